@@ -1,0 +1,64 @@
+"""The ``granular-material`` command line: core DEM commands plus plugin commands.
+
+Plugins add sub-commands through the ``granular_material.commands`` entry-point group; each
+entry point is a ``register(subparsers)`` callable that adds its parsers and sets ``func`` (a
+callable taking the parsed arguments and returning the exit code).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import warnings
+from importlib.metadata import entry_points
+
+from granular_material import __version__
+
+__all__ = ["UsageError", "build_parser", "main"]
+
+
+class UsageError(ValueError):
+    """Bad input from the user: reported on stderr with exit code 2."""
+
+
+def _register_plugins(subparsers: argparse._SubParsersAction) -> None:
+    for ep in entry_points(group="granular_material.commands"):
+        try:
+            register = ep.load()
+        except ImportError as exc:
+            warnings.warn(f"command plugin {ep.name!r} could not be loaded: {exc}", stacklevel=2)
+            continue
+        register(subparsers)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The full argument parser, plugin commands included."""
+    parser = argparse.ArgumentParser(
+        prog="granular-material",
+        description="Multiscale FEM x DEM simulation of granular geomaterials.",
+    )
+    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
+    subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    try:
+        from granular_material import dem_commands
+    except ImportError:  # pragma: no cover - only while the engine is being built
+        pass
+    else:
+        dem_commands.register(subparsers)
+    _register_plugins(subparsers)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the command line; returns the exit code (2 for bad input)."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except (UsageError, ValueError, FileNotFoundError) as exc:
+        print(f"granular-material {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())
