@@ -1,0 +1,115 @@
+"""Packing generation: random disc gases in periodic cells, consolidated to a pressure."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+
+from granular_material.dem.batch import DEMBatch
+from granular_material.dem.protocols import consolidate, drive_grad_u
+from granular_material.dem.rve_file import RVEData, RVEMeta
+
+__all__ = ["prepare_packing", "random_gas"]
+
+DEFAULT_RADIUS_RANGE = (3.0e-3, 7.0e-3)  # Wu et al. (2025) Table 1; Guo & Zhao rMean 5 mm ± 40 %
+
+
+def _place_discs(radius: np.ndarray, side: float, rng: np.random.Generator) -> np.ndarray:
+    """Random sequential addition of non-overlapping discs in a periodic square [m]."""
+    placed = np.empty((0, 2))
+    placed_r = np.empty(0)
+    out = np.empty((radius.size, 2))
+    order = np.argsort(-radius, kind="stable")
+    for idx in order:
+        r = radius[idx]
+        for _ in range(100_000):
+            x = rng.uniform(0.0, side, size=2)
+            d = placed - x
+            d -= side * np.round(d / side)
+            if placed.size == 0 or (np.einsum("ij,ij->i", d, d) >= (placed_r + r) ** 2).all():
+                break
+        else:
+            raise RuntimeError("could not place the discs: initial solid fraction too high")
+        placed = np.vstack([placed, x])
+        placed_r = np.append(placed_r, r)
+        out[idx] = x
+    return out
+
+
+def random_gas(
+    n_disc: int = 400,
+    n_rve: int = 1,
+    seed: int = 1,
+    radius_range: tuple[float, float] = DEFAULT_RADIUS_RANGE,
+    solid_fraction: float = 0.4,
+    meta: RVEMeta | None = None,
+) -> RVEData:
+    """B loose random packings of N non-overlapping discs in square periodic cells.
+
+    RVE b draws from ``numpy.random.default_rng(seed + b)``: radii uniform in
+    ``radius_range`` [m], positions by random sequential addition at ``solid_fraction``.
+    """
+    if n_disc < 2:
+        raise ValueError(f"n_disc must be >= 2, got {n_disc}")
+    if n_rve < 1:
+        raise ValueError(f"n_rve must be >= 1, got {n_rve}")
+    r_min, r_max = radius_range
+    if not (0 < r_min <= r_max and math.isfinite(r_max)):
+        raise ValueError(f"radius_range must satisfy 0 < r_min <= r_max, got {radius_range!r}")
+    if not 0 < solid_fraction <= 0.5:
+        raise ValueError(f"solid_fraction must lie in (0, 0.5], got {solid_fraction!r}")
+    meta = meta or RVEMeta()
+    radius = np.empty((n_rve, n_disc))
+    position = np.empty((n_rve, n_disc, 2))
+    cell = np.empty((n_rve, 2, 2))
+    for b in range(n_rve):
+        rng = np.random.default_rng(seed + b)
+        radius[b] = rng.uniform(r_min, r_max, size=n_disc)
+        side = math.sqrt(np.pi * np.sum(radius[b] ** 2) / solid_fraction)
+        position[b] = _place_discs(radius[b], side, rng)
+        cell[b] = side * np.eye(2)
+    return RVEData(
+        radius=radius, position=position, cell=cell,
+        velocity=np.zeros((n_rve, n_disc, 2)), angular_velocity=np.zeros((n_rve, n_disc)),
+        meta=replace(meta, seed=seed),
+    )
+
+
+def prepare_packing(
+    n_disc: int = 400,
+    n_rve: int = 1,
+    seed: int = 1,
+    pressure: float = 100.0e3,
+    meta: RVEMeta | None = None,
+    target_void_ratio: float | None = None,
+    radius_range: tuple[float, float] = DEFAULT_RADIUS_RANGE,
+    device: str | None = None,
+    dtype: str = "float64",
+    progress: bool = False,
+) -> DEMBatch:
+    """Prepare B RVEs: random gas, frictionless isotropic consolidation to ``pressure`` [Pa],
+    then the friction of ``meta`` set and the packing re-equilibrated at that pressure.
+
+    With ``target_void_ratio`` the frictionless gas is first compressed isotropically
+    (strain-driven) to that 2D void ratio, then consolidated (Wu et al. 2025: e0 = 0.18, then
+    p0 = 100 kPa); the final void ratio is reported by :meth:`DEMBatch.homogenize`.
+    """
+    meta = meta or RVEMeta()
+    meta.validate()
+    gas = random_gas(n_disc, n_rve, seed, radius_range, meta=replace(meta, friction_angle=0.0))
+    batch = DEMBatch(gas, device=device, dtype=dtype)
+    if target_void_ratio is not None:
+        if not (math.isfinite(target_void_ratio) and target_void_ratio > 0):
+            raise ValueError(
+                f"target_void_ratio must be a positive number, got {target_void_ratio!r}"
+            )
+        e_now = batch.homogenize().void_ratio
+        stretch = np.sqrt((1.0 + target_void_ratio) / (1.0 + e_now)) - 1.0
+        grad = stretch[:, None, None] * np.eye(2)[None]
+        drive_grad_u(batch, grad, max_strain_per_step=1.0e-4, progress=progress)
+    consolidate(batch, pressure, progress=progress)
+    batch.set_friction(meta.friction_angle)
+    consolidate(batch, pressure, progress=progress)
+    return batch

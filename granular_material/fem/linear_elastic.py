@@ -1,0 +1,143 @@
+"""Isotropic linear elasticity in plane strain: the baseline material a user swaps out."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from granular_material.fem.material import MaterialResponse, PointStatus
+
+__all__ = ["LinearElastic", "LinearElasticParameters", "isotropic_tangent"]
+
+_I2 = np.eye(2)
+
+
+@dataclass(frozen=True)
+class LinearElasticParameters:
+    """Parameters of :class:`LinearElastic`.
+
+    Attributes:
+        young: Young's modulus E [Pa], > 0.
+        poisson: Poisson's ratio ν [-], in (-1, 0.5).
+        initial_stress: isotropic stress at zero strain [Pa], tension positive (e.g.
+            ``-100e3`` for a specimen consolidated to 100 kPa).
+    """
+
+    young: float = 60.0e6
+    poisson: float = 0.3
+    initial_stress: float = 0.0
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.young) and self.young > 0):
+            raise ValueError(f"young must be a positive number of Pa, got {self.young!r}")
+        if not (math.isfinite(self.poisson) and -1.0 < self.poisson < 0.5):
+            raise ValueError(f"poisson must lie in (-1, 0.5), got {self.poisson!r}")
+        if not math.isfinite(self.initial_stress):
+            raise ValueError(f"initial_stress must be finite, got {self.initial_stress!r}")
+
+    @property
+    def lame(self) -> tuple[float, float]:
+        """Lamé constants (λ, μ) [Pa]: λ = Eν/((1+ν)(1−2ν)), μ = E/(2(1+ν))."""
+        e, nu = self.young, self.poisson
+        return e * nu / ((1 + nu) * (1 - 2 * nu)), e / (2 * (1 + nu))
+
+
+def isotropic_tangent(lam: float, mu: float) -> np.ndarray:
+    """C_ijkl = λ δ_ij δ_kl + μ (δ_ik δ_jl + δ_il δ_jk) [Pa], shape (2, 2, 2, 2).
+
+    Contracted with the full ∇u it gives σ = λ tr(ε) I + 2μ ε, ε = sym ∇u (plane strain:
+    ε_zz = 0, σ_zz = λ tr ε is not part of the 2D stress).
+    """
+    d = _I2
+    return (
+        lam * np.einsum("ij,kl->ijkl", d, d)
+        + mu * (np.einsum("ik,jl->ijkl", d, d) + np.einsum("il,jk->ijkl", d, d))
+    )
+
+
+class LinearElastic:
+    """Isotropic, plane-strain linear elastic material (small strain).
+
+    State per point: the committed total strain ε (n, 2, 2). ``evaluate(∇u)`` returns
+    σ = σ0 I + C : (ε + sym ∇u) with the constant tangent C of :func:`isotropic_tangent`.
+    """
+
+    def __init__(
+        self, young: float = 60.0e6, poisson: float = 0.3, initial_stress: float = 0.0
+    ) -> None:
+        self.parameters = LinearElasticParameters(young, poisson, initial_stress)
+        self._tangent = isotropic_tangent(*self.parameters.lame)
+        self._strain = np.zeros((0, 2, 2))
+        self._trial: np.ndarray | None = None
+
+    @property
+    def n_points(self) -> int:
+        """Number of Gauss points allocated."""
+        return int(self._strain.shape[0])
+
+    @property
+    def strain(self) -> np.ndarray:
+        """Committed total strain [-], shape (n, 2, 2), float64 (a copy)."""
+        return self._strain.copy()
+
+    def allocate(self, n_points: int) -> None:
+        """Start ``n_points`` points at zero strain."""
+        if n_points < 1:
+            raise ValueError(f"n_points must be >= 1, got {n_points}")
+        self._strain = np.zeros((n_points, 2, 2))
+        self._trial = None
+
+    def evaluate(self, grad_u: np.ndarray) -> MaterialResponse:
+        """σ [Pa] (n, 2, 2) and C [Pa] (n, 2, 2, 2, 2) for ∇u (n, 2, 2) since the commit."""
+        grad_u = _check_grad(grad_u, self.n_points)
+        strain = self._strain + 0.5 * (grad_u + np.swapaxes(grad_u, 1, 2))
+        stress = np.einsum("ijkl,nkl->nij", self._tangent, strain)
+        stress += self.parameters.initial_stress * _I2
+        self._trial = strain
+        n = self.n_points
+        return MaterialResponse(
+            stress=stress,
+            tangent=np.broadcast_to(self._tangent, (n, 2, 2, 2, 2)).copy(),
+            status=np.full(n, PointStatus.OK, dtype=np.int8),
+        )
+
+    def commit(self) -> None:
+        """Make the strain of the last evaluation the committed strain."""
+        if self._trial is None:
+            raise RuntimeError("commit() needs an evaluate() since the last commit/revert")
+        self._strain, self._trial = self._trial, None
+
+    def revert(self) -> None:
+        """Drop the trial strain."""
+        self._trial = None
+
+    def checkpoint(self, path: str | Path) -> None:
+        """Write the committed strain and the parameters to ``path`` (.npz)."""
+        p = self.parameters
+        with open(path, "wb") as fh:
+            np.savez(fh, strain=self._strain, young=p.young, poisson=p.poisson,
+                     initial_stress=p.initial_stress)
+
+    def restore(self, path: str | Path) -> None:
+        """Read a checkpoint; its parameters must match this material's."""
+        with np.load(path) as data:
+            saved = LinearElasticParameters(
+                float(data["young"]), float(data["poisson"]), float(data["initial_stress"])
+            )
+            if saved != self.parameters:
+                raise ValueError(f"{path}: checkpoint parameters {saved} differ from "
+                                 f"{self.parameters}")
+            self._strain = np.array(data["strain"], dtype=np.float64)
+        self._trial = None
+
+
+def _check_grad(grad_u: np.ndarray, n: int) -> np.ndarray:
+    grad_u = np.asarray(grad_u, dtype=np.float64)
+    if n == 0:
+        raise RuntimeError("allocate() the material before evaluate()")
+    if grad_u.shape != (n, 2, 2):
+        raise ValueError(f"grad_u must have shape ({n}, 2, 2), got {grad_u.shape}")
+    return grad_u

@@ -1,0 +1,286 @@
+"""Newton–Raphson load stepping for the small-strain equilibrium problem.
+
+Each load step follows Wu, Fu & Zhou (2025) §1.4: (a) the equivalent nodal forces of the
+step, with prescribed displacements moved to the right-hand side by condensation;
+(b)–(d) the committed tangent gives a predictor; (e)–(f) the material is evaluated with the
+displacement gradient accumulated since the last commit; (g) the residual
+R = ∫ Bᵀσ dV − f_ext is compared with the step's load, ‖R‖₂ / ‖R₀‖₂ ≤ TOL (0.005);
+(h) otherwise the tangent of the current iterate gives the correction. A step that does not
+converge is reverted (the material returns to its committed state) and retried with half the
+increment, down to a limit.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+from skfem import Basis, condense, solve
+
+from granular_material.fem.forms import gauss_points_grad, internal_force, stiffness
+from granular_material.fem.material import Material, MaterialResponse
+
+__all__ = ["Loading", "NewtonError", "NewtonSettings", "NewtonSolver", "StepRecord"]
+
+
+@dataclass(frozen=True)
+class NewtonSettings:
+    """Tolerances and limits of the Newton driver.
+
+    Attributes:
+        rtol: relative tolerance on ‖R‖₂ / ‖R₀‖₂ (0.005 after Wu et al. 2025, eq. 7).
+        atol: absolute tolerance on ‖R‖₂ [N/m]; also the test when R₀ = 0.
+        max_iterations: material evaluations allowed per increment before a cut-back.
+        max_cutbacks: how many times an increment may be halved (smallest increment =
+            nominal / 2**max_cutbacks).
+        divergence: an increment is abandoned as soon as ‖R‖ > divergence · ‖R₀‖.
+    """
+
+    rtol: float = 0.005
+    atol: float = 1e-9
+    max_iterations: int = 25
+    max_cutbacks: int = 6
+    divergence: float = 1e3
+
+    def __post_init__(self) -> None:
+        if not (0 < self.rtol < 1):
+            raise ValueError(f"rtol must lie in (0, 1), got {self.rtol!r}")
+        if not (self.atol >= 0 and math.isfinite(self.atol)):
+            raise ValueError(f"atol must be a finite number >= 0, got {self.atol!r}")
+        if self.max_iterations < 1:
+            raise ValueError(f"max_iterations must be >= 1, got {self.max_iterations!r}")
+        if self.max_cutbacks < 0:
+            raise ValueError(f"max_cutbacks must be >= 0, got {self.max_cutbacks!r}")
+        if not self.divergence > 1:
+            raise ValueError(f"divergence must be > 1, got {self.divergence!r}")
+
+
+@dataclass(frozen=True)
+class Loading:
+    """Boundary conditions as a linear function of the load factor λ ∈ [0, 1].
+
+    Attributes:
+        dirichlet_dofs: constrained degrees of freedom, shape (m,), int.
+        dirichlet_end: prescribed displacement at λ = 1 [m], shape (m,); u_D(λ) = λ · end.
+        force_start: external nodal forces at λ = 0 [N/m], shape (ndofs,) (e.g. confinement).
+        force_end: external nodal forces at λ = 1 [N/m], shape (ndofs,).
+    """
+
+    dirichlet_dofs: np.ndarray
+    dirichlet_end: np.ndarray
+    force_start: np.ndarray
+    force_end: np.ndarray
+
+    def __post_init__(self) -> None:
+        if self.dirichlet_dofs.shape != self.dirichlet_end.shape:
+            raise ValueError(
+                f"dirichlet_end shape {self.dirichlet_end.shape} does not match "
+                f"dirichlet_dofs shape {self.dirichlet_dofs.shape}"
+            )
+        if self.force_start.shape != self.force_end.shape:
+            raise ValueError(
+                f"force_end shape {self.force_end.shape} differs from force_start "
+                f"shape {self.force_start.shape}"
+            )
+
+    def at(self, load_factor: float) -> tuple[np.ndarray, np.ndarray]:
+        """(u_D [m] shape (m,), f_ext [N/m] shape (ndofs,)) at load factor λ."""
+        f = (1.0 - load_factor) * self.force_start + load_factor * self.force_end
+        return load_factor * self.dirichlet_end, f
+
+
+@dataclass
+class StepRecord:
+    """What one load step cost and how it converged.
+
+    Attributes:
+        step: load step number, 1-based.
+        load_factor: λ at the end of the step.
+        iterations: material evaluations used, all attempts and sub-increments included.
+        work: material work (DEM steps run), all attempts included.
+        cutbacks: how many times an increment of this step was halved.
+        residual_history: ‖R‖₂ / ‖R₀‖₂ of every iteration, one list per attempt.
+        wall_time: seconds spent on the step.
+    """
+
+    step: int
+    load_factor: float
+    iterations: int = 0
+    work: int = 0
+    cutbacks: int = 0
+    residual_history: list[list[float]] = field(default_factory=list)
+    wall_time: float = 0.0
+
+
+class NewtonError(RuntimeError):
+    """A load step could not be converged even with the smallest increment allowed."""
+
+    def __init__(self, message: str, records: list[StepRecord]) -> None:
+        super().__init__(message)
+        self.records = records
+
+
+@dataclass
+class _Attempt:
+    converged: bool
+    du: np.ndarray
+    response: MaterialResponse | None
+    f_int: np.ndarray | None
+    history: list[float]
+    iterations: int
+    work: int
+    reason: str
+
+
+class NewtonSolver:
+    """Load-stepping Newton solver for one basis, one material and one loading.
+
+    The committed state (displacement ``u``, the material response and the internal
+    force that belong to it) only changes when an increment converges.
+    """
+
+    def __init__(
+        self,
+        basis: Basis,
+        material: Material,
+        loading: Loading,
+        settings: NewtonSettings | None = None,
+    ) -> None:
+        self.basis = basis
+        self.material = material
+        self.loading = loading
+        self.settings = settings or NewtonSettings()
+        n_points = basis.nelems * basis.X.shape[-1]
+        if material.n_points == 0:
+            material.allocate(n_points)
+        if material.n_points != n_points:
+            raise ValueError(
+                f"material holds {material.n_points} points, the mesh has {n_points}"
+            )
+        self.u = np.zeros(basis.N)
+        self.load_factor = 0.0
+        self.records: list[StepRecord] = []
+        # initial stress and tangent of the committed state (∇u = 0)
+        self.response = material.evaluate(np.zeros((n_points, 2, 2)))
+        material.revert()
+        if not self.response.ok:
+            raise RuntimeError(
+                f"material fails in its initial state at points {self.response.failed_points()}"
+            )
+        self.f_int = internal_force(basis, self.response.stress)
+
+    @property
+    def reaction(self) -> np.ndarray:
+        """f_int − f_ext [N/m] at the committed state, shape (ndofs,); nonzero at D only."""
+        return self.f_int - self.loading.at(self.load_factor)[1]
+
+    def grad_u(self) -> np.ndarray:
+        """Total ∇u [-] at the Gauss points, committed state, shape (n, 2, 2)."""
+        return gauss_points_grad(self.basis, self.u)
+
+    def _increment(self, target: float) -> _Attempt:
+        s, D = self.settings, self.loading.dirichlet_dofs
+        u_d, f_ext = self.loading.at(target)
+        du = np.zeros_like(self.u)
+        du[D] = u_d - self.u[D]
+        K = stiffness(self.basis, self.response.tangent)
+        A, b, x, interior = condense(K, f_ext - self.f_int, x=du, D=D)
+        r0 = float(np.linalg.norm(b))
+        du = solve(A, b, x, interior)
+        history: list[float] = []
+        work = 0
+        for it in range(1, s.max_iterations + 1):
+            response = self.material.evaluate(gauss_points_grad(self.basis, du))
+            work += int(response.work)
+            if not response.ok:
+                bad = response.failed_points()
+                return _Attempt(False, du, None, None, history, it, work,
+                                f"material failed at points {bad[:8].tolist()}")
+            f_int = internal_force(self.basis, response.stress)
+            residual = f_int - f_ext
+            r = float(np.linalg.norm(residual[interior]))
+            history.append(r / r0 if r0 > 0 else r)
+            if r <= s.atol or (r0 > 0 and r <= s.rtol * r0):
+                return _Attempt(True, du, response, f_int, history, it, work, "")
+            if not math.isfinite(r) or (r0 > 0 and r > s.divergence * r0):
+                return _Attempt(False, du, None, None, history, it, work, "diverged")
+            K = stiffness(self.basis, response.tangent)
+            A, b, x, interior = condense(K, -residual, D=D)
+            du = du + solve(A, b, x, interior)
+        return _Attempt(False, du, None, None, history, s.max_iterations, work,
+                        f"not converged in {s.max_iterations} iterations")
+
+    def step(self, target: float, step: int) -> StepRecord:
+        """Advance the committed state to load factor ``target``, cutting back as needed.
+
+        Raises :class:`NewtonError` (the committed state is left at the last converged
+        increment) when the increment would have to fall below nominal / 2**max_cutbacks.
+        """
+        t0 = time.perf_counter()
+        record = StepRecord(step=step, load_factor=target)
+        nominal = target - self.load_factor
+        increment = nominal
+        smallest = nominal / 2 ** self.settings.max_cutbacks
+        while self.load_factor < target - 1e-12 * max(abs(target), 1.0):
+            end = min(self.load_factor + increment, target)
+            attempt = self._increment(end)
+            record.iterations += attempt.iterations
+            record.work += attempt.work
+            record.residual_history.append(attempt.history)
+            if attempt.converged:
+                self.material.commit()
+                self.u = self.u + attempt.du
+                self.response, self.f_int = attempt.response, attempt.f_int
+                self.load_factor = end
+                increment = min(2 * increment, nominal) if record.cutbacks else increment
+                continue
+            self.material.revert()
+            record.cutbacks += 1
+            increment /= 2
+            if increment < smallest * (1 - 1e-9):
+                record.wall_time = time.perf_counter() - t0
+                raise NewtonError(
+                    f"load step {step} (load factor {self.load_factor:.6g} -> {target:.6g}) "
+                    f"did not converge ({attempt.reason}) even with the increment halved "
+                    f"{self.settings.max_cutbacks} times; the state committed at load factor "
+                    f"{self.load_factor:.6g} is kept",
+                    [*self.records, record],
+                )
+        record.wall_time = time.perf_counter() - t0
+        self.records.append(record)
+        return record
+
+    def run(
+        self,
+        n_steps: int,
+        on_step: Callable[[NewtonSolver, StepRecord], None] | None = None,
+        progress: bool = False,
+        description: str = "load steps",
+    ) -> list[StepRecord]:
+        """Apply the loading in ``n_steps`` equal steps of λ from the current value to 1.
+
+        ``on_step(solver, record)`` is called after every committed step (for output).
+        """
+        if n_steps < 1:
+            raise ValueError(f"n_steps must be >= 1, got {n_steps}")
+        from tqdm.auto import tqdm
+
+        start = self.load_factor
+        first = len(self.records) + 1
+        bar = tqdm(total=n_steps, desc=description, disable=not progress, unit="step")
+        try:
+            for k in range(n_steps):
+                target = start + (1.0 - start) * (k + 1) / n_steps
+                record = self.step(target, first + k)
+                if on_step is not None:
+                    on_step(self, record)
+                last = record.residual_history[-1][-1] if record.residual_history[-1] else 0.0
+                bar.set_postfix(it=record.iterations, cut=record.cutbacks,
+                                res=f"{last:.2g}", work=record.work)
+                bar.update()
+        finally:
+            bar.close()
+        return self.records

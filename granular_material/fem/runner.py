@@ -1,0 +1,144 @@
+"""Run a biaxial problem with any material and collect its per-step results.
+
+Tables (tension positive unless the column says otherwise):
+
+``steps`` — one row per load step (step 0 is the initial state):
+    step, load_factor, axial_strain (compression +), platen_stress [Pa] (axial stress from
+    the top platen reaction, compression +), confining [Pa] (compression +), stress_ratio
+    (platen_stress / confining), sxx, syy, sxy [Pa] (volume averages over Gauss points),
+    volumetric_strain (tr ε volume average, contraction negative), void_ratio (mean, NaN if
+    the material has none), iterations, work (DEM steps), cutbacks, wall_time [s],
+    residual_history (JSON list of lists of ‖R‖/‖R₀‖).
+
+``points`` — one row per load step and Gauss point:
+    step, axial_strain, point, element, x, y [m], sxx, syy, sxy [Pa], exx, eyy, exy,
+    volumetric_strain (tr ε), shear_strain (γ = √((ε_xx − ε_yy)² + (2ε_xy)²)), plus the
+    material's own fields (void_ratio, coordination, ...).
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from granular_material.fem.layout import to_points
+from granular_material.fem.material import Material
+from granular_material.fem.newton import NewtonError, NewtonSettings, NewtonSolver, StepRecord
+from granular_material.fem.problems import BiaxialProblem, BiaxialSetup, build_biaxial
+
+__all__ = ["BiaxialResult", "run_biaxial"]
+
+
+@dataclass
+class BiaxialResult:
+    """Everything a biaxial run produced.
+
+    Attributes:
+        problem: the boundary-value problem.
+        steps: global table (see module docstring).
+        points: Gauss-point table (see module docstring).
+        displacements: nodal displacement [m] after every step, shape (S + 1, ndofs).
+        records: the Newton records of the committed steps.
+        error: the message of the :class:`NewtonError` that stopped the run, if any.
+    """
+
+    problem: BiaxialProblem
+    steps: pd.DataFrame
+    points: pd.DataFrame
+    displacements: np.ndarray
+    records: list[StepRecord] = field(default_factory=list)
+    error: str | None = None
+
+
+def _rows(solver: NewtonSolver, problem: BiaxialProblem, record: StepRecord | None):
+    grad = solver.grad_u()
+    strain = 0.5 * (grad + np.swapaxes(grad, 1, 2))
+    stress = solver.response.stress
+    w = problem.weights / problem.weights.sum()
+    s = problem.setup
+    eps_a = solver.load_factor * s.axial_strain
+    platen = problem.axial_stress(solver.reaction)
+    fields = {k: np.asarray(v, dtype=float) for k, v in solver.response.fields.items()}
+    step = record.step if record else 0
+    mean_stress = np.einsum("p,pij->ij", w, stress)
+    row = {
+        "step": step, "load_factor": solver.load_factor, "axial_strain": eps_a,
+        "platen_stress": platen, "confining": s.confining,
+        "stress_ratio": platen / s.confining if s.confining > 0 else np.nan,
+        "sxx": mean_stress[0, 0], "syy": mean_stress[1, 1], "sxy": mean_stress[0, 1],
+        "volumetric_strain": float(w @ np.trace(strain, axis1=1, axis2=2)),
+        "void_ratio": float(w @ fields["void_ratio"]) if "void_ratio" in fields else np.nan,
+        "iterations": record.iterations if record else 0,
+        "work": record.work if record else 0,
+        "cutbacks": record.cutbacks if record else 0,
+        "wall_time": record.wall_time if record else 0.0,
+        "residual_history": json.dumps(record.residual_history if record else []),
+    }
+    xy = to_points(np.asarray(problem.basis.global_coordinates()))
+    n = stress.shape[0]
+    nqp = problem.basis.X.shape[-1]
+    points = pd.DataFrame({
+        "step": step, "axial_strain": eps_a, "point": np.arange(n),
+        "element": np.arange(n) // nqp, "x": xy[:, 0], "y": xy[:, 1],
+        "sxx": stress[:, 0, 0], "syy": stress[:, 1, 1], "sxy": stress[:, 0, 1],
+        "exx": strain[:, 0, 0], "eyy": strain[:, 1, 1], "exy": strain[:, 0, 1],
+        "volumetric_strain": strain[:, 0, 0] + strain[:, 1, 1],
+        "shear_strain": np.hypot(strain[:, 0, 0] - strain[:, 1, 1], 2 * strain[:, 0, 1]),
+        **fields,
+    })
+    return row, points
+
+
+def run_biaxial(
+    setup: BiaxialSetup,
+    material: Material,
+    n_steps: int,
+    settings: NewtonSettings | None = None,
+    progress: bool = False,
+    on_step: Callable[[NewtonSolver, StepRecord, pd.DataFrame], None] | None = None,
+    out_dir: str | Path | None = None,
+) -> BiaxialResult:
+    """Drive ``material`` through a drained biaxial test in ``n_steps`` load steps.
+
+    A :class:`NewtonError` does not propagate: the committed steps are returned with
+    ``error`` set (and written to ``out_dir`` when given, with the fields file).
+    """
+    from granular_material.fem.output import FieldWriter, write_tables
+
+    problem = build_biaxial(setup)
+    solver = NewtonSolver(problem.basis, material, problem.loading, settings)
+    rows, tables, disps = [], [], []
+    writer = FieldWriter(Path(out_dir) / "fields.xdmf", problem) if out_dir else None
+
+    def collect(solver: NewtonSolver, record: StepRecord | None) -> None:
+        row, points = _rows(solver, problem, record)
+        rows.append(row)
+        tables.append(points)
+        disps.append(solver.u.copy())
+        if writer is not None:
+            writer.write(row["axial_strain"], solver.u, points)
+        if on_step is not None and record is not None:
+            on_step(solver, record, points)
+
+    error = None
+    try:
+        collect(solver, None)
+        solver.run(n_steps, on_step=collect, progress=progress,
+                   description=f"biaxial {setup.nx}x{setup.ny}")
+    except NewtonError as exc:
+        error = str(exc)
+    finally:
+        if writer is not None:
+            writer.close()
+    result = BiaxialResult(
+        problem=problem, steps=pd.DataFrame(rows), points=pd.concat(tables, ignore_index=True),
+        displacements=np.array(disps), records=list(solver.records), error=error,
+    )
+    if out_dir is not None:
+        write_tables(result, out_dir)
+    return result
