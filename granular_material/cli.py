@@ -14,7 +14,7 @@ from importlib.metadata import entry_points
 
 from granular_material import __version__
 
-__all__ = ["UsageError", "build_parser", "main"]
+__all__ = ["UsageError", "build_parser", "main", "quiet_warp"]
 
 
 class UsageError(ValueError):
@@ -29,6 +29,16 @@ def _register_plugins(subparsers: argparse._SubParsersAction) -> None:
             warnings.warn(f"command plugin {ep.name!r} could not be loaded: {exc}", stacklevel=2)
             continue
         register(subparsers)
+
+
+def quiet_warp() -> None:
+    """Silence warp's start-up banner and module-load messages (they go to stdout)."""
+    import warp as wp
+
+    if hasattr(wp, "LOG_WARNING"):
+        wp.config.log_level = wp.LOG_WARNING
+    else:  # warp < 1.10
+        wp.config.quiet = True
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -51,6 +61,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     """Run the command line; returns the exit code (2 for bad input)."""
+    quiet_warp()  # keep stdout clean for --json
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
@@ -58,6 +69,9 @@ def main(argv: list[str] | None = None) -> int:
     except (UsageError, ValueError, FileNotFoundError) as exc:
         print(f"granular-material {args.command}: error: {exc}", file=sys.stderr)
         return 2
+    except RuntimeError as exc:  # e.g. DEMInstabilityError naming the RVEs
+        print(f"granular-material {args.command}: failed: {exc}", file=sys.stderr)
+        return 1
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -182,7 +182,8 @@ def biaxial_test(
 
     Args:
         axial_strain: final axial (yy) compressive strain [-], engineering.
-        confining: lateral stress magnitude [Pa]. strain_per_step: axial strain per step.
+        confining: lateral stress magnitude [Pa].
+        strain_per_step: largest axial (logarithmic) strain per step [-].
         record_every: steps between recorded rows.
 
     Returns:
@@ -200,7 +201,9 @@ def biaxial_test(
     b = batch.n_rve
     cell0 = batch.cell()
     area0 = np.linalg.det(cell0)
-    total = int(math.ceil(axial_strain / strain_per_step))
+    # n equal logarithmic steps ending exactly at the requested engineering strain
+    total = int(math.ceil(-math.log1p(-axial_strain) / strain_per_step))
+    step_strain = (1.0 - axial_strain) ** (1.0 / total) - 1.0
     rows: list[pd.DataFrame] = []
 
     def record(step: int) -> None:
@@ -221,7 +224,7 @@ def biaxial_test(
         }))
 
     record(0)
-    target = np.tile([-float(confining), -float(strain_per_step)], (b, 1))
+    target = np.tile([-float(confining), step_strain], (b, 1))
     control = np.tile([CONTROL_STRESS, CONTROL_STRAIN], (b, 1))
     bar = tqdm(total=total, desc="biaxial", unit="step", disable=not progress)
     done = 0
