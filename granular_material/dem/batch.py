@@ -35,7 +35,8 @@ class DEMBatch:
         self.model: Model = build_model(data, device=device, dtype=dtype, timestep=timestep)
         self.state: State = state_from_data(self.model, data)
         self.solver = Solver(self.model)
-        self.solver.refresh_neighbors(self.state)
+        if self.state.force_rebuild.numpy().any():
+            self.solver.refresh_neighbors(self.state)
 
     # -- shape and parameters -------------------------------------------------------------
     @property
@@ -90,6 +91,9 @@ class DEMBatch:
             "contact_partner": self.state.nbr.numpy().reshape(b, n, k),
             "contact_count": self.state.nbr_count.numpy().reshape(b, n),
             "contact_shear_force": self.state.shear.numpy().astype(np.float64).reshape(b, n, k),
+            "fractional_position": frac,
+            "verlet_displacement": self.state.disp.numpy().astype(np.float64).reshape(b, n, 2),
+            "cell_at_list_build": self.state.cell_ref.numpy().astype(np.float64),
         }
         meta = replace(m.meta, timestep=m.dt)
         return RVEData(

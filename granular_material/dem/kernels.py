@@ -3,7 +3,8 @@
 Every particle array is flat, index ``i = b·N + j`` for disc j of RVE b; per-RVE arrays have
 length B. Positions are fractional, ``s = H⁻¹x`` in [0, 1)², so particles follow the cell's
 homogeneous deformation (YADE's homoDeform); velocities are the fluctuation about the affine
-field ``L·x``. Each particle thread evaluates every pair in its own neighbour list (no atomics
+field ``L·x``, and spins the fluctuation about the cell's spin ``(L₁₀ − L₀₁)/2``, so that a
+rigid rotation of the cell is a rigid rotation of the packing (objectivity). Each particle thread evaluates every pair in its own neighbour list (no atomics
 on forces, deterministic); a pair is always computed in the orientation (min id → max id), so
 both partners see bit-identical forces and tangential history.
 
@@ -244,8 +245,10 @@ def kernels_for(float_type: Any) -> KernelSet:
                 n = d / dist
                 t = vec2(-n[1], n[0])
                 stiff = pair_stiffness(law, ra, rc, kn_c, kt_c, young, kt_ratio)
+                # affine field: velocity L·x and spin w = (L10 - L01)/2 of every disc
                 v_rel = vel[c] - vel[a] + lg * d
-                v_t = wp.dot(v_rel, t) - (ang_vel[a] * ra + ang_vel[c] * rc)
+                spin = ft(0.5) * (lg[1, 0] - lg[0, 1])
+                v_t = wp.dot(v_rel, t) - (ang_vel[a] * ra + ang_vel[c] * rc) - spin * (ra + rc)
                 fs = shear[slot] + stiff[1] * v_t * dt
                 fn = stiff[0] * overlap
                 cap = mu * fn

@@ -225,7 +225,15 @@ class State:
             wp.copy(getattr(self, f.name), getattr(other, f.name))
 
 
-HISTORY_KEYS = ("contact_partner", "contact_count", "contact_shear_force")
+#: further arrays of the RVE file that make a resumed run bit-identical to an uninterrupted one
+HISTORY_KEYS = (
+    "contact_partner",  # (B, N, K) int32, partner index within the RVE, -1 = empty slot
+    "contact_count",  # (B, N) int32, used slots
+    "contact_shear_force",  # (B, N, K) float64, tangential spring force [N]
+    "fractional_position",  # (B, N, 2) float64, s = H⁻¹x in [0, 1)
+    "verlet_displacement",  # (B, N, 2) float64, displacement since the last list build [m]
+    "cell_at_list_build",  # (B, 2, 2) float64, H at the last list build [m]
+)
 
 
 def state_from_data(model: Model, data: RVEData) -> State:
@@ -239,7 +247,17 @@ def state_from_data(model: Model, data: RVEData) -> State:
     nbr = np.full((b, n, k), -1, dtype=np.int32)
     count = np.zeros((b, n), dtype=np.int32)
     shear = np.zeros((b, n, k))
-    if all(key in data.extra for key in HISTORY_KEYS):
+    disp = np.zeros((b, n, 2))
+    cell_ref = np.array(data.cell)
+    resume = all(key in data.extra for key in HISTORY_KEYS)
+    if resume:
+        stored = np.asarray(data.extra["fractional_position"], dtype=np.float64)
+        drift = np.abs(np.einsum("bij,bnj->bni", data.cell, stored) - data.position).max()
+        if stored.shape != frac.shape or drift > 1e-9:
+            raise ValueError("fractional_position does not match position and cell")
+        frac = stored
+        disp = np.asarray(data.extra["verlet_displacement"], dtype=np.float64)
+        cell_ref = np.asarray(data.extra["cell_at_list_build"], dtype=np.float64)
         partner = np.asarray(data.extra["contact_partner"], dtype=np.int32)
         width = min(partner.shape[-1], k)
         if partner.shape[:2] != (b, n):
@@ -257,8 +275,8 @@ def state_from_data(model: Model, data: RVEData) -> State:
         nbr=wp.array(nbr.reshape(-1), dtype=wp.int32, device=dev),
         nbr_count=wp.array(count.reshape(-1), dtype=wp.int32, device=dev),
         shear=wp.array(shear.reshape(-1), dtype=ks.float_type, device=dev),
-        disp=wp.zeros(b * n, dtype=ks.vec2, device=dev),
-        cell_ref=wp.array(data.cell, dtype=ks.mat22, device=dev),
-        force_rebuild=wp.ones(b, dtype=wp.int32, device=dev),
+        disp=wp.array(disp.reshape(-1, 2), dtype=ks.vec2, device=dev),
+        cell_ref=wp.array(cell_ref, dtype=ks.mat22, device=dev),
+        force_rebuild=wp.array(np.full(b, 0 if resume else 1), dtype=wp.int32, device=dev),
         status=wp.zeros(b, dtype=wp.int32, device=dev),
     )
