@@ -83,7 +83,8 @@ template = {
     "density": density, "friction_angle": phi, "damping": damping,
     "stiffness": {"law": "frictmat", "young": young, "kt_over_kn": ratio}, "seed": seed,
 }
-out = scene_io.scene_from_simulation(template)
+# at rest in a frozen cell (the velGrad set above is still only YADE's nextVelGrad)
+out = scene_io.scene_from_simulation(template, velocity_gradient=[[0.0, 0.0], [0.0, 0.0]])
 sxx, syy, sxy = scene_io.stress_2d()
 out["prepare"] = {
     "stress": [sxx, syy, sxy], "void_ratio": scene_io.void_ratio(),

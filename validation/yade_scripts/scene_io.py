@@ -184,20 +184,23 @@ def stress_and_tangent_2d():
     return (s[0, 0], s[1, 1], 0.5 * (s[0, 1] + s[1, 0])), voigt
 
 
-def scene_from_simulation(template: dict) -> dict:
+def scene_from_simulation(template: dict, velocity_gradient=None) -> dict:
     """The current simulation as a scene dict (same format as the input scene).
 
     Positions are YADE's own (not wrapped into the cell); velocities are YADE's total
     velocities, and ``velocity_gradient`` is the L the cell moved with in the last step (a
     velGrad set since then is only YADE's ``nextVelGrad``), so the fluctuation is v − L·x.
+    Pass ``velocity_gradient`` to state the L of a packing put at rest by hand.
     """
     out = {k: v for k, v in template.items() if k not in (
         "radius", "position", "velocity", "angular_velocity", "cell")}
     out["format"] = SCENE_FORMAT
     out["version"] = SCENE_VERSION
     out["cell"] = cell_2d()
-    lg = O.cell.velGrad
-    out["velocity_gradient"] = [[lg[0, 0], lg[0, 1]], [lg[1, 0], lg[1, 1]]]
+    if velocity_gradient is None:
+        lg = O.cell.velGrad
+        velocity_gradient = [[lg[0, 0], lg[0, 1]], [lg[1, 0], lg[1, 1]]]
+    out["velocity_gradient"] = velocity_gradient
     out["timestep"] = O.dt
     out["radius"] = [b.shape.radius for b in O.bodies]
     out["position"] = [[b.state.pos[0], b.state.pos[1]] for b in O.bodies]
