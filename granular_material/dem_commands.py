@@ -8,10 +8,13 @@ import math
 import os
 import sys
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pandas as pd
+
+if TYPE_CHECKING:
+    from granular_material.dem import DEMBatch as DEMBatchType
 
 __all__ = ["register"]
 
@@ -45,7 +48,9 @@ def _grad_u(text: str) -> np.ndarray:
     try:
         values = np.array([float(p) for p in parts])
     except ValueError:
-        raise argparse.ArgumentTypeError(f"--grad-u has a value that is not a number: {text!r}")
+        raise argparse.ArgumentTypeError(
+            f"--grad-u has a value that is not a number: {text!r}"
+        ) from None
     if not np.isfinite(values).all():
         raise argparse.ArgumentTypeError(f"--grad-u must be finite, got {text!r}")
     return values.reshape(2, 2)
@@ -82,7 +87,7 @@ def _write_csv(frame: pd.DataFrame, path: Path) -> None:
     os.replace(tmp, path)
 
 
-def _load_batch(args: argparse.Namespace):  # noqa: ANN202 - returns a DEMBatch
+def _load_batch(args: argparse.Namespace) -> DEMBatchType:
     from granular_material.dem import DEMBatch, load_rve
 
     data = load_rve(args.rve)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -9,12 +10,10 @@ import pytest
 import warp as wp
 
 from granular_material.cli import quiet_warp
+from granular_material.dem import RVEData, RVEMeta
 
 quiet_warp()
 wp.init()
-
-CUDA = wp.is_cuda_available()
-requires_cuda = pytest.mark.skipif(not CUDA, reason="no CUDA device")
 
 
 @pytest.fixture(scope="session")
@@ -29,7 +28,7 @@ def small_rve_path(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 @pytest.fixture
-def two_discs():  # noqa: ANN201 - returns a factory
+def two_discs() -> Callable[..., RVEData]:
     """Factory: RVEData of two equal discs at x_a, x_b [m] in a (0.2 m square) cell."""
     return _two_disc_data
 
@@ -40,9 +39,7 @@ def _two_disc_data(
     radius: float = 5e-3,
     cell: np.ndarray | None = None,
     **meta_fields: object,
-):  # noqa: ANN202
-    from granular_material.dem import RVEData, RVEMeta
-
+) -> RVEData:
     cell = np.eye(2) * 0.2 if cell is None else np.asarray(cell, dtype=float)
     return RVEData(
         radius=np.full((1, 2), radius),

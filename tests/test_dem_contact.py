@@ -16,7 +16,8 @@ def _force_on_b(batch: DEMBatch) -> np.ndarray:
     batch.solver.set_affine(np.zeros((1, 2, 2)))
     batch.solver.run(batch.state, 1)
     dv = batch.state.vel.numpy() - v0
-    m = batch.model.meta.density * batch.model.meta.thickness * math.pi * batch.model.radius_host[0] ** 2
+    meta = batch.model.meta
+    m = meta.density * meta.thickness * math.pi * batch.model.radius_host[0] ** 2
     return dv[1] * m[1] / batch.dt
 
 

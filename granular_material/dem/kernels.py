@@ -4,7 +4,8 @@ Every particle array is flat, index ``i = b·N + j`` for disc j of RVE b; per-RV
 length B. Positions are fractional, ``s = H⁻¹x`` in [0, 1)², so particles follow the cell's
 homogeneous deformation (YADE's homoDeform); velocities are the fluctuation about the affine
 field ``L·x``, and spins the fluctuation about the cell's spin ``(L₁₀ − L₀₁)/2``, so that a
-rigid rotation of the cell is a rigid rotation of the packing (objectivity). Each particle thread evaluates every pair in its own neighbour list (no atomics
+rigid rotation of the cell is a rigid rotation of the packing (objectivity). Each particle
+thread evaluates every pair in its own neighbour list (no atomics
 on forces, deterministic); a pair is always computed in the orientation (min id → max id), so
 both partners see bit-identical forces and tangential history.
 
@@ -141,7 +142,7 @@ def kernels_for(float_type: Any) -> KernelSet:
         base = b * n_disc
         h = cell[b]
         old_count = nbr_count[i]
-        count = int(0)
+        count = int(0)  # noqa: UP018, RUF046 - a mutable loop variable in warp
         for jj in range(n_disc):
             j = base + jj
             if j == i:

@@ -7,6 +7,7 @@ batch neighbours (an RVE that has finished its part is frozen while the others g
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -105,7 +106,7 @@ def servo_steps(
     gain: float = 0.2,
     max_strain: float = 1.0e-4,
     check_every: int = 200,
-    callback=None,  # noqa: ANN001 - forwarded to Solver.run
+    callback: Callable[[int], bool | None] | None = None,
 ) -> int:
     """Run ``steps`` steps under mixed control of the diagonal components (see Solver)."""
     batch.solver.set_servo(control, target, gain=gain, max_strain=max_strain)
@@ -150,7 +151,8 @@ def consolidate(
         newly = ok & ~done
         done[newly] = True
         bar.update(int(newly.sum()))
-        bar.set_postfix(p=f"{-h.mean_stress.mean():.4g}", unbalanced=f"{h.unbalanced_force.max():.2g}")
+        bar.set_postfix(p=f"{-h.mean_stress.mean():.4g}",
+                        unbalanced=f"{h.unbalanced_force.max():.2g}")
         batch.solver.set_active(~done)
         return bool(done.all())
 
@@ -202,7 +204,7 @@ def biaxial_test(
     cell0 = batch.cell()
     area0 = np.linalg.det(cell0)
     # n equal logarithmic steps ending exactly at the requested engineering strain
-    total = int(math.ceil(-math.log1p(-axial_strain) / strain_per_step))
+    total = math.ceil(-math.log1p(-axial_strain) / strain_per_step)
     step_strain = (1.0 - axial_strain) ** (1.0 / total) - 1.0
     rows: list[pd.DataFrame] = []
 

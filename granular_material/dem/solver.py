@@ -122,7 +122,7 @@ class Solver:
         b, n, k = m.n_rve, m.n_disc, m.capacity
         dt = m.dt
 
-        def rec(kernel, dim, inputs):  # noqa: ANN001, ANN202 - thin local helper
+        def rec(kernel: wp.Kernel, dim: int, inputs: list) -> wp.Launch:
             return wp.launch(kernel, dim=dim, inputs=inputs, device=dev, record_cmd=True)
 
         cmds = [
