@@ -1,0 +1,21 @@
+"""Smoke-size run of the throughput benchmark (the full one is `tox -e bench`)."""
+
+from __future__ import annotations
+
+import importlib.util
+from pathlib import Path
+
+BENCH = Path(__file__).resolve().parents[1] / "benchmarks" / "dem_throughput.py"
+
+
+def test_throughput_benchmark_smoke(tmp_path):
+    spec = importlib.util.spec_from_file_location("dem_throughput", BENCH)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    out = tmp_path / "throughput.csv"
+    table = module.main(["--device", "cpu", "--batches", "1,3", "--particles", "30",
+                         "--seconds", "0.05", "--no-yade", "--out", str(out)])
+    assert out.exists()
+    assert table["batch"].tolist() == [1, 3]
+    assert (table["particle_steps_per_s"] > 0).all()
+    assert (table["steps"] >= 20).all()
