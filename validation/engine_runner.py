@@ -1,0 +1,155 @@
+"""Our engine's side of the cross-runs, through its command line (and its API for tangents).
+
+The command line (``prepare``, ``biaxial-dem``, ``dem-drive``) runs as a subprocess of this
+interpreter (``python -m granular_material.cli``), so its wall time is measured the same way
+as YADE's: the whole process, start-up included.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+__all__ = [
+    "EngineError",
+    "engine_available",
+    "ours_biaxial",
+    "ours_drive",
+    "ours_prepare",
+    "ours_tangents",
+    "voigt_tangent",
+]
+
+DEFAULT_TIMEOUT = 900.0
+
+
+class EngineError(RuntimeError):
+    """Our engine's command failed or timed out; the message holds the tail of its stderr."""
+
+
+def engine_available() -> bool:
+    """True when the engine's DEM commands are importable (``granular_material.dem_commands``)."""
+    try:
+        import granular_material.dem_commands  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+def _run(args: list[str], timeout: float) -> tuple[dict[str, Any], float]:
+    cmd = [sys.executable, "-m", "granular_material.cli", *args, "--json"]
+    start = time.perf_counter()
+    try:
+        proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, check=False,
+                              stdin=subprocess.DEVNULL)
+    except subprocess.TimeoutExpired:
+        raise EngineError(f"granular-material {args[0]} timed out after {timeout:g} s") from None
+    wall = time.perf_counter() - start
+    if proc.returncode != 0:
+        tail = "\n".join(proc.stderr.splitlines()[-20:])
+        raise EngineError(f"granular-material {' '.join(args)} failed (exit "
+                          f"{proc.returncode}):\n{tail}")
+    try:
+        result = json.loads(proc.stdout)
+    except json.JSONDecodeError as exc:
+        raise EngineError(f"granular-material {args[0]} printed no JSON: {exc}\n"
+                          f"{proc.stdout[-2000:]}") from None
+    return result, wall
+
+
+def _device(device: str | None) -> list[str]:
+    return [] if device is None else ["--device", device]
+
+
+def ours_prepare(out: str | Path, particles: int = 400, seed: int = 1, pressure: float = 1e5,
+                 device: str | None = None,
+                 timeout: float = DEFAULT_TIMEOUT) -> dict[str, Any]:
+    """``granular-material prepare``: its JSON summary plus ``wall_s`` [s]."""
+    result, wall = _run(["prepare", "--particles", str(particles), "--seed", str(seed),
+                         "--pressure", repr(float(pressure)), "--out", str(out),
+                         *_device(device)], timeout)
+    result["wall_s"] = wall
+    return result
+
+
+def ours_biaxial(rve: str | Path, out_csv: str | Path, axial_strain: float = 0.1,
+                 confining: float = 1e5, strain_per_step: float = 1e-5,
+                 record_every: int = 10, device: str | None = None,
+                 timeout: float = DEFAULT_TIMEOUT) -> tuple[pd.DataFrame, dict[str, Any]]:
+    """``granular-material biaxial-dem`` on RVE 0: the curve and its JSON plus ``wall_s``."""
+    result, wall = _run(["biaxial-dem", str(rve), "--axial-strain", repr(float(axial_strain)),
+                         "--confining", repr(float(confining)),
+                         "--strain-per-step", repr(float(strain_per_step)),
+                         "--record-every", str(int(record_every)), "--out", str(out_csv),
+                         *_device(device)], timeout)
+    result["wall_s"] = wall
+    curve = pd.read_csv(out_csv)
+    if "rve" in curve.columns:
+        curve = curve[curve["rve"] == 0].reset_index(drop=True)
+    return curve, result
+
+
+def ours_drive(rve: str | Path, out_csv: str | Path, grad_u: list[float], increments: int,
+               device: str | None = None,
+               timeout: float = DEFAULT_TIMEOUT) -> tuple[pd.DataFrame, dict[str, Any]]:
+    """``granular-material dem-drive`` on the file: rows of RVE 0, JSON plus ``wall_s``."""
+    if len(grad_u) != 4 or increments < 1:
+        raise ValueError(f"grad_u needs 4 numbers and increments >= 1, got {grad_u}, "
+                         f"{increments}")
+    text = ",".join(repr(float(g)) for g in grad_u)
+    result, wall = _run(["dem-drive", str(rve), f"--grad-u={text}", "--increments",
+                         str(int(increments)), "--out", str(out_csv), *_device(device)],
+                        timeout)
+    result["wall_s"] = wall
+    path = pd.read_csv(out_csv)
+    if "rve" in path.columns:
+        path = path[path["rve"] == 0].reset_index(drop=True)
+    return path, result
+
+
+def voigt_tangent(tangent: np.ndarray) -> np.ndarray:
+    """Symmetrised Voigt (xx, yy, xy) matrix (3, 3) [Pa] of a 4th-order tangent (2, 2, 2, 2)."""
+    tangent = np.asarray(tangent, dtype=np.float64)
+    if tangent.shape != (2, 2, 2, 2):
+        raise ValueError(f"tangent must have shape (2, 2, 2, 2), got {tangent.shape}")
+    sym = 0.25 * (tangent + tangent.transpose(1, 0, 2, 3) + tangent.transpose(0, 1, 3, 2)
+                  + tangent.transpose(1, 0, 3, 2))
+    idx = ((0, 0), (1, 1), (0, 1))
+    return np.array([[sym[i, j, k, m] for (k, m) in idx] for (i, j) in idx])
+
+
+def ours_tangents(rve: str | Path, grad_u: list[float], increments: int, at: list[int],
+                  device: str | None = "cpu") -> dict[int, np.ndarray]:
+    """Voigt tangents (3, 3) [Pa] of our engine after the increments ``at`` of a ∇u path.
+
+    Runs in this process through the engine's API (``DEMBatch`` and ``drive_grad_u``), the
+    way ``dem-drive`` applies the increments; the homogenised tangent is Kruyt–Rothenburg's.
+    """
+    from granular_material.dem import drive_grad_u
+    from granular_material.dem.batch import DEMBatch
+    from granular_material.dem.rve_file import load_rve
+
+    data = load_rve(rve).select(0)
+    batch = DEMBatch(data, device=device)
+    grad = np.asarray(grad_u, dtype=np.float64).reshape(2, 2)
+    wanted = sorted(set(int(k) for k in at))
+    if any(k < 0 or k > increments for k in wanted):
+        raise ValueError(f"tangent increments must lie in [0, {increments}], got {wanted}")
+    out: dict[int, np.ndarray] = {}
+    if 0 in wanted:
+        out[0] = voigt_tangent(batch.homogenize().tangent[0])
+    for k in range(1, (wanted[-1] if wanted else 0) + 1):
+        f_now = np.eye(2) + grad * (k - 1) / increments
+        f_next = np.eye(2) + grad * k / increments
+        step_grad = f_next @ np.linalg.inv(f_now) - np.eye(2)
+        drive_grad_u(batch, step_grad)
+        if k in wanted:
+            out[k] = voigt_tangent(batch.homogenize().tangent[0])
+    return out

@@ -1,0 +1,154 @@
+"""Markdown report, overlay plots and JSON of the YADE cross-validation."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+from granular_material_validation import metrics
+
+__all__ = ["json_entries", "plot_case", "write_report"]
+
+
+def _fmt(value: Any, spec: str = ".3g") -> str:
+    if value is None or (isinstance(value, float) and not math.isfinite(value)):
+        return "–"
+    return format(value, spec)
+
+
+def _pct(value: Any) -> str:
+    return "–" if value is None else f"{100 * value:.2f} %"
+
+
+def plot_case(entry: dict[str, Any], path: Path) -> Path:
+    """Overlay of YADE (solid) and ours (dashed) for every seed: stresses, σ1/σ3, εv, e."""
+    case = entry["case"]
+    x = "axial_strain" if case["kind"] == "biaxial" else "path_strain"
+    xlabel = ("axial strain εa [%] (compression positive)" if case["kind"] == "biaxial"
+              else "path strain max|∇u|·k/K [%]")
+    fig, axes = plt.subplots(2, 2, figsize=(11, 8), constrained_layout=True)
+    for n, run in enumerate(entry["_runs"]):
+        colour = f"C{n}"
+        for frame, style, side in ((run.yade, "-", "YADE"), (run.ours, "--", "ours")):
+            xs = 100 * frame[x].to_numpy()
+            label = f"{side} seed {run.seed}"
+            for comp, marker in (("sxx", "σxx"), ("syy", "σyy"), ("sxy", "σxy")):
+                axes[0, 0].plot(xs, -frame[comp] / 1e3, style, color=colour, lw=1,
+                                label=f"{label} −{marker}" if n == 0 else None)
+            axes[0, 1].plot(xs, metrics.stress_ratio(frame), style, color=colour, lw=1,
+                            label=label)
+            if "volumetric_strain" in frame.columns:
+                axes[1, 0].plot(xs, -100 * frame["volumetric_strain"], style, color=colour,
+                                lw=1, label=label)
+            axes[1, 1].plot(xs, frame["void_ratio"], style, color=colour, lw=1, label=label)
+    axes[0, 0].set_ylabel("stress components [kPa] (compression positive)")
+    axes[0, 1].set_ylabel("stress ratio σ1/σ3 [-] (compression positive)")
+    axes[1, 0].set_ylabel("volumetric strain εv [%] (compression positive)")
+    axes[1, 1].set_ylabel("void ratio e [-]")
+    if case["kind"] == "drive":
+        axes[1, 0].text(0.5, 0.5, "volumetric strain: see void ratio", ha="center",
+                        transform=axes[1, 0].transAxes)
+    for ax in axes.flat:
+        ax.set_xlabel(xlabel)
+        ax.grid(alpha=0.3)
+    axes[0, 0].legend(fontsize=7)
+    axes[0, 1].legend(fontsize=7)
+    fig.suptitle(f"{case['name']}: YADE (solid) vs ours (dashed)")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def json_entries(entries: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The case entries without their in-memory curves, ready for ``json.dumps``."""
+    return [{k: v for k, v in e.items() if not k.startswith("_")} for e in entries]
+
+
+def _table(entries: list[dict[str, Any]]) -> list[str]:
+    lines = [
+        "| case | seed | peak σ1/σ3 YADE / ours (Δ) | εa at peak YADE / ours (Δ) | "
+        "pre-peak Δσ | post-peak Δσ | max Δεv | max Δe | wall YADE / ours [s] (ratio) |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for e in entries:
+        rows = [(str(r["seed"]), r["comparison"], r) for r in e["per_seed"]]
+        if "ensemble" in e:
+            rows.append(("mean", e["ensemble"], None))
+        for seed, c, r in rows:
+            wall = (f"{r['yade_wall_s']:.1f} / {r['ours_wall_s']:.1f} "
+                    f"({r['wall_ratio_ours_over_yade']:.2f})" if r else "")
+            lines.append(
+                f"| {e['case']['name']} | {seed} | {c['peak_ratio_ref']:.3f} / "
+                f"{c['peak_ratio_ours']:.3f} ({_pct(c['peak_ratio_diff'])}) | "
+                f"{_pct(c['strain_at_peak_ref'])} / {_pct(c['strain_at_peak_ours'])} "
+                f"({_pct(c['strain_at_peak_diff'])}) | {_pct(c['pre_peak_diff'])} | "
+                f"{_pct(c['post_peak_diff'])} | {_pct(c['volumetric_strain_diff'])} | "
+                f"{_fmt(c['void_ratio_diff'], '.4f')} | {wall} |")
+    return lines
+
+
+def write_report(entries: list[dict[str, Any]], out: str | Path,
+                 context: dict[str, Any]) -> Path:
+    """Write ``report.md``, ``results.json`` and ``plots/<case>.png`` under ``out``."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    lines = ["# YADE cross-validation", ""]
+    for key, value in context.items():
+        lines.append(f"- {key}: {value}")
+    lines += [
+        "",
+        "Acceptance (issue 5): before the peak every stress component within "
+        f"{metrics.PRE_PEAK_TOL:.0%} of the peak stress σ1; peak σ1/σ3 within "
+        f"{metrics.PEAK_RATIO_TOL:.0%}; strain at peak within {100 * metrics.PEAK_STRAIN_TOL:.1f} %"
+        f" strain; after the peak within {metrics.POST_PEAK_TOL:.0%} of the peak stress. The "
+        "first three hold for every seed; the post-peak rule is judged on the seed-mean curves "
+        "(DEM is chaotic after the peak: every seed's figure is listed too). Stresses are "
+        "compared on YADE's strain grid; the peak is located on a 5-point running mean.",
+        "",
+        "## Summary",
+        "",
+        "| case | result | checks | wall YADE / ours [s] (ours/YADE) |",
+        "|---|---|---|---|",
+    ]
+    for e in entries:
+        failed = [k for k, ok in e["checks"].items() if not ok]
+        lines.append(f"| {e['case']['name']} | {'PASS' if e['passed'] else 'FAIL'} | "
+                     f"{'all pass' if not failed else 'failed: ' + ', '.join(failed)} | "
+                     f"{e['yade_wall_s']:.1f} / {e['ours_wall_s']:.1f} "
+                     f"({e['wall_ratio_ours_over_yade']:.2f}) |")
+    lines += ["", "## Figures", "", *_table(entries), ""]
+    for e in entries:
+        name = e["case"]["name"]
+        plot = plot_case(e, out / "plots" / f"{name}.png")
+        lines += [f"### {name}", "", e["case"]["description"], "",
+                  f"![{name}]({plot.relative_to(out).as_posix()})", ""]
+        for r in e["per_seed"]:
+            p = r["packing"]
+            lines.append(
+                f"- seed {r['seed']}: packing e0 = {_fmt(p.get('void_ratio'), '.4f')}, "
+                f"Z = {_fmt(p.get('coordination'), '.3f')}; YADE stepping {r['yade_run_s']:.2f} s")
+            for side in ("yade", "ours"):
+                if f"servo_error_{side}" in r:
+                    lines.append(f"  - largest |σxx + σc|/σc, {side}: "
+                                 f"{_pct(r[f'servo_error_{side}'])}")
+            for t in r.get("tangents", []):
+                lines.append(f"  - tangent after increment {t['increment']}: "
+                             f"‖Δ‖/‖D_YADE‖ = {_pct(t['frobenius'])}, "
+                             f"max |Δ| / max |D| = {_pct(t['max_entry'])}")
+        if "yade_seed_spread" in e:
+            s = e["yade_seed_spread"]
+            lines.append(f"- YADE seed-to-seed: peak σ1/σ3 = {s['peak_ratio_mean']:.3f} ± "
+                         f"{s['peak_ratio_std']:.3f} (1 s.d.)")
+        lines.append("")
+    report = out / "report.md"
+    report.write_text("\n".join(lines))
+    (out / "results.json").write_text(json.dumps(
+        {"context": context, "cases": json_entries(entries)}, indent=1))
+    return report
