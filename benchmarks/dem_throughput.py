@@ -49,17 +49,16 @@ def _yade_rate(rve_path: Path, steps: int) -> float | None:
 
 def measure(batch: DEMBatch, seconds: float) -> tuple[int, float]:
     """Steps run and wall time [s] of about ``seconds`` of shearing (after a warm-up)."""
-    dt = batch.dt
     shear = np.zeros((batch.n_rve, 2, 2))
-    shear[:, 0, 1] = 1e-5 / dt  # 1e-5 strain a step
-    batch.solver.set_affine(shear)
-    batch.solver.run(batch.state, 20)  # warm-up: kernels loaded, lists built
+    shear[:, 0, 1] = 1e-5 / batch.dt  # 1e-5 strain a step
+    batch.set_affine(shear)
+    batch.run(20)  # warm-up: kernels loaded, lists built
     t0 = time.perf_counter()
-    batch.solver.run(batch.state, 20)
+    batch.run(20)
     per_step = (time.perf_counter() - t0) / 20
     steps = max(20, int(seconds / per_step))
     t0 = time.perf_counter()
-    batch.solver.run(batch.state, steps, check_every=min(steps, 500))
+    batch.run(steps, check_every=min(steps, 500))
     return steps, time.perf_counter() - t0
 
 
@@ -72,6 +71,8 @@ def main(argv: list[str] | None = None) -> pd.DataFrame:
     parser.add_argument("--particles", type=int, default=400, help="discs per RVE")
     parser.add_argument("--seconds", type=float, default=2.0, help="timed seconds per case")
     parser.add_argument("--dtype", default="float64", choices=["float64", "float32"])
+    parser.add_argument("--shards", type=int, default=None,
+                        help="CPU shards (threads); default: one per core")
     parser.add_argument("--yade-steps", type=int, default=2000, help="steps YADE is timed on")
     parser.add_argument("--no-yade", action="store_true", help="skip the YADE measurement")
     parser.add_argument("--out", type=Path, default=None, help="CSV of the table")
@@ -86,10 +87,12 @@ def main(argv: list[str] | None = None) -> pd.DataFrame:
 
     rows = []
     for b in (int(x) for x in args.batches.split(",")):
-        batch = DEMBatch(one.replicate(b), device=args.device, dtype=args.dtype)
+        batch = DEMBatch(one.replicate(b), device=args.device, dtype=args.dtype,
+                         shards=args.shards)
         steps, wall = measure(batch, args.seconds)
         rate = b * args.particles * steps / wall
-        rows.append({"device": batch.device, "dtype": args.dtype, "batch": b,
+        rows.append({"device": batch.device, "dtype": args.dtype,
+                     "shards": len(batch.shards), "batch": b,
                      "particles": b * args.particles, "steps": steps, "wall_s": wall,
                      "particle_steps_per_s": rate,
                      "ratio_to_yade": rate / yade if yade else math.nan})

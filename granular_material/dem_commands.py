@@ -123,7 +123,7 @@ def _run_prepare(args: argparse.Namespace) -> int:
         "cell": _scalar_or_list(batch.cell()),
         "particles": batch.n_disc,
         "batch": batch.n_rve,
-        "timestep": batch.dt,
+        "timestep": _scalar_or_list(batch.dt),
         "out": str(args.out),
     })
     return 0

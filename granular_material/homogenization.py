@@ -5,7 +5,7 @@ All measures come back for every RVE of a batch from one pair of kernel launches
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 import warp as wp
@@ -39,6 +39,14 @@ class Homogenized:
     n_contacts: np.ndarray
     sliding_fraction: np.ndarray
     volume: np.ndarray
+
+    @classmethod
+    def concatenate(cls, parts: list[Homogenized]) -> Homogenized:
+        """Join the results of consecutive groups of RVEs along the batch axis."""
+        if len(parts) == 1:
+            return parts[0]
+        return cls(**{f.name: np.concatenate([getattr(p, f.name) for p in parts])
+                      for f in fields(cls)})
 
     @property
     def mean_stress(self) -> np.ndarray:

@@ -36,7 +36,7 @@ def test_dem_drive_csv_and_exact_timestep(small_rve_path, tmp_path, capsys):
     data = load_rve(small_rve_path)
     rve = tmp_path / "dt.npz"
     save_rve(rve, replace(data, meta=replace(data.meta, timestep=3.0e-6)))
-    assert DEMBatch(load_rve(rve), device="cpu").dt == 3.0e-6
+    assert DEMBatch(load_rve(rve), device="cpu").dt.tolist() == [3.0e-6]
     csv = tmp_path / "path.csv"
     rc = main(["dem-drive", str(rve), "--grad-u", "0,0.001,0,0", "--increments", "3",
                "--out", str(csv), "--device", "cpu", "--json"])

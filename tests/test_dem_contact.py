@@ -12,13 +12,14 @@ from granular_material.dem import DEMBatch
 
 def _force_on_b(batch: DEMBatch) -> np.ndarray:
     """Contact force on disc 1 [N] from one step's velocity change, damping off."""
-    v0 = batch.state.vel.numpy().copy()
-    batch.solver.set_affine(np.zeros((1, 2, 2)))
-    batch.solver.run(batch.state, 1)
-    dv = batch.state.vel.numpy() - v0
-    meta = batch.model.meta
-    m = meta.density * meta.thickness * math.pi * batch.model.radius_host[0] ** 2
-    return dv[1] * m[1] / batch.dt
+    v0 = batch.shards[0].state.vel.numpy().copy()
+    batch.set_affine(np.zeros((1, 2, 2)))
+    batch.run(1)
+    dv = batch.shards[0].state.vel.numpy() - v0
+    model = batch.shards[0].model
+    meta = model.meta
+    m = meta.density * meta.thickness * math.pi * model.radius_host[0] ** 2
+    return dv[1] * m[1] / batch.dt[0]
 
 
 def test_two_disc_normal_force_is_kn_times_overlap(two_discs):
@@ -56,11 +57,11 @@ def test_stick_then_slip_follows_coulomb(two_discs):
     batch = DEMBatch(data, device="cpu")
     kn, kt = data.meta.stiffness["kn"], data.meta.stiffness["kt"]
     cap = math.tan(0.5) * kn * overlap
-    batch.solver.set_affine(np.zeros((1, 2, 2)))
+    batch.set_affine(np.zeros((1, 2, 2)))
     history = []
     for _ in range(12):
-        batch.solver.run(batch.state, 1)
-        history.append(batch.state.shear.numpy()[0])
+        batch.run(1)
+        history.append(batch.shards[0].state.shear.numpy()[0])
     history = np.array(history)
     stick = np.arange(1, 13) * kt * v_t * dt
     n_stick = int(np.sum(stick < cap * 0.98))

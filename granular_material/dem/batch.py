@@ -1,17 +1,56 @@
-"""DEMBatch: a model, its state and a solver together — the object users and the FEM hold."""
+"""DEMBatch: the RVEs, their state and solvers together — the object users and the FEM hold.
+
+On the CPU a warp kernel runs on one thread, so the batch is split into shards (contiguous
+groups of RVEs, each with its own Model, State and Solver) stepped by one thread each; the
+launches release the GIL, so two shards use two cores. RVEs are independent, so sharding
+never changes a result. On CUDA one shard holds the whole batch.
+"""
 
 from __future__ import annotations
 
-from dataclasses import replace
+import os
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, replace
 
 import numpy as np
 
-from granular_material.dem.model import Model, State, build_model, state_from_data
+from granular_material.dem.model import Model, State, build_model, resolve_device, state_from_data
 from granular_material.dem.rve_file import RVEData
-from granular_material.dem.solver import Solver
+from granular_material.dem.solver import DEMInstabilityError, Solver
 from granular_material.homogenization import Homogenized, homogenize
 
-__all__ = ["DEMBatch"]
+__all__ = ["BatchSnapshot", "DEMBatch", "Shard"]
+
+
+@dataclass(eq=False)
+class Shard:
+    """A contiguous group of RVEs ``first : first + model.n_rve`` of a batch."""
+
+    first: int
+    model: Model
+    state: State
+    solver: Solver
+
+    @property
+    def rves(self) -> slice:
+        """The shard's RVEs as a slice of the batch."""
+        return slice(self.first, self.first + self.model.n_rve)
+
+
+@dataclass(frozen=True, eq=False)
+class BatchSnapshot:
+    """Device copies of every shard's state (what ``DEMBatch.snapshot`` returns)."""
+
+    states: tuple[State, ...]
+
+
+def _slice_data(data: RVEData, rves: slice) -> RVEData:
+    return replace(
+        data, radius=data.radius[rves], position=data.position[rves], cell=data.cell[rves],
+        velocity=data.velocity[rves], angular_velocity=data.angular_velocity[rves],
+        extra={k: v[rves] for k, v in data.extra.items()},
+    )
 
 
 class DEMBatch:
@@ -21,8 +60,9 @@ class DEMBatch:
         data: the RVE batch (e.g. from :func:`load_rve`).
         device: "cpu", "cuda" or None (CUDA when present, else CPU).
         dtype: "float64" (default) or "float32".
-        timestep: time step [s]; default: ``data.meta.timestep`` if set, else a safety
-            fraction of the critical step.
+        timestep: time step [s] for every RVE; default: ``data.meta.timestep`` if set, else a
+            safety fraction of each RVE's critical step.
+        shards: number of CPU shards (threads); default: as many as cores, at most B.
     """
 
     def __init__(
@@ -31,77 +71,176 @@ class DEMBatch:
         device: str | None = None,
         dtype: str = "float64",
         timestep: float | None = None,
+        shards: int | None = None,
     ) -> None:
-        self.model: Model = build_model(data, device=device, dtype=dtype, timestep=timestep)
-        self.state: State = state_from_data(self.model, data)
-        self.solver = Solver(self.model)
-        if self.state.force_rebuild.numpy().any():
-            self.solver.refresh_neighbors(self.state)
+        data.validate()
+        device = resolve_device(device)
+        if shards is None:
+            shards = (os.cpu_count() or 1) if device == "cpu" else 1
+        if shards < 1:
+            raise ValueError(f"shards must be >= 1, got {shards}")
+        shards = min(shards, data.n_rve)
+        self.shards: list[Shard] = []
+        for part in np.array_split(np.arange(data.n_rve), shards):
+            rves = slice(int(part[0]), int(part[-1]) + 1)
+            model = build_model(_slice_data(data, rves), device=device, dtype=dtype,
+                                timestep=timestep)
+            state = state_from_data(model, _slice_data(data, rves))
+            solver = Solver(model)
+            if state.force_rebuild.numpy().any():
+                solver.refresh_neighbors(state)
+            self.shards.append(Shard(rves.start, model, state, solver))
+        self._pool = ThreadPoolExecutor(len(self.shards)) if len(self.shards) > 1 else None
 
     # -- shape and parameters -------------------------------------------------------------
     @property
     def n_rve(self) -> int:
         """Number of RVEs B."""
-        return self.model.n_rve
+        return sum(s.model.n_rve for s in self.shards)
 
     @property
     def n_disc(self) -> int:
         """Discs per RVE N."""
-        return self.model.n_disc
+        return self.shards[0].model.n_disc
 
     @property
     def device(self) -> str:
         """The warp device the batch lives on."""
-        return self.model.device
+        return self.shards[0].model.device
 
     @property
-    def dt(self) -> float:
-        """Time step [s]."""
-        return self.model.dt
+    def dt(self) -> np.ndarray:
+        """Time step of every RVE [s], shape (B,), float64."""
+        return np.concatenate([s.model.dt for s in self.shards])
 
     def set_friction(self, friction_angle: float) -> None:
         """Set the interparticle friction angle [rad] of every RVE (tangential history kept)."""
-        self.model = self.model.with_friction(friction_angle)
-        self.solver = Solver(self.model)
+        for shard in self.shards:
+            shard.model = shard.model.with_friction(friction_angle)
+            shard.solver = Solver(shard.model)
+
+    # -- loading and stepping -------------------------------------------------------------
+    def set_affine(self, vel_grad: np.ndarray) -> None:
+        """Prescribe each RVE's velocity gradient L [1/s], shape (B, 2, 2)."""
+        for shard in self.shards:
+            shard.solver.set_affine(np.asarray(vel_grad)[shard.rves])
+
+    def set_servo(
+        self, control: np.ndarray, target: np.ndarray, gain: float, max_strain: float
+    ) -> None:
+        """Mixed stress/strain control of xx, yy per RVE (see :meth:`Solver.set_servo`)."""
+        for shard in self.shards:
+            shard.solver.set_servo(np.asarray(control)[shard.rves],
+                                   np.asarray(target)[shard.rves], gain, max_strain)
+
+    def set_active(self, active: np.ndarray) -> None:
+        """Which RVEs step (True) and which stay frozen, shape (B,)."""
+        for shard in self.shards:
+            shard.solver.set_active(np.asarray(active)[shard.rves])
+
+    def run(
+        self,
+        steps: int,
+        check_every: int = 200,
+        callback: Callable[[int], bool | None] | None = None,
+    ) -> int:
+        """Advance every RVE by up to ``steps`` steps (shards in parallel on the CPU).
+
+        Every ``check_every`` steps the state is checked (DEMInstabilityError names the RVEs
+        by their batch index) and ``callback(steps_done)`` may return True to stop early.
+        Returns the steps run.
+        """
+        if steps < 0:
+            raise ValueError(f"steps must be >= 0, got {steps}")
+        done = 0
+        while done < steps:
+            chunk = min(check_every, steps - done)
+            self._run_shards(chunk)
+            done += chunk
+            if callback is not None and callback(done):
+                break
+        return done
+
+    def _run_shards(self, steps: int) -> None:
+        def one(shard: Shard) -> None:
+            shard.solver.run(shard.state, steps, check_every=steps)
+
+        if self._pool is None:
+            results = [self._guard(one, self.shards[0])]
+        else:
+            results = list(self._pool.map(lambda s: self._guard(one, s), self.shards))
+        failures = [r for r in results if r is not None]
+        if failures:
+            rves = sorted(i for f in failures for i in f.rve)
+            reasons = sorted({reason for f in failures for reason in f.reasons})
+            raise DEMInstabilityError(rves, reasons)
+
+    @staticmethod
+    def _guard(run: Callable[[Shard], None], shard: Shard) -> DEMInstabilityError | None:
+        try:
+            run(shard)
+        except DEMInstabilityError as exc:
+            return DEMInstabilityError([shard.first + i for i in exc.rve], exc.reasons)
+        return None
 
     # -- state ----------------------------------------------------------------------------
-    def snapshot(self) -> State:
+    def snapshot(self) -> BatchSnapshot:
         """A device copy of the whole dynamic state (commit)."""
-        return self.state.clone()
+        return BatchSnapshot(tuple(s.state.clone() for s in self.shards))
 
-    def restore(self, snapshot: State) -> None:
+    def restore(self, snapshot: BatchSnapshot) -> None:
         """Make ``snapshot`` the current state again (revert), exactly."""
-        self.state.assign(snapshot)
+        for shard, state in zip(self.shards, snapshot.states, strict=True):
+            shard.state.assign(state)
 
     def cell(self) -> np.ndarray:
         """Cell matrices H [m], shape (B, 2, 2), float64."""
-        return self.state.cell.numpy().astype(np.float64)
+        return np.concatenate([s.state.cell.numpy().astype(np.float64) for s in self.shards])
+
+    def set_cell(self, cell: np.ndarray) -> None:
+        """Overwrite the cell matrices H [m], shape (B, 2, 2); discs keep fractional coords."""
+        for shard in self.shards:
+            shard.state.cell.assign(np.asarray(cell, dtype=np.float64)[shard.rves])
 
     def homogenize(self) -> Homogenized:
         """Stress, tangent, void ratio, coordination, fabric of every RVE."""
-        return homogenize(self.model, self.state)
+        return Homogenized.concatenate([homogenize(s.model, s.state) for s in self.shards])
 
     def to_data(self) -> RVEData:
         """The batch as an :class:`RVEData` (host copy), contact history included."""
-        m = self.model
-        b, n, k = m.n_rve, m.n_disc, m.capacity
-        cell = self.cell()
-        frac = self.state.frac.numpy().astype(np.float64).reshape(b, n, 2)
-        extra = {
-            "contact_partner": self.state.nbr.numpy().reshape(b, n, k),
-            "contact_count": self.state.nbr_count.numpy().reshape(b, n),
-            "contact_shear_force": self.state.shear.numpy().astype(np.float64).reshape(b, n, k),
-            "fractional_position": frac,
-            "verlet_displacement": self.state.disp.numpy().astype(np.float64).reshape(b, n, 2),
-            "cell_at_list_build": self.state.cell_ref.numpy().astype(np.float64),
-        }
-        meta = replace(m.meta, timestep=m.dt)
-        return RVEData(
-            radius=m.radius_host.copy(),
-            position=np.einsum("bij,bnj->bni", cell, frac),
-            cell=cell,
-            velocity=self.state.vel.numpy().astype(np.float64).reshape(b, n, 2),
-            angular_velocity=self.state.ang_vel.numpy().astype(np.float64).reshape(b, n),
-            meta=meta,
-            extra=extra,
+        parts = [_shard_data(s) for s in self.shards]
+        first = parts[0]
+        return replace(
+            first,
+            radius=np.concatenate([p.radius for p in parts]),
+            position=np.concatenate([p.position for p in parts]),
+            cell=np.concatenate([p.cell for p in parts]),
+            velocity=np.concatenate([p.velocity for p in parts]),
+            angular_velocity=np.concatenate([p.angular_velocity for p in parts]),
+            extra={k: np.concatenate([p.extra[k] for p in parts]) for k in first.extra},
         )
+
+
+def _shard_data(shard: Shard) -> RVEData:
+    m, state = shard.model, shard.state
+    b, n, k = m.n_rve, m.n_disc, m.capacity
+    cell = state.cell.numpy().astype(np.float64)
+    frac = state.frac.numpy().astype(np.float64).reshape(b, n, 2)
+    extra = {
+        "contact_partner": state.nbr.numpy().reshape(b, n, k),
+        "contact_count": state.nbr_count.numpy().reshape(b, n),
+        "contact_shear_force": state.shear.numpy().astype(np.float64).reshape(b, n, k),
+        "fractional_position": frac,
+        "verlet_displacement": state.disp.numpy().astype(np.float64).reshape(b, n, 2),
+        "cell_at_list_build": state.cell_ref.numpy().astype(np.float64),
+    }
+    meta = replace(m.meta, timestep=float(m.dt[0]) if m.explicit_timestep else None)
+    return RVEData(
+        radius=m.radius_host.copy(),
+        position=np.einsum("bij,bnj->bni", cell, frac),
+        cell=cell,
+        velocity=state.vel.numpy().astype(np.float64).reshape(b, n, 2),
+        angular_velocity=state.ang_vel.numpy().astype(np.float64).reshape(b, n),
+        meta=meta,
+        extra=extra,
+    )

@@ -192,7 +192,7 @@ def kernels_for(float_type: Any) -> KernelSet:
     def compute_forces(
         n_disc: int,
         capacity: int,
-        dt: ft,
+        timestep: wp.array(dtype=ft),
         law: int,
         kn_c: ft,
         kt_c: ft,
@@ -227,6 +227,7 @@ def kernels_for(float_type: Any) -> KernelSet:
             h = cell[b]
             lg = vel_grad[b]
             mu = friction[b]
+            dt = timestep[b]
             for k in range(nbr_count[i]):
                 slot = i * capacity + k
                 j = base + nbr[slot]
@@ -276,7 +277,7 @@ def kernels_for(float_type: Any) -> KernelSet:
     @wp.kernel(module="unique")
     def servo(
         n_disc: int,
-        dt: ft,
+        timestep: wp.array(dtype=ft),
         thickness: ft,
         gain: ft,
         max_strain: ft,
@@ -293,6 +294,7 @@ def kernels_for(float_type: Any) -> KernelSet:
         b = wp.tid()
         if active[b] == 0:
             return
+        dt = timestep[b]
         volume = wp.determinant(cell[b]) * thickness
         s_sum = mat22(ft(0.0), ft(0.0), ft(0.0), ft(0.0))
         k_sum = vec2(ft(0.0), ft(0.0))
@@ -325,7 +327,7 @@ def kernels_for(float_type: Any) -> KernelSet:
     @wp.kernel(module="unique")
     def integrate(
         n_disc: int,
-        dt: ft,
+        timestep: wp.array(dtype=ft),
         damping: ft,
         active: wp.array(dtype=wp.int32),
         cell: wp.array(dtype=mat22),
@@ -344,6 +346,7 @@ def kernels_for(float_type: Any) -> KernelSet:
         b = i // n_disc
         if active[b] == 0:
             return
+        dt = timestep[b]
         v = vel[i]
         f = force[i]
         f = vec2(damp(f[0], v[0], damping), damp(f[1], v[1], damping))

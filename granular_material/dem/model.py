@@ -78,7 +78,8 @@ class Model:
         dtype: "float64" or "float32".
         n_rve: B. n_disc: N.
         meta: material parameters (friction, damping, stiffness law, density, thickness).
-        dt: time step [s].
+        dt: time step per RVE [s], numpy, shape (B,), float64; ``timestep`` the same on
+            the device. explicit_timestep: True when given (argument or file), not derived.
         skin: Verlet skin [m]. cutoff: largest pair reach 2·r_max + skin [m].
         capacity: neighbour slots per disc.
         radius: disc radii [m], shape (B·N,), float. inv_mass [1/kg], inv_inertia
@@ -92,7 +93,9 @@ class Model:
     n_rve: int
     n_disc: int
     meta: RVEMeta
-    dt: float
+    dt: np.ndarray
+    timestep: wp.array
+    explicit_timestep: bool
     skin: float
     cutoff: float
     capacity: int
@@ -143,25 +146,31 @@ def build_model(
     """Build the static model of ``data`` on ``device``.
 
     The time step is ``timestep`` if given, else ``data.meta.timestep`` if present, else
-    ``safety`` × :func:`critical_timestep`. A step above the critical one raises ValueError.
+    ``safety`` × :func:`critical_timestep` of each RVE's own discs. A step above the critical
+    one raises ValueError.
     """
     data.validate()
     device = resolve_device(device)
     ft = kernels_for(_float_type(dtype)).float_type
     meta = data.meta
-    crit = critical_timestep(data.radius, meta)
+    # per RVE, so that an RVE's time step (and result) never depends on its batch neighbours
+    crit = np.array([critical_timestep(r, meta) for r in data.radius])
     if timestep is None:
         timestep = meta.timestep
     if timestep is None:
         if not 0 < safety <= 1:
             raise ValueError(f"safety must lie in (0, 1], got {safety!r}")
-        timestep = safety * crit
-    if not (math.isfinite(timestep) and timestep > 0):
-        raise ValueError(f"timestep must be a positive number, got {timestep!r}")
-    if timestep > crit:
-        raise ValueError(
-            f"timestep {timestep:.4g} s is above the stable step {crit:.4g} s of this packing"
-        )
+        dt = safety * crit
+    else:
+        if not (math.isfinite(timestep) and timestep > 0):
+            raise ValueError(f"timestep must be a positive number, got {timestep!r}")
+        if (timestep > crit).any():
+            rve = int(np.argmax(timestep > crit))
+            raise ValueError(
+                f"timestep {timestep:.4g} s is above the stable step {crit[rve]:.4g} s of "
+                f"RVE {rve}"
+            )
+        dt = np.full(data.n_rve, float(timestep))
     r = data.radius.reshape(-1)
     mass = meta.density * meta.thickness * np.pi * r**2
     inertia = 0.5 * mass * r**2
@@ -174,7 +183,9 @@ def build_model(
         n_rve=data.n_rve,
         n_disc=data.n_disc,
         meta=meta,
-        dt=float(timestep),
+        dt=dt,
+        timestep=wp.array(dt, dtype=ft, device=device),
+        explicit_timestep=timestep is not None,
         skin=skin,
         cutoff=cutoff,
         capacity=capacity,

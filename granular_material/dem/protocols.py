@@ -78,23 +78,22 @@ def drive_grad_u(
             if np.abs(log_f.imag).max() > 1e-12:
                 raise ValueError(f"grad_u of RVE {b} has no real logarithm: {g[b].tolist()}")
             log_f = log_f.real
-        vel_grad[b] = log_f / (n_steps[b] * dt)
+        vel_grad[b] = log_f / (n_steps[b] * dt[b])
     cell0 = batch.cell()
-    solver = batch.solver
-    solver.set_affine(vel_grad)
+    batch.set_affine(vel_grad)
     done = 0
     bar = tqdm(total=int(n_steps.max()), desc="strain path", unit="step", disable=not progress)
     try:
         for stop in np.unique(n_steps):
-            solver.set_active(n_steps > done)
-            solver.run(batch.state, int(stop) - done)
+            batch.set_active(n_steps > done)
+            batch.run(int(stop) - done)
             bar.update(int(stop) - done)
             done = int(stop)
     finally:
         bar.close()
-        solver.set_active(np.ones(batch.n_rve))
-        solver.set_affine(np.zeros_like(g))
-    batch.state.cell.assign(np.einsum("bij,bjk->bik", np.eye(2) + g, cell0))
+        batch.set_active(np.ones(batch.n_rve))
+        batch.set_affine(np.zeros_like(g))
+    batch.set_cell(np.einsum("bij,bjk->bik", np.eye(2) + g, cell0))
     return int(n_steps.max())
 
 
@@ -109,11 +108,11 @@ def servo_steps(
     callback: Callable[[int], bool | None] | None = None,
 ) -> int:
     """Run ``steps`` steps under mixed control of the diagonal components (see Solver)."""
-    batch.solver.set_servo(control, target, gain=gain, max_strain=max_strain)
+    batch.set_servo(control, target, gain=gain, max_strain=max_strain)
     try:
-        return batch.solver.run(batch.state, steps, check_every=check_every, callback=callback)
+        return batch.run(steps, check_every=check_every, callback=callback)
     finally:
-        batch.solver.set_affine(np.zeros((batch.n_rve, 2, 2)))
+        batch.set_affine(np.zeros((batch.n_rve, 2, 2)))
 
 
 def consolidate(
@@ -153,7 +152,7 @@ def consolidate(
         bar.update(int(newly.sum()))
         bar.set_postfix(p=f"{-h.mean_stress.mean():.4g}",
                         unbalanced=f"{h.unbalanced_force.max():.2g}")
-        batch.solver.set_active(~done)
+        batch.set_active(~done)
         return bool(done.all())
 
     try:
@@ -161,7 +160,7 @@ def consolidate(
                             check_every=check_every, callback=converged)
     finally:
         bar.close()
-        batch.solver.set_active(np.ones(b))
+        batch.set_active(np.ones(b))
     if not done.all():
         missing = np.flatnonzero(~done).tolist()
         raise RuntimeError(

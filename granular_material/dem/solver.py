@@ -85,8 +85,7 @@ class Solver:
         from scipy.linalg import expm
 
         lg = np.asarray(vel_grad, dtype=np.float64)
-        dt = self.model.dt
-        maps = np.stack([expm(m * dt) for m in lg])
+        maps = np.stack([expm(m * dt) for m, dt in zip(lg, self.model.dt, strict=True)])
         self.vel_grad.assign(lg)
         self.step_map.assign(maps)
         self._servo_on = False
@@ -120,7 +119,7 @@ class Solver:
         ks = m.kernels
         dev = m.device
         b, n, k = m.n_rve, m.n_disc, m.capacity
-        dt = m.dt
+        dt = m.timestep
 
         def rec(kernel: wp.Kernel, dim: int, inputs: list) -> wp.Launch:
             return wp.launch(kernel, dim=dim, inputs=inputs, device=dev, record_cmd=True)
