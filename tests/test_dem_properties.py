@@ -143,3 +143,14 @@ def test_float32_agrees_with_float64(small_rve_path):
         drive_grad_u(batch, grad)
         results.append(batch.homogenize().stress[0])
     np.testing.assert_allclose(results[1], results[0], atol=0.02 * 100e3)
+
+
+def test_target_void_ratio_is_reached_then_held_at_p0():
+    """Wu et al. (2025): compact to e0, then consolidate at p0 = 100 kPa."""
+    from granular_material.dem import prepare_packing
+
+    batch = prepare_packing(n_disc=100, seed=11, pressure=100e3, target_void_ratio=0.2,
+                            device="cpu")
+    h = batch.homogenize()
+    assert h.void_ratio[0] == pytest.approx(0.2, abs=0.01)
+    assert h.mean_stress[0] == pytest.approx(-100e3, rel=0.01)

@@ -8,7 +8,7 @@ from dataclasses import replace
 import numpy as np
 
 from granular_material.dem.batch import DEMBatch
-from granular_material.dem.protocols import consolidate, drive_grad_u
+from granular_material.dem.protocols import consolidate
 from granular_material.dem.rve_file import RVEData, RVEMeta
 
 __all__ = ["prepare_packing", "random_gas"]
@@ -92,9 +92,11 @@ def prepare_packing(
     """Prepare B RVEs: random gas, frictionless isotropic consolidation to ``pressure`` [Pa],
     then the friction of ``meta`` set and the packing re-equilibrated at that pressure.
 
-    With ``target_void_ratio`` the frictionless gas is first compressed isotropically
-    (strain-driven) to that 2D void ratio, then consolidated (Wu et al. 2025: e0 = 0.18, then
-    p0 = 100 kPa); the final void ratio is reported by :meth:`DEMBatch.homogenize`.
+    With ``target_void_ratio`` the frictionless gas is first compacted isotropically until it
+    reaches that 2D void ratio (or p0), then friction is set and the packing consolidated
+    (Wu et al. 2025: e0 = 0.18, then p0 = 100 kPa); the void ratio reached under p0 is a
+    little below e0 (reported by :meth:`DEMBatch.homogenize`). A target below what
+    frictionless consolidation reaches cannot be held.
     """
     meta = meta or RVEMeta()
     meta.validate()
@@ -105,10 +107,13 @@ def prepare_packing(
             raise ValueError(
                 f"target_void_ratio must be a positive number, got {target_void_ratio!r}"
             )
-        e_now = batch.homogenize().void_ratio
-        stretch = np.sqrt((1.0 + target_void_ratio) / (1.0 + e_now)) - 1.0
-        grad = stretch[:, None, None] * np.eye(2)[None]
-        drive_grad_u(batch, grad, max_strain_per_step=1.0e-4, progress=progress)
+        # frictionless compaction toward p0, stopped where e reaches e0 (checked every 10
+        # steps: at most 2e-3 in e past it), then friction on so that structure is kept
+        consolidate(batch, pressure, stop_void_ratio=target_void_ratio, check_every=10,
+                    max_strain=5.0e-5, progress=progress)
+        batch.set_friction(meta.friction_angle)
+        consolidate(batch, pressure, progress=progress)
+        return batch
     consolidate(batch, pressure, progress=progress)
     batch.set_friction(meta.friction_angle)
     consolidate(batch, pressure, progress=progress)

@@ -124,14 +124,15 @@ def consolidate(
     max_strain: float = 1.0e-4,
     gain: float = 0.2,
     check_every: int = 500,
+    stop_void_ratio: float | None = None,
     progress: bool = False,
 ) -> int:
     """Isotropic consolidation of every RVE to mean stress −``pressure`` [Pa].
 
     An RVE is done when both σxx and σyy are within ``tolerance``·pressure of −pressure and its
-    unbalanced-force ratio is below ``max_unbalanced``; it is then frozen while the others go
-    on. Raises RuntimeError naming the RVEs that did not get there in ``max_steps``.
-    Returns the steps run.
+    unbalanced-force ratio is below ``max_unbalanced`` — or, with ``stop_void_ratio``, as soon
+    as its void ratio falls to that value; it is then frozen while the others go on. Raises
+    RuntimeError naming the RVEs that did not get there in ``max_steps``. Returns the steps run.
     """
     if not (math.isfinite(pressure) and pressure > 0):
         raise ValueError(f"pressure must be a positive number [Pa], got {pressure!r}")
@@ -147,6 +148,8 @@ def consolidate(
         diag = np.stack([h.stress[:, 0, 0], h.stress[:, 1, 1]], axis=1)
         ok = (np.abs(diag + pressure) <= tolerance * pressure).all(axis=1)
         ok &= h.unbalanced_force <= max_unbalanced
+        if stop_void_ratio is not None:
+            ok |= h.void_ratio <= stop_void_ratio
         newly = ok & ~done
         done[newly] = True
         bar.update(int(newly.sum()))
