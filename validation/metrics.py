@@ -61,13 +61,13 @@ def stress_ratio(frame: pd.DataFrame) -> np.ndarray:
 def _smooth(values: np.ndarray, window: int) -> np.ndarray:
     if window <= 1:
         return values
-    return pd.Series(values).rolling(window, center=True, min_periods=1).mean().to_numpy()
+    return pd.Series(values).rolling(window, center=True, min_periods=1).median().to_numpy()
 
 
 def find_peak(strain: np.ndarray, ratio: np.ndarray, window: int = 5) -> tuple[int, float]:
     """Index and value of the peak of ``ratio`` along ``strain`` (shape (n,)).
 
-    The index is located on a centred running mean of ``window`` points (DEM curves are noisy);
+    The index is located on a centred running median of ``window`` points (DEM curves are noisy);
     the value returned is the raw ratio there. Returns (-1, nan) if the ratio is all NaN.
     """
     ratio = np.asarray(ratio, dtype=np.float64)

@@ -110,7 +110,7 @@ def write_report(entries: list[dict[str, Any]], out: str | Path,
         f" strain; after the peak within {metrics.POST_PEAK_TOL:.0%} of the peak stress. The "
         "first three hold for every seed; the post-peak rule is judged on the seed-mean curves "
         "(DEM is chaotic after the peak: every seed's figure is listed too). Stresses are "
-        "compared on YADE's strain grid; the peak is located on a 5-point running mean.",
+        "compared on YADE's strain grid; the peak is located on a 5-point running median.",
         "",
         "## Summary",
         "",

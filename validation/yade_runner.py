@@ -163,14 +163,19 @@ def yade_prepare_guo_zhao(out_rve: str | Path, seed: int = 1, particles: int = 4
 
 
 def yade_round_trip(rve: str | Path | RVEData, workdir: str | Path | None = None,
-                    steps: int = 0, timeout: float = 120.0) -> RVEData:
-    """Export RVE 0 to YADE, build the scene there, run ``steps`` steps and import it back."""
+                    steps: int = 0,
+                    timeout: float = 120.0) -> tuple[RVEData, tuple[float, float, float]]:
+    """Export RVE 0 to YADE, build the scene there, run ``steps`` steps and import it back.
+
+    Returns the imported RVE and YADE's stress (sxx, syy, sxy) [Pa] of that state.
+    """
     work = _workdir(workdir, "echo")
     scene = export_rve(rve, work / "in.scene.json")
     out = work / "out.scene.json"
     run_script("echo_scene.py", {"scene": str(scene), "out": str(out), "steps": steps},
                work, timeout)
-    return import_scene(out)
+    stress = json.loads(out.read_text())["stress"]
+    return import_scene(out), (float(stress[0]), float(stress[1]), float(stress[2]))
 
 
 def yade_biaxial(rve: str | Path | RVEData, axial_strain: float = 0.1,
