@@ -61,9 +61,14 @@ def _add_device(parser: argparse.ArgumentParser) -> None:
                         help="warp device (default: CUDA when present, else CPU)")
     parser.add_argument("--dtype", choices=["float64", "float32"], default="float64",
                         help="floating-point precision of the DEM (default: float64)")
-    parser.add_argument("--progress", action="store_true", help="show progress bars")
+    parser.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,
+                        help="progress bars on stderr (default: when stderr is a terminal)")
     parser.add_argument("--json", action="store_true",
                         help="print the key results as JSON on stdout")
+
+
+def _progress(args: argparse.Namespace) -> bool:
+    return sys.stderr.isatty() if args.progress is None else bool(args.progress)
 
 
 def _scalar_or_list(values: np.ndarray) -> Any:
@@ -112,7 +117,7 @@ def _run_prepare(args: argparse.Namespace) -> int:
         n_disc=args.particles, n_rve=args.batch, seed=args.seed, pressure=args.pressure,
         meta=meta, target_void_ratio=args.target_void_ratio,
         radius_range=(args.radius_min, args.radius_max), device=args.device, dtype=args.dtype,
-        progress=args.progress,
+        progress=_progress(args),
     )
     h = batch.homogenize()
     save_rve(args.out, batch.to_data())
@@ -158,7 +163,7 @@ def _run_biaxial(args: argparse.Namespace) -> int:
     batch = _load_batch(args)
     curve = biaxial_test(batch, axial_strain=args.axial_strain, confining=args.confining,
                          strain_per_step=args.strain_per_step,
-                         record_every=args.record_every, progress=args.progress)
+                         record_every=args.record_every, progress=_progress(args))
     summaries = [summarize_biaxial(g) for _, g in curve.groupby("rve")]
     if args.out:
         _write_csv(curve, Path(args.out))
@@ -200,7 +205,7 @@ def _run_drive(args: argparse.Namespace) -> int:
         f_next = np.eye(2) + grad * inc / args.increments
         step_grad = f_next @ np.linalg.inv(f_now) - np.eye(2)
         steps += drive_grad_u(batch, step_grad, max_strain_per_step=args.max_strain_per_step,
-                              progress=args.progress)
+                              progress=_progress(args))
         record(inc)
     table = pd.concat(rows, ignore_index=True)
     if args.out:
