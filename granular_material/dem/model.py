@@ -23,7 +23,7 @@ __all__ = [
     "state_from_data",
 ]
 
-DEFAULT_CAPACITY = 24  #: neighbour-list slots per disc
+DEFAULT_CAPACITY = 16  #: neighbour-list slots per disc (a dense 400-disc packing uses <= 8)
 DEFAULT_SAFETY = 0.3  #: default time step as a fraction of the critical one
 SKIN_FRACTION = 0.25  #: Verlet skin as a fraction of the mean disc diameter
 
