@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from granular_material_validation import yade_io
+from granular_material_validation import yade_io, yade_runner
 
 from granular_material.dem.rve_file import RVEData, RVEMeta, load_rve, save_rve
 
@@ -86,3 +86,10 @@ def test_import_names_bad_format_and_shapes() -> None:
         yade_io.scene_to_rve({**scene, "position": scene["position"][:-1]})
     with pytest.raises(ValueError, match="index"):
         yade_io.rve_to_scene(grid_rve(), index=3)
+
+
+def test_missing_yade_is_a_clear_error(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    monkeypatch.setenv("GM_YADE", "no-such-yade-executable")
+    with pytest.raises(yade_runner.YadeNotFoundError, match="apt-get install yade"):
+        yade_runner.find_yade()
+    assert yade_runner.yade_throughput(tmp_path / "any.npz") is None
