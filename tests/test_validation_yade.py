@@ -130,6 +130,24 @@ def test_yade_drive_follows_shear2d_and_tangent_rule(guo_zhao_seed1, tmp_path: P
     assert path["D_xy_xy"].iloc[2] > 1.2 * path["D_xx_yy"].iloc[2]  # kt terms now present
 
 
+def test_yade_drive_kinematics_exact_and_shear2d(guo_zhao_seed1, tmp_path: Path) -> None:
+    """Pure shear G = diag(+0.2 %, −0.2 %): with F = I + G the area changes by
+    det F = 1.002·0.998 = 1 − 4e-6, so 1 + e scales by it; Guo & Zhao's L = ΔG/(n·dt) is
+    trace-free, the area stays (forward Euler: (1 − (1e-5)²)^200 ≈ 1 − 2e-8)."""
+    rve, _, _ = guo_zhao_seed1
+    exact, s_exact = yade_runner.yade_drive(rve, [0.002, 0.0, 0.0, -0.002], 2,
+                                            kinematics="exact", workdir=tmp_path / "exact")
+    g_z, _ = yade_runner.yade_drive(rve, [0.002, 0.0, 0.0, -0.002], 2,
+                                    workdir=tmp_path / "shear2d")
+    e0 = exact["void_ratio"].iloc[0]
+    assert 1 + exact["void_ratio"].iloc[-1] == pytest.approx((1 + e0) * 1.002 * 0.998,
+                                                             rel=1e-9)
+    assert abs(g_z["void_ratio"].iloc[-1] - e0) < 1e-7
+    assert s_exact["kinematics"] == "exact"
+    with pytest.raises(ValueError, match="kinematics"):
+        yade_runner.yade_drive(rve, [0.002, 0.0, 0.0, -0.002], 2, kinematics="log")
+
+
 def test_yade_throughput_is_measured(guo_zhao_seed1) -> None:
     """DESIGN §5: one YADE core ran 2.3–2.6e6 particle-steps/s on this RVE (2-core machine);
     a loaded CI machine may be several times slower, so only the order of magnitude is held."""

@@ -138,10 +138,20 @@ def write_report(entries: list[dict[str, Any]], out: str | Path,
                 if f"servo_error_{side}" in r:
                     lines.append(f"  - largest |σxx + σc|/σc, {side}: "
                                  f"{_pct(r[f'servo_error_{side}'])}")
+            if "shear2d_vs_exact_yade" in r:
+                k = r["shear2d_vs_exact_yade"]
+                lines.append(
+                    "  - YADE with Guo & Zhao's shear2D kinematics against YADE with F = I + ∇u: "
+                    f"pre-peak Δσ {_pct(k['pre_peak_diff'])}, post-peak {_pct(k['post_peak_diff'])}"
+                    f", max Δεv {_pct(k['volumetric_strain_diff'])}")
             for t in r.get("tangents", []):
                 lines.append(f"  - tangent after increment {t['increment']}: "
                              f"‖Δ‖/‖D_YADE‖ = {_pct(t['frobenius'])}, "
                              f"max |Δ| / max |D| = {_pct(t['max_entry'])}")
+        if e["case"]["kind"] == "drive":
+            lines.append("- Tangents after increment 0 differ by design: at rest no contact "
+                         "carries a shear force and YADE's getStressAndTangent then drops the "
+                         "contact's kt term (DESIGN §5); ours keeps it (t ⟂ n).")
         if "yade_seed_spread" in e:
             s = e["yade_seed_spread"]
             lines.append(f"- YADE seed-to-seed: peak σ1/σ3 = {s['peak_ratio_mean']:.3f} ± "

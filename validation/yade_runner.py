@@ -200,13 +200,17 @@ def yade_biaxial(rve: str | Path | RVEData, axial_strain: float = 0.1,
 
 
 def yade_drive(rve: str | Path | RVEData, grad_u: list[float], increments: int,
-               tangent_at: list[int] | None = None, workdir: str | Path | None = None,
+               tangent_at: list[int] | None = None, kinematics: str = "shear2d",
+               workdir: str | Path | None = None,
                timeout: float = DEFAULT_TIMEOUT) -> tuple[pd.DataFrame, dict[str, Any]]:
     """YADE's shear2D-style ∇u path of RVE 0 (``grad_u`` = [Gxx, Gxy, Gyx, Gyy], total).
 
-    Returns one row per increment (see ``drive.py``; tangent columns ``D_xx_xx`` … in Pa
-    where asked) and the timings summary.
+    ``kinematics``: ``"shear2d"`` (Guo & Zhao: L = ΔG/(n·dt)) or ``"exact"`` (the cell is
+    (I + G·k/K)·H0 after increment k, as in our ``dem-drive``). Returns one row per increment
+    (see ``drive.py``; tangent columns ``D_xx_xx`` … in Pa where asked) and the timings.
     """
+    if kinematics not in ("shear2d", "exact"):
+        raise ValueError(f"kinematics must be 'shear2d' or 'exact', got {kinematics!r}")
     if len(grad_u) != 4 or increments < 1:
         raise ValueError(f"grad_u needs 4 numbers and increments >= 1, got {grad_u}, "
                          f"{increments}")
@@ -215,7 +219,8 @@ def yade_drive(rve: str | Path | RVEData, grad_u: list[float], increments: int,
     run = run_script("drive.py", {
         "scene": str(scene), "out": str(work / "yade_drive.csv"),
         "summary": str(work / "yade_drive.json"), "grad_u": [float(g) for g in grad_u],
-        "increments": int(increments), "tangent_at": list(tangent_at or [])}, work, timeout)
+        "increments": int(increments), "tangent_at": list(tangent_at or []),
+        "kinematics": kinematics}, work, timeout)
     summary = json.loads((work / "yade_drive.json").read_text())
     summary["wall_s"] = run.wall_s
     return pd.read_csv(work / "yade_drive.csv"), summary
