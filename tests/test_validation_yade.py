@@ -140,8 +140,9 @@ def test_yade_drive_kinematics_exact_and_shear2d(guo_zhao_seed1, tmp_path: Path)
     g_z, _ = yade_runner.yade_drive(rve, [0.002, 0.0, 0.0, -0.002], 2,
                                     workdir=tmp_path / "shear2d")
     e0 = exact["void_ratio"].iloc[0]
+    # YADE integrates the cell explicitly: O((L·dt)²) = 1e-10 a step, 200 steps
     assert 1 + exact["void_ratio"].iloc[-1] == pytest.approx((1 + e0) * 1.002 * 0.998,
-                                                             rel=1e-9)
+                                                             rel=5e-8)
     assert abs(g_z["void_ratio"].iloc[-1] - e0) < 1e-7
     assert s_exact["kinematics"] == "exact"
     with pytest.raises(ValueError, match="kinematics"):
