@@ -32,7 +32,11 @@ def run_validation(names: list[str], out: str | Path, device: str | None = None,
     if seeds:
         chosen = [replace(c, seeds=tuple(seeds)) for c in chosen]
     entries = [cases.run_case(c, out, device=device) for c in chosen]
+    import granular_material
+
     context = {"YADE": f"{yade} ({yade_runner.yade_version()})",
+               "our engine": f"granular_material {granular_material.__version__} from "
+                             f"{Path(granular_material.__file__).parent}",
                "our device": device or "default (CUDA when present, else CPU)",
                "total wall time": f"{time.perf_counter() - start:.1f} s"}
     report.write_report(entries, out, context)
