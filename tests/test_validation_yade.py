@@ -180,7 +180,22 @@ def test_smoke_case_through_the_command_line(tmp_path: Path) -> None:
     assert (tmp_path / "report.md").read_text().count("| smoke |") >= 2
     assert (tmp_path / "plots" / "smoke.png").stat().st_size > 10_000
     seed = entry["per_seed"][0]
-    assert seed["comparison"]["strain_max"] == pytest.approx(0.03, abs=1e-4)
+    comparison = seed["comparison"]
+    assert comparison["strain_max"] == pytest.approx(0.03, abs=1e-4)
     assert seed["yade_wall_s"] > 0 and seed["ours_wall_s"] > 0
     assert code == (0 if entry["passed"] else 1)
-    assert entry["passed"], entry["checks"]
+    # Acceptance (issue 5): peak σ1/σ3 within 5 %, its strain within 0.5 % strain.
+    assert comparison["peak_ratio_diff"] <= 0.05
+    assert comparison["strain_at_peak_diff"] <= 0.005
+    # Before 1 % axial strain both codes follow the same deterministic path (measured here:
+    # 0.56 % of the peak stress for seed 1); chaos only sets in towards the peak, so a
+    # systematic difference shows up here first.
+    import pandas as pd
+
+    run = tmp_path / "runs" / "smoke" / "seed1"
+    yade, ours = pd.read_csv(run / "yade_curve.csv"), pd.read_csv(run / "ours_curve.csv")
+    early = yade["axial_strain"] <= 0.01
+    x = yade.loc[early, "axial_strain"]
+    worst = max(np.abs(np.interp(x, ours["axial_strain"], ours[c]) - yade.loc[early, c]).max()
+                for c in ("sxx", "syy", "sxy"))
+    assert worst <= 0.01 * comparison["stress_scale"]
