@@ -51,9 +51,6 @@ def plot_case(entry: dict[str, Any], path: Path) -> Path:
     axes[0, 1].set_ylabel("stress ratio σ1/σ3 [-] (compression positive)")
     axes[1, 0].set_ylabel("volumetric strain εv [%] (compression positive)")
     axes[1, 1].set_ylabel("void ratio e [-]")
-    if case["kind"] == "drive":
-        axes[1, 0].text(0.5, 0.5, "volumetric strain: see void ratio", ha="center",
-                        transform=axes[1, 0].transAxes)
     for ax in axes.flat:
         ax.set_xlabel(xlabel)
         ax.grid(alpha=0.3)
