@@ -163,11 +163,13 @@ def _run_seed(case: Case, seed: int, out: Path, device: str | None) -> SeedRun:
         yade, ours = _path_strain(yade, case), _path_strain(ours, case)
         # Guo & Zhao's own shear2D kinematics (cell ∝ exp(ΔG) per increment), YADE against
         # YADE: how much the kinematic convention alone moves the curve
-        g_z, _ = yade_runner.yade_drive(rve, list(case.grad_u), case.increments,
-                                        kinematics="shear2d", workdir=work / "yade_shear2d")
+        g_z, gsum = yade_runner.yade_drive(rve, list(case.grad_u), case.increments,
+                                           kinematics="shear2d", workdir=work / "yade_shear2d")
         g_z = _path_strain(g_z, case)
-        extra["shear2d_vs_exact_yade"] = metrics.compare_curves(
-            yade, g_z, strain=case.strain_label).to_dict()
+        extra["shear2d_vs_exact_yade"] = {
+            **metrics.compare_curves(yade, g_z, strain=case.strain_label).to_dict(),
+            "steps_exact": int(ysum["steps"]), "steps_shear2d": int(gsum["steps"]),
+            "steps_ours": int(ours["steps"].iloc[-1])}
         if case.tangent_at:
             extra["tangents"] = _compare_tangents(case, rve, yade, device)
     comparison = metrics.compare_curves(yade, ours, strain=case.strain_label)

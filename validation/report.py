@@ -138,9 +138,11 @@ def write_report(entries: list[dict[str, Any]], out: str | Path,
             if "shear2d_vs_exact_yade" in r:
                 k = r["shear2d_vs_exact_yade"]
                 lines.append(
-                    "  - YADE with Guo & Zhao's shear2D kinematics against YADE with F = I + ∇u: "
-                    f"pre-peak Δσ {_pct(k['pre_peak_diff'])}, post-peak {_pct(k['post_peak_diff'])}"
-                    f", max Δεv {_pct(k['volumetric_strain_diff'])}")
+                    "  - YADE with Guo & Zhao's shear2D kinematics "
+                    f"({k['steps_shear2d']} steps) against YADE with F = I + ∇u "
+                    f"({k['steps_exact']} steps; ours {k['steps_ours']}): pre-peak Δσ "
+                    f"{_pct(k['pre_peak_diff'])}, post-peak {_pct(k['post_peak_diff'])}, "
+                    f"max Δεv {_pct(k['volumetric_strain_diff'])}")
             for t in r.get("tangents", []):
                 lines.append(f"  - tangent after increment {t['increment']}: "
                              f"‖Δ‖/‖D_YADE‖ = {_pct(t['frobenius'])}, "
