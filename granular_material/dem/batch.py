@@ -198,9 +198,11 @@ class DEMBatch:
         return np.concatenate([s.state.cell.numpy().astype(np.float64) for s in self.shards])
 
     def set_cell(self, cell: np.ndarray) -> None:
-        """Overwrite the cell matrices H [m], shape (B, 2, 2); discs keep fractional coords."""
+        """Overwrite the cell matrices H [m], shape (B, 2, 2); discs keep their fractional
+        coordinates and the neighbour lists are rebuilt for the new cell."""
         for shard in self.shards:
             shard.state.cell.assign(np.asarray(cell, dtype=np.float64)[shard.rves])
+            shard.solver.refresh_neighbors(shard.state)
 
     def homogenize(self) -> Homogenized:
         """Stress, tangent, void ratio, coordination, fabric of every RVE."""

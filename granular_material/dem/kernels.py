@@ -48,6 +48,8 @@ class KernelSet:
     mat22: Any
     mat44: Any
     check_rebuild: Any
+    clear_bins: Any
+    fill_bins: Any
     build_neighbors: Any
     commit_neighbors: Any
     compute_forces: Any
@@ -118,15 +120,104 @@ def kernels_for(float_type: Any) -> KernelSet:
             cell_ref[b] = h
             force_rebuild[b] = 0
 
+    @wp.func
+    def bins_per_axis(h: mat22, cutoff: ft, max_bins: int) -> wp.vec2i:
+        """Bins along s0 and s1: each at least ``cutoff`` across, measured perpendicular."""
+        area = wp.determinant(h)
+        len0 = wp.sqrt(h[0, 0] * h[0, 0] + h[1, 0] * h[1, 0])
+        len1 = wp.sqrt(h[0, 1] * h[0, 1] + h[1, 1] * h[1, 1])
+        n0 = wp.min(int(wp.floor(area / len1 / cutoff)), max_bins)
+        n1 = wp.min(int(wp.floor(area / len0 / cutoff)), max_bins)
+        return wp.vec2i(wp.max(n0, 1), wp.max(n1, 1))
+
+    @wp.func
+    def bin_of(s: vec2, nb: wp.vec2i) -> wp.vec2i:
+        return wp.vec2i(wp.min(int(s[0] * ft(nb[0])), nb[0] - 1),
+                        wp.min(int(s[1] * ft(nb[1])), nb[1] - 1))
+
+    @wp.kernel(module="unique")
+    def clear_bins(
+        max_bins: int,
+        rebuild: wp.array(dtype=wp.int32),
+        bin_count: wp.array(dtype=wp.int32),
+    ):
+        k = wp.tid()
+        if rebuild[k // (max_bins * max_bins)] != 0:
+            bin_count[k] = 0
+
+    @wp.kernel(module="unique")
+    def fill_bins(
+        n_disc: int,
+        max_bins: int,
+        bin_capacity: int,
+        cutoff: ft,
+        rebuild: wp.array(dtype=wp.int32),
+        cell: wp.array(dtype=mat22),
+        frac: wp.array(dtype=vec2),
+        bin_count: wp.array(dtype=wp.int32),
+        bin_items: wp.array(dtype=wp.int32),
+        status: wp.array(dtype=wp.int32),
+    ):
+        i = wp.tid()
+        b = i // n_disc
+        if rebuild[b] == 0:
+            return
+        nb = bins_per_axis(cell[b], cutoff, max_bins)
+        if nb[0] < 3 or nb[1] < 3:
+            return  # small cell: the build scans all discs of the RVE
+        ij = bin_of(frac[i], nb)
+        key = (b * max_bins + ij[1]) * max_bins + ij[0]
+        slot = wp.atomic_add(bin_count, key, 1)
+        if slot < bin_capacity:
+            bin_items[key * bin_capacity + slot] = i - b * n_disc
+        else:
+            wp.atomic_or(status, b, STATUS_OVERFLOW)
+
+    @wp.func
+    def consider_pair(
+        i: int, jj: int, base: int, h: mat22, skin: ft, capacity: int, count: int,
+        frac: wp.array(dtype=vec2), radius: wp.array(dtype=ft),
+        nbr: wp.array(dtype=wp.int32), shear: wp.array(dtype=ft), old_count: int,
+        nbr_new: wp.array(dtype=wp.int32), shear_new: wp.array(dtype=ft),
+    ) -> int:
+        """Insert partner jj (kept sorted by jj, history carried over); returns the count."""
+        j = base + jj
+        if j == i:
+            return count
+        a = wp.min(i, j)
+        c = wp.max(i, j)
+        d = h * min_image(frac[c] - frac[a])
+        reach = radius[a] + radius[c] + skin
+        if wp.dot(d, d) >= reach * reach:
+            return count
+        if count < capacity:
+            history = ft(0.0)
+            for k in range(old_count):
+                if nbr[i * capacity + k] == jj:
+                    history = shear[i * capacity + k]
+            pos = count
+            while pos > 0 and nbr_new[i * capacity + pos - 1] > jj:
+                nbr_new[i * capacity + pos] = nbr_new[i * capacity + pos - 1]
+                shear_new[i * capacity + pos] = shear_new[i * capacity + pos - 1]
+                pos -= 1
+            nbr_new[i * capacity + pos] = jj
+            shear_new[i * capacity + pos] = history
+        return count + 1
+
     @wp.kernel(module="unique")
     def build_neighbors(
         n_disc: int,
         capacity: int,
+        max_bins: int,
+        bin_capacity: int,
         skin: ft,
+        cutoff: ft,
         rebuild: wp.array(dtype=wp.int32),
         cell: wp.array(dtype=mat22),
         frac: wp.array(dtype=vec2),
         radius: wp.array(dtype=ft),
+        bin_count: wp.array(dtype=wp.int32),
+        bin_items: wp.array(dtype=wp.int32),
         nbr: wp.array(dtype=wp.int32),
         nbr_count: wp.array(dtype=wp.int32),
         shear: wp.array(dtype=ft),
@@ -143,23 +234,24 @@ def kernels_for(float_type: Any) -> KernelSet:
         h = cell[b]
         old_count = nbr_count[i]
         count = int(0)  # noqa: UP018, RUF046 - a mutable loop variable in warp
-        for jj in range(n_disc):
-            j = base + jj
-            if j == i:
-                continue
-            a = wp.min(i, j)
-            c = wp.max(i, j)
-            d = h * min_image(frac[c] - frac[a])
-            reach = radius[a] + radius[c] + skin
-            if wp.dot(d, d) < reach * reach:
-                if count < capacity:
-                    history = ft(0.0)
-                    for k in range(old_count):
-                        if nbr[i * capacity + k] == jj:
-                            history = shear[i * capacity + k]
-                    nbr_new[i * capacity + count] = jj
-                    shear_new[i * capacity + count] = history
-                count += 1
+        nb = bins_per_axis(h, cutoff, max_bins)
+        if nb[0] < 3 or nb[1] < 3:
+            for jj in range(n_disc):
+                count = consider_pair(i, jj, base, h, skin, capacity, count, frac, radius,
+                                      nbr, shear, old_count, nbr_new, shear_new)
+        else:
+            # the 3 x 3 bins around i's (distinct, as there are >= 3 bins per axis)
+            ij = bin_of(frac[i], nb)
+            for dy in range(-1, 2):
+                for dx in range(-1, 2):
+                    bx = (ij[0] + dx + nb[0]) % nb[0]
+                    by = (ij[1] + dy + nb[1]) % nb[1]
+                    key = (b * max_bins + by) * max_bins + bx
+                    for q in range(wp.min(bin_count[key], bin_capacity)):
+                        jj = bin_items[key * bin_capacity + q]
+                        count = consider_pair(i, jj, base, h, skin, capacity, count, frac,
+                                              radius, nbr, shear, old_count, nbr_new,
+                                              shear_new)
         if count > capacity:
             wp.atomic_or(status, b, STATUS_OVERFLOW)
             count = capacity
@@ -487,7 +579,8 @@ def kernels_for(float_type: Any) -> KernelSet:
 
     return KernelSet(
         float_type=ft, vec2=vec2, mat22=mat22, mat44=mat44,
-        check_rebuild=check_rebuild, build_neighbors=build_neighbors,
+        check_rebuild=check_rebuild, clear_bins=clear_bins, fill_bins=fill_bins,
+        build_neighbors=build_neighbors,
         commit_neighbors=commit_neighbors, compute_forces=compute_forces, servo=servo,
         integrate=integrate, advance_cell=advance_cell, contact_measures=contact_measures,
         reduce_measures=reduce_measures,

@@ -82,6 +82,7 @@ class Model:
             the device. explicit_timestep: True when given (argument or file), not derived.
         skin: Verlet skin [m]. cutoff: largest pair reach 2·r_max + skin [m].
         capacity: neighbour slots per disc.
+        max_bins: largest number of contact-detection bins per cell axis.
         radius: disc radii [m], shape (B·N,), float. inv_mass [1/kg], inv_inertia
             [1/(kg·m²)]: shape (B·N,).
         friction: μ = tan φ per RVE, shape (B,).
@@ -99,6 +100,7 @@ class Model:
     skin: float
     cutoff: float
     capacity: int
+    max_bins: int
     radius: wp.array
     inv_mass: wp.array
     inv_inertia: wp.array
@@ -189,6 +191,8 @@ def build_model(
         skin=skin,
         cutoff=cutoff,
         capacity=capacity,
+        # about one disc a bin at most; bins are never narrower than the cut-off
+        max_bins=max(3, math.ceil(math.sqrt(data.n_disc))),
         radius=wp.array(r, dtype=ft, device=device),
         inv_mass=wp.array(1.0 / mass, dtype=ft, device=device),
         inv_inertia=wp.array(1.0 / inertia, dtype=ft, device=device),

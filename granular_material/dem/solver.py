@@ -15,7 +15,9 @@ from granular_material.dem.kernels import (
 )
 from granular_material.dem.model import Model, State
 
-__all__ = ["CONTROL_STRAIN", "CONTROL_STRESS", "DEMInstabilityError", "Solver"]
+__all__ = ["BIN_CAPACITY", "CONTROL_STRAIN", "CONTROL_STRESS", "DEMInstabilityError", "Solver"]
+
+BIN_CAPACITY = 32  #: discs a contact-detection bin can hold (an overflow is an error)
 
 CONTROL_STRAIN = 0  #: a diagonal component driven at a prescribed strain per step
 CONTROL_STRESS = 1  #: a diagonal component servo-controlled to a target stress
@@ -43,7 +45,9 @@ class DEMInstabilityError(RuntimeError):
 class Solver:
     """Advances a :class:`State` of a :class:`Model`; holds the per-step work arrays.
 
-    Each step: rebuild stale neighbour lists (Verlet skin), contact forces, optionally the
+    Each step: rebuild stale neighbour lists (Verlet skin; candidates from the 3 × 3 bins of
+    a per-RVE grid in fractional coordinates, or all discs in a cell under 3 bins across),
+    contact forces, optionally the
     stress servo, leap-frog integration with local damping, cell update ``H ← E·H``.
     The loading is set per RVE through :meth:`set_affine` (prescribed velocity gradient) or
     :meth:`set_servo` (mixed stress/strain control of the diagonal components).
@@ -59,6 +63,9 @@ class Solver:
         self.nbr_new = wp.zeros(b * n * k, dtype=wp.int32, device=dev)
         self.nbr_count_new = wp.zeros(b * n, dtype=wp.int32, device=dev)
         self.shear_new = wp.zeros(b * n * k, dtype=ks.float_type, device=dev)
+        self.bin_count = wp.zeros(b * model.max_bins**2, dtype=wp.int32, device=dev)
+        self.bin_items = wp.zeros(b * model.max_bins**2 * BIN_CAPACITY, dtype=wp.int32,
+                                  device=dev)
         self.force = wp.zeros(b * n, dtype=ks.vec2, device=dev)
         self.torque = wp.zeros(b * n, dtype=ks.float_type, device=dev)
         self.part_stress = wp.zeros(b * n, dtype=ks.mat22, device=dev)
@@ -128,9 +135,15 @@ class Solver:
             rec(ks.check_rebuild, b, [n, m.skin, m.cutoff, self.active, state.cell,
                                       state.cell_ref, state.disp, state.force_rebuild,
                                       self.rebuild, state.status]),
-            rec(ks.build_neighbors, b * n, [n, k, m.skin, self.rebuild, state.cell, state.frac,
-                                            m.radius, state.nbr, state.nbr_count, state.shear,
-                                            self.nbr_new, self.nbr_count_new, self.shear_new,
+            rec(ks.clear_bins, b * m.max_bins**2, [m.max_bins, self.rebuild, self.bin_count]),
+            rec(ks.fill_bins, b * n, [n, m.max_bins, BIN_CAPACITY, m.cutoff, self.rebuild,
+                                      state.cell, state.frac, self.bin_count, self.bin_items,
+                                      state.status]),
+            rec(ks.build_neighbors, b * n, [n, k, m.max_bins, BIN_CAPACITY, m.skin, m.cutoff,
+                                            self.rebuild, state.cell, state.frac, m.radius,
+                                            self.bin_count, self.bin_items, state.nbr,
+                                            state.nbr_count, state.shear, self.nbr_new,
+                                            self.nbr_count_new, self.shear_new,
                                             state.status]),
             rec(ks.commit_neighbors, b * n, [n, k, self.rebuild, self.nbr_new,
                                              self.nbr_count_new, self.shear_new, state.nbr,
@@ -199,7 +212,7 @@ class Solver:
     def refresh_neighbors(self, state: State) -> None:
         """Rebuild the neighbour lists of every RVE now (tangential history is kept)."""
         state.force_rebuild.fill_(1)
-        for cmd in self._record(state)[:3]:
+        for cmd in self._record(state)[:5]:
             cmd.launch()
         self.check(state)
 
