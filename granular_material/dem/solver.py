@@ -18,6 +18,7 @@ from granular_material.dem.model import Model, State
 __all__ = ["BIN_CAPACITY", "CONTROL_STRAIN", "CONTROL_STRESS", "DEMInstabilityError", "Solver"]
 
 BIN_CAPACITY = 32  #: discs a contact-detection bin can hold (an overflow is an error)
+GRAPH_STEPS = 50  #: steps captured in one CUDA graph and replayed
 
 CONTROL_STRAIN = 0  #: a diagonal component driven at a prescribed strain per step
 CONTROL_STRESS = 1  #: a diagonal component servo-controlled to a target stress
@@ -78,6 +79,7 @@ class Solver:
         self._servo_on = False
         self._servo_gain = 0.0
         self._servo_max = 0.0
+        self._graphs: dict[tuple, wp.Graph] = {}
 
     # -- loading --------------------------------------------------------------------------
     def set_active(self, active: np.ndarray) -> None:
@@ -187,27 +189,33 @@ class Solver:
             raise ValueError(f"steps must be >= 0, got {steps}")
         cmds = self._record(state)
         done = 0
-        graph = None
-        use_graph = wp.get_device(self.model.device).is_cuda
         while done < steps:
             chunk = min(check_every, steps - done)
-            if use_graph and done > 0 and chunk == check_every:
-                if graph is None:
-                    with wp.ScopedCapture(device=self.model.device) as capture:
-                        for _ in range(chunk):
-                            for cmd in cmds:
-                                cmd.launch()
-                    graph = capture.graph
-                wp.capture_launch(graph)
-            else:
-                for _ in range(chunk):
-                    for cmd in cmds:
-                        cmd.launch()
+            self._advance(state, cmds, chunk)
             done += chunk
             self.check(state)
             if callback is not None and callback(done):
                 break
         return done
+
+    def _advance(self, state: State, cmds: list, steps: int) -> None:
+        """Launch ``steps`` steps; on CUDA whole blocks replay one captured graph."""
+        eager = steps
+        if wp.get_device(self.model.device).is_cuda and steps >= GRAPH_STEPS:
+            key = (id(state), self._servo_on, self._servo_gain, self._servo_max)
+            graph = self._graphs.get(key)
+            if graph is None:
+                with wp.ScopedCapture(device=self.model.device) as capture:
+                    for _ in range(GRAPH_STEPS):
+                        for cmd in cmds:
+                            cmd.launch()
+                graph = self._graphs[key] = capture.graph
+            for _ in range(steps // GRAPH_STEPS):
+                wp.capture_launch(graph)
+            eager = steps % GRAPH_STEPS
+        for _ in range(eager):
+            for cmd in cmds:
+                cmd.launch()
 
     def refresh_neighbors(self, state: State) -> None:
         """Rebuild the neighbour lists of every RVE now (tangential history is kept)."""
