@@ -13,6 +13,10 @@ distance to the former reported.
 Acceptance of a case: the pre-peak, peak-ratio and strain-at-peak rules on every seed; the
 post-peak rule (DEM is chaotic after the peak) on the seed-mean curves when there are two or
 more seeds, on the one curve otherwise. Every seed's post-peak figure is reported as well.
+
+Chaos baseline: each seed also runs YADE against a perturbed YADE (biaxial: 1 % less strain a
+step; ∇u paths: Guo & Zhao's shear2D kinematics and step count) and the same rules are
+applied, so a miss of ours can be set against how far YADE moves from itself.
 """
 
 from __future__ import annotations
@@ -89,6 +93,10 @@ CASES: dict[str, Case] = {c.name: c for c in (
 )}
 
 
+# YADE's own sensitivity: the biaxial test rerun at 1 % less strain a step than 1e-5
+PERTURBED_STRAIN_PER_STEP = 0.99e-5
+
+
 @dataclass
 class SeedRun:
     """The results of one seed of a case (curves on both sides, timings, differences)."""
@@ -154,6 +162,14 @@ def _run_seed(case: Case, seed: int, out: Path, device: str | None) -> SeedRun:
         for side, frame in (("yade", yade), ("ours", ours)):
             extra[f"servo_error_{side}"] = float(
                 np.abs(frame["sxx"] + case.pressure).max() / case.pressure)
+        # chaos baseline: YADE against itself with a 1 % slower loading rate
+        slower, _ = yade_runner.yade_biaxial(rve, axial_strain=case.axial_strain,
+                                             confining=case.pressure,
+                                             strain_per_step=PERTURBED_STRAIN_PER_STEP,
+                                             workdir=work / "yade_perturbed")
+        extra["yade_perturbed_vs_yade"] = {
+            **metrics.compare_curves(yade, slower).to_dict(),
+            "strain_per_step": PERTURBED_STRAIN_PER_STEP}
     else:
         yade, ysum = yade_runner.yade_drive(rve, list(case.grad_u), case.increments,
                                             tangent_at=list(case.tangent_at),

@@ -107,17 +107,26 @@ def write_report(entries: list[dict[str, Any]], out: str | Path,
         f" strain; after the peak within {metrics.POST_PEAK_TOL:.0%} of the peak stress. The "
         "first three hold for every seed; the post-peak rule is judged on the seed-mean curves "
         "(DEM is chaotic after the peak: every seed's figure is listed too). Stresses are "
-        "compared on YADE's strain grid; the peak is located on a 5-point running median.",
+        "compared on YADE's strain grid; the peak is located on a 5-point running median. "
+        "Chaos baseline: the same rules applied to YADE against YADE rerun with a perturbed "
+        "loading (biaxial: 1 % slower; ∇u paths: Guo & Zhao's shear2D kinematics and step "
+        "count instead of F = I + ∇u).",
         "",
         "## Summary",
         "",
-        "| case | result | checks | wall YADE / ours [s] (ours/YADE) |",
-        "|---|---|---|---|",
+        "| case | result | checks | YADE vs perturbed YADE: seeds missing a rule | "
+        "wall YADE / ours [s] (ours/YADE) |",
+        "|---|---|---|---|---|",
     ]
     for e in entries:
         failed = [k for k, ok in e["checks"].items() if not ok]
+        baseline = [r.get("yade_perturbed_vs_yade") or r.get("shear2d_vs_exact_yade")
+                    for r in e["per_seed"]]
+        missing = [str(r["seed"]) for r, b in zip(e["per_seed"], baseline, strict=True)
+                   if b is not None and not b["passed"]]
         lines.append(f"| {e['case']['name']} | {'PASS' if e['passed'] else 'FAIL'} | "
                      f"{'all pass' if not failed else 'failed: ' + ', '.join(failed)} | "
+                     f"{', '.join(missing) or 'none'} of {len(baseline)} | "
                      f"{e['yade_wall_s']:.1f} / {e['ours_wall_s']:.1f} "
                      f"({e['wall_ratio_ours_over_yade']:.2f}) |")
     lines += ["", "## Figures", "", *_table(entries), ""]
@@ -135,6 +144,14 @@ def write_report(entries: list[dict[str, Any]], out: str | Path,
                 if f"servo_error_{side}" in r:
                     lines.append(f"  - largest |σxx + σc|/σc, {side}: "
                                  f"{_pct(r[f'servo_error_{side}'])}")
+            if "yade_perturbed_vs_yade" in r:
+                k = r["yade_perturbed_vs_yade"]
+                lines.append(
+                    f"  - chaos baseline, YADE at {k['strain_per_step']:.3g} strain a step "
+                    f"against YADE at 1e-05: pre-peak Δσ {_pct(k['pre_peak_diff'])}, peak "
+                    f"σ1/σ3 {_pct(k['peak_ratio_diff'])}, strain at peak "
+                    f"{_pct(k['strain_at_peak_diff'])}, post-peak {_pct(k['post_peak_diff'])}"
+                    f" ({'passes' if k['passed'] else 'misses'} the rules itself)")
             if "shear2d_vs_exact_yade" in r:
                 k = r["shear2d_vs_exact_yade"]
                 lines.append(
@@ -142,7 +159,8 @@ def write_report(entries: list[dict[str, Any]], out: str | Path,
                     f"({k['steps_shear2d']} steps) against YADE with F = I + ∇u "
                     f"({k['steps_exact']} steps; ours {k['steps_ours']}): pre-peak Δσ "
                     f"{_pct(k['pre_peak_diff'])}, post-peak {_pct(k['post_peak_diff'])}, "
-                    f"max Δεv {_pct(k['volumetric_strain_diff'])}")
+                    f"max Δεv {_pct(k['volumetric_strain_diff'])} "
+                    f"({'passes' if k['passed'] else 'misses'} the rules itself)")
             for t in r.get("tangents", []):
                 lines.append(f"  - tangent after increment {t['increment']}: "
                              f"‖Δ‖/‖D_YADE‖ = {_pct(t['frobenius'])}, "
