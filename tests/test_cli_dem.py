@@ -67,7 +67,7 @@ def test_biaxial_dem_reports_peak(small_rve_path, tmp_path, capsys):
     assert curve["axial_strain"].iloc[-1] == pytest.approx(0.01, rel=1e-9)
     assert report["peak_stress_ratio"] > 1.5
     # lateral stress held by the servo at the confining pressure
-    assert curve["sxx"].iloc[-1] == pytest.approx(-100e3, rel=0.05)
+    assert (curve["sxx"] / -100e3 - 1).abs().max() < 0.02
 
 
 @pytest.mark.parametrize(
