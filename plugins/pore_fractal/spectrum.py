@@ -145,7 +145,8 @@ def _log_moments(mass: np.ndarray, q: np.ndarray) -> np.ndarray:
 
     Returns:
         shape (m, nq, 3), float64: Σ μ_i ln p_i, Σ μ_i ln μ_i and ln Σ p_iᑫ over the boxes
-        with p_i > 0, where μ_i(q) = p_iᑫ / Σ_j p_jᑫ (Chhabra & Jensen 1989, eq. 3).
+        with p_i > 0, where μ_i(q) = p_iᑫ / Σ_j p_jᑫ is Chhabra & Jensen's (1989) normalised
+        measure (Wu et al. 2025, eq. 14).
     """
     occupied = mass > 0
     log_p = np.where(occupied, np.log(np.where(occupied, mass, 1.0)), 0.0)
@@ -213,11 +214,12 @@ def multifractal_spectrum(
             or for malformed ``q`` or ``k``.
 
     Notes:
-        Chhabra & Jensen (1989), eqs. (3)–(5): with μ_i(q, ε) = p_iᑫ / Σ_j p_jᑫ,
+        Chhabra & Jensen (1989, Phys. Rev. Lett. 62, 1327), written as Wu et al. (2025)
+        eqs. (12)–(14): with μ_i(q, ε) = p_iᑫ / Σ_j p_jᑫ,
         α(q) = lim Σ μ_i ln p_i / ln ε and f(q) = lim Σ μ_i ln μ_i / ln ε, each taken as the
         least-squares slope over the box levels k. τ(q) = lim ln Σ p_iᑫ / ln ε, so that
         f = qα − τ holds at every ε and therefore for the fitted slopes;
-        D_q = τ(q)/(q − 1) (Hentschel & Procaccia 1983), with D1 = α(1).
+        D_q = τ(q)/(q − 1) (Wu et al. 2025, eq. 15), with D1 = α(1).
         α0 = α(0) and D0 = −τ(0) = f(α0), the capacity dimension.
     """
     if not (np.isfinite(min_r2) and 0.0 <= min_r2 <= 1.0):
