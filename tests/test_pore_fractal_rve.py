@@ -142,6 +142,23 @@ def test_sheared_cell_matches_brute_force():
     assert 0.05 < got.mean() < 0.95  # the comparison is not trivial
 
 
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"n_pixels": 0}, "n_pixels"),
+        ({"pixel_size": 0.0}, "pixel_size"),
+        ({"radius": np.array([-1e-3])}, "radius"),
+        ({"cell": np.diag([0.05, -0.05])}, "area"),
+        ({"position": np.zeros((2, 2))}, "position"),
+    ],
+)
+def test_rasterize_rejects_bad_input(kwargs, match):
+    args = {"radius": np.array([5e-3]), "position": np.array([[0.01, 0.02]]),
+            "cell": np.diag([0.05, 0.05]), "n_pixels": 64, "pixel_size": 0.05 / 64, **kwargs}
+    with pytest.raises(ValueError, match=match):
+        rasterize_pores(**args)
+
+
 def test_translation_by_whole_pixels_rolls_the_image(packing):
     # for a square cell the window is one period: moving every disc by (17, −40) pixels
     # rolls the image by the same amount, wrapping across the cell boundary

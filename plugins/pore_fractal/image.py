@@ -159,6 +159,14 @@ def rasterize_pores(
     lo = np.asarray(origin, dtype=np.float64).reshape(2)
     if x.shape[0] != r.size:
         raise ValueError(f"position must have shape ({r.size}, 2), got {x.shape}")
+    if int(n_pixels) != n_pixels or n_pixels < 1:
+        raise ValueError(f"n_pixels must be a positive integer, got {n_pixels!r}")
+    if not (np.isfinite(pixel_size) and pixel_size > 0):
+        raise ValueError(f"pixel_size must be a positive length in m, got {pixel_size!r}")
+    if np.any(~np.isfinite(r)) or np.any(r <= 0):
+        raise ValueError("radius must hold positive finite lengths in m")
+    if not np.linalg.det(h) > 0:
+        raise ValueError(f"cell must have a positive area, got det H = {np.linalg.det(h)!r} m²")
     n = int(n_pixels)
     hi = lo + n * pixel_size
     covered = np.zeros((n, n), dtype=bool)
