@@ -40,6 +40,7 @@ def plot_dq(ax: Axes, spectrum: MultifractalSpectrum, label: str | None = None) 
     if poor.any():
         ax.plot(spectrum.q[poor], spectrum.Dq[poor], "o", mfc="none", mec="red", ms=7,
                 label=f"R² < {spectrum.min_r2:g}")
+        ax.legend(fontsize="small")
     ax.set_xlabel("q")
     ax.set_ylabel("$D_q$")
     ax.set_title(f"$D_0$ = {float(spectrum.D0):.4f}", fontsize="small")
