@@ -1,0 +1,6 @@
+"""Cross-validation against YADE: identical RVEs and loadings in both engines, compared.
+
+Modules: yade_io (scene export/import), yade_runner (yade -n -x subprocesses),
+engine_runner (our command line), cases, metrics (acceptance rules), report, cli
+(validate-yade). The scripts YADE itself runs are in yade_scripts/.
+"""
