@@ -13,7 +13,7 @@ from skfem import Basis, BilinearForm, LinearForm
 
 from granular_material.fem.layout import to_points, to_quadrature
 
-__all__ = ["gauss_points_grad", "internal_force", "stiffness", "tangent_form", "stress_form"]
+__all__ = ["gauss_points_grad", "internal_force", "stiffness", "stress_form", "tangent_form"]
 
 
 @BilinearForm

@@ -37,6 +37,12 @@ class NewtonSettings:
         max_cutbacks: how many times an increment may be halved (smallest increment =
             nominal / 2**max_cutbacks).
         divergence: an increment is abandoned as soon as ‖R‖ > divergence · ‖R₀‖.
+        predictor: "tangent" (solve with the committed tangent, Wu et al. step (b)–(d)) or
+            "extrapolate" (the last converged increment, scaled to the new one, once there
+            is one; the tangent predictor for the first step).
+        relaxation: "none" (plain Newton steps) or "aitken" (Irons–Tuck dynamic relaxation
+            of the corrections, for tangents that are too stiff, such as the
+            Kruyt–Rothenburg one that ignores sliding; Küttler & Wall 2008, eq. 44).
     """
 
     rtol: float = 0.005
@@ -44,8 +50,16 @@ class NewtonSettings:
     max_iterations: int = 25
     max_cutbacks: int = 6
     divergence: float = 1e3
+    predictor: str = "tangent"
+    relaxation: str = "none"
 
     def __post_init__(self) -> None:
+        if self.predictor not in ("tangent", "extrapolate"):
+            raise ValueError(
+                f"predictor must be 'tangent' or 'extrapolate', got {self.predictor!r}"
+            )
+        if self.relaxation not in ("none", "aitken"):
+            raise ValueError(f"relaxation must be 'none' or 'aitken', got {self.relaxation!r}")
         if not (0 < self.rtol < 1):
             raise ValueError(f"rtol must lie in (0, 1), got {self.rtol!r}")
         if not (self.atol >= 0 and math.isfinite(self.atol)):
@@ -162,6 +176,7 @@ class NewtonSolver:
             )
         self.u = np.zeros(basis.N)
         self.load_factor = 0.0
+        self._last: tuple[float, np.ndarray] | None = None  # last converged (Δλ, Δu)
         self.records: list[StepRecord] = []
         # initial stress and tangent of the committed state (∇u = 0)
         self.response = material.evaluate(np.zeros((n_points, 2, 2)))
@@ -190,8 +205,12 @@ class NewtonSolver:
         A, b, x, interior = condense(K, f_ext - self.f_int, x=du, D=D)
         r0 = float(np.linalg.norm(b))
         du = solve(A, b, x, interior)
+        if s.predictor == "extrapolate" and self._last is not None:
+            last_step, last_du = self._last
+            du[interior] = (target - self.load_factor) / last_step * last_du[interior]
         history: list[float] = []
         work = 0
+        omega, previous = 1.0, None
         for it in range(1, s.max_iterations + 1):
             response = self.material.evaluate(gauss_points_grad(self.basis, du))
             work += int(response.work)
@@ -209,7 +228,15 @@ class NewtonSolver:
                 return _Attempt(False, du, None, None, history, it, work, "diverged")
             K = stiffness(self.basis, response.tangent)
             A, b, x, interior = condense(K, -residual, D=D)
-            du = du + solve(A, b, x, interior)
+            correction = solve(A, b, x, interior)
+            if s.relaxation == "aitken" and previous is not None:
+                change = correction - previous
+                denominator = float(change @ change)
+                if denominator > 0:
+                    omega = float(np.clip(-omega * (previous @ change) / denominator,
+                                          0.1, 50.0))
+            previous = correction
+            du = du + omega * correction
         return _Attempt(False, du, None, None, history, s.max_iterations, work,
                         f"not converged in {s.max_iterations} iterations")
 
@@ -234,6 +261,7 @@ class NewtonSolver:
                 self.material.commit()
                 self.u = self.u + attempt.du
                 self.response, self.f_int = attempt.response, attempt.f_int
+                self._last = (end - self.load_factor, attempt.du)
                 self.load_factor = end
                 increment = min(2 * increment, nominal) if record.cutbacks else increment
                 continue

@@ -43,7 +43,8 @@ class FieldWriter:
 
     def write(self, time: float, u: np.ndarray, points: pd.DataFrame) -> None:
         """Append one step: nodal displacement ``u`` (ndofs,) and the Gauss-point table."""
-        disp = np.column_stack([u[self._nodal[0]], u[self._nodal[1]], np.zeros(self._nodal.shape[1])])
+        ux, uy = u[self._nodal[0]], u[self._nodal[1]]
+        disp = np.column_stack([ux, uy, np.zeros_like(ux)])
         means = points.groupby("element").mean(numeric_only=True)
         cell_data = {k: [means[k].to_numpy(dtype=float)] for k in _CELL_FIELDS if k in means}
         self._writer.write_data(float(time), point_data={"displacement": disp},
@@ -121,7 +122,8 @@ def plot_maps(result: BiaxialResult, axial_strain: float, path: str | Path) -> P
     for ax, values, title in ((axes[0], 1e3 * ux, "u_x [mm]"), (axes[1], 1e3 * uy, "u_y [mm]")):
         im = ax.tripcolor(tri, values, shading="gouraud", cmap="viridis")
         fig.colorbar(im, ax=ax, label=title)
-    im = axes[2].tripcolor(tri, facecolors=100 * np.concatenate([gamma, gamma]), cmap="inferno")
+    im = axes[2].tripcolor(tri, facecolors=100 * np.concatenate([gamma, gamma]), cmap="inferno",
+                          vmin=0.0, vmax=max(100 * float(gamma.max()), 1e-12))
     fig.colorbar(im, ax=axes[2], label="shear strain γ [%]")
     for ax, title in zip(axes, ("displacement u_x", "displacement u_y", "shear strain"),
                          strict=True):

@@ -1,0 +1,13 @@
+"""The scikit-fem DEM material plugin: one periodic DEM RVE per Gauss point.
+
+Registered as the ``dem`` entry point of ``granular_material.materials``::
+
+    from granular_material.fem import create_material
+    material = create_material("dem", particles=400, seed=1)
+"""
+
+from granular_material_skfem.adapter import DEMBackend, DEMEvaluation, InProcessBackend
+from granular_material_skfem.material import DEMMaterial, DEMMaterialParameters
+
+__all__ = ["DEMBackend", "DEMEvaluation", "DEMMaterial", "DEMMaterialParameters",
+           "InProcessBackend"]
