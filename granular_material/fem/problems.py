@@ -79,6 +79,18 @@ class BiaxialProblem:
     top_dofs: np.ndarray
     weights: np.ndarray
 
+    def force_tolerance(self, stress: float) -> float:
+        """‖R‖₂ [N/m] that a stress error of ``stress`` [Pa] at every Gauss point leaves.
+
+        Nodal forces from a stress error τ scale as τ·h (h = √(area / elements), unit
+        thickness); uncorrelated errors add in quadrature over the free degrees of freedom:
+        ‖R‖ ≈ τ · h · √n_free. Used as the absolute Newton tolerance for noisy (DEM) stress.
+        """
+        s = self.setup
+        h = math.sqrt(s.width * s.height / (s.nx * s.ny))
+        n_free = self.basis.N - self.loading.dirichlet_dofs.size
+        return float(stress * h * math.sqrt(n_free))
+
     def axial_stress(self, reaction: np.ndarray) -> float:
         """Axial stress from the platen reaction [Pa], compression positive (σ = −ΣR_y / W)."""
         return float(-reaction[self.top_dofs].sum() / self.setup.width)

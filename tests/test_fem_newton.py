@@ -1,0 +1,207 @@
+"""Newton driver: patch test, analytic plane-strain response, cut-back and recovery."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from skfem import Basis, ElementQuad1, ElementVector, FacetBasis, LinearForm, MeshQuad
+
+from granular_material.fem import (
+    BiaxialSetup,
+    LinearElastic,
+    Loading,
+    MaterialResponse,
+    NewtonError,
+    NewtonSettings,
+    NewtonSolver,
+    PointStatus,
+    build_biaxial,
+    run_biaxial,
+)
+from granular_material.fem.linear_elastic import isotropic_tangent
+
+
+def _distorted_mesh() -> MeshQuad:
+    mesh = MeshQuad.init_tensor(np.linspace(0, 2, 4), np.linspace(0, 1, 4))
+    p = mesh.p.copy()
+    interior = np.flatnonzero((p[0] > 0) & (p[0] < 2) & (p[1] > 0) & (p[1] < 1))
+    p[:, interior] += np.random.default_rng(3).uniform(-0.1, 0.1, size=(2, interior.size))
+    return MeshQuad(p, mesh.t)
+
+
+def test_patch_test_reproduces_uniform_strain():
+    """Linear boundary displacements u = G x on a distorted mesh → u = G x inside, σ uniform."""
+    mesh = _distorted_mesh()
+    basis = Basis(mesh, ElementVector(ElementQuad1()), intorder=2)
+    grad = np.array([[1.0e-3, 4.0e-4], [-2.0e-4, -6.0e-4]])
+    exact = np.zeros(basis.N)
+    exact[basis.nodal_dofs[0]], exact[basis.nodal_dofs[1]] = grad @ mesh.p
+    boundary = basis.get_dofs().flatten()
+    loading = Loading(boundary, exact[boundary], np.zeros(basis.N), np.zeros(basis.N))
+    material = LinearElastic(young=50e6, poisson=0.3)
+    solver = NewtonSolver(basis, material, loading, NewtonSettings(rtol=1e-12))
+    solver.run(1)
+    np.testing.assert_allclose(solver.u, exact, rtol=0, atol=1e-10 * np.abs(exact).max())
+    eps = 0.5 * (grad + grad.T)
+    sigma = np.einsum("ijkl,kl->ij", isotropic_tangent(*material.parameters.lame), eps)
+    stress = solver.response.stress
+    assert np.abs(stress - sigma).max() <= 1e-10 * np.abs(sigma).max()
+    np.testing.assert_allclose(solver.grad_u(), np.broadcast_to(grad, stress.shape),
+                               atol=1e-10 * np.abs(grad).max())
+
+
+def test_single_element_plane_strain_uniaxial_analytic():
+    """σxx = −p held, εyy prescribed: Δσyy = E/(1−ν²) εyy and εxx = −ν/(1−ν) εyy.
+
+    Closed form of plane-strain Hooke's law with Δσxx = 0 (ε_zz = 0).
+    """
+    e, nu, p, strain = 40e6, 0.25, 100e3, 0.01
+    setup = BiaxialSetup(width=1.0, height=1.0, nx=1, ny=1, confining=p, axial_strain=strain)
+    result = run_biaxial(setup, LinearElastic(young=e, poisson=nu, initial_stress=-p), 4)
+    last = result.steps.iloc[-1]
+    assert last["platen_stress"] == pytest.approx(p + e / (1 - nu**2) * strain, rel=1e-10)
+    assert last["syy"] == pytest.approx(-last["platen_stress"], rel=1e-10)
+    assert last["sxx"] == pytest.approx(-p, rel=1e-10)
+    exx = result.points[result.points["step"] == 4]["exx"].to_numpy()
+    np.testing.assert_allclose(exx, nu / (1 - nu) * strain, rtol=1e-10)
+    assert (result.steps["iterations"].iloc[1:] == 1).all()  # a linear law: the predictor
+
+
+class StiffeningElastic:
+    """σ = (1 + ε:ε/ε0²) C:ε with a tangent frozen at the committed state.
+
+    Written for the cut-back test: the frozen (too soft) tangent makes Newton's iteration a
+    fixed-point iteration that converges only while the true stiffness over the increment
+    stays below twice the committed one, i.e. it genuinely diverges for large increments.
+    """
+
+    def __init__(self, young: float = 10e6, poisson: float = 0.2, eps0: float = 2e-3):
+        lam, mu = young * poisson / ((1 + poisson) * (1 - 2 * poisson)), young / (2 + 2 * poisson)
+        self.c = isotropic_tangent(lam, mu)
+        self.eps0 = eps0
+        self.strain = np.zeros((0, 2, 2))
+        self.trial = None
+
+    @property
+    def n_points(self) -> int:
+        return self.strain.shape[0]
+
+    def allocate(self, n_points: int) -> None:
+        self.strain = np.zeros((n_points, 2, 2))
+
+    def _factor(self, strain):
+        return 1.0 + np.einsum("nij,nij->n", strain, strain) / self.eps0**2
+
+    def evaluate(self, grad_u):
+        strain = self.strain + 0.5 * (grad_u + np.swapaxes(grad_u, 1, 2))
+        self.trial = strain
+        stress = self._factor(strain)[:, None, None] * np.einsum("ijkl,nkl->nij", self.c, strain)
+        tangent = self._factor(self.strain)[:, None, None, None, None] * self.c
+        return MaterialResponse(stress, tangent, np.zeros(self.n_points, dtype=np.int8))
+
+    def commit(self) -> None:
+        self.strain = self.trial
+
+    def revert(self) -> None:
+        self.trial = None
+
+    def checkpoint(self, path) -> None:
+        np.save(path, self.strain)
+
+    def restore(self, path) -> None:
+        self.strain = np.load(path)
+
+
+@LinearForm
+def _pressure(v, w):
+    return -w.q * (w.n[0] * v[0] + w.n[1] * v[1])
+
+
+def _top_loaded_element(q: float):
+    """One unit Q4 on rollers at the bottom (one node pinned), pressure q [Pa] on top."""
+    mesh = MeshQuad()
+    basis = Basis(mesh, ElementVector(ElementQuad1()), intorder=2)
+    bottom = np.flatnonzero(mesh.p[1] == 0)
+    dofs = np.concatenate([basis.nodal_dofs[1, bottom], basis.nodal_dofs[0, bottom[:1]]])
+    top = FacetBasis(mesh, basis.elem, facets=mesh.facets_satisfying(lambda x: x[1] == 1),
+                     intorder=2)
+    force = _pressure.assemble(top, q=q)
+    return basis, Loading(dofs, np.zeros(dofs.size), np.zeros(basis.N), force)
+
+
+def test_diverging_step_is_cut_back_and_recovers():
+    # q = 20 kPa on E = 10 MPa: the final stiffening factor is about 1.4 (ε ≈ 1.3e-3 vs
+    # ε0 = 2e-3), enough for one increment to diverge and for 32 increments not to
+    settings = NewtonSettings(rtol=1e-6, max_iterations=40, max_cutbacks=8)
+    basis, loading = _top_loaded_element(q=20e3)
+    big = NewtonSolver(basis, StiffeningElastic(), loading, settings)
+    record = big.step(1.0, step=1)
+    assert record.cutbacks >= 1
+    assert any(len(h) == settings.max_iterations or h[-1] > 1 for h in record.residual_history)
+    assert big.load_factor == 1.0
+    # reference: the same load in 32 small steps, which converge without any cut-back
+    small = NewtonSolver(basis, StiffeningElastic(), loading, settings)
+    records = small.run(32)
+    assert sum(r.cutbacks for r in records) == 0
+    np.testing.assert_allclose(big.u, small.u, rtol=1e-4, atol=1e-4 * np.abs(small.u).max())
+    # the solution is stiffer than the initial linear response (the law stiffens)
+    linear = NewtonSolver(basis, LinearElastic(young=10e6, poisson=0.2), loading, settings)
+    linear.run(1)
+    assert np.abs(big.u).max() < np.abs(linear.u).max()
+
+
+def test_cut_back_limit_names_the_step_and_keeps_committed_state():
+    settings = NewtonSettings(rtol=1e-6, max_iterations=40, max_cutbacks=0)
+    basis, loading = _top_loaded_element(q=20e3)
+    material = StiffeningElastic()
+    solver = NewtonSolver(basis, material, loading, settings)
+    solver.step(0.05, step=1)  # a small first step converges
+    committed_u, committed_strain = solver.u.copy(), material.strain.copy()
+    with pytest.raises(NewtonError, match="load step 2") as info:
+        solver.step(1.0, step=2)
+    assert solver.load_factor == 0.05
+    np.testing.assert_array_equal(solver.u, committed_u)
+    np.testing.assert_array_equal(material.strain, committed_strain)
+    assert [r.step for r in info.value.records] == [1, 2]
+
+
+class _FailsAbove:
+    """Linear elastic, but reports FAILED at every point when max|∇u| exceeds a limit."""
+
+    def __init__(self, limit: float):
+        self.inner, self.limit = LinearElastic(), limit
+
+    n_points = property(lambda self: self.inner.n_points)
+
+    def allocate(self, n):
+        self.inner.allocate(n)
+
+    def evaluate(self, grad_u):
+        r = self.inner.evaluate(grad_u)
+        if np.abs(grad_u).max() > self.limit:
+            return MaterialResponse(r.stress, r.tangent,
+                                    np.full(r.status.shape, PointStatus.FAILED, dtype=np.int8))
+        return r
+
+    def commit(self):
+        self.inner.commit()
+
+    def revert(self):
+        self.inner.revert()
+
+    def checkpoint(self, path):
+        self.inner.checkpoint(path)
+
+    def restore(self, path):
+        self.inner.restore(path)
+
+
+def test_failed_points_trigger_cut_back():
+    problem = build_biaxial(BiaxialSetup(width=1, height=1, nx=1, ny=1, confining=0.0,
+                                         axial_strain=0.01))
+    solver = NewtonSolver(problem.basis, _FailsAbove(limit=3e-3), problem.loading)
+    record = solver.step(1.0, step=1)
+    # 1 % → 0.5 % → 0.25 % per increment (below the 0.3 % limit), then regrowth is refused
+    assert record.cutbacks >= 2
+    assert solver.load_factor == 1.0
+    np.testing.assert_allclose(solver.grad_u()[:, 1, 1], -0.01, rtol=1e-10)
