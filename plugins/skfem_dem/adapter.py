@@ -96,7 +96,9 @@ class InProcessBackend:
         b = self.n_rve
         self.batch.restore(self._committed)
         self._trial = False
-        failed = np.linalg.det(np.eye(2) + grad_u) <= 0
+        finite = np.isfinite(grad_u).all(axis=(1, 2))
+        grad_u = np.where(finite[:, None, None], grad_u, 0.0)
+        failed = ~finite | (np.linalg.det(np.eye(2) + grad_u) <= 0)
         steps = 0
         try:
             steps = drive_grad_u(self.batch, np.where(failed[:, None, None], 0.0, grad_u),

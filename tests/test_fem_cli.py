@@ -1,0 +1,72 @@
+"""The FEM commands and the scikit-fem example, run as tests."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+from pathlib import Path
+
+import meshio
+import pandas as pd
+import pytest
+
+from granular_material.cli import main
+
+EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "skfem_material_swap.py"
+
+
+def _example():
+    spec = importlib.util.spec_from_file_location("skfem_material_swap", EXAMPLE)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_single_element_linear_elastic_json(tmp_path, capsys):
+    code = main(["single-element", "--material", "linear-elastic", "--E", "50e6", "--nu",
+                 "0.25", "--axial-strain", "0.01", "--steps", "4", "--confining", "100e3",
+                 "--out", str(tmp_path), "--json", "--no-progress"])
+    assert code == 0
+    out = json.loads(capsys.readouterr().out)
+    # plane strain, σxx held: σyy = −p − E/(1−ν²)·ε_a (tension positive)
+    assert out["syy"] == pytest.approx(-100e3 - 50e6 / (1 - 0.25**2) * 0.01, rel=1e-10)
+    assert out["sxx"] == pytest.approx(-100e3, rel=1e-10)
+    assert out["newton_iterations_mean"] == 1.0
+    assert out["peak_stress_ratio"] == pytest.approx(-out["syy"] / 100e3, rel=1e-10)
+    steps = pd.read_csv(tmp_path / "steps.csv")
+    points = pd.read_csv(tmp_path / "points.csv")
+    assert len(steps) == 5 and len(points) == 5 * 4
+    for name in ("stress_strain.png", "maps.png", "fields.xdmf"):
+        assert (tmp_path / name).stat().st_size > 0
+    with meshio.xdmf.TimeSeriesReader(str(tmp_path / "fields.xdmf")) as reader:
+        _, cells = reader.read_points_cells()
+        assert reader.num_steps == 5 and cells[0].data.shape == (1, 4)
+
+
+def test_bad_input_is_a_value_error(capsys):
+    assert main(["single-element", "--material", "linear-elastic", "--steps", "0",
+                 "--no-progress"]) == 2
+    assert "--steps" in capsys.readouterr().err
+    assert main(["single-element", "--material", "linear-elastic", "--nu", "0.7",
+                 "--no-progress"]) == 2
+
+
+def test_biaxial_command_reduced_scale(tmp_path, capsys):
+    code = main(["biaxial", "--elements", "1", "2", "--particles", "40", "--axial-strain",
+                 "0.004", "--steps", "2", "--device", "cpu", "--out", str(tmp_path),
+                 "--json", "--no-progress"])
+    out = json.loads(capsys.readouterr().out)
+    assert code == 0, out["error"]
+    assert out["gauss_points"] == 8 and out["steps_completed"] == 2 and out["dem_steps"] > 0
+    points = pd.read_csv(tmp_path / "points.csv")
+    assert points["void_ratio"].notna().all() and points["point"].max() == 7
+
+
+def test_example_swaps_the_material_by_name():
+    example = _example()
+    elastic = example.main("linear-elastic", axial_strain=0.004, steps=2)
+    # 2 × 2 elements, σxx held at −P: σyy = P + E/(1−ν²) ε_a, E = 60 MPa, ν = 0.3
+    assert elastic[-1] == pytest.approx(100e3 + 60e6 / (1 - 0.09) * 0.004, rel=1e-6)
+    example.PARAMETERS["dem"]["particles"] = 40
+    dem = example.main("dem", axial_strain=0.004, steps=2)
+    assert 100e3 < dem[0] < dem[1] < elastic[-1]  # granular: softer than the elastic block
