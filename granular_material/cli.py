@@ -66,7 +66,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         return int(args.func(args) or 0)
-    except (UsageError, ValueError, FileNotFoundError) as exc:
+    except (UsageError, ValueError, OSError) as exc:
         print(f"granular-material {args.command}: error: {exc}", file=sys.stderr)
         return 2
     except RuntimeError as exc:  # e.g. DEMInstabilityError naming the RVEs

@@ -86,6 +86,13 @@ def _emit(args: argparse.Namespace, result: dict[str, Any]) -> None:
             print(f"{key:>24}: {value}")
 
 
+def _ensure_parents(*paths: Path | None) -> None:
+    """Create the folders of the output files up front, so a bad path fails before the run."""
+    for path in paths:
+        if path is not None:
+            Path(path).parent.mkdir(parents=True, exist_ok=True)
+
+
 def _write_csv(frame: pd.DataFrame, path: Path) -> None:
     tmp = path.with_name(path.name + ".part")
     frame.to_csv(tmp, index=False)
@@ -113,6 +120,7 @@ def _run_prepare(args: argparse.Namespace) -> int:
                    friction_angle=args.friction_angle, damping=args.damping,
                    stiffness=stiffness, seed=args.seed)
     meta.validate()
+    _ensure_parents(args.out)
     batch = prepare_packing(
         n_disc=args.particles, n_rve=args.batch, seed=args.seed, pressure=args.pressure,
         meta=meta, target_void_ratio=args.target_void_ratio,
@@ -160,6 +168,7 @@ def _plot_biaxial(curve: pd.DataFrame, path: Path) -> None:
 def _run_biaxial(args: argparse.Namespace) -> int:
     from granular_material.dem import biaxial_test, summarize_biaxial
 
+    _ensure_parents(args.out, args.plot)
     batch = _load_batch(args)
     curve = biaxial_test(batch, axial_strain=args.axial_strain, confining=args.confining,
                          strain_per_step=args.strain_per_step,
@@ -179,6 +188,7 @@ def _run_biaxial(args: argparse.Namespace) -> int:
 def _run_drive(args: argparse.Namespace) -> int:
     from granular_material.dem import drive_grad_u
 
+    _ensure_parents(args.out)
     batch = _load_batch(args)
     grad = args.grad_u
     b = batch.n_rve

@@ -92,3 +92,11 @@ def test_bad_input_exits_2_and_writes_nothing(small_rve_path, tmp_path, capsys, 
     assert rc == 2
     assert message in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_outputs_go_into_new_folders(small_rve_path, tmp_path, capsys):
+    out = tmp_path / "a" / "b" / "path.csv"
+    rc = main(["dem-drive", str(small_rve_path), "--grad-u", "0,0,0,0", "--increments", "1",
+               "--out", str(out), "--device", "cpu"])
+    assert rc == 0
+    assert out.exists()
