@@ -58,6 +58,8 @@ def _common_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     parser.add_argument("--device", choices=("cpu", "cuda"), default=None,
                         help="DEM device (default: CUDA when present, else CPU)")
+    parser.add_argument("--shards", type=int, default=None,
+                        help="CPU threads (shards) of the DEM batch (default: one per core)")
     parser.add_argument("--map-strain", type=float, default=0.02,
                         help="axial strain of the displacement/shear-strain maps (default 0.02)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
@@ -182,7 +184,7 @@ def run_single_element(args: argparse.Namespace) -> int:
         material = create_material("dem", rve=args.rve, particles=args.particles,
                                    seed=args.seed, pressure=args.confining,
                                    replicate=not args.independent, device=args.device,
-                                   progress=progress)
+                                   shards=args.shards, progress=progress)
         material.allocate(setup.n_points)
     reference = None
     if args.material == "dem" and args.compare_dem:
@@ -207,7 +209,7 @@ def _pure_dem(material: Material, args: argparse.Namespace, progress: bool) -> p
     """Drained biaxial test of RVE 0 of the DEM material (its committed state)."""
     from granular_material.dem import DEMBatch, biaxial_test
 
-    batch = DEMBatch(material.batch.to_data().replicate(1), device=args.device)
+    batch = DEMBatch(material.batch.to_data().replicate(1), device=args.device, shards=1)
     curve = biaxial_test(batch, axial_strain=args.axial_strain, confining=args.confining,
                          progress=progress)
     return curve[curve["rve"] == 0].reset_index(drop=True)
@@ -228,7 +230,8 @@ def run_biaxial_command(args: argparse.Namespace) -> int:
                          confining=args.confining, axial_strain=args.axial_strain)
     progress = not args.no_progress
     material = create_material("dem", rve=args.rve, particles=particles, seed=args.seed,
-                               pressure=args.confining, device=device, progress=progress)
+                               pressure=args.confining, device=device, shards=args.shards,
+                               progress=progress)
     material.allocate(setup.n_points)
     t0 = time.perf_counter()
     result = run_biaxial(setup, material, args.steps, _settings(args), progress=progress,

@@ -10,13 +10,13 @@ D = (1/V) Σ_c (k_n n⊗d⊗n⊗d + k_t t⊗d⊗t⊗d) (Wu, Fu & Zhou 2025, eqs.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 from granular_material_skfem.adapter import InProcessBackend
 
-from granular_material.dem import DEMBatch, load_rve, prepare_packing
+from granular_material.dem import DEMBatch, RVEData, load_rve, prepare_packing
 from granular_material.fem.material import MaterialResponse, PointStatus
 
 __all__ = ["DEMMaterial", "DEMMaterialParameters"]
@@ -36,6 +36,9 @@ class DEMMaterialParameters:
         device: "cpu", "cuda" or None (CUDA when present).
         max_strain_per_step: largest strain per DEM step while driving ∇u [-].
         min_steps: fewest DEM steps per evaluation.
+        shards: CPU shards (threads) of the batch; None: the engine's default (one per
+            core). With 1, independent RVEs are also prepared one at a time (RVE p from the
+            random gas of seed + p, consolidated on its own).
     """
 
     rve: str | None = None
@@ -46,8 +49,11 @@ class DEMMaterialParameters:
     device: str | None = None
     max_strain_per_step: float = 1.0e-5
     min_steps: int = 2
+    shards: int | None = None
 
     def __post_init__(self) -> None:
+        if self.shards is not None and (int(self.shards) != self.shards or self.shards < 1):
+            raise ValueError(f"shards must be an integer >= 1 or None, got {self.shards!r}")
         if int(self.particles) != self.particles or self.particles < 4:
             raise ValueError(f"particles must be an integer >= 4, got {self.particles!r}")
         if not (math.isfinite(self.pressure) and self.pressure > 0):
@@ -68,10 +74,11 @@ class DEMMaterial:
     def __init__(self, rve: str | Path | None = None, particles: int = 400, seed: int = 1,
                  pressure: float = 100.0e3, replicate: bool = False,
                  device: str | None = None, max_strain_per_step: float = 1.0e-5,
-                 min_steps: int = 2, progress: bool = False) -> None:
+                 min_steps: int = 2, shards: int | None = None,
+                 progress: bool = False) -> None:
         self.parameters = DEMMaterialParameters(
             None if rve is None else str(rve), particles, seed, pressure, replicate, device,
-            max_strain_per_step, min_steps,
+            max_strain_per_step, min_steps, shards,
         )
         self.progress = progress
         self.backend: InProcessBackend | None = None
@@ -106,16 +113,19 @@ class DEMMaterial:
                     f"rve file {p.rve} holds {data.n_rve} RVEs; {n_points} Gauss points need "
                     f"1 (replicated) or {n_points}"
                 )
-            batch = DEMBatch(data, device=p.device)
         elif p.replicate:
-            one = prepare_packing(n_disc=p.particles, n_rve=1, seed=p.seed, pressure=p.pressure,
-                                  device=p.device, progress=self.progress)
-            batch = DEMBatch(one.to_data().replicate(n_points), device=p.device)
+            data = self._prepare(1, p.seed).replicate(n_points)
+        elif p.shards == 1:
+            data = _concatenate([self._prepare(1, p.seed + k) for k in range(n_points)])
         else:
-            batch = prepare_packing(n_disc=p.particles, n_rve=n_points, seed=p.seed,
-                                    pressure=p.pressure, device=p.device,
-                                    progress=self.progress)
-        self.backend = self._backend(batch)
+            data = self._prepare(n_points, p.seed)
+        self.backend = self._backend(DEMBatch(data, device=p.device, shards=p.shards))
+
+    def _prepare(self, n_rve: int, seed: int) -> RVEData:
+        p = self.parameters
+        batch = prepare_packing(n_disc=p.particles, n_rve=n_rve, seed=seed, pressure=p.pressure,
+                                device=p.device, progress=self.progress)
+        return batch.to_data()
 
     def evaluate(self, grad_u: np.ndarray) -> MaterialResponse:
         """Love stress and Kruyt–Rothenburg tangent for ∇u (n, 2, 2) since the commit.
@@ -152,4 +162,19 @@ class DEMMaterial:
 
     def restore(self, path: str | Path) -> None:
         """Load committed RVE states written by :meth:`checkpoint`."""
-        self.backend = self._backend(DEMBatch(load_rve(path), device=self.parameters.device))
+        p = self.parameters
+        self.backend = self._backend(DEMBatch(load_rve(path), device=p.device, shards=p.shards))
+
+
+def _concatenate(parts: list[RVEData]) -> RVEData:
+    """One batch from several (same meta; extra arrays concatenated along the batch axis)."""
+    first = parts[0]
+
+    def cat(name: str) -> np.ndarray:
+        return np.concatenate([getattr(d, name) for d in parts])
+
+    return replace(
+        first, radius=cat("radius"), position=cat("position"), cell=cat("cell"),
+        velocity=cat("velocity"), angular_velocity=cat("angular_velocity"),
+        extra={k: np.concatenate([d.extra[k] for d in parts]) for k in first.extra},
+    )
