@@ -205,3 +205,21 @@ def test_failed_points_trigger_cut_back():
     assert record.cutbacks >= 2
     assert solver.load_factor == 1.0
     np.testing.assert_allclose(solver.grad_u()[:, 1, 1], -0.01, rtol=1e-10)
+
+
+def test_full_scale_specimen_mesh_with_linear_elastic():
+    """Wu et al.'s specimen: 50 mm × 100 mm, 10 × 15 Q4, 600 Gauss points (DESIGN §5).
+
+    With a linear-elastic material the smooth-platen test stays homogeneous, so the platen
+    stress is the plane-strain closed form p + E/(1−ν²) ε_a.
+    """
+    setup = BiaxialSetup()
+    problem = build_biaxial(setup)
+    assert setup.n_points == 600 == problem.weights.size
+    assert problem.weights.sum() == pytest.approx(0.05 * 0.10, rel=1e-12)
+    result = run_biaxial(setup, LinearElastic(young=30e6, poisson=0.3, initial_stress=-100e3),
+                         2)
+    expected = 100e3 + 30e6 / (1 - 0.3**2) * 0.10
+    assert result.steps["platen_stress"].iloc[-1] == pytest.approx(expected, rel=1e-9)
+    last = result.points[result.points["step"] == 2]
+    np.testing.assert_allclose(last["syy"], -expected, rtol=1e-9)

@@ -267,7 +267,7 @@ class NewtonSolver:
                 continue
             self.material.revert()
             record.cutbacks += 1
-            increment /= 2
+            increment = (end - self.load_factor) / 2  # half of what was tried (maybe clipped)
             if increment < smallest * (1 - 1e-9):
                 record.wall_time = time.perf_counter() - t0
                 raise NewtonError(
