@@ -154,3 +154,18 @@ def test_target_void_ratio_is_reached_then_held_at_p0():
     h = batch.homogenize()
     assert h.void_ratio[0] == pytest.approx(0.2, abs=0.01)
     assert h.mean_stress[0] == pytest.approx(-100e3, rel=0.01)
+
+
+def test_parallel_shards_are_safe_and_change_nothing(small_rve_path):
+    """Two CPU shards step in two threads (each with its own kernel module): many short
+    parallel runs must neither crash the interpreter nor differ from one shard."""
+    data = load_rve(small_rve_path).replicate(6)
+    grad = np.array([[0.0, 1e-3], [0.0, 0.0]])
+    results = []
+    for shards in (1, 2):
+        batch = DEMBatch(data, device="cpu", shards=shards)
+        assert len(batch.shards) == shards
+        for _ in range(20):
+            drive_grad_u(batch, grad / 20)
+        results.append(batch.homogenize().stress)
+    np.testing.assert_array_equal(results[0], results[1])

@@ -1,9 +1,9 @@
 """DEMBatch: the RVEs, their state and solvers together — the object users and the FEM hold.
 
 On the CPU a warp kernel runs on one thread, so the batch is split into shards (contiguous
-groups of RVEs, each with its own Model, State and Solver) stepped by one thread each; the
-launches release the GIL, so two shards use two cores. RVEs are independent, so sharding
-never changes a result. On CUDA one shard holds the whole batch.
+groups of RVEs, each with its own Model, State, Solver and copy of the kernel module)
+stepped by one thread each; the launches release the GIL, so two shards use two cores. RVEs
+are independent, so sharding never changes a result. On CUDA one shard holds the batch.
 """
 
 from __future__ import annotations
@@ -81,10 +81,10 @@ class DEMBatch:
             raise ValueError(f"shards must be >= 1, got {shards}")
         shards = min(shards, data.n_rve)
         self.shards: list[Shard] = []
-        for part in np.array_split(np.arange(data.n_rve), shards):
+        for replica, part in enumerate(np.array_split(np.arange(data.n_rve), shards)):
             rves = slice(int(part[0]), int(part[-1]) + 1)
             model = build_model(_slice_data(data, rves), device=device, dtype=dtype,
-                                timestep=timestep)
+                                timestep=timestep, replica=replica)
             state = state_from_data(model, _slice_data(data, rves))
             solver = Solver(model)
             if state.force_rebuild.numpy().any():
@@ -165,6 +165,8 @@ class DEMBatch:
         def one(shard: Shard) -> None:
             shard.solver.run(shard.state, steps, check_every=steps)
 
+        for shard in self.shards:  # record launches and load modules here, not in threads
+            shard.solver.prepare(shard.state)
         if self._pool is None:
             results = [self._guard(one, self.shards[0])]
         else:

@@ -61,9 +61,15 @@ class KernelSet:
 
 
 @cache
-def kernels_for(float_type: Any) -> KernelSet:
-    """Build (once) and return the kernel set for ``float_type``."""
+def kernels_for(float_type: Any, replica: int = 0) -> KernelSet:
+    """Build (once) and return the kernel set for ``float_type``.
+
+    Each ``replica`` is a separate warp module. On x86-64 a CPU module keeps a static
+    pointer to the running launch's tile storage, so two threads must never run kernels of
+    the same module at once: every CPU shard steps with its own replica.
+    """
     ft = float_type
+    module = f"granular_material_dem_{wp.types.type_repr(ft)}_r{replica}"
     vec2 = wp.types.vector(2, ft)
     mat22 = wp.types.matrix((2, 2), ft)
     mat44 = wp.types.matrix((4, 4), ft)
@@ -81,7 +87,7 @@ def kernels_for(float_type: Any) -> KernelSet:
             return vec2(kn, kt_ratio * kn)
         return vec2(kn_c, kt_c)
 
-    @wp.kernel(module="unique")
+    @wp.kernel(module=module)
     def check_rebuild(
         n_disc: int,
         skin: ft,
@@ -135,7 +141,7 @@ def kernels_for(float_type: Any) -> KernelSet:
         return wp.vec2i(wp.min(int(s[0] * ft(nb[0])), nb[0] - 1),
                         wp.min(int(s[1] * ft(nb[1])), nb[1] - 1))
 
-    @wp.kernel(module="unique")
+    @wp.kernel(module=module)
     def clear_bins(
         max_bins: int,
         rebuild: wp.array(dtype=wp.int32),
@@ -145,7 +151,7 @@ def kernels_for(float_type: Any) -> KernelSet:
         if rebuild[k // (max_bins * max_bins)] != 0:
             bin_count[k] = 0
 
-    @wp.kernel(module="unique")
+    @wp.kernel(module=module)
     def fill_bins(
         n_disc: int,
         max_bins: int,
@@ -204,7 +210,7 @@ def kernels_for(float_type: Any) -> KernelSet:
             shear_new[i * capacity + pos] = history
         return count + 1
 
-    @wp.kernel(module="unique")
+    @wp.kernel(module=module)
     def build_neighbors(
         n_disc: int,
         capacity: int,
@@ -257,7 +263,7 @@ def kernels_for(float_type: Any) -> KernelSet:
             count = capacity
         nbr_count_new[i] = count
 
-    @wp.kernel(module="unique")
+    @wp.kernel(module=module)
     def commit_neighbors(
         n_disc: int,
         capacity: int,
@@ -280,7 +286,7 @@ def kernels_for(float_type: Any) -> KernelSet:
             shear[i * capacity + k] = shear_new[i * capacity + k]
         disp[i] = vec2(ft(0.0), ft(0.0))
 
-    @wp.kernel(module="unique")
+    @wp.kernel(module=module)
     def compute_forces(
         n_disc: int,
         capacity: int,
@@ -366,7 +372,7 @@ def kernels_for(float_type: Any) -> KernelSet:
         part_stress[i] = s_sum
         part_stiff[i] = k_sum
 
-    @wp.kernel(module="unique")
+    @wp.kernel(module=module)
     def servo(
         n_disc: int,
         timestep: wp.array(dtype=ft),
@@ -416,7 +422,7 @@ def kernels_for(float_type: Any) -> KernelSet:
             return f * (ft(1.0) + damping)
         return f
 
-    @wp.kernel(module="unique")
+    @wp.kernel(module=module)
     def integrate(
         n_disc: int,
         timestep: wp.array(dtype=ft),
@@ -456,7 +462,7 @@ def kernels_for(float_type: Any) -> KernelSet:
         s = frac[i] + wp.inverse(cell[b]) * dx
         frac[i] = vec2(s[0] - wp.floor(s[0]), s[1] - wp.floor(s[1]))
 
-    @wp.kernel(module="unique")
+    @wp.kernel(module=module)
     def advance_cell(
         active: wp.array(dtype=wp.int32),
         step_map: wp.array(dtype=mat22),
@@ -466,7 +472,7 @@ def kernels_for(float_type: Any) -> KernelSet:
         if active[b] != 0:
             cell[b] = step_map[b] * cell[b]
 
-    @wp.kernel(module="unique")
+    @wp.kernel(module=module)
     def contact_measures(
         n_disc: int,
         capacity: int,
@@ -544,7 +550,7 @@ def kernels_for(float_type: Any) -> KernelSet:
         part_counts[i] = vec2(n_contacts, n_sliding)
         part_forces[i] = vec2(wp.length(f_net), f_abs)
 
-    @wp.kernel(module="unique")
+    @wp.kernel(module=module)
     def reduce_measures(
         n_disc: int,
         part_stress: wp.array(dtype=mat22),

@@ -87,6 +87,8 @@ class Model:
             [1/(kg·m²)]: shape (B·N,).
         friction: μ = tan φ per RVE, shape (B,).
         radius_host: radii [m] as numpy, shape (B, N), float64.
+        replica: which copy of the kernel module this model's launches use (one per
+            CPU shard, see :func:`kernels_for`).
     """
 
     device: str
@@ -106,11 +108,12 @@ class Model:
     inv_inertia: wp.array
     friction: wp.array
     radius_host: np.ndarray
+    replica: int = 0
 
     @property
     def kernels(self) -> Any:
-        """The kernel set for this model's float type."""
-        return kernels_for(_float_type(self.dtype))
+        """The kernel set for this model's float type and replica."""
+        return kernels_for(_float_type(self.dtype), self.replica)
 
     @property
     def law_args(self) -> list:
@@ -144,6 +147,7 @@ def build_model(
     timestep: float | None = None,
     safety: float = DEFAULT_SAFETY,
     capacity: int = DEFAULT_CAPACITY,
+    replica: int = 0,
 ) -> Model:
     """Build the static model of ``data`` on ``device``.
 
@@ -153,7 +157,7 @@ def build_model(
     """
     data.validate()
     device = resolve_device(device)
-    ft = kernels_for(_float_type(dtype)).float_type
+    ft = kernels_for(_float_type(dtype), replica).float_type
     meta = data.meta
     # per RVE, so that an RVE's time step (and result) never depends on its batch neighbours
     crit = np.array([critical_timestep(r, meta) for r in data.radius])
@@ -198,6 +202,7 @@ def build_model(
         inv_inertia=wp.array(1.0 / inertia, dtype=ft, device=device),
         friction=wp.array(mu, dtype=ft, device=device),
         radius_host=np.array(data.radius, dtype=np.float64),
+        replica=replica,
     )
 
 

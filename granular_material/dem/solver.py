@@ -80,6 +80,8 @@ class Solver:
         self._servo_gain = 0.0
         self._servo_max = 0.0
         self._graphs: dict[tuple, wp.Graph] = {}
+        self._cmds: list = []
+        self._cmds_key: tuple | None = None
 
     # -- loading --------------------------------------------------------------------------
     def set_active(self, active: np.ndarray) -> None:
@@ -187,7 +189,7 @@ class Solver:
         """
         if steps < 0:
             raise ValueError(f"steps must be >= 0, got {steps}")
-        cmds = self._record(state)
+        cmds = self.prepare(state)
         done = 0
         while done < steps:
             chunk = min(check_every, steps - done)
@@ -197,6 +199,16 @@ class Solver:
             if callback is not None and callback(done):
                 break
         return done
+
+    def prepare(self, state: State) -> list:
+        """The recorded launches of one step for ``state`` (recorded, and the kernel module
+        loaded, on first use after a loading change). Call it from the main thread before
+        stepping shards in threads: warp's module loading is not for concurrent use."""
+        key = (id(state), self._servo_on, self._servo_gain, self._servo_max)
+        if self._cmds_key != key:
+            self._cmds = self._record(state)
+            self._cmds_key = key
+        return self._cmds
 
     def _advance(self, state: State, cmds: list, steps: int) -> None:
         """Launch ``steps`` steps; on CUDA whole blocks replay one captured graph."""
