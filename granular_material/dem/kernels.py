@@ -79,6 +79,11 @@ def kernels_for(float_type: Any, replica: int = 0) -> KernelSet:
         return vec2(ds[0] - wp.round(ds[0]), ds[1] - wp.round(ds[1]))
 
     @wp.func
+    def branch(i: int, j: int, h: mat22, frac: wp.array(dtype=vec2)) -> vec2:
+        """Minimum-image branch vector from disc min(i, j) to disc max(i, j) [m]."""
+        return h * min_image(frac[wp.max(i, j)] - frac[wp.min(i, j)])
+
+    @wp.func
     def pair_stiffness(
         law: int, ra: ft, rb: ft, kn_c: ft, kt_c: ft, young: ft, kt_ratio: ft
     ) -> vec2:
@@ -190,10 +195,8 @@ def kernels_for(float_type: Any, replica: int = 0) -> KernelSet:
         j = base + jj
         if j == i:
             return count
-        a = wp.min(i, j)
-        c = wp.max(i, j)
-        d = h * min_image(frac[c] - frac[a])
-        reach = radius[a] + radius[c] + skin
+        d = branch(i, j, h, frac)
+        reach = radius[i] + radius[j] + skin
         if wp.dot(d, d) >= reach * reach:
             return count
         if count < capacity:
@@ -331,7 +334,7 @@ def kernels_for(float_type: Any, replica: int = 0) -> KernelSet:
                 j = base + nbr[slot]
                 a = wp.min(i, j)
                 c = wp.max(i, j)
-                d = h * min_image(frac[c] - frac[a])
+                d = branch(i, j, h, frac)
                 dist = wp.length(d)
                 ra = radius[a]
                 rc = radius[c]
@@ -512,7 +515,7 @@ def kernels_for(float_type: Any, replica: int = 0) -> KernelSet:
             j = base + nbr[slot]
             a = wp.min(i, j)
             c = wp.max(i, j)
-            d = h * min_image(frac[c] - frac[a])
+            d = branch(i, j, h, frac)
             dist = wp.length(d)
             ra = radius[a]
             rc = radius[c]
