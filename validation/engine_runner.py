@@ -1,8 +1,8 @@
 """Our engine's side of the cross-runs, through its command line (and its API for tangents).
 
-The command line (``prepare``, ``biaxial-dem``, ``dem-drive``) runs as a subprocess of this
-interpreter (``python -m granular_material.cli``), so its wall time is measured the same way
-as YADE's: the whole process, start-up included.
+The command line (``prepare``, ``biaxial-dem``, ``dem-drive``, ``single-element``) runs as a
+subprocess of this interpreter (``python -m granular_material.cli``), so its wall time is
+measured the same way as YADE's: the whole process, start-up included.
 """
 
 from __future__ import annotations
@@ -23,6 +23,7 @@ __all__ = [
     "ours_biaxial",
     "ours_drive",
     "ours_prepare",
+    "ours_single_element",
     "ours_tangents",
     "voigt_tangent",
 ]
@@ -112,6 +113,32 @@ def ours_drive(rve: str | Path, out_csv: str | Path, grad_u: list[float], increm
     if "rve" in path.columns:
         path = path[path["rve"] == 0].reset_index(drop=True)
     return path, result
+
+
+def ours_single_element(rve: str | Path, out_dir: str | Path, axial_strain: float = 0.1,
+                        confining: float = 1e5, steps: int = 100, device: str | None = None,
+                        timeout: float = DEFAULT_TIMEOUT) -> tuple[pd.DataFrame, dict[str, Any]]:
+    """``granular-material single-element --material dem`` on the RVE file (FEM × DEM).
+
+    One Q4 element, its four Gauss points each holding a copy of the RVE, loaded like the
+    drained biaxial test: sides under ``confining`` [Pa] (compression positive), the top
+    compressed to ``axial_strain`` (compression positive) in ``steps`` Newton load steps.
+    Returns ``DIR/steps.csv`` (step 0 included: ``axial_strain``, ``sxx``, ``syy``, ``sxy``
+    [Pa] tension positive, volume averages over the Gauss points, ``volumetric_strain`` =
+    tr ε, ``void_ratio``, Newton ``iterations`` ...) and the command's JSON summary plus
+    ``wall_s`` [s] (the whole process). A Newton failure (exit 1) raises :class:`EngineError`.
+    """
+    if steps < 1 or not axial_strain > 0:
+        raise ValueError(f"steps must be >= 1 and axial_strain > 0, got {steps}, "
+                         f"{axial_strain}")
+    out_dir = Path(out_dir)
+    result, wall = _run(["single-element", "--material", "dem", "--rve", str(rve),
+                         "--axial-strain", repr(float(axial_strain)),
+                         "--confining", repr(float(confining)), "--steps", str(int(steps)),
+                         "--out", str(out_dir), "--no-progress", *_device(device)], timeout)
+    result["wall_s"] = wall
+    curve = pd.read_csv(out_dir / "steps.csv")
+    return curve.drop(columns=["residual_history"], errors="ignore"), result
 
 
 def voigt_tangent(tangent: np.ndarray) -> np.ndarray:

@@ -26,16 +26,32 @@ def _pct(value: Any) -> str:
     return "–" if value is None else f"{100 * value:.2f} %"
 
 
+def _passing(counts: dict[str, int] | None, seeds: int) -> str:
+    """``a / b / c / d of n``: seeds passing each rule on their own (information only)."""
+    if counts is None:
+        return "–"
+    rules = ("pre_peak", "peak_ratio", "strain_at_peak", "post_peak")
+    return " / ".join(str(counts[r]) for r in rules) + f" of {seeds}"
+
+
 def plot_case(entry: dict[str, Any], path: Path) -> Path:
-    """Overlay of YADE (solid) and ours (dashed) for every seed: stresses, σ1/σ3, εv, e."""
+    """Overlay of YADE (solid) and ours (dashed) for every seed: stresses, σ1/σ3, εv, e.
+
+    For the single-element case "ours" is our FEM × DEM element (dashed) and our pure-DEM
+    biaxial test of the same RVE is drawn dotted.
+    """
     case = entry["case"]
-    x = "axial_strain" if case["kind"] == "biaxial" else "path_strain"
-    xlabel = ("axial strain εa [%] (compression positive)" if case["kind"] == "biaxial"
-              else "path strain max|∇u|·k/K [%]")
+    x = "path_strain" if case["kind"] == "drive" else "axial_strain"
+    xlabel = ("path strain max|∇u|·k/K [%]" if case["kind"] == "drive"
+              else "axial strain εa [%] (compression positive)")
+    ours_name = "ours FEM" if case["kind"] == "single-element" else "ours"
     fig, axes = plt.subplots(2, 2, figsize=(11, 8), constrained_layout=True)
     for n, run in enumerate(entry["_runs"]):
         colour = f"C{n}"
-        for frame, style, side in ((run.yade, "-", "YADE"), (run.ours, "--", "ours")):
+        sides = [(run.yade, "-", "YADE"), (run.ours, "--", ours_name)]
+        if "ours_dem" in run.curves:
+            sides.append((run.curves["ours_dem"], ":", "ours DEM"))
+        for frame, style, side in sides:
             xs = 100 * frame[x].to_numpy()
             label = f"{side} seed {run.seed}"
             for comp, marker in (("sxx", "σxx"), ("syy", "σyy"), ("sxy", "σxy")):
@@ -56,7 +72,10 @@ def plot_case(entry: dict[str, Any], path: Path) -> Path:
         ax.grid(alpha=0.3)
     axes[0, 0].legend(fontsize=7)
     axes[0, 1].legend(fontsize=7)
-    fig.suptitle(f"{case['name']}: YADE (solid) vs ours (dashed)")
+    title = f"{case['name']}: YADE (solid) vs {ours_name} (dashed)"
+    if case["kind"] == "single-element":
+        title += ", ours pure DEM (dotted)"
+    fig.suptitle(title)
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)
     plt.close(fig)
@@ -78,6 +97,10 @@ def _table(entries: list[dict[str, Any]]) -> list[str]:
         rows = [(str(r["seed"]), r["comparison"], r) for r in e["per_seed"]]
         if "ensemble" in e:
             rows.append(("mean", e["ensemble"], None))
+        if "ours_dem_ensemble" in e:
+            rows.append(("mean, our pure DEM", e["ours_dem_ensemble"], None))
+        if "baseline_ensemble" in e:
+            rows.append(("mean, perturbed YADE", e["baseline_ensemble"], None))
         for seed, c, r in rows:
             wall = (f"{r['yade_wall_s']:.1f} / {r['ours_wall_s']:.1f} "
                     f"({r['wall_ratio_ours_over_yade']:.2f})" if r else "")
@@ -101,20 +124,26 @@ def write_report(entries: list[dict[str, Any]], out: str | Path,
         lines.append(f"- {key}: {value}")
     lines += [
         "",
-        "Acceptance (issue 5): before the peak every stress component within "
-        f"{metrics.PRE_PEAK_TOL:.0%} of the peak stress σ1; peak σ1/σ3 within "
+        "Acceptance (issue 5, the lead's policy): before the peak every stress component "
+        f"within {metrics.PRE_PEAK_TOL:.0%} of the peak stress σ1; peak σ1/σ3 within "
         f"{metrics.PEAK_RATIO_TOL:.0%}; strain at peak within {100 * metrics.PEAK_STRAIN_TOL:.1f} %"
-        f" strain; after the peak within {metrics.POST_PEAK_TOL:.0%} of the peak stress. The "
-        "first three hold for every seed; the post-peak rule is judged on the seed-mean curves "
-        "(DEM is chaotic after the peak: every seed's figure is listed too). Stresses are "
-        "compared on YADE's strain grid; the peak is located on a 5-point running median. "
-        "Chaos baseline: the same rules applied to YADE against YADE rerun with a perturbed "
-        "loading (biaxial: 1 % slower; ∇u paths: Guo & Zhao's shear2D kinematics and step "
-        "count instead of F = I + ∇u).",
+        f" strain; after the peak within {metrics.POST_PEAK_TOL:.0%} of the peak stress. "
+        "**All four rules are judged on the seed-mean curves** (on the one curve when a case "
+        "has one seed): per seed, the pre-peak and strain-at-peak rules are stricter than "
+        "YADE's own reproducibility (YADE against a perturbed YADE misses them), so every "
+        "seed's figures and how many seeds pass each rule are listed for information but do "
+        "not decide the case. Stresses are compared on YADE's strain grid; the peak is "
+        "located on a 5-point running median. Chaos baseline: the same rules, on the same "
+        "seed means, applied to YADE against YADE rerun with a perturbed loading (biaxial "
+        "and single element: 1 % less strain a step; ∇u paths: Guo & Zhao's shear2D "
+        "kinematics and step count instead of F = I + ∇u). Single element: ours is the FEM "
+        "× DEM element (`single-element --material dem`), our pure-DEM `biaxial-dem` of the "
+        "same RVE is listed beside it.",
         "",
         "## Summary",
         "",
-        "| case | result | checks | same rules, YADE vs perturbed YADE | "
+        "| case | result (seed means) | seeds passing pre / ratio / εpeak / post | "
+        "same rules, YADE vs perturbed YADE (seeds passing) | "
         "wall YADE / ours [s] (ours/YADE) |",
         "|---|---|---|---|---|",
     ]
@@ -122,12 +151,23 @@ def write_report(entries: list[dict[str, Any]], out: str | Path,
         failed = [k for k, ok in e["checks"].items() if not ok]
         base = e.get("baseline_checks")
         base_failed = "–" if base is None else (
-            ", ".join(k for k, ok in base.items() if not ok) or "all pass")
-        lines.append(f"| {e['case']['name']} | {'PASS' if e['passed'] else 'FAIL'} | "
-                     f"{'all pass' if not failed else 'failed: ' + ', '.join(failed)} | "
+            (", ".join(k for k, ok in base.items() if not ok) or "all pass")
+            + f" ({_passing(e.get('baseline_seeds_passing'), len(e['per_seed']))})")
+        lines.append(f"| {e['case']['name']} | {'PASS' if e['passed'] else 'FAIL'}: "
+                     f"{'all pass' if not failed else 'failed ' + ', '.join(failed)} | "
+                     f"{_passing(e.get('seeds_passing'), len(e['per_seed']))} | "
                      f"{base_failed} | "
                      f"{e['yade_wall_s']:.1f} / {e['ours_wall_s']:.1f} "
                      f"({e['wall_ratio_ours_over_yade']:.2f}) |")
+        if "ours_dem_checks" in e:
+            dem_failed = [k for k, ok in e["ours_dem_checks"].items() if not ok]
+            dem_wall = sum(r["ours_dem_vs_yade"]["wall_s"] for r in e["per_seed"])
+            lines.append(f"| {e['case']['name']}, our pure DEM | "
+                         f"{'PASS' if not dem_failed else 'FAIL'}: "
+                         f"{'all pass' if not dem_failed else 'failed ' + ', '.join(dem_failed)}"
+                         f" | {_passing(e.get('ours_dem_seeds_passing'), len(e['per_seed']))}"
+                         f" | (as above) | {e['yade_wall_s']:.1f} / {dem_wall:.1f} "
+                         f"({dem_wall / e['yade_wall_s']:.2f}) |")
     lines += ["", "## Figures", "", *_table(entries), ""]
     for e in entries:
         name = e["case"]["name"]
@@ -160,6 +200,30 @@ def write_report(entries: list[dict[str, Any]], out: str | Path,
                     f"peak σ1/σ3 {_pct(k['peak_ratio_diff'])}, strain at peak "
                     f"{_pct(k['strain_at_peak_diff'])}, max Δεv "
                     f"{_pct(k['volumetric_strain_diff'])}")
+            if "ours_dem_vs_yade" in r:
+                k, f = r["ours_dem_vs_yade"], r["fem_vs_ours_dem"]
+                fem = r["fem"]
+                lines.append(
+                    f"  - our pure DEM against YADE: peak σ1/σ3 {k['peak_ratio_ours']:.3f} "
+                    f"({_pct(k['peak_ratio_diff'])}), strain at peak "
+                    f"{_pct(k['strain_at_peak_diff'])}, pre-peak Δσ {_pct(k['pre_peak_diff'])}"
+                    f", post-peak {_pct(k['post_peak_diff'])}; wall {k['wall_s']:.1f} s")
+                lines.append(
+                    f"  - our FEM element against our pure DEM: peak σ1/σ3 "
+                    f"{_pct(f['peak_ratio_diff'])}, strain at peak "
+                    f"{_pct(f['strain_at_peak_diff'])}, pre-peak Δσ {_pct(f['pre_peak_diff'])}"
+                    f", post-peak {_pct(f['post_peak_diff'])}")
+                sh = r["shear_stress"]
+                lines.append(
+                    f"  - before the peak, the element's mean |σxy| stays ≤ "
+                    f"{sh['max_abs_sxy_fem'] / 1e3:.2f} kPa (its sides carry no shear traction)"
+                    f", YADE's shape-fixed cell builds up {sh['max_abs_sxy_yade'] / 1e3:.2f} kPa;"
+                    f" pre-peak Δσ of σxx, σyy alone {_pct(sh['pre_peak_diff_normal'])}")
+                lines.append(
+                    f"  - FEM: {fem['steps_completed']} load steps, "
+                    f"{_fmt(fem['newton_iterations_mean'], '.2f')} Newton iterations a step, "
+                    f"{fem['cutbacks']} cut-backs, {fem['dem_steps']} DEM steps, "
+                    f"Newton solve {_fmt(fem['wall_time_s'], '.1f')} s")
             for t in r.get("tangents", []):
                 lines.append(f"  - tangent after increment {t['increment']}: "
                              f"‖Δ‖/‖D_YADE‖ = {_pct(t['frobenius'])}, "
