@@ -199,3 +199,48 @@ def test_smoke_case_through_the_command_line(tmp_path: Path) -> None:
     worst = max(np.abs(np.interp(x, ours["axial_strain"], ours[c]) - yade.loc[early, c]).max()
                 for c in ("sxx", "syy", "sxy"))
     assert worst <= 0.01 * comparison["stress_scale"]
+
+
+def test_single_element_case_at_smoke_size(tmp_path: Path) -> None:
+    """gz-single-element at smoke size (seed 1, 3 % axial strain in 30 load steps of 0.1 %):
+    our FEM × DEM element against YADE's pure-DEM biaxial test of the same Guo & Zhao RVE.
+
+    Measured here (seed 1): peak σ1/σ3 2.883 against YADE's 2.890; up to 1 % axial strain
+    σxx, σyy within 0.7 % of the peak stress and σ1/σ3 within 0.9 %. σxy differs by design:
+    the element's sides carry no shear traction (its mean σxy stays below 1 kPa) while YADE's
+    periodic cell keeps its shape and builds σxy up (4.6 kPa before the peak).
+    """
+    from granular_material_validation.cases import CASES, run_case
+    from granular_material_validation.engine_runner import engine_available
+    from granular_material_validation.metrics import stress_ratio
+
+    if shutil.which("yade") is None:
+        pytest.skip("needs Debian's yade")
+    if not engine_available():
+        pytest.skip("our DEM commands are not built yet")
+    from dataclasses import replace
+
+    case = replace(CASES["gz-single-element"], seeds=(1,), axial_strain=0.03, steps=30)
+    entry = run_case(case, tmp_path, device="cpu")
+    (run,) = entry["_runs"]
+    seed = entry["per_seed"][0]
+    assert seed["fem"]["steps_completed"] == 30
+    assert run.ours["axial_strain"].iloc[-1] == pytest.approx(0.03, rel=1e-12)
+    assert len(run.ours) == 31 and seed["ours_wall_s"] > 0 and seed["yade_wall_s"] > 0
+    comparison = seed["comparison"]
+    assert comparison["peak_ratio_diff"] <= 0.05  # acceptance: peak σ1/σ3 within 5 %
+    assert comparison["peak_inside"]
+    # The curves overlap before the peak: normal stresses and σ1/σ3 up to 1 % axial strain
+    yade, fem = run.yade, run.ours
+    early = (yade["axial_strain"] <= 0.01).to_numpy()
+    x = yade.loc[early, "axial_strain"]
+    scale = comparison["stress_scale"]
+    for column in ("sxx", "syy"):
+        diff = np.interp(x, fem["axial_strain"], fem[column]) - yade.loc[early, column]
+        assert np.abs(diff).max() <= 0.02 * scale, column
+    ratio = np.interp(x, fem["axial_strain"], stress_ratio(fem))
+    assert np.abs(ratio / stress_ratio(yade)[early] - 1).max() <= 0.02
+    shear = seed["shear_stress"]
+    assert shear["max_abs_sxy_fem"] < 0.01 * scale < shear["max_abs_sxy_yade"]
+    # the element's lateral stress is the confining traction (Newton's stress tolerance 0.5 %)
+    assert seed["servo_error_ours"] < 0.02
