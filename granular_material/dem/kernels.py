@@ -388,7 +388,6 @@ def kernels_for(float_type: Any, replica: int = 0) -> KernelSet:
         part_stiff: wp.array(dtype=vec2),
         control: wp.array(dtype=wp.int32),
         target: wp.array(dtype=vec2),
-        stress: wp.array(dtype=mat22),
         vel_grad: wp.array(dtype=mat22),
         step_map: wp.array(dtype=mat22),
     ):
@@ -403,7 +402,6 @@ def kernels_for(float_type: Any, replica: int = 0) -> KernelSet:
             s_sum = s_sum + part_stress[b * n_disc + j]
             k_sum = k_sum + part_stiff[b * n_disc + j]
         sigma = s_sum / volume
-        stress[b] = sigma
         goal = target[b]
         de = vec2(ft(0.0), ft(0.0))
         for k in range(2):

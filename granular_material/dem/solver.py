@@ -48,8 +48,8 @@ class Solver:
 
     Each step: rebuild stale neighbour lists (Verlet skin; candidates from the 3 × 3 bins of
     a per-RVE grid in fractional coordinates, or all discs in a cell under 3 bins across),
-    contact forces, optionally the
-    stress servo, leap-frog integration with local damping, cell update ``H ← E·H``.
+    contact forces, optionally the stress servo, leap-frog integration with local damping,
+    cell update ``H ← E·H``.
     The loading is set per RVE through :meth:`set_affine` (prescribed velocity gradient) or
     :meth:`set_servo` (mixed stress/strain control of the diagonal components).
     """
@@ -75,7 +75,6 @@ class Solver:
         self.step_map = wp.array(np.repeat(np.eye(2)[None], b, 0), dtype=ks.mat22, device=dev)
         self.control = wp.zeros(2 * b, dtype=wp.int32, device=dev)
         self.target = wp.zeros(b, dtype=ks.vec2, device=dev)
-        self.stress = wp.zeros(b, dtype=ks.mat22, device=dev)
         self._servo_on = False
         self._servo_gain = 0.0
         self._servo_max = 0.0
@@ -163,7 +162,7 @@ class Solver:
             cmds.append(rec(ks.servo, b, [n, dt, m.meta.thickness, self._servo_gain,
                                           self._servo_max, self.active, state.cell,
                                           self.part_stress, self.part_stiff, self.control,
-                                          self.target, self.stress, self.vel_grad,
+                                          self.target, self.vel_grad,
                                           self.step_map]))
         cmds += [
             rec(ks.integrate, b * n, [n, dt, m.meta.damping, self.active, state.cell, m.radius,
