@@ -199,12 +199,14 @@ class DEMBatch:
         """Cell matrices H [m], shape (B, 2, 2), float64."""
         return np.concatenate([s.state.cell.numpy().astype(np.float64) for s in self.shards])
 
-    def set_cell(self, cell: np.ndarray) -> None:
+    def set_cell(self, cell: np.ndarray, refresh: bool = True) -> None:
         """Overwrite the cell matrices H [m], shape (B, 2, 2); discs keep their fractional
-        coordinates and the neighbour lists are rebuilt for the new cell."""
+        coordinates. The neighbour lists are rebuilt for the new cell unless ``refresh`` is
+        False (for changes at rounding level: every step checks the lists anyway)."""
         for shard in self.shards:
             shard.state.cell.assign(np.asarray(cell, dtype=np.float64)[shard.rves])
-            shard.solver.refresh_neighbors(shard.state)
+            if refresh:
+                shard.solver.refresh_neighbors(shard.state)
 
     def homogenize(self) -> Homogenized:
         """Stress, tangent, void ratio, coordination, fabric of every RVE."""
