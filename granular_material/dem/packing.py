@@ -87,6 +87,7 @@ def prepare_packing(
     radius_range: tuple[float, float] = DEFAULT_RADIUS_RANGE,
     device: str | None = None,
     dtype: str = "float64",
+    shards: int | None = None,
     progress: bool = False,
 ) -> DEMBatch:
     """Prepare B RVEs: random gas, frictionless isotropic consolidation to ``pressure`` [Pa],
@@ -101,7 +102,7 @@ def prepare_packing(
     meta = meta or RVEMeta()
     meta.validate()
     gas = random_gas(n_disc, n_rve, seed, radius_range, meta=replace(meta, friction_angle=0.0))
-    batch = DEMBatch(gas, device=device, dtype=dtype)
+    batch = DEMBatch(gas, device=device, dtype=dtype, shards=shards)
     if target_void_ratio is not None:
         if not (math.isfinite(target_void_ratio) and target_void_ratio > 0):
             raise ValueError(
@@ -111,10 +112,8 @@ def prepare_packing(
         # steps: at most 2e-3 in e past it), then friction on so that structure is kept
         consolidate(batch, pressure, stop_void_ratio=target_void_ratio, check_every=10,
                     max_strain=5.0e-5, progress=progress)
-        batch.set_friction(meta.friction_angle)
+    else:
         consolidate(batch, pressure, progress=progress)
-        return batch
-    consolidate(batch, pressure, progress=progress)
     batch.set_friction(meta.friction_angle)
     consolidate(batch, pressure, progress=progress)
     return batch
