@@ -53,7 +53,7 @@ def test_bad_input_is_a_value_error(capsys):
 
 def test_biaxial_command_reduced_scale(tmp_path, capsys):
     code = main(["biaxial", "--elements", "1", "2", "--particles", "40", "--axial-strain",
-                 "0.004", "--steps", "2", "--device", "cpu", "--shards", "1",
+                 "0.004", "--steps", "2", "--device", "cpu",
                  "--out", str(tmp_path), "--json", "--no-progress"])
     out = json.loads(capsys.readouterr().out)
     assert code == 0, out["error"]
@@ -67,6 +67,6 @@ def test_example_swaps_the_material_by_name():
     elastic = example.main("linear-elastic", axial_strain=0.004, steps=2)
     # 2 × 2 elements, σxx held at −P: σyy = P + E/(1−ν²) ε_a, E = 60 MPa, ν = 0.3
     assert elastic[-1] == pytest.approx(100e3 + 60e6 / (1 - 0.09) * 0.004, rel=1e-6)
-    example.PARAMETERS["dem"].update(particles=40, shards=1)  # one thread: see the DEM tests
+    example.PARAMETERS["dem"].update(particles=40)
     dem = example.main("dem", axial_strain=0.004, steps=2)
     assert 100e3 < dem[0] < dem[1] < elastic[-1]  # granular: softer than the elastic block

@@ -1,8 +1,7 @@
 """The scikit-fem DEM material: engine equivalence, commit/revert, single-element agreement.
 
-Smoke scale: RVEs of 100 discs (the session fixture ``small_rve_path``, seed 3). Batches run
-as one CPU shard: concurrent warp CPU launches from two threads crash the interpreter now
-and then (reported to the engine's author).
+Smoke scale: RVEs of 100 discs (the session fixture ``small_rve_path``, seed 3). Batches use
+the default CPU sharding (one thread per core), which never changes a result.
 """
 
 from __future__ import annotations
@@ -30,7 +29,7 @@ GRAD = np.array([
 
 @pytest.fixture
 def material(small_rve_path) -> DEMMaterial:
-    m = create_material("dem", rve=small_rve_path, device="cpu", shards=1)
+    m = create_material("dem", rve=small_rve_path, device="cpu")
     m.allocate(4)
     return m
 
@@ -42,7 +41,7 @@ def test_entry_point_builds_the_dem_material(material):
 
 def test_stress_and_tangent_equal_the_engine(material, small_rve_path):
     response = material.evaluate(GRAD)
-    batch = DEMBatch(load_rve(small_rve_path).replicate(4), device="cpu", shards=1)
+    batch = DEMBatch(load_rve(small_rve_path).replicate(4), device="cpu")
     steps = drive_grad_u(batch, GRAD)
     h = batch.homogenize()
     np.testing.assert_allclose(response.stress, h.stress, rtol=1e-12, atol=1e-9)
@@ -66,7 +65,7 @@ def test_evaluate_is_idempotent_and_commit_revert_are_exact(material, tmp_path):
     np.testing.assert_array_equal(material.evaluate(0.5 * GRAD).stress, second)
     # checkpoint writes the committed state, not the trial one
     material.checkpoint(tmp_path / "committed.npz")
-    other = DEMMaterial(device="cpu", shards=1)
+    other = DEMMaterial(device="cpu")
     other.restore(tmp_path / "committed.npz")
     np.testing.assert_allclose(other.evaluate(0.5 * GRAD).stress, second, rtol=1e-9, atol=1e-6)
 
@@ -95,7 +94,7 @@ def test_single_element_agrees_with_pure_dem_biaxial(small_rve_path):
     pure-DEM drained biaxial test of the same RVE (the acceptance band of issue 3)."""
     setup = BiaxialSetup(width=1.0, height=1.0, nx=1, ny=1, confining=100e3,
                          axial_strain=0.03)
-    material = DEMMaterial(rve=small_rve_path, device="cpu", shards=1)
+    material = DEMMaterial(rve=small_rve_path, device="cpu")
     settings = NewtonSettings(predictor="extrapolate", relaxation="aitken")
     result = run_biaxial(setup, material, 15, settings, stress_tol=200.0)
     assert result.error is None
