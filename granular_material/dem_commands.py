@@ -186,7 +186,7 @@ def _run_biaxial(args: argparse.Namespace) -> int:
 
 # -- dem-drive -----------------------------------------------------------------------------
 def _run_drive(args: argparse.Namespace) -> int:
-    from granular_material.dem import drive_grad_u
+    from granular_material.dem import drive_grad_u, path_increment
 
     _ensure_parents(args.out)
     batch = _load_batch(args)
@@ -210,10 +210,7 @@ def _run_drive(args: argparse.Namespace) -> int:
 
     record(0)
     for inc in range(1, args.increments + 1):
-        # the increment measured from the current configuration: F_k+1 F_k^-1 - I
-        f_now = np.eye(2) + grad * (inc - 1) / args.increments
-        f_next = np.eye(2) + grad * inc / args.increments
-        step_grad = f_next @ np.linalg.inv(f_now) - np.eye(2)
+        step_grad = path_increment(grad, inc, args.increments)
         steps += drive_grad_u(batch, step_grad, max_strain_per_step=args.max_strain_per_step,
                               progress=_progress(args))
         record(inc)

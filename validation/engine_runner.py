@@ -159,7 +159,7 @@ def ours_tangents(rve: str | Path, grad_u: list[float], increments: int, at: lis
     Runs in this process through the engine's API (``DEMBatch`` and ``drive_grad_u``), the
     way ``dem-drive`` applies the increments; the homogenised tangent is Kruyt–Rothenburg's.
     """
-    from granular_material.dem import drive_grad_u
+    from granular_material.dem import drive_grad_u, path_increment
     from granular_material.dem.batch import DEMBatch
     from granular_material.dem.rve_file import load_rve
 
@@ -173,10 +173,7 @@ def ours_tangents(rve: str | Path, grad_u: list[float], increments: int, at: lis
     if 0 in wanted:
         out[0] = voigt_tangent(batch.homogenize().tangent[0])
     for k in range(1, (wanted[-1] if wanted else 0) + 1):
-        f_now = np.eye(2) + grad * (k - 1) / increments
-        f_next = np.eye(2) + grad * k / increments
-        step_grad = f_next @ np.linalg.inv(f_now) - np.eye(2)
-        drive_grad_u(batch, step_grad)
+        drive_grad_u(batch, path_increment(grad, k, increments))
         if k in wanted:
             out[k] = voigt_tangent(batch.homogenize().tangent[0])
     return out

@@ -17,6 +17,7 @@ from granular_material.dem.protocols import (
     biaxial_test,
     consolidate,
     drive_grad_u,
+    path_increment,
     servo_steps,
     summarize_biaxial,
 )
@@ -47,6 +48,7 @@ __all__ = [
     "critical_timestep",
     "drive_grad_u",
     "load_rve",
+    "path_increment",
     "prepare_packing",
     "random_gas",
     "save_rve",

@@ -19,6 +19,7 @@ __all__ = [
     "State",
     "build_model",
     "critical_timestep",
+    "disc_mass",
     "resolve_device",
     "state_from_data",
 ]
@@ -48,6 +49,11 @@ def _float_type(dtype: str) -> Any:
     raise ValueError(f"dtype must be 'float64' or 'float32', got {dtype!r}")
 
 
+def disc_mass(radius: np.ndarray, meta: RVEMeta) -> np.ndarray:
+    """Mass [kg] of discs of ``radius`` [m]: cylinders ρ·t·π·r² (DESIGN §3), same shape."""
+    return meta.density * meta.thickness * np.pi * np.asarray(radius, dtype=np.float64) ** 2
+
+
 def critical_timestep(radius: np.ndarray, meta: RVEMeta) -> float:
     """Smallest ``sqrt(m_i / kn_i)`` [s] over discs, kn_i the stiffness against an equal disc.
 
@@ -56,7 +62,7 @@ def critical_timestep(radius: np.ndarray, meta: RVEMeta) -> float:
     uses ``DEFAULT_SAFETY`` times it by default.
     """
     r = np.asarray(radius, dtype=np.float64)
-    mass = meta.density * meta.thickness * np.pi * r**2
+    mass = disc_mass(r, meta)
     law = meta.stiffness["law"]
     if law == "frictmat":
         kn = meta.stiffness["young"] * r
@@ -178,7 +184,7 @@ def build_model(
             )
         dt = np.full(data.n_rve, float(timestep))
     r = data.radius.reshape(-1)
-    mass = meta.density * meta.thickness * np.pi * r**2
+    mass = disc_mass(r, meta)
     inertia = 0.5 * mass * r**2
     skin = SKIN_FRACTION * 2.0 * float(np.mean(data.radius))
     cutoff = 2.0 * float(np.max(data.radius)) + skin

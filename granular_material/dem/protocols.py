@@ -23,6 +23,7 @@ __all__ = [
     "biaxial_test",
     "consolidate",
     "drive_grad_u",
+    "path_increment",
     "servo_steps",
     "summarize_biaxial",
 ]
@@ -44,6 +45,21 @@ def _as_batch_grad(batch: DEMBatch, grad_u: np.ndarray) -> np.ndarray:
             f"grad_u of RVE {rve} inverts the cell: det(I + grad_u) = {det[rve]:.4g} <= 0"
         )
     return g
+
+
+def path_increment(grad_u: np.ndarray, k: int, increments: int) -> np.ndarray:
+    """∇u of increment ``k`` (1…K) of a path to the total ``grad_u`` in K equal steps of F.
+
+    Measured from the configuration after increment k − 1, as :func:`drive_grad_u` takes it:
+    ``F_k F_(k-1)⁻¹ − I`` with ``F_k = I + (k/K)·grad_u``, so that the K increments compose
+    to ``I + grad_u`` exactly. ``grad_u`` has shape (2, 2) or (B, 2, 2).
+    """
+    if not 1 <= k <= increments:
+        raise ValueError(f"increment k must lie in [1, {increments}], got {k}")
+    g = np.asarray(grad_u, dtype=np.float64)
+    f_now = np.eye(2) + g * (k - 1) / increments
+    f_next = np.eye(2) + g * k / increments
+    return f_next @ np.linalg.inv(f_now) - np.eye(2)
 
 
 def drive_grad_u(
