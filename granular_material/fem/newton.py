@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from skfem import Basis, condense, solve
 
+from granular_material.fem.acceleration import AitkenRelaxation
 from granular_material.fem.forms import gauss_points_grad, internal_force, stiffness
 from granular_material.fem.material import Material, MaterialResponse
 
@@ -42,7 +43,8 @@ class NewtonSettings:
             is one; the tangent predictor for the first step).
         relaxation: "none" (plain Newton steps) or "aitken" (Irons–Tuck dynamic relaxation
             of the corrections, for tangents that are too stiff, such as the
-            Kruyt–Rothenburg one that ignores sliding; Küttler & Wall 2008, eq. 44).
+            Kruyt–Rothenburg one, which leaves out the particles' rearrangement; see
+            :mod:`granular_material.fem.acceleration`).
     """
 
     rtol: float = 0.005
@@ -210,7 +212,7 @@ class NewtonSolver:
             du[interior] = (target - self.load_factor) / last_step * last_du[interior]
         history: list[float] = []
         work = 0
-        omega, previous = 1.0, None
+        aitken = AitkenRelaxation() if s.relaxation == "aitken" else None
         for it in range(1, s.max_iterations + 1):
             response = self.material.evaluate(gauss_points_grad(self.basis, du))
             work += int(response.work)
@@ -229,14 +231,7 @@ class NewtonSolver:
             K = stiffness(self.basis, response.tangent)
             A, b, x, interior = condense(K, -residual, D=D)
             correction = solve(A, b, x, interior)
-            if s.relaxation == "aitken" and previous is not None:
-                change = correction - previous
-                denominator = float(change @ change)
-                if denominator > 0:
-                    omega = float(np.clip(-omega * (previous @ change) / denominator,
-                                          0.1, 50.0))
-            previous = correction
-            du = du + omega * correction
+            du = du + correction if aitken is None else aitken.update(du, correction)
         return _Attempt(False, du, None, None, history, s.max_iterations, work,
                         f"not converged in {s.max_iterations} iterations")
 

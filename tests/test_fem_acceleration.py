@@ -1,0 +1,91 @@
+"""Aitken relaxation of Newton corrections when the tangent is stiffer than the material."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from granular_material.fem import (
+    BiaxialSetup,
+    MaterialResponse,
+    NewtonError,
+    NewtonSettings,
+    NewtonSolver,
+    build_biaxial,
+)
+from granular_material.fem.acceleration import AitkenRelaxation
+from granular_material.fem.linear_elastic import isotropic_tangent
+
+
+def test_aitken_learns_the_factor_of_a_uniformly_too_stiff_tangent():
+    # A x = b with the "tangent" 10 A: plain corrections are a tenth of what is needed
+    a, b = np.diag([1.0, 2.0, 3.0]), np.array([1.0, -1.0, 2.0])
+    x, relax = np.zeros(3), AitkenRelaxation()
+    for _ in range(4):
+        x = relax.update(x, np.linalg.solve(10 * a, b - a @ x))
+    np.testing.assert_allclose(x, np.linalg.solve(a, b), rtol=1e-12)
+    assert relax.omega == pytest.approx(10.0)
+    with pytest.raises(ValueError, match="lower"):
+        AitkenRelaxation(lower=2.0)
+
+
+class BandSoftened:
+    """Linear elastic whose true stiffness is ``soft`` · C inside a band and ``hard`` · C
+    outside, while its tangent always reports C: the Kruyt–Rothenburg tangent of a sheared
+    specimen in caricature (too stiff everywhere, most of all inside the band).
+    """
+
+    def __init__(self, in_band: np.ndarray, soft: float = 0.05, hard: float = 0.5):
+        self.c = isotropic_tangent(20e6, 15e6)
+        self.factor = np.where(in_band, soft, hard)
+        self.strain = np.zeros((in_band.size, 2, 2))
+        self.trial = None
+
+    n_points = property(lambda self: self.strain.shape[0])
+
+    def allocate(self, n_points: int) -> None:
+        assert n_points == self.n_points
+
+    def evaluate(self, grad_u):
+        self.trial = self.strain + 0.5 * (grad_u + np.swapaxes(grad_u, 1, 2))
+        stress = self.factor[:, None, None] * np.einsum("ijkl,nkl->nij", self.c, self.trial)
+        tangent = np.broadcast_to(self.c, (self.n_points, 2, 2, 2, 2))
+        return MaterialResponse(stress, tangent, np.zeros(self.n_points, dtype=np.int8))
+
+    def commit(self):
+        self.strain = self.trial
+
+    def revert(self):
+        self.trial = None
+
+    def checkpoint(self, path):
+        np.save(path, self.strain)
+
+    def restore(self, path):
+        self.strain = np.load(path)
+
+
+def _band_problem(relaxation: str) -> NewtonSolver:
+    problem = build_biaxial(BiaxialSetup(width=1.0, height=2.0, nx=4, ny=8, confining=0.0,
+                                         axial_strain=0.01))
+    xy = problem.basis.global_coordinates()  # (2, nelems, nqp)
+    x, y = (np.asarray(xy[i]).reshape(-1) for i in range(2))  # element-major, as the layout
+    in_band = np.abs(y - 0.5 - x) < 0.3
+    settings = NewtonSettings(rtol=1e-6, max_iterations=40, max_cutbacks=0,
+                              relaxation=relaxation)
+    return NewtonSolver(problem.basis, BandSoftened(in_band), problem.loading, settings)
+
+
+def test_aitken_converges_where_a_too_stiff_tangent_stalls_plain_newton():
+    # plain corrections shrink the error by 5 % per iteration inside the band
+    with pytest.raises(NewtonError, match="not converged in 40 iterations"):
+        _band_problem("none").step(1.0, step=1)
+    relaxed = _band_problem("aitken")
+    record = relaxed.step(1.0, step=1)
+    assert record.cutbacks == 0 and record.iterations <= 25
+    # the converged state is the solution of the softened linear problem: two half steps
+    # reach the same displacements
+    reference = _band_problem("aitken")
+    reference.step(0.5, step=1)
+    reference.step(1.0, step=2)
+    np.testing.assert_allclose(relaxed.u, reference.u, atol=1e-5 * np.abs(reference.u).max())
