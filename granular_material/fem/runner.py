@@ -111,7 +111,8 @@ def run_biaxial(
     does not reduce, while the relative test ‖R‖/‖R₀‖ tightens with every halving.
 
     A :class:`NewtonError` does not propagate: the committed steps are returned with
-    ``error`` set (and written to ``out_dir`` when given, with the fields file).
+    ``error`` set (and written to ``out_dir`` when given, with the fields file). With
+    ``out_dir`` the tables and the fields file are also written after every step.
     """
     from granular_material.fem.output import FieldWriter, write_tables
 
@@ -132,6 +133,12 @@ def run_biaxial(
         disps.append(solver.u.copy())
         if writer is not None:
             writer.write(row["axial_strain"], solver.u, points)
+            # the tables grow on disk step by step, so a long run can be followed (and is
+            # not lost if it is stopped); the end of the run writes them once more, whole
+            out = Path(out_dir)
+            pd.DataFrame(rows).to_csv(out / "steps.csv", index=False)
+            points.to_csv(out / "points.csv", index=False, mode="a" if len(rows) > 1 else "w",
+                          header=len(rows) == 1)
         if on_step is not None and record is not None:
             on_step(solver, record, points)
 
