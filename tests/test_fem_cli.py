@@ -53,13 +53,20 @@ def test_bad_input_is_a_value_error(capsys):
 
 def test_biaxial_command_reduced_scale(tmp_path, capsys):
     code = main(["biaxial", "--elements", "1", "2", "--particles", "40", "--axial-strain",
-                 "0.004", "--steps", "2", "--device", "cpu",
+                 "0.004", "--steps", "2", "--device", "cpu", "--map-strain", "0.002", "0.004",
                  "--out", str(tmp_path), "--json", "--no-progress"])
     out = json.loads(capsys.readouterr().out)
     assert code == 0, out["error"]
     assert out["gauss_points"] == 8 and out["steps_completed"] == 2 and out["dem_steps"] > 0
     points = pd.read_csv(tmp_path / "points.csv")
     assert points["void_ratio"].notna().all() and points["point"].max() == 7
+    # the tables written step by step match the final ones; band measures of the last step
+    assert len(pd.read_csv(tmp_path / "steps.csv")) == 3 and len(points) == 3 * 8
+    assert [b["step"] for b in out["shear_bands"]] == [1, 2]
+    band = out["shear_band_final"]
+    assert band == out["shear_bands"][1] and -90 < band["inclination_deg"] <= 90
+    assert band["localization"] >= 1 and 45 <= out["mohr_coulomb_inclination_deg"] < 90
+    assert (tmp_path / "maps_0.2pct.png").exists() and (tmp_path / "maps_0.4pct.png").exists()
 
 
 def test_example_swaps_the_material_by_name():

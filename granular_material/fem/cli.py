@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from granular_material.fem.localization import mohr_coulomb_inclination, shear_band
 from granular_material.fem.material import Material, create_material
 from granular_material.fem.newton import NewtonSettings
 from granular_material.fem.output import write_outputs
@@ -60,8 +61,9 @@ def _common_arguments(parser: argparse.ArgumentParser) -> None:
                         help="DEM device (default: CUDA when present, else CPU)")
     parser.add_argument("--shards", type=int, default=None,
                         help="CPU threads (shards) of the DEM batch (default: one per core)")
-    parser.add_argument("--map-strain", type=float, default=0.02,
-                        help="axial strain of the displacement/shear-strain maps (default 0.02)")
+    parser.add_argument("--map-strain", type=float, nargs="+", default=[0.02],
+                        help="axial strain(s) of the displacement/shear-strain maps and of the "
+                             "shear-band measures (default 0.02)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
 
 
@@ -160,6 +162,22 @@ def _summary(result: BiaxialResult, wall: float) -> dict[str, Any]:
     }
 
 
+def _band_summary(result: BiaxialResult, map_strains: list[float],
+                  peak_ratio: float) -> dict[str, Any]:
+    """Shear-band measures at the map strains and at the last step (fem.localization)."""
+    steps = result.steps
+    if len(steps) < 2:
+        return {}
+    strains = steps["axial_strain"].to_numpy()
+    rows = sorted({int(np.argmin(np.abs(strains - e))) for e in map_strains})
+    return {
+        "shear_bands": [shear_band(result.points, int(steps["step"].iloc[r])).as_dict()
+                        for r in rows],
+        "shear_band_final": shear_band(result.points).as_dict(),
+        "mohr_coulomb_inclination_deg": mohr_coulomb_inclination(max(peak_ratio, 1.0)),
+    }
+
+
 def _report(args: argparse.Namespace, summary: dict[str, Any]) -> int:
     if args.json:
         print(json.dumps(summary, indent=2, default=str))
@@ -241,6 +259,7 @@ def run_biaxial_command(args: argparse.Namespace) -> int:
     summary = _summary(result, time.perf_counter() - t0)
     summary.update(scale=scale, elements=[nx, ny], gauss_points=setup.n_points,
                    particles=particles, device=device)
+    summary.update(_band_summary(result, args.map_strain, summary["peak_stress_ratio"]))
     if args.out is not None:
         write_outputs(result, args.out, map_strain=args.map_strain)
         summary["out"] = str(args.out)

@@ -6,11 +6,14 @@ volumetric strain are drawn compression positive.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 import pandas as pd
+
+from granular_material.fem.localization import shear_band
 
 if TYPE_CHECKING:
     from granular_material.fem.problems import BiaxialProblem
@@ -131,22 +134,37 @@ def plot_maps(result: BiaxialResult, axial_strain: float, path: str | Path) -> P
         ax.set_title(title)
         ax.set_xlabel("x [mm]")
         ax.set_ylabel("y [mm]")
+    band = shear_band(result.points, step)
     fig.suptitle(f"step {step}, axial strain {100 * steps['axial_strain'].iloc[row]:.2f} % "
-                 "(compression +)")
+                 f"(compression +)\nlargest-γ {100 * band.band_fraction:.0f} % of points: "
+                 f"inclination {band.inclination_deg:.0f}°, elongation "
+                 f"{band.elongation:.2f}, γ ratio {band.localization:.1f}")
     path = Path(path)
     fig.savefig(path, dpi=120)
     plt.close(fig)
     return path
 
 
-def write_outputs(result: BiaxialResult, out_dir: str | Path, map_strain: float | None = None,
+def write_outputs(result: BiaxialResult, out_dir: str | Path,
+                  map_strain: float | Sequence[float] | None = None,
                   reference: pd.DataFrame | None = None) -> dict[str, Path]:
-    """Tables, the stress–strain figure and the maps figure under ``out_dir``."""
+    """Tables, the stress–strain figure and the maps figures under ``out_dir``.
+
+    ``map_strain``: axial strain(s) of the maps; None: the last step. One strain gives
+    ``maps.png``; several give ``maps_<strain in %>pct.png`` each (keys ``maps_<strain>``).
+    """
     out = Path(out_dir)
     paths = write_tables(result, out)
     paths["stress_strain"] = plot_stress_strain(result.steps, out / "stress_strain.png",
                                                 reference)
-    strain = result.steps["axial_strain"].iloc[-1] if map_strain is None else map_strain
-    paths["maps"] = plot_maps(result, strain, out / "maps.png")
+    if map_strain is None:
+        map_strain = float(result.steps["axial_strain"].iloc[-1])
+    strains = [float(map_strain)] if np.isscalar(map_strain) else [float(e) for e in map_strain]
+    if len(strains) == 1:
+        paths["maps"] = plot_maps(result, strains[0], out / "maps.png")
+    else:
+        for strain in strains:
+            paths[f"maps_{strain:g}"] = plot_maps(result, strain,
+                                                  out / f"maps_{100 * strain:.1f}pct.png")
     paths["fields"] = out / "fields.xdmf"
     return paths
