@@ -223,3 +223,66 @@ def test_full_scale_specimen_mesh_with_linear_elastic():
     assert result.steps["platen_stress"].iloc[-1] == pytest.approx(expected, rel=1e-9)
     last = result.points[result.points["step"] == 2]
     np.testing.assert_allclose(last["syy"], -expected, rtol=1e-9)
+
+
+class _NoisyElastic:
+    """Linear elastic plus a stress noise of ``amplitude`` [Pa] that changes with every ∇u
+    (seeded by its bytes): like a DEM RVE, the same ∇u gives the same stress, any other ∇u a
+    fresh draw, so Newton's residual settles on a floor set by the noise."""
+
+    def __init__(self, amplitude: float):
+        self.inner, self.amplitude = LinearElastic(young=50e6, poisson=0.3), amplitude
+
+    n_points = property(lambda self: self.inner.n_points)
+
+    def allocate(self, n):
+        self.inner.allocate(n)
+
+    def evaluate(self, grad_u):
+        r = self.inner.evaluate(grad_u)
+        seed = int.from_bytes(np.ascontiguousarray(grad_u).tobytes()[-64:], "little") % 2**63
+        noise = np.random.default_rng(seed).uniform(-1, 1, r.stress.shape)
+        noise = 0.5 * (noise + np.swapaxes(noise, 1, 2))
+        return MaterialResponse(r.stress + self.amplitude * noise, r.tangent, r.status)
+
+    def commit(self):
+        self.inner.commit()
+
+    def revert(self):
+        self.inner.revert()
+
+    def checkpoint(self, path):
+        self.inner.checkpoint(path)
+
+    def restore(self, path):
+        self.inner.restore(path)
+
+
+def _noisy_solver(stall_rtol: float) -> NewtonSolver:
+    problem = build_biaxial(BiaxialSetup(width=1, height=2, nx=2, ny=4, confining=0.0,
+                                         axial_strain=0.01))
+    # the 0.5 MPa step load against a 1 kPa noise: a floor near 2e-3 of ‖R₀‖
+    settings = NewtonSettings(rtol=1e-4, stall_rtol=stall_rtol, max_iterations=30,
+                              max_cutbacks=1)
+    return NewtonSolver(problem.basis, _NoisyElastic(1e3), problem.loading, settings)
+
+
+def test_stalled_residual_is_accepted_only_when_asked_and_counted():
+    with pytest.raises(NewtonError, match="not converged"):
+        _noisy_solver(0.0).step(1.0, step=1)
+    solver = _noisy_solver(0.02)
+    record = solver.step(1.0, step=1)
+    assert record.stalled == 1 and record.cutbacks == 0
+    history = record.residual_history[-1]
+    assert 1e-4 < history[-1] <= 0.02 and len(history) > solver.settings.stall_window
+    # the accepted state is the elastic solution up to the noise
+    exact = NewtonSolver(solver.basis, LinearElastic(young=50e6, poisson=0.3), solver.loading)
+    exact.step(1.0, step=1)
+    assert np.abs(solver.u - exact.u).max() < 0.01 * np.abs(exact.u).max()
+
+
+def test_stall_tolerance_is_checked():
+    with pytest.raises(ValueError, match="stall_rtol"):
+        NewtonSettings(rtol=0.005, stall_rtol=0.001)
+    with pytest.raises(ValueError, match="stall_window"):
+        NewtonSettings(stall_window=1)

@@ -35,6 +35,10 @@ def _newton_arguments(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--stress-tol", type=float, default=None,
                    help="absolute tolerance as a stress error [Pa] at the Gauss points, for "
                         "DEM noise (default 0.005 x confining for dem, 0 for linear-elastic)")
+    g.add_argument("--stall-rtol", type=float, default=None,
+                   help="accept an iterate with ||R||/||R0|| below this once the residual has "
+                        "stopped falling for 8 iterations (DEM stress noise; default 2 x rtol "
+                        "for dem, off for linear-elastic; 0: off)")
     g.add_argument("--max-iterations", type=int, default=25,
                    help="iterations per increment before it is halved (default 25)")
     g.add_argument("--max-cutbacks", type=int, default=6,
@@ -120,7 +124,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def _settings(args: argparse.Namespace) -> NewtonSettings:
-    return NewtonSettings(rtol=args.rtol, max_iterations=args.max_iterations,
+    stall = args.stall_rtol
+    if stall is None:
+        stall = 0.0 if getattr(args, "material", "dem") == "linear-elastic" else 2 * args.rtol
+    return NewtonSettings(rtol=args.rtol, stall_rtol=stall, max_iterations=args.max_iterations,
                           max_cutbacks=args.max_cutbacks, predictor=args.predictor,
                           relaxation=args.relaxation)
 
@@ -156,6 +163,7 @@ def _summary(result: BiaxialResult, wall: float) -> dict[str, Any]:
         "final_axial_strain": float(steps["axial_strain"].iloc[-1]),
         "steps_completed": len(done),
         "cutbacks": int(done["cutbacks"].sum()),
+        "stalled_increments": int(done["stalled"].sum()),
         "dem_steps": int(done["work"].sum()),
         "wall_time_s": wall,
         "error": result.error,

@@ -7,7 +7,8 @@ Tables (tension positive unless the column says otherwise):
     the top platen reaction, compression +), confining [Pa] (compression +), stress_ratio
     (platen_stress / confining), sxx, syy, sxy [Pa] (volume averages over Gauss points),
     volumetric_strain (tr ε volume average, contraction negative), void_ratio (mean, NaN if
-    the material has none), iterations, work (DEM steps), cutbacks, wall_time [s],
+    the material has none), iterations, work (DEM steps), cutbacks, stalled (increments
+    accepted on a stalled residual), wall_time [s],
     residual_history (JSON list of lists of ‖R‖/‖R₀‖).
 
 ``points`` — one row per load step and Gauss point:
@@ -76,6 +77,7 @@ def _rows(solver: NewtonSolver, problem: BiaxialProblem, record: StepRecord | No
         "iterations": record.iterations if record else 0,
         "work": record.work if record else 0,
         "cutbacks": record.cutbacks if record else 0,
+        "stalled": record.stalled if record else 0,
         "wall_time": record.wall_time if record else 0.0,
         "residual_history": json.dumps(record.residual_history if record else []),
     }
