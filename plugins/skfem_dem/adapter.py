@@ -17,7 +17,10 @@ import numpy as np
 
 from granular_material.dem import DEMBatch, DEMInstabilityError, drive_grad_u, load_rve, save_rve
 
-__all__ = ["DEMBackend", "DEMEvaluation", "InProcessBackend"]
+__all__ = ["TANGENTS", "DEMBackend", "DEMEvaluation", "InProcessBackend"]
+
+TANGENTS = ("kruyt-rothenburg", "perturbation")
+_COMPONENTS = ((0, 0), (0, 1), (1, 0), (1, 1))  # the (k, l) of ∂u_k/∂x_l
 
 
 @dataclass(frozen=True)
@@ -63,6 +66,15 @@ class DEMBackend(Protocol):
         ...
 
 
+def _has_real_logarithm(f: np.ndarray) -> np.ndarray:
+    """Whether each F (B, 2, 2) has a real logarithm, i.e. the constant velocity gradient of
+    :func:`drive_grad_u` exists: det F > 0 and no negative real eigenvalue."""
+    trace, det = np.trace(f, axis1=1, axis2=2), np.linalg.det(f)
+    discriminant = trace**2 - 4 * det
+    # real eigenvalues (discriminant >= 0) share the sign of the trace when det > 0
+    return (det > 0) & ((discriminant < 0) | (trace > 0))
+
+
 class InProcessBackend:
     """All RVEs in one :class:`DEMBatch` of this process.
 
@@ -70,13 +82,27 @@ class InProcessBackend:
         batch: the RVEs, in their committed state.
         max_strain_per_step: largest strain component per DEM step (Guo & Zhao: 1e-5).
         min_steps: fewest DEM steps per evaluation.
+        tangent: "kruyt-rothenburg" (the contact-network estimate, one DEM run per
+            evaluation) or "perturbation" (the derivative of the RVE's own response to ∇u by
+            forward differences: four more runs from the committed state, with ∇u + h E_kl,
+            h = max(perturbation · max|∇u|, min_perturbation) per RVE).
+        perturbation: relative size of the perturbation [-].
+        min_perturbation: smallest perturbation [-].
     """
 
     def __init__(self, batch: DEMBatch, max_strain_per_step: float = 1.0e-5,
-                 min_steps: int = 2) -> None:
+                 min_steps: int = 2, tangent: str = "kruyt-rothenburg",
+                 perturbation: float = 0.1, min_perturbation: float = 1.0e-4) -> None:
+        if tangent not in TANGENTS:
+            raise ValueError(f"tangent must be one of {', '.join(TANGENTS)}, got {tangent!r}")
+        if not (perturbation > 0 and min_perturbation > 0):
+            raise ValueError("perturbation and min_perturbation must be > 0, got "
+                             f"{perturbation!r}, {min_perturbation!r}")
         self.batch = batch
         self.max_strain_per_step = max_strain_per_step
         self.min_steps = min_steps
+        self.tangent = tangent
+        self.perturbation, self.min_perturbation = perturbation, min_perturbation
         self._committed = batch.snapshot()
         self._trial = False
 
@@ -91,15 +117,10 @@ class InProcessBackend:
         """A backend holding the RVE batch of ``path`` (written by :meth:`checkpoint`)."""
         return cls(DEMBatch(load_rve(path), device=device), **kwargs)
 
-    def evaluate(self, grad_u: np.ndarray) -> DEMEvaluation:
-        """Restore the committed state, apply ∇u [-] (B, 2, 2), homogenise."""
-        b = self.n_rve
+    def _drive(self, grad_u: np.ndarray, failed: np.ndarray) -> tuple[int, bool]:
+        """From the committed state, drive ∇u (failed RVEs held still); marks RVEs that blow
+        up in ``failed``. Returns (DEM steps, whether the batch came through)."""
         self.batch.restore(self._committed)
-        self._trial = False
-        finite = np.isfinite(grad_u).all(axis=(1, 2))
-        grad_u = np.where(finite[:, None, None], grad_u, 0.0)
-        failed = ~finite | (np.linalg.det(np.eye(2) + grad_u) <= 0)
-        steps = 0
         try:
             steps = drive_grad_u(self.batch, np.where(failed[:, None, None], 0.0, grad_u),
                                  max_strain_per_step=self.max_strain_per_step,
@@ -107,13 +128,41 @@ class InProcessBackend:
         except DEMInstabilityError as exc:
             failed[np.asarray(exc.rve, dtype=int)] = True
             self.batch.restore(self._committed)
+            return 0, False
+        return steps, True
+
+    def evaluate(self, grad_u: np.ndarray) -> DEMEvaluation:
+        """Restore the committed state, apply ∇u [-] (B, 2, 2), homogenise."""
+        b = self.n_rve
+        self._trial = False
+        finite = np.isfinite(grad_u).all(axis=(1, 2))
+        grad_u = np.where(finite[:, None, None], grad_u, 0.0)
+        failed = ~finite | ~_has_real_logarithm(np.eye(2) + grad_u)
+        work, perturbed = 0, []
+        if self.tangent == "perturbation":
+            size = np.maximum(self.perturbation * np.abs(grad_u).max(axis=(1, 2)),
+                              self.min_perturbation)
+            for row, col in _COMPONENTS:
+                g = grad_u.copy()
+                g[:, row, col] += size
+                steps, ok = self._drive(g, failed)
+                work += steps
+                perturbed.append(self.batch.homogenize().stress if ok else None)
+        steps, ok = self._drive(grad_u, failed)
+        work += steps
+        if not ok or any(p is None for p in perturbed):
             nan = np.full(b, np.nan)
             return DEMEvaluation(np.full((b, 2, 2), np.nan), np.full((b, 2, 2, 2, 2), np.nan),
-                                 failed, steps, nan, nan.copy())
+                                 failed, work, nan, nan.copy())
         h = self.batch.homogenize()
+        stress = np.asarray(h.stress, dtype=np.float64)
+        tangent = np.asarray(h.tangent, dtype=np.float64)
+        if perturbed:
+            tangent = np.empty_like(tangent)
+            for (row, col), sigma in zip(_COMPONENTS, perturbed, strict=True):
+                tangent[:, :, :, row, col] = (sigma - stress) / size[:, None, None]
         self._trial = True
-        return DEMEvaluation(np.asarray(h.stress, dtype=np.float64),
-                             np.asarray(h.tangent, dtype=np.float64), failed, steps,
+        return DEMEvaluation(stress, tangent, failed, work,
                              np.asarray(h.void_ratio, dtype=np.float64),
                              np.asarray(h.coordination, dtype=np.float64))
 
