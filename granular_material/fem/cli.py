@@ -46,6 +46,14 @@ def _newton_arguments(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--predictor", choices=("tangent", "extrapolate"), default="extrapolate",
                    help="first guess of a step: committed-tangent solve or the last increment "
                         "scaled (default extrapolate)")
+    g.add_argument("--tangent", choices=("kruyt-rothenburg", "perturbation"),
+                   default="kruyt-rothenburg",
+                   help="dem: tangent of the RVEs: Kruyt-Rothenburg (Wu et al. eq. 6, default) "
+                        "or forward differences of each RVE's response (4 more DEM runs per "
+                        "iteration)")
+    g.add_argument("--perturbation", type=float, default=0.1,
+                   help="dem, --tangent perturbation: perturbation of grad u relative to its "
+                        "largest component (default 0.1)")
     g.add_argument("--relaxation", choices=("none", "aitken"), default="aitken",
                    help="relaxation of Newton corrections (default aitken: the DEM tangent "
                         "ignores sliding and is too stiff)")
@@ -212,7 +220,8 @@ def run_single_element(args: argparse.Namespace) -> int:
         material = create_material("dem", rve=args.rve, particles=args.particles,
                                    seed=args.seed, pressure=args.confining,
                                    replicate=not args.independent, device=args.device,
-                                   shards=args.shards, progress=progress)
+                                   shards=args.shards, progress=progress,
+                                   tangent=args.tangent, perturbation=args.perturbation)
         material.allocate(setup.n_points)
     reference = None
     if args.material == "dem" and args.compare_dem:
@@ -259,7 +268,8 @@ def run_biaxial_command(args: argparse.Namespace) -> int:
     progress = not args.no_progress
     material = create_material("dem", rve=args.rve, particles=particles, seed=args.seed,
                                pressure=args.confining, device=device, shards=args.shards,
-                               progress=progress)
+                               progress=progress, tangent=args.tangent,
+                               perturbation=args.perturbation)
     material.allocate(setup.n_points)
     t0 = time.perf_counter()
     result = run_biaxial(setup, material, args.steps, _settings(args), progress=progress,

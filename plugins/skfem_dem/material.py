@@ -14,7 +14,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
-from granular_material_skfem.adapter import InProcessBackend
+from granular_material_skfem.adapter import TANGENTS, InProcessBackend
 
 from granular_material.dem import DEMBatch, RVEData, load_rve, prepare_packing
 from granular_material.fem.material import MaterialResponse, PointStatus
@@ -39,6 +39,10 @@ class DEMMaterialParameters:
         shards: CPU shards (threads) of the batch; None: the engine's default (one per
             core). With 1, independent RVEs are also prepared one at a time (RVE p from the
             random gas of seed + p, consolidated on its own).
+        tangent: "kruyt-rothenburg" (Wu et al. eq. 6) or "perturbation" (forward
+            differences of the RVE response, four extra DEM runs per evaluation; see
+            :class:`~granular_material_skfem.adapter.InProcessBackend`).
+        perturbation: relative perturbation of ∇u for the "perturbation" tangent [-].
     """
 
     rve: str | None = None
@@ -50,8 +54,14 @@ class DEMMaterialParameters:
     max_strain_per_step: float = 1.0e-5
     min_steps: int = 2
     shards: int | None = None
+    tangent: str = "kruyt-rothenburg"
+    perturbation: float = 0.1
 
     def __post_init__(self) -> None:
+        if self.tangent not in TANGENTS:
+            raise ValueError(f"tangent must be one of {', '.join(TANGENTS)}, got {self.tangent!r}")
+        if not (math.isfinite(self.perturbation) and self.perturbation > 0):
+            raise ValueError(f"perturbation must be > 0, got {self.perturbation!r}")
         if self.shards is not None and (int(self.shards) != self.shards or self.shards < 1):
             raise ValueError(f"shards must be an integer >= 1 or None, got {self.shards!r}")
         if int(self.particles) != self.particles or self.particles < 4:
@@ -75,10 +85,11 @@ class DEMMaterial:
                  pressure: float = 100.0e3, replicate: bool = False,
                  device: str | None = None, max_strain_per_step: float = 1.0e-5,
                  min_steps: int = 2, shards: int | None = None,
-                 progress: bool = False) -> None:
+                 progress: bool = False, tangent: str = "kruyt-rothenburg",
+                 perturbation: float = 0.1) -> None:
         self.parameters = DEMMaterialParameters(
             None if rve is None else str(rve), particles, seed, pressure, replicate, device,
-            max_strain_per_step, min_steps, shards,
+            max_strain_per_step, min_steps, shards, tangent, perturbation,
         )
         self.progress = progress
         self.backend: InProcessBackend | None = None
@@ -97,7 +108,8 @@ class DEMMaterial:
 
     def _backend(self, batch: DEMBatch) -> InProcessBackend:
         p = self.parameters
-        return InProcessBackend(batch, p.max_strain_per_step, p.min_steps)
+        return InProcessBackend(batch, p.max_strain_per_step, p.min_steps, tangent=p.tangent,
+                                perturbation=p.perturbation)
 
     def allocate(self, n_points: int) -> None:
         """Load or prepare ``n_points`` RVEs in their consolidated state."""
