@@ -141,3 +141,13 @@ def test_perturbation_tangent_predicts_the_rve_response_better_than_kruyt_rothen
     assert error(at_g.tangent) < 0.3
     with pytest.raises(ValueError, match="tangent"):
         create_material("dem", rve=small_rve_path, tangent="secant")
+
+
+def test_perturbed_gradient_that_inverts_the_cell_fails_the_point_only(small_rve_path):
+    # I + ∇u = [[1, .97], [.97, 1]] is valid (det 0.059); + 0.097 on ∂u_x/∂y inverts it
+    fd = create_material("dem", rve=small_rve_path, device="cpu", tangent="perturbation",
+                         max_strain_per_step=1e-2)
+    fd.allocate(2)
+    grad = np.array([[[0.0, 0.97], [0.97, 0.0]], [[1e-4, 0.0], [0.0, -2e-4]]])
+    response = fd.evaluate(grad)
+    assert response.status.tolist() == [PointStatus.FAILED, PointStatus.OK]

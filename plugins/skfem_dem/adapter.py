@@ -119,7 +119,9 @@ class InProcessBackend:
 
     def _drive(self, grad_u: np.ndarray, failed: np.ndarray) -> tuple[int, bool]:
         """From the committed state, drive ∇u (failed RVEs held still); marks RVEs that blow
-        up in ``failed``. Returns (DEM steps, whether the batch came through)."""
+        up, or whose ∇u has no constant velocity gradient, in ``failed``. Returns (DEM steps,
+        whether the batch came through)."""
+        failed |= ~_has_real_logarithm(np.eye(2) + grad_u)
         self.batch.restore(self._committed)
         try:
             steps = drive_grad_u(self.batch, np.where(failed[:, None, None], 0.0, grad_u),
@@ -137,7 +139,7 @@ class InProcessBackend:
         self._trial = False
         finite = np.isfinite(grad_u).all(axis=(1, 2))
         grad_u = np.where(finite[:, None, None], grad_u, 0.0)
-        failed = ~finite | ~_has_real_logarithm(np.eye(2) + grad_u)
+        failed = ~finite
         work, perturbed = 0, []
         if self.tangent == "perturbation":
             size = np.maximum(self.perturbation * np.abs(grad_u).max(axis=(1, 2)),
