@@ -165,11 +165,11 @@ def test_cut_back_limit_names_the_step_and_keeps_committed_state():
     assert [r.step for r in info.value.records] == [1, 2]
 
 
-class _FailsAbove:
-    """Linear elastic, but reports FAILED at every point when max|∇u| exceeds a limit."""
+class _WrappedElastic:
+    """A linear-elastic material that subclasses alter in ``evaluate`` only."""
 
-    def __init__(self, limit: float):
-        self.inner, self.limit = LinearElastic(), limit
+    def __init__(self, inner: LinearElastic):
+        self.inner = inner
 
     n_points = property(lambda self: self.inner.n_points)
 
@@ -177,11 +177,7 @@ class _FailsAbove:
         self.inner.allocate(n)
 
     def evaluate(self, grad_u):
-        r = self.inner.evaluate(grad_u)
-        if np.abs(grad_u).max() > self.limit:
-            return MaterialResponse(r.stress, r.tangent,
-                                    np.full(r.status.shape, PointStatus.FAILED, dtype=np.int8))
-        return r
+        return self.inner.evaluate(grad_u)
 
     def commit(self):
         self.inner.commit()
@@ -194,6 +190,21 @@ class _FailsAbove:
 
     def restore(self, path):
         self.inner.restore(path)
+
+
+class _FailsAbove(_WrappedElastic):
+    """Linear elastic, but reports FAILED at every point when max|∇u| exceeds a limit."""
+
+    def __init__(self, limit: float):
+        super().__init__(LinearElastic())
+        self.limit = limit
+
+    def evaluate(self, grad_u):
+        r = self.inner.evaluate(grad_u)
+        if np.abs(grad_u).max() > self.limit:
+            return MaterialResponse(r.stress, r.tangent,
+                                    np.full(r.status.shape, PointStatus.FAILED, dtype=np.int8))
+        return r
 
 
 def test_failed_points_trigger_cut_back():
@@ -225,18 +236,14 @@ def test_full_scale_specimen_mesh_with_linear_elastic():
     np.testing.assert_allclose(last["syy"], -expected, rtol=1e-9)
 
 
-class _NoisyElastic:
+class _NoisyElastic(_WrappedElastic):
     """Linear elastic plus a stress noise of ``amplitude`` [Pa] that changes with every ∇u
     (seeded by its bytes): like a DEM RVE, the same ∇u gives the same stress, any other ∇u a
     fresh draw, so Newton's residual settles on a floor set by the noise."""
 
     def __init__(self, amplitude: float):
-        self.inner, self.amplitude = LinearElastic(young=50e6, poisson=0.3), amplitude
-
-    n_points = property(lambda self: self.inner.n_points)
-
-    def allocate(self, n):
-        self.inner.allocate(n)
+        super().__init__(LinearElastic(young=50e6, poisson=0.3))
+        self.amplitude = amplitude
 
     def evaluate(self, grad_u):
         r = self.inner.evaluate(grad_u)
@@ -244,18 +251,6 @@ class _NoisyElastic:
         noise = np.random.default_rng(seed).uniform(-1, 1, r.stress.shape)
         noise = 0.5 * (noise + np.swapaxes(noise, 1, 2))
         return MaterialResponse(r.stress + self.amplitude * noise, r.tangent, r.status)
-
-    def commit(self):
-        self.inner.commit()
-
-    def revert(self):
-        self.inner.revert()
-
-    def checkpoint(self, path):
-        self.inner.checkpoint(path)
-
-    def restore(self, path):
-        self.inner.restore(path)
 
 
 def _noisy_solver(stall_rtol: float) -> NewtonSolver:
