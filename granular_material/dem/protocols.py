@@ -23,6 +23,7 @@ __all__ = [
     "biaxial_test",
     "consolidate",
     "drive_grad_u",
+    "has_real_logarithm",
     "path_increment",
     "servo_steps",
     "summarize_biaxial",
@@ -45,6 +46,15 @@ def _as_batch_grad(batch: DEMBatch, grad_u: np.ndarray) -> np.ndarray:
             f"grad_u of RVE {rve} inverts the cell: det(I + grad_u) = {det[rve]:.4g} <= 0"
         )
     return g
+
+
+def has_real_logarithm(f: np.ndarray) -> np.ndarray:
+    """Whether each F (B, 2, 2) has a real logarithm, i.e. the constant velocity gradient of
+    :func:`drive_grad_u` exists: det F > 0 and no negative real eigenvalue."""
+    trace, det = np.trace(f, axis1=1, axis2=2), np.linalg.det(f)
+    discriminant = trace**2 - 4 * det
+    # real eigenvalues (discriminant >= 0) share the sign of the trace when det > 0
+    return (det > 0) & ((discriminant < 0) | (trace > 0))
 
 
 def path_increment(grad_u: np.ndarray, k: int, increments: int) -> np.ndarray:

@@ -15,7 +15,14 @@ from typing import Protocol
 
 import numpy as np
 
-from granular_material.dem import DEMBatch, DEMInstabilityError, drive_grad_u, load_rve, save_rve
+from granular_material.dem import (
+    DEMBatch,
+    DEMInstabilityError,
+    drive_grad_u,
+    has_real_logarithm,
+    load_rve,
+    save_rve,
+)
 
 __all__ = ["TANGENTS", "DEMBackend", "DEMEvaluation", "InProcessBackend"]
 
@@ -66,15 +73,6 @@ class DEMBackend(Protocol):
         ...
 
 
-def _has_real_logarithm(f: np.ndarray) -> np.ndarray:
-    """Whether each F (B, 2, 2) has a real logarithm, i.e. the constant velocity gradient of
-    :func:`drive_grad_u` exists: det F > 0 and no negative real eigenvalue."""
-    trace, det = np.trace(f, axis1=1, axis2=2), np.linalg.det(f)
-    discriminant = trace**2 - 4 * det
-    # real eigenvalues (discriminant >= 0) share the sign of the trace when det > 0
-    return (det > 0) & ((discriminant < 0) | (trace > 0))
-
-
 class InProcessBackend:
     """All RVEs in one :class:`DEMBatch` of this process.
 
@@ -121,7 +119,7 @@ class InProcessBackend:
         """From the committed state, drive ∇u (failed RVEs held still); marks RVEs that blow
         up, or whose ∇u has no constant velocity gradient, in ``failed``. Returns (DEM steps,
         whether the batch came through)."""
-        failed |= ~_has_real_logarithm(np.eye(2) + grad_u)
+        failed |= ~has_real_logarithm(np.eye(2) + grad_u)
         self.batch.restore(self._committed)
         try:
             steps = drive_grad_u(self.batch, np.where(failed[:, None, None], 0.0, grad_u),
