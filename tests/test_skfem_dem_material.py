@@ -153,3 +153,24 @@ def test_every_dem_run_fails_points_without_a_constant_velocity_gradient(materia
     failed = np.zeros(4, dtype=bool)
     steps, ok = backend._drive(grad, failed)
     assert ok and steps == 20 and failed.tolist() == [False, True, True, False]
+
+
+def test_perturbation_tangent_stops_at_the_first_dem_run_that_fails(small_rve_path,
+                                                                    monkeypatch):
+    """Once one perturbed run has failed, the evaluation fails whatever the others give:
+    none of them is run, and the failed points of that run are reported."""
+    material = create_material("dem", rve=small_rve_path, device="cpu", tangent="perturbation")
+    material.allocate(2)
+    backend = material.backend
+    calls = []
+
+    def blow_up(grad_u, failed):
+        calls.append(grad_u.copy())
+        failed[1] = True
+        return 0, False
+
+    monkeypatch.setattr(backend, "_drive", blow_up)
+    response = material.evaluate(np.repeat(GRAD[:1], 2, axis=0))
+    assert len(calls) == 1 and not response.ok
+    assert response.status.tolist() == [PointStatus.OK, PointStatus.FAILED]
+    assert response.work == 0

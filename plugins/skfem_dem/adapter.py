@@ -138,7 +138,7 @@ class InProcessBackend:
         finite = np.isfinite(grad_u).all(axis=(1, 2))
         grad_u = np.where(finite[:, None, None], grad_u, 0.0)
         failed = ~finite
-        work, perturbed = 0, []
+        work, perturbed, ok = 0, [], True
         if self.tangent == "perturbation":
             size = np.maximum(self.perturbation * np.abs(grad_u).max(axis=(1, 2)),
                               self.min_perturbation)
@@ -147,10 +147,13 @@ class InProcessBackend:
                 g[:, row, col] += size
                 steps, ok = self._drive(g, failed)
                 work += steps
-                perturbed.append(self.batch.homogenize().stress if ok else None)
-        steps, ok = self._drive(grad_u, failed)
-        work += steps
-        if not ok or any(p is None for p in perturbed):
+                if not ok:  # the evaluation has failed: the remaining runs are wasted work
+                    break
+                perturbed.append(self.batch.homogenize().stress)
+        if ok:
+            steps, ok = self._drive(grad_u, failed)
+            work += steps
+        if not ok:
             nan = np.full(b, np.nan)
             return DEMEvaluation(np.full((b, 2, 2), np.nan), np.full((b, 2, 2, 2, 2), np.nan),
                                  failed, work, nan, nan.copy())
