@@ -69,6 +69,18 @@ def test_biaxial_command_reduced_scale(tmp_path, capsys):
     assert (tmp_path / "maps_0.2pct.png").exists() and (tmp_path / "maps_0.4pct.png").exists()
 
 
+def test_biaxial_command_with_secant_tangents(tmp_path, capsys):
+    code = main(["biaxial", "--elements", "1", "2", "--particles", "40", "--axial-strain",
+                 "0.004", "--steps", "2", "--device", "cpu", "--tangent-update", "secant",
+                 "--relaxation", "none", "--json", "--no-progress"])
+    out = json.loads(capsys.readouterr().out)
+    assert code == 0, out["error"]
+    assert out["steps_completed"] == 2 and out["peak_stress_ratio"] > 1
+    assert main(["biaxial", "--tangent-update", "secant", "--secant-min-change", "0",
+                 "--no-progress"]) == 2
+    assert "secant_min_change" in capsys.readouterr().err
+
+
 def test_example_swaps_the_material_by_name():
     example = _example()
     elastic = example.main("linear-elastic", axial_strain=0.004, steps=2)

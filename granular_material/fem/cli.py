@@ -56,7 +56,14 @@ def _newton_arguments(parser: argparse.ArgumentParser) -> None:
                         "largest component (default 0.1)")
     g.add_argument("--relaxation", choices=("none", "aitken"), default="aitken",
                    help="relaxation of Newton corrections (default aitken: the DEM tangent "
-                        "ignores sliding and is too stiff)")
+                        "leaves out the discs' rearrangement and is too stiff)")
+    g.add_argument("--tangent-update", choices=("none", "secant"), default="none",
+                   help="none: the material's tangent at every iterate (default); secant: "
+                        "each point's tangent corrected by Broyden updates from the stress "
+                        "change its RVE gave (use with --relaxation none)")
+    g.add_argument("--secant-min-change", type=float, default=1e-4,
+                   help="--tangent-update secant: smallest change of a point's grad u that "
+                        "updates its tangent (default 1e-4; smaller changes carry DEM noise)")
 
 
 def _common_arguments(parser: argparse.ArgumentParser) -> None:
@@ -137,7 +144,8 @@ def _settings(args: argparse.Namespace) -> NewtonSettings:
         stall = 0.0 if getattr(args, "material", "dem") == "linear-elastic" else 2 * args.rtol
     return NewtonSettings(rtol=args.rtol, stall_rtol=stall, max_iterations=args.max_iterations,
                           max_cutbacks=args.max_cutbacks, predictor=args.predictor,
-                          relaxation=args.relaxation)
+                          relaxation=args.relaxation, tangent_update=args.tangent_update,
+                          secant_min_change=args.secant_min_change)
 
 
 def _stress_tol(args: argparse.Namespace) -> float:
