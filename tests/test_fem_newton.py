@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pandas as pd
 import pytest
 from skfem import Basis, ElementQuad1, ElementVector, FacetBasis, LinearForm, MeshQuad
 
@@ -234,6 +235,18 @@ def test_full_scale_specimen_mesh_with_linear_elastic():
     assert result.steps["platen_stress"].iloc[-1] == pytest.approx(expected, rel=1e-9)
     last = result.points[result.points["step"] == 2]
     np.testing.assert_allclose(last["syy"], -expected, rtol=1e-9)
+
+
+def test_an_interrupted_biaxial_run_keeps_and_writes_its_committed_steps(tmp_path):
+    def stop_after_two(solver, record, points):
+        if record.step == 2:
+            raise KeyboardInterrupt
+
+    result = run_biaxial(BiaxialSetup(nx=1, ny=2), LinearElastic(young=30e6, poisson=0.3),
+                         5, on_step=stop_after_two, out_dir=tmp_path)
+    assert result.error == "interrupted after load step 2 of 5"
+    assert result.steps["step"].tolist() == [0, 1, 2]
+    assert len(pd.read_csv(tmp_path / "steps.csv")) == 3
 
 
 class _NoisyElastic(_WrappedElastic):

@@ -113,8 +113,9 @@ def run_biaxial(
     does not reduce, while the relative test ‖R‖/‖R₀‖ tightens with every halving.
 
     A :class:`NewtonError` does not propagate: the committed steps are returned with
-    ``error`` set (and written to ``out_dir`` when given, with the fields file). With
-    ``out_dir`` the tables and the fields file are also written after every step.
+    ``error`` set (and written to ``out_dir`` when given, with the fields file). Nor does an
+    interrupt (Ctrl-C): a long run stopped by hand returns, and writes, the steps committed
+    so far. With ``out_dir`` the tables and the fields file are also written after every step.
     """
     from granular_material.fem.output import FieldWriter, write_tables
 
@@ -151,6 +152,8 @@ def run_biaxial(
                    description=f"biaxial {setup.nx}x{setup.ny}")
     except NewtonError as exc:
         error = str(exc)
+    except KeyboardInterrupt:
+        error = f"interrupted after load step {len(rows) - 1} of {n_steps}"
     finally:
         if writer is not None:
             writer.close()
