@@ -237,6 +237,25 @@ def test_full_scale_specimen_mesh_with_linear_elastic():
     np.testing.assert_allclose(last["syy"], -expected, rtol=1e-9)
 
 
+def test_rough_platens_hold_the_ends_and_stiffen_the_specimen():
+    """Rough platens stop the ends spreading: the specimen barrels, the platen stress is above
+    the smooth-platen closed form, and no platen node moves sideways."""
+    material = LinearElastic(young=30e6, poisson=0.3, initial_stress=-100e3)
+    smooth = run_biaxial(BiaxialSetup(nx=4, ny=8, axial_strain=0.01), material, 1)
+    setup = BiaxialSetup(nx=4, ny=8, axial_strain=0.01, platens="rough")
+    rough = run_biaxial(setup, LinearElastic(young=30e6, poisson=0.3, initial_stress=-100e3), 1)
+    closed_form = 100e3 + 30e6 / (1 - 0.3**2) * 0.01
+    assert smooth.steps["platen_stress"].iloc[-1] == pytest.approx(closed_form, rel=1e-9)
+    assert rough.steps["platen_stress"].iloc[-1] > 1.01 * closed_form
+    basis = build_biaxial(setup).basis
+    ux = rough.displacements[-1][basis.nodal_dofs[0]]
+    y = basis.mesh.p[1]
+    ends = (y < 1e-12) | (y > 0.1 - 1e-12)
+    assert np.abs(ux[ends]).max() == 0 and np.abs(ux[~ends]).max() > 1e-6
+    with pytest.raises(ValueError, match="platens"):
+        BiaxialSetup(platens="glued")
+
+
 def test_an_interrupted_biaxial_run_keeps_and_writes_its_committed_steps(tmp_path):
     def stop_after_two(solver, record, points):
         if record.step == 2:

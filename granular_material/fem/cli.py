@@ -118,7 +118,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     b = subparsers.add_parser(
         "biaxial",
         help="biaxial specimen (50 mm x 100 mm) of DEM Gauss points",
-        description="Drained biaxial test of a plane-strain specimen with smooth platens, one "
+        description="Drained biaxial test of a plane-strain specimen (smooth or rough platens), one "
                     "independently prepared DEM RVE per Gauss point (seed, seed+1, ...). "
                     "--scale full is Wu et al.'s 10x15 elements with 400-disc RVEs; "
                     "--scale reduced (5x10 elements, 64 discs) runs on a CPU.",
@@ -134,6 +134,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="RVE file with one RVE per Gauss point (or one, replicated)")
     b.add_argument("--width", type=float, default=0.05, help="specimen width [m]")
     b.add_argument("--height", type=float, default=0.10, help="specimen height [m]")
+    b.add_argument("--platens", choices=("smooth", "rough"), default="smooth",
+                   help="smooth: platen nodes slide freely, one bottom node pinned (default); "
+                        "rough: no platen node moves sideways")
     _common_arguments(b)
     _newton_arguments(b)
     b.set_defaults(func=run_biaxial_command)
@@ -273,7 +276,8 @@ def run_biaxial_command(args: argparse.Namespace) -> int:
         nx, ny = args.elements
     particles = args.particles or particles
     setup = BiaxialSetup(width=args.width, height=args.height, nx=nx, ny=ny,
-                         confining=args.confining, axial_strain=args.axial_strain)
+                         confining=args.confining, axial_strain=args.axial_strain,
+                         platens=args.platens)
     progress = not args.no_progress
     material = create_material("dem", rve=args.rve, particles=particles, seed=args.seed,
                                pressure=args.confining, device=device, shards=args.shards,

@@ -1,10 +1,11 @@
 """Boundary-value problems: the drained biaxial specimen and its one-element version.
 
 Plane strain, small strain, thickness 1 m (forces in N/m). The specimen occupies
-[0, width] × [0, height]; smooth platens: the bottom nodes are on rollers (u_y = 0) with one
-node pinned (u_x = 0, the bottom node nearest x = width/2), the top nodes move down by
-``axial_strain · height`` and slide freely, the sides carry the confining traction
-t = −p·n (tension positive, n the outward normal).
+[0, width] × [0, height]; the top nodes move down by ``axial_strain · height``, the bottom
+nodes stay at u_y = 0, the sides carry the confining traction t = −p·n (tension positive,
+n the outward normal). Smooth platens (default): the platen nodes slide freely, but for one
+bottom node pinned (u_x = 0, the one nearest x = width/2). Rough platens: no platen node
+moves sideways (u_x = 0 on top and bottom).
 """
 
 from __future__ import annotations
@@ -32,6 +33,8 @@ class BiaxialSetup:
         ny: elements along the height, >= 1.
         confining: lateral confining pressure p [Pa], compression positive, >= 0.
         axial_strain: final axial strain, compression positive, in (0, 0.5].
+        platens: "smooth" (platen nodes slide freely, one bottom node pinned) or "rough"
+            (u_x = 0 on every platen node).
     """
 
     width: float = 0.05
@@ -40,8 +43,11 @@ class BiaxialSetup:
     ny: int = 15
     confining: float = 100.0e3
     axial_strain: float = 0.10
+    platens: str = "smooth"
 
     def __post_init__(self) -> None:
+        if self.platens not in ("smooth", "rough"):
+            raise ValueError(f"platens must be 'smooth' or 'rough', got {self.platens!r}")
         for name in ("width", "height"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
@@ -106,12 +112,14 @@ def build_biaxial(setup: BiaxialSetup) -> BiaxialProblem:
     tol = 1e-9 * max(setup.width, setup.height)
     bottom = np.flatnonzero(np.abs(y) < tol)
     top = np.flatnonzero(np.abs(y - setup.height) < tol)
-    pin = bottom[np.argmin(np.abs(x[bottom] - setup.width / 2))]
     ux, uy = basis.nodal_dofs
-    dofs = np.concatenate([uy[bottom], [ux[pin]], uy[top]])
-    end = np.concatenate(
-        [np.zeros(bottom.size + 1), np.full(top.size, -setup.axial_strain * setup.height)]
-    )
+    if setup.platens == "rough":
+        held = np.concatenate([ux[bottom], ux[top]])
+    else:
+        held = ux[[bottom[np.argmin(np.abs(x[bottom] - setup.width / 2))]]]
+    dofs = np.concatenate([uy[bottom], held, uy[top]])
+    end = np.concatenate([np.zeros(bottom.size + held.size),
+                          np.full(top.size, -setup.axial_strain * setup.height)])
     sides = mesh.facets_satisfying(
         lambda p: (np.abs(p[0]) < tol) | (np.abs(p[0] - setup.width) < tol)
     )
