@@ -118,8 +118,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     b = subparsers.add_parser(
         "biaxial",
         help="biaxial specimen (50 mm x 100 mm) of DEM Gauss points",
-        description="Drained biaxial test of a plane-strain specimen (smooth or rough platens), one "
-                    "independently prepared DEM RVE per Gauss point (seed, seed+1, ...). "
+        description="Drained biaxial test of a plane-strain specimen (smooth or rough "
+                    "platens), one independently prepared DEM RVE per Gauss point (seed, "
+                    "seed+1, ...). "
                     "--scale full is Wu et al.'s 10x15 elements with 400-disc RVEs; "
                     "--scale reduced (5x10 elements, 64 discs) runs on a CPU.",
     )

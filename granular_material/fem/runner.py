@@ -115,7 +115,8 @@ def run_biaxial(
     A :class:`NewtonError` does not propagate: the committed steps are returned with
     ``error`` set (and written to ``out_dir`` when given, with the fields file). Nor does an
     interrupt (Ctrl-C): a long run stopped by hand returns, and writes, the steps committed
-    so far. With ``out_dir`` the tables and the fields file are also written after every step.
+    so far. With ``out_dir`` the tables are also written after every step; the fields file
+    is finished when the run returns (a killed process leaves the tables only).
     """
     from granular_material.fem.output import FieldWriter, write_tables
 
