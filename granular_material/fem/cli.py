@@ -197,8 +197,7 @@ def _band_summary(result: BiaxialResult, map_strains: list[float],
     steps = result.steps
     if len(steps) < 2:
         return {}
-    strains = steps["axial_strain"].to_numpy()
-    rows = sorted({int(np.argmin(np.abs(strains - e))) for e in map_strains})
+    rows = sorted({result.row_nearest(e) for e in map_strains})
     return {
         "shear_bands": [shear_band(result.points, int(steps["step"].iloc[r])).as_dict()
                         for r in rows],

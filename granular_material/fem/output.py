@@ -110,7 +110,7 @@ def plot_maps(result: BiaxialResult, axial_strain: float, path: str | Path) -> P
     from matplotlib.tri import Triangulation
 
     steps = result.steps
-    row = int(np.argmin(np.abs(steps["axial_strain"].to_numpy() - axial_strain)))
+    row = result.row_nearest(axial_strain)
     step = int(steps["step"].iloc[row])
     u = result.displacements[row]
     basis = result.problem.basis

@@ -45,7 +45,8 @@ class BiaxialResult:
         points: Gauss-point table (see module docstring).
         displacements: nodal displacement [m] after every step, shape (S + 1, ndofs).
         records: the Newton records of the committed steps.
-        error: the message of the :class:`NewtonError` that stopped the run, if any.
+        error: why the run stopped early (the :class:`NewtonError` message, or an
+            interrupt), if it did.
     """
 
     problem: BiaxialProblem
@@ -54,6 +55,10 @@ class BiaxialResult:
     displacements: np.ndarray
     records: list[StepRecord] = field(default_factory=list)
     error: str | None = None
+
+    def row_nearest(self, axial_strain: float) -> int:
+        """Row of ``steps`` (and of ``displacements``) whose axial strain [-] is nearest."""
+        return int(np.argmin(np.abs(self.steps["axial_strain"].to_numpy() - axial_strain)))
 
 
 def _rows(solver: NewtonSolver, problem: BiaxialProblem, record: StepRecord | None):
