@@ -24,7 +24,8 @@ import numpy as np
 import pandas as pd
 
 from granular_material.cli import quiet_warp
-from granular_material.dem import DEMBatch, prepare_packing, save_rve
+from granular_material.dem import DEMBatch, save_rve
+from granular_material.procedures import prepare_packing
 
 
 def _commit() -> str:

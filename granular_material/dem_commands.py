@@ -108,7 +108,8 @@ def _load_batch(args: argparse.Namespace) -> DEMBatchType:
 
 # -- prepare -------------------------------------------------------------------------------
 def _run_prepare(args: argparse.Namespace) -> int:
-    from granular_material.dem import RVEMeta, prepare_packing, save_rve
+    from granular_material.dem import RVEMeta, save_rve
+    from granular_material.procedures import prepare_packing
 
     if args.radius_min > args.radius_max:
         raise ValueError(f"--radius-min {args.radius_min} exceeds --radius-max {args.radius_max}")
@@ -166,7 +167,7 @@ def _plot_biaxial(curve: pd.DataFrame, path: Path) -> None:
 
 
 def _run_biaxial(args: argparse.Namespace) -> int:
-    from granular_material.dem import biaxial_test, summarize_biaxial
+    from granular_material.procedures import biaxial_test, summarize_biaxial
 
     _ensure_parents(args.out, args.plot)
     batch = _load_batch(args)
@@ -186,7 +187,7 @@ def _run_biaxial(args: argparse.Namespace) -> int:
 
 # -- dem-drive -----------------------------------------------------------------------------
 def _run_drive(args: argparse.Namespace) -> int:
-    from granular_material.dem import drive_grad_u, path_increment
+    from granular_material.procedures import drive_grad_u, path_increment
 
     _ensure_parents(args.out)
     batch = _load_batch(args)

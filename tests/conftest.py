@@ -19,7 +19,8 @@ wp.init()
 @pytest.fixture(scope="session")
 def small_rve_path(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """An RVE file of 100 discs (seed 3) consolidated to 100 kPa with friction 0.5 rad."""
-    from granular_material.dem import prepare_packing, save_rve
+    from granular_material.dem import save_rve
+    from granular_material.procedures import prepare_packing
 
     batch = prepare_packing(n_disc=100, n_rve=1, seed=3, pressure=100e3, device="cpu")
     path = tmp_path_factory.mktemp("rve") / "small.npz"

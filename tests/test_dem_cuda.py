@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 import warp as wp
 
-from granular_material.dem import DEMBatch, biaxial_test, drive_grad_u, load_rve
+from granular_material.dem import DEMBatch, load_rve
+from granular_material.procedures import biaxial_test, drive_grad_u
 
 pytestmark = [
     pytest.mark.cuda,

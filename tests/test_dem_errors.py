@@ -12,10 +12,10 @@ from granular_material.dem import (
     DEMInstabilityError,
     RVEFileError,
     critical_timestep,
-    drive_grad_u,
     load_rve,
     save_rve,
 )
+from granular_material.procedures import drive_grad_u
 
 
 def test_non_positive_radius_is_named(two_discs, tmp_path):

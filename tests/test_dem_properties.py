@@ -8,14 +8,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from granular_material.dem import (
-    DEMBatch,
-    RVEMeta,
-    drive_grad_u,
-    load_rve,
-    random_gas,
-    save_rve,
-)
+from granular_material.dem import DEMBatch, RVEMeta, load_rve, save_rve
+from granular_material.procedures import drive_grad_u, random_gas
 
 
 def _energy(batch: DEMBatch) -> float:
@@ -147,7 +141,7 @@ def test_float32_agrees_with_float64(small_rve_path):
 
 def test_target_void_ratio_is_reached_then_held_at_p0():
     """Wu et al. (2025): compact to e0, then consolidate at p0 = 100 kPa."""
-    from granular_material.dem import prepare_packing
+    from granular_material.procedures import prepare_packing
 
     batch = prepare_packing(n_disc=100, seed=11, pressure=100e3, target_void_ratio=0.2,
                             device="cpu")

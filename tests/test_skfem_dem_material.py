@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from granular_material_skfem import DEMMaterial
 
-from granular_material.dem import DEMBatch, biaxial_test, drive_grad_u, load_rve, summarize_biaxial
+from granular_material.dem import DEMBatch, load_rve
 from granular_material.fem import (
     BiaxialSetup,
     NewtonSettings,
@@ -18,6 +18,7 @@ from granular_material.fem import (
     create_material,
     run_biaxial,
 )
+from granular_material.procedures import biaxial_test, drive_grad_u, summarize_biaxial
 
 GRAD = np.array([
     [[0.0, 0.0], [0.0, -2e-4]],

@@ -159,9 +159,9 @@ def ours_tangents(rve: str | Path, grad_u: list[float], increments: int, at: lis
     Runs in this process through the engine's API (``DEMBatch`` and ``drive_grad_u``), the
     way ``dem-drive`` applies the increments; the homogenised tangent is Kruyt–Rothenburg's.
     """
-    from granular_material.dem import drive_grad_u, path_increment
     from granular_material.dem.batch import DEMBatch
     from granular_material.dem.rve_file import load_rve
+    from granular_material.procedures import drive_grad_u, path_increment
 
     data = load_rve(rve).select(0)
     batch = DEMBatch(data, device=device)

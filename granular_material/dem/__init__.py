@@ -1,6 +1,6 @@
-"""Batched periodic 2D DEM on warp: many RVEs of discs advanced together.
+"""Batched periodic 2D DEM on warp: many RVEs of discs advanced together (numpy + warp only).
 
-Typical use::
+Typical use (with the procedures of :mod:`granular_material.procedures`)::
 
     batch = prepare_packing(n_disc=400, n_rve=8, seed=1, pressure=100e3)
     snap = batch.snapshot()
@@ -10,18 +10,8 @@ Typical use::
 """
 
 from granular_material.dem.batch import DEMBatch
+from granular_material.dem.homogenization import Homogenized, homogenize, void_ratio
 from granular_material.dem.model import Model, State, build_model, critical_timestep
-from granular_material.dem.packing import prepare_packing, random_gas
-from granular_material.dem.protocols import (
-    BiaxialSummary,
-    biaxial_test,
-    consolidate,
-    drive_grad_u,
-    has_real_logarithm,
-    path_increment,
-    servo_steps,
-    summarize_biaxial,
-)
 from granular_material.dem.rve_file import (
     FORMAT_VERSION,
     RVEData,
@@ -30,30 +20,30 @@ from granular_material.dem.rve_file import (
     load_rve,
     save_rve,
 )
-from granular_material.dem.solver import DEMInstabilityError, Solver
+from granular_material.dem.solver import (
+    CONTROL_STRAIN,
+    CONTROL_STRESS,
+    DEMInstabilityError,
+    Solver,
+)
 
 __all__ = [
+    "CONTROL_STRAIN",
+    "CONTROL_STRESS",
     "FORMAT_VERSION",
-    "BiaxialSummary",
     "DEMBatch",
     "DEMInstabilityError",
+    "Homogenized",
     "Model",
     "RVEData",
     "RVEFileError",
     "RVEMeta",
     "Solver",
     "State",
-    "biaxial_test",
     "build_model",
-    "consolidate",
     "critical_timestep",
-    "drive_grad_u",
-    "has_real_logarithm",
+    "homogenize",
     "load_rve",
-    "path_increment",
-    "prepare_packing",
-    "random_gas",
     "save_rve",
-    "servo_steps",
-    "summarize_biaxial",
+    "void_ratio",
 ]

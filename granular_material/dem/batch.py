@@ -15,10 +15,10 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from granular_material.dem.homogenization import Homogenized, homogenize
 from granular_material.dem.model import Model, State, build_model, resolve_device, state_from_data
 from granular_material.dem.rve_file import RVEData
 from granular_material.dem.solver import DEMInstabilityError, Solver
-from granular_material.homogenization import Homogenized, homogenize
 
 __all__ = ["BatchSnapshot", "DEMBatch", "Shard"]
 

@@ -28,6 +28,7 @@ __all__ = ["FORMAT_VERSION", "RVEData", "RVEFileError", "RVEMeta", "load_rve", "
 
 FORMAT_VERSION = 1
 _CORE_KEYS = ("radius", "position", "cell", "velocity", "angular_velocity", "meta")
+_BATCH_ARRAYS = ("radius", "position", "cell", "velocity", "angular_velocity")
 
 
 class RVEFileError(ValueError):
@@ -160,20 +161,31 @@ class RVEData:
             self.angular_velocity[sl], self.meta,
         )
 
+    def _arrays(self) -> dict[str, np.ndarray]:
+        """Every per-RVE array of the core format (batch axis first)."""
+        return {name: getattr(self, name) for name in _BATCH_ARRAYS}
+
+    def take(self, rves: slice | np.ndarray | list[int]) -> RVEData:
+        """The RVEs ``rves`` (a slice or indices) as a batch, contact history included."""
+        return replace(self, **{k: v[rves] for k, v in self._arrays().items()},
+                       extra={k: v[rves] for k, v in self.extra.items()})
+
     def replicate(self, n_rve: int) -> RVEData:
         """A batch of ``n_rve`` copies of RVE 0 (contact history included)."""
         if n_rve < 1:
             raise ValueError(f"n_rve must be >= 1, got {n_rve}")
+        return self.take(np.zeros(n_rve, dtype=np.int64))
 
-        def tile(a: np.ndarray) -> np.ndarray:
-            return np.repeat(a[:1], n_rve, axis=0)
-
-        extra = {k: tile(v) for k, v in self.extra.items()}
-        return replace(
-            self, radius=tile(self.radius), position=tile(self.position), cell=tile(self.cell),
-            velocity=tile(self.velocity), angular_velocity=tile(self.angular_velocity),
-            extra=extra,
-        )
+    @staticmethod
+    def concatenate(parts: list[RVEData]) -> RVEData:
+        """One batch of the RVEs of ``parts`` in order; the meta (and the set of extra
+        arrays) of the first part is kept."""
+        if not parts:
+            raise ValueError("concatenate needs at least one RVEData")
+        first = parts[0]
+        arrays = {k: np.concatenate([getattr(p, k) for p in parts]) for k in _BATCH_ARRAYS}
+        extra = {k: np.concatenate([p.extra[k] for p in parts]) for k in first.extra}
+        return replace(first, **arrays, extra=extra)
 
     def validate(self) -> None:
         """Raise ``RVEFileError`` naming the first array or value that is not a valid RVE."""

@@ -256,7 +256,8 @@ def run_single_element(args: argparse.Namespace) -> int:
 
 def _pure_dem(material: Material, args: argparse.Namespace, progress: bool) -> pd.DataFrame:
     """Drained biaxial test of RVE 0 of the DEM material (its committed state)."""
-    from granular_material.dem import DEMBatch, biaxial_test
+    from granular_material.dem import DEMBatch
+    from granular_material.procedures import biaxial_test
 
     batch = DEMBatch(material.batch.to_data().replicate(1), device=args.device, shards=1)
     curve = biaxial_test(batch, axial_strain=args.axial_strain, confining=args.confining,

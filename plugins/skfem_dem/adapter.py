@@ -15,14 +15,8 @@ from typing import Protocol
 
 import numpy as np
 
-from granular_material.dem import (
-    DEMBatch,
-    DEMInstabilityError,
-    drive_grad_u,
-    has_real_logarithm,
-    load_rve,
-    save_rve,
-)
+from granular_material.dem import DEMBatch, DEMInstabilityError, load_rve, save_rve
+from granular_material.procedures import drive_grad_u, has_real_logarithm
 
 __all__ = ["TANGENTS", "DEMBackend", "DEMEvaluation", "InProcessBackend"]
 

@@ -16,8 +16,9 @@ from pathlib import Path
 import numpy as np
 from granular_material_skfem.adapter import TANGENTS, InProcessBackend
 
-from granular_material.dem import DEMBatch, RVEData, load_rve, prepare_packing
+from granular_material.dem import DEMBatch, RVEData, load_rve
 from granular_material.fem.material import MaterialResponse, PointStatus
+from granular_material.procedures import prepare_packing
 
 __all__ = ["DEMMaterial", "DEMMaterialParameters"]
 

@@ -7,9 +7,8 @@ from dataclasses import replace
 
 import numpy as np
 
-from granular_material.dem.batch import DEMBatch
-from granular_material.dem.protocols import consolidate
-from granular_material.dem.rve_file import RVEData, RVEMeta
+from granular_material.dem import DEMBatch, RVEData, RVEMeta
+from granular_material.procedures.servo import consolidate
 
 __all__ = ["prepare_packing", "random_gas"]
 
