@@ -12,13 +12,13 @@ from granular_material.dem import DEMBatch
 
 def _force_on_b(batch: DEMBatch) -> np.ndarray:
     """Contact force on disc 1 [N] from one step's velocity change, damping off."""
-    v0 = batch.shards[0].state.vel.numpy().copy()
+    v0 = batch.shards[0].state.velocity.numpy().copy()
     batch.set_affine(np.zeros((1, 2, 2)))
     batch.run(1)
-    dv = batch.shards[0].state.vel.numpy() - v0
+    dv = batch.shards[0].state.velocity.numpy() - v0
     model = batch.shards[0].model
     meta = model.meta
-    m = meta.density * meta.thickness * math.pi * model.radius_host[0] ** 2
+    m = meta.density * meta.thickness * math.pi * model.radius[0] ** 2
     return dv[1] * m[1] / batch.dt[0]
 
 
@@ -61,7 +61,7 @@ def test_stick_then_slip_follows_coulomb(two_discs):
     history = []
     for _ in range(12):
         batch.run(1)
-        history.append(batch.shards[0].state.shear.numpy()[0])
+        history.append(batch.shards[0].state.contact_shear_force.numpy()[0])
     history = np.array(history)
     stick = np.arange(1, 13) * kt * v_t * dt
     n_stick = int(np.sum(stick < cap * 0.98))
@@ -128,7 +128,7 @@ def test_binned_detection_finds_every_contact_in_sheared_cells(small_rve_path, s
     cell[0, 1] = shear * cell[1, 1]
     batch.set_cell(cell[None])
     h = batch.homogenize()
-    frac = batch.shards[0].state.frac.numpy()
+    frac = batch.shards[0].state.fractional_position.numpy()
     expected = _brute_force_contacts(data.radius[0], frac, cell)
     assert expected > 50
     assert h.n_contacts[0] == expected

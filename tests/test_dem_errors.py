@@ -76,4 +76,4 @@ def test_blow_up_names_the_rve(two_discs):
     with pytest.raises(DEMInstabilityError, match=r"RVE\(s\) 1 ") as info:
         batch.run(50, check_every=10)
     assert info.value.rve == [1]
-    assert all(np.isfinite(s.state.frac.numpy()).all() for s in batch.shards)
+    assert all(np.isfinite(s.state.fractional_position.numpy()).all() for s in batch.shards)

@@ -11,7 +11,8 @@ Typical use (with the procedures of :mod:`granular_material.procedures`)::
 
 from granular_material.dem.batch import DEMBatch
 from granular_material.dem.homogenization import Homogenized, homogenize, void_ratio
-from granular_material.dem.model import Model, State, build_model, critical_timestep
+from granular_material.dem.loading import LoadingControl, ServoSettings
+from granular_material.dem.model import Model, build_model, critical_timestep, resolve_device
 from granular_material.dem.rve_file import (
     FORMAT_VERSION,
     RVEData,
@@ -26,6 +27,7 @@ from granular_material.dem.solver import (
     DEMInstabilityError,
     Solver,
 )
+from granular_material.dem.state import State
 
 __all__ = [
     "CONTROL_STRAIN",
@@ -34,16 +36,19 @@ __all__ = [
     "DEMBatch",
     "DEMInstabilityError",
     "Homogenized",
+    "LoadingControl",
     "Model",
     "RVEData",
     "RVEFileError",
     "RVEMeta",
+    "ServoSettings",
     "Solver",
     "State",
     "build_model",
     "critical_timestep",
     "homogenize",
     "load_rve",
+    "resolve_device",
     "save_rve",
     "void_ratio",
 ]

@@ -1,9 +1,10 @@
 """DEMBatch: the RVEs, their state and solvers together — the object users and the FEM hold.
 
 On the CPU a warp kernel runs on one thread, so the batch is split into shards (contiguous
-groups of RVEs, each with its own Model, State, Solver and copy of the kernel module)
-stepped by one thread each; the launches release the GIL, so two shards use two cores. RVEs
-are independent, so sharding never changes a result. On CUDA one shard holds the batch.
+groups of RVEs, each with its own Model, State, LoadingControl, Solver and copy of the kernel
+module) stepped by one thread each; the launches release the GIL, so two shards use two
+cores. RVEs are independent, so sharding never changes a result. On CUDA one shard holds the
+batch.
 """
 
 from __future__ import annotations
@@ -11,14 +12,16 @@ from __future__ import annotations
 import os
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
-from granular_material.dem.homogenization import Homogenized, homogenize
-from granular_material.dem.model import Model, State, build_model, resolve_device, state_from_data
+from granular_material.dem.homogenization import Homogenized, MeasureBuffers, homogenize
+from granular_material.dem.loading import LoadingControl, ServoSettings
+from granular_material.dem.model import Model, build_model, resolve_device
 from granular_material.dem.rve_file import RVEData
 from granular_material.dem.solver import DEMInstabilityError, Solver
+from granular_material.dem.state import State, state_from_data, state_to_data
 
 __all__ = ["BatchSnapshot", "DEMBatch", "Shard"]
 
@@ -30,12 +33,20 @@ class Shard:
     first: int
     model: Model
     state: State
+    loading: LoadingControl
     solver: Solver
+    measures: MeasureBuffers
 
     @property
     def rves(self) -> slice:
         """The shard's RVEs as a slice of the batch."""
         return slice(self.first, self.first + self.model.n_rve)
+
+    def run(self, steps: int, check_every: int = 200,
+            callback: Callable[[int], bool | None] | None = None) -> int:
+        """Advance the shard's state by up to ``steps`` steps (see :meth:`Solver.run`)."""
+        return self.solver.run(self.model, self.state, self.loading, steps, check_every,
+                               callback)
 
 
 @dataclass(frozen=True, eq=False)
@@ -43,14 +54,6 @@ class BatchSnapshot:
     """Device copies of every shard's state (what ``DEMBatch.snapshot`` returns)."""
 
     states: tuple[State, ...]
-
-
-def _slice_data(data: RVEData, rves: slice) -> RVEData:
-    return replace(
-        data, radius=data.radius[rves], position=data.position[rves], cell=data.cell[rves],
-        velocity=data.velocity[rves], angular_velocity=data.angular_velocity[rves],
-        extra={k: v[rves] for k, v in data.extra.items()},
-    )
 
 
 class DEMBatch:
@@ -82,14 +85,13 @@ class DEMBatch:
         shards = min(shards, data.n_rve)
         self.shards: list[Shard] = []
         for replica, part in enumerate(np.array_split(np.arange(data.n_rve), shards)):
-            rves = slice(int(part[0]), int(part[-1]) + 1)
-            model = build_model(_slice_data(data, rves), device=device, dtype=dtype,
-                                timestep=timestep, replica=replica)
-            state = state_from_data(model, _slice_data(data, rves))
-            solver = Solver(model)
-            if state.force_rebuild.numpy().any():
-                solver.refresh_neighbors(state)
-            self.shards.append(Shard(rves.start, model, state, solver))
+            part_data = data.take(slice(int(part[0]), int(part[-1]) + 1))
+            model = build_model(part_data, device=device, dtype=dtype, timestep=timestep)
+            shard = Shard(int(part[0]), model, state_from_data(model, part_data),
+                          LoadingControl(model), Solver(model, replica), MeasureBuffers(model))
+            if shard.state.force_rebuild.numpy().any():
+                shard.solver.refresh_lists(shard.model, shard.state, shard.loading)
+            self.shards.append(shard)
         self._pool = ThreadPoolExecutor(len(self.shards)) if len(self.shards) > 1 else None
 
     # -- shape and parameters -------------------------------------------------------------
@@ -109,34 +111,41 @@ class DEMBatch:
         return self.shards[0].model.device
 
     @property
+    def dtype(self) -> str:
+        """The float type of the device arrays ("float64" or "float32")."""
+        return self.shards[0].model.dtype
+
+    @property
     def dt(self) -> np.ndarray:
         """Time step of every RVE [s], shape (B,), float64."""
-        return np.concatenate([s.model.dt for s in self.shards])
+        return np.concatenate([s.model.timestep for s in self.shards])
 
     def set_friction(self, friction_angle: float) -> None:
-        """Set the interparticle friction angle [rad] of every RVE (tangential history kept)."""
+        """Set the interparticle friction angle [rad] of every RVE; the tangential history
+        and the loading are kept."""
         for shard in self.shards:
             shard.model = shard.model.with_friction(friction_angle)
-            shard.solver = Solver(shard.model)
 
     # -- loading and stepping -------------------------------------------------------------
     def set_affine(self, vel_grad: np.ndarray) -> None:
         """Prescribe each RVE's velocity gradient L [1/s], shape (B, 2, 2)."""
         for shard in self.shards:
-            shard.solver.set_affine(np.asarray(vel_grad)[shard.rves])
+            shard.loading.set_affine(np.asarray(vel_grad)[shard.rves])
 
     def set_servo(
         self, control: np.ndarray, target: np.ndarray, gain: float, max_strain: float
     ) -> None:
-        """Mixed stress/strain control of xx, yy per RVE (see :meth:`Solver.set_servo`)."""
+        """Mixed stress/strain control of xx, yy per RVE (see
+        :meth:`LoadingControl.set_servo`): ``control`` and ``target`` of shape (B, 2)."""
+        settings = ServoSettings(float(gain), float(max_strain))
         for shard in self.shards:
-            shard.solver.set_servo(np.asarray(control)[shard.rves],
-                                   np.asarray(target)[shard.rves], gain, max_strain)
+            shard.loading.set_servo(np.asarray(control)[shard.rves],
+                                    np.asarray(target)[shard.rves], settings)
 
     def set_active(self, active: np.ndarray) -> None:
         """Which RVEs step (True) and which stay frozen, shape (B,)."""
         for shard in self.shards:
-            shard.solver.set_active(np.asarray(active)[shard.rves])
+            shard.loading.set_active(np.asarray(active)[shard.rves])
 
     def run(
         self,
@@ -162,15 +171,12 @@ class DEMBatch:
         return done
 
     def _run_shards(self, steps: int) -> None:
-        def one(shard: Shard) -> None:
-            shard.solver.run(shard.state, steps, check_every=steps)
-
         for shard in self.shards:  # record launches and load modules here, not in threads
-            shard.solver.prepare(shard.state)
+            shard.solver.prepare(shard.model, shard.state, shard.loading)
         if self._pool is None:
-            results = [self._guard(one, self.shards[0])]
+            results = [self._guard(self.shards[0], steps)]
         else:
-            results = list(self._pool.map(lambda s: self._guard(one, s), self.shards))
+            results = list(self._pool.map(lambda s: self._guard(s, steps), self.shards))
         failures = [r for r in results if r is not None]
         if failures:
             rves = sorted(i for f in failures for i in f.rve)
@@ -178,9 +184,9 @@ class DEMBatch:
             raise DEMInstabilityError(rves, reasons)
 
     @staticmethod
-    def _guard(run: Callable[[Shard], None], shard: Shard) -> DEMInstabilityError | None:
+    def _guard(shard: Shard, steps: int) -> DEMInstabilityError | None:
         try:
-            run(shard)
+            shard.run(steps, check_every=steps)
         except DEMInstabilityError as exc:
             return DEMInstabilityError([shard.first + i for i in exc.rve], exc.reasons)
         return None
@@ -206,47 +212,14 @@ class DEMBatch:
         for shard in self.shards:
             shard.state.cell.assign(np.asarray(cell, dtype=np.float64)[shard.rves])
             if refresh:
-                shard.solver.refresh_neighbors(shard.state)
+                shard.solver.refresh_lists(shard.model, shard.state, shard.loading)
 
     def homogenize(self) -> Homogenized:
         """Stress, tangent, void ratio, coordination, fabric of every RVE."""
-        return Homogenized.concatenate([homogenize(s.model, s.state) for s in self.shards])
+        return Homogenized.concatenate([
+            homogenize(s.model, s.state, s.measures, s.solver.kernels) for s in self.shards
+        ])
 
     def to_data(self) -> RVEData:
         """The batch as an :class:`RVEData` (host copy), contact history included."""
-        parts = [_shard_data(s) for s in self.shards]
-        first = parts[0]
-        return replace(
-            first,
-            radius=np.concatenate([p.radius for p in parts]),
-            position=np.concatenate([p.position for p in parts]),
-            cell=np.concatenate([p.cell for p in parts]),
-            velocity=np.concatenate([p.velocity for p in parts]),
-            angular_velocity=np.concatenate([p.angular_velocity for p in parts]),
-            extra={k: np.concatenate([p.extra[k] for p in parts]) for k in first.extra},
-        )
-
-
-def _shard_data(shard: Shard) -> RVEData:
-    m, state = shard.model, shard.state
-    b, n, k = m.n_rve, m.n_disc, m.capacity
-    cell = state.cell.numpy().astype(np.float64)
-    frac = state.frac.numpy().astype(np.float64).reshape(b, n, 2)
-    extra = {
-        "contact_partner": state.nbr.numpy().reshape(b, n, k),
-        "contact_count": state.nbr_count.numpy().reshape(b, n),
-        "contact_shear_force": state.shear.numpy().astype(np.float64).reshape(b, n, k),
-        "fractional_position": frac,
-        "verlet_displacement": state.disp.numpy().astype(np.float64).reshape(b, n, 2),
-        "cell_at_list_build": state.cell_ref.numpy().astype(np.float64),
-    }
-    meta = replace(m.meta, timestep=float(m.dt[0]) if m.explicit_timestep else None)
-    return RVEData(
-        radius=m.radius_host.copy(),
-        position=np.einsum("bij,bnj->bni", cell, frac),
-        cell=cell,
-        velocity=state.vel.numpy().astype(np.float64).reshape(b, n, 2),
-        angular_velocity=state.ang_vel.numpy().astype(np.float64).reshape(b, n),
-        meta=meta,
-        extra=extra,
-    )
+        return RVEData.concatenate([state_to_data(s.model, s.state) for s in self.shards])

@@ -10,9 +10,11 @@ from dataclasses import dataclass, fields
 import numpy as np
 import warp as wp
 
-from granular_material.dem.model import Model, State
+from granular_material.dem.kernels import KernelSet, kernels_for, launch
+from granular_material.dem.model import Model
+from granular_material.dem.state import State
 
-__all__ = ["Homogenized", "homogenize", "void_ratio"]
+__all__ = ["Homogenized", "MeasureBuffers", "homogenize", "void_ratio"]
 
 
 @dataclass(frozen=True)
@@ -60,8 +62,35 @@ def void_ratio(radius: np.ndarray, cell: np.ndarray) -> np.ndarray:
     return np.linalg.det(cell) / solid - 1.0
 
 
-def homogenize(model: Model, state: State) -> Homogenized:
+class MeasureBuffers:
+    """Device work arrays of :func:`homogenize` for one model's sizes, allocated once."""
+
+    def __init__(self, model: Model) -> None:
+        ft = model.float_type
+        dev = model.device
+        vec2 = wp.types.vector(2, ft)
+        mat22 = wp.types.matrix((2, 2), ft)
+        mat44 = wp.types.matrix((4, 4), ft)
+        b, n = model.n_rve, model.n_disc
+        self.shape = (model.n_rve, model.n_disc, model.dtype, model.device)
+        self.part_stress = wp.zeros(b * n, dtype=mat22, device=dev)
+        self.part_tangent = wp.zeros(b * n, dtype=mat44, device=dev)
+        self.part_fabric = wp.zeros(b * n, dtype=mat22, device=dev)
+        self.part_counts = wp.zeros(b * n, dtype=vec2, device=dev)
+        self.part_forces = wp.zeros(b * n, dtype=vec2, device=dev)
+        self.stress = wp.zeros(b, dtype=mat22, device=dev)
+        self.tangent = wp.zeros(b, dtype=mat44, device=dev)
+        self.fabric = wp.zeros(b, dtype=mat22, device=dev)
+        self.counts = wp.zeros(b, dtype=vec2, device=dev)
+        self.forces = wp.zeros(b, dtype=vec2, device=dev)
+
+
+def homogenize(model: Model, state: State, buffers: MeasureBuffers | None = None,
+               kernels: KernelSet | None = None) -> Homogenized:
     """Love stress and Kruyt–Rothenburg tangent of every RVE in ``state``.
+
+    ``buffers`` (reused between calls) and ``kernels`` (the replica to launch) are made
+    when not given.
 
     Notes:
         Love (1927) / Christoffersen et al. (1981), Wu et al. (2025) Eq. 5, tension positive:
@@ -70,37 +99,31 @@ def homogenize(model: Model, state: State) -> Homogenized:
         ``C_ijkl = (1/V) Σ_c (kn n_i d_j n_k d_l + kt t_i d_j t_k d_l)``, t = perp(n), all
         contacts (sliding ones included, as Wu et al. and Guo & Zhao do).
     """
-    ks = model.kernels
+    ks = kernels or kernels_for(model.dtype)
     dev = model.device
     b, n, k = model.n_rve, model.n_disc, model.capacity
-    p_stress = wp.zeros(b * n, dtype=ks.mat22, device=dev)
-    p_tangent = wp.zeros(b * n, dtype=ks.mat44, device=dev)
-    p_fabric = wp.zeros(b * n, dtype=ks.mat22, device=dev)
-    p_counts = wp.zeros(b * n, dtype=ks.vec2, device=dev)
-    p_forces = wp.zeros(b * n, dtype=ks.vec2, device=dev)
-    wp.launch(
-        ks.contact_measures, dim=b * n, device=dev,
-        inputs=[n, k, *model.law_args, model.friction, state.cell, state.frac, model.radius,
-                state.nbr, state.nbr_count, state.shear, p_stress, p_tangent, p_fabric,
-                p_counts, p_forces],
-    )
-    stress = wp.zeros(b, dtype=ks.mat22, device=dev)
-    tangent = wp.zeros(b, dtype=ks.mat44, device=dev)
-    fabric = wp.zeros(b, dtype=ks.mat22, device=dev)
-    counts = wp.zeros(b, dtype=ks.vec2, device=dev)
-    forces = wp.zeros(b, dtype=ks.vec2, device=dev)
-    wp.launch(
-        ks.reduce_measures, dim=b, device=dev,
-        inputs=[n, p_stress, p_tangent, p_fabric, p_counts, p_forces, stress, tangent, fabric,
-                counts, forces],
-    )
+    buf = buffers if buffers is not None else MeasureBuffers(model)
+    if buf.shape != (model.n_rve, model.n_disc, model.dtype, model.device):
+        raise ValueError(f"measure buffers are for {buf.shape}, not this model")
+    launch(ks.contact_measures, b * n, dev, n_disc=n, capacity=k, law=model.law,
+           friction=model.constants.friction, cell=state.cell,
+           fractional_position=state.fractional_position, radius=model.constants.radius,
+           contact_partner=state.contact_partner, contact_count=state.contact_count,
+           contact_mirror_slot=state.contact_mirror_slot,
+           contact_shear_force=state.contact_shear_force, part_stress=buf.part_stress,
+           part_tangent=buf.part_tangent, part_fabric=buf.part_fabric,
+           part_counts=buf.part_counts, part_forces=buf.part_forces)
+    launch(ks.reduce_measures, b, dev, n_disc=n, part_stress=buf.part_stress,
+           part_tangent=buf.part_tangent, part_fabric=buf.part_fabric,
+           part_counts=buf.part_counts, part_forces=buf.part_forces, stress=buf.stress,
+           tangent=buf.tangent, fabric=buf.fabric, counts=buf.counts, forces=buf.forces)
     cell = state.cell.numpy().astype(np.float64)
     volume = np.linalg.det(cell) * model.meta.thickness
-    counts_h = counts.numpy().astype(np.float64)
-    forces_h = forces.numpy().astype(np.float64)
+    counts_h = buf.counts.numpy().astype(np.float64)
+    forces_h = buf.forces.numpy().astype(np.float64)
     n_c = counts_h[:, 0]
     with np.errstate(divide="ignore", invalid="ignore"):
-        fab = np.where(n_c[:, None, None] > 0, fabric.numpy() / n_c[:, None, None], 0.0)
+        fab = np.where(n_c[:, None, None] > 0, buf.fabric.numpy() / n_c[:, None, None], 0.0)
         sliding = np.where(n_c > 0, counts_h[:, 1] / n_c, 0.0)
         # mean net force per disc / mean force per contact
         unbalanced = np.where(
@@ -108,10 +131,10 @@ def homogenize(model: Model, state: State) -> Homogenized:
             np.inf,
         )
     return Homogenized(
-        stress=stress.numpy().astype(np.float64) / volume[:, None, None],
-        tangent=tangent.numpy().astype(np.float64).reshape(b, 2, 2, 2, 2)
+        stress=buf.stress.numpy().astype(np.float64) / volume[:, None, None],
+        tangent=buf.tangent.numpy().astype(np.float64).reshape(b, 2, 2, 2, 2)
         / volume[:, None, None, None, None],
-        void_ratio=void_ratio(model.radius_host, cell),
+        void_ratio=void_ratio(model.radius, cell),
         coordination=2.0 * n_c / n,
         fabric=fab,
         unbalanced_force=unbalanced,

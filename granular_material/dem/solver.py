@@ -3,25 +3,29 @@
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 import warp as wp
 
 from granular_material.dem.kernels import (
+    CONTROL_STRAIN,
+    CONTROL_STRESS,
     STATUS_BLOWUP,
     STATUS_CELL_TOO_SMALL,
     STATUS_COINCIDENT,
     STATUS_OVERFLOW,
+    kernels_for,
+    launch,
 )
-from granular_material.dem.model import Model, State
+from granular_material.dem.loading import LoadingControl
+from granular_material.dem.model import Model
+from granular_material.dem.state import State
 
 __all__ = ["BIN_CAPACITY", "CONTROL_STRAIN", "CONTROL_STRESS", "DEMInstabilityError", "Solver"]
 
 BIN_CAPACITY = 32  #: discs a contact-detection bin can hold (an overflow is an error)
 GRAPH_STEPS = 50  #: steps captured in one CUDA graph and replayed
-
-CONTROL_STRAIN = 0  #: a diagonal component driven at a prescribed strain per step
-CONTROL_STRESS = 1  #: a diagonal component servo-controlled to a target stress
 
 _MESSAGES = {
     STATUS_BLOWUP: "a velocity became non-finite or a disc moved more than r/4 in one step "
@@ -43,139 +47,168 @@ class DEMInstabilityError(RuntimeError):
         super().__init__(f"DEM state of RVE(s) {shown} is invalid: " + "; ".join(reasons))
 
 
-class Solver:
-    """Advances a :class:`State` of a :class:`Model`; holds the per-step work arrays.
+def _record(kernel: wp.Kernel, dim: int, device: str, **arguments: Any) -> wp.Launch:
+    return launch(kernel, dim, device, record=True, **arguments)
 
-    Each step: rebuild stale neighbour lists (Verlet skin; candidates from the 3 × 3 bins of
-    a per-RVE grid in fractional coordinates, or all discs in a cell under 3 bins across),
-    contact forces, optionally the stress servo, leap-frog integration with local damping,
-    cell update ``H ← E·H``.
-    The loading is set per RVE through :meth:`set_affine` (prescribed velocity gradient) or
-    :meth:`set_servo` (mixed stress/strain control of the diagonal components).
+
+class Solver:
+    """Advances a :class:`State` of a :class:`Model` under a :class:`LoadingControl`.
+
+    Each step: contact forces of the pairs each disc owns, their gather with local damping
+    and leap-frog integration, optionally the stress servo, the cell update ``H ← E·H`` and
+    the test of the Verlet skin; where the skin may have closed, the next step first rebuilds
+    that RVE's lists (candidates from the 3 × 3 bins of a per-RVE grid in fractional
+    coordinates, or all discs in a cell under 3 bins across). On the CPU, where launches are
+    synchronous, the rebuild launches are skipped from the host when no RVE needs them.
+
+    Notes:
+        The lists stay valid while ``2·max|Δx_fluct| + |H H_build⁻¹ − I|·cutoff ≤ skin``.
+
+    Args:
+        model: gives the sizes and float type of the work arrays; any model of the same
+            sizes (e.g. :meth:`Model.with_friction`) may be stepped.
+        replica: the kernel module to launch (one per CPU shard, see ``kernels_for``).
     """
 
-    def __init__(self, model: Model) -> None:
-        self.model = model
-        ks = model.kernels
+    def __init__(self, model: Model, replica: int = 0) -> None:
+        self.kernels = kernels_for(model.dtype, replica)
+        ft = model.float_type
         dev = model.device
         b, n, k = model.n_rve, model.n_disc, model.capacity
-        self.active = wp.ones(b, dtype=wp.int32, device=dev)
+        vec2 = wp.types.vector(2, ft)
+        self.device = dev
         self.rebuild = wp.zeros(b, dtype=wp.int32, device=dev)
-        self.nbr_new = wp.zeros(b * n * k, dtype=wp.int32, device=dev)
-        self.nbr_count_new = wp.zeros(b * n, dtype=wp.int32, device=dev)
-        self.shear_new = wp.zeros(b * n * k, dtype=ks.float_type, device=dev)
+        self.partner_new = wp.zeros(b * n * k, dtype=wp.int32, device=dev)
+        self.count_new = wp.zeros(b * n, dtype=wp.int32, device=dev)
+        self.shear_new = wp.zeros(b * n * k, dtype=ft, device=dev)
         self.bin_count = wp.zeros(b * model.max_bins**2, dtype=wp.int32, device=dev)
         self.bin_items = wp.zeros(b * model.max_bins**2 * BIN_CAPACITY, dtype=wp.int32,
                                   device=dev)
-        self.force = wp.zeros(b * n, dtype=ks.vec2, device=dev)
-        self.torque = wp.zeros(b * n, dtype=ks.float_type, device=dev)
-        self.part_stress = wp.zeros(b * n, dtype=ks.mat22, device=dev)
-        self.part_stiff = wp.zeros(b * n, dtype=ks.vec2, device=dev)
-        self.vel_grad = wp.zeros(b, dtype=ks.mat22, device=dev)
-        self.step_map = wp.array(np.repeat(np.eye(2)[None], b, 0), dtype=ks.mat22, device=dev)
-        self.control = wp.zeros(2 * b, dtype=wp.int32, device=dev)
-        self.target = wp.zeros(b, dtype=ks.vec2, device=dev)
-        self._servo_on = False
-        self._servo_gain = 0.0
-        self._servo_max = 0.0
+        self.pair = wp.zeros(b * n * k, dtype=wp.types.vector(4, ft), device=dev)
+        self.pair_branch = wp.zeros(b * n * k, dtype=vec2, device=dev)
+        self.part_stress = wp.zeros(b * n, dtype=wp.types.matrix((2, 2), ft), device=dev)
+        self.part_stiffness = wp.zeros(b * n, dtype=vec2, device=dev)
+        self._host_rebuild = None if wp.get_device(dev).is_cuda else self.rebuild.numpy()
         self._graphs: dict[tuple, wp.Graph] = {}
-        self._cmds: list = []
-        self._cmds_key: tuple | None = None
+        # keyed by the ids of (model, state, loading); each entry holds those objects, so
+        # that an id is never reused by another object while its launches are cached
+        self._recorded: dict[tuple, tuple[tuple, tuple[list, list, list]]] = {}
 
-    # -- loading --------------------------------------------------------------------------
-    def set_active(self, active: np.ndarray) -> None:
-        """Which RVEs step (1) and which stay frozen (0), shape (B,)."""
-        self.active.assign(np.asarray(active, dtype=np.int32))
+    # -- recorded launches ----------------------------------------------------------------
+    def _check_launch(self, model: Model, state: State, loading: LoadingControl) -> wp.Launch:
+        return _record(
+            self.kernels.check_lists, model.n_rve, self.device, n_disc=model.n_disc,
+            skin=model.scalar(model.skin), cutoff=model.scalar(model.cutoff),
+            active=loading.active, cell=state.cell,
+            cell_at_list_build=state.cell_at_list_build,
+            verlet_displacement=state.verlet_displacement, force_rebuild=state.force_rebuild,
+            rebuild=self.rebuild, status=state.status,
+        )
 
-    def set_affine(self, vel_grad: np.ndarray) -> None:
-        """Prescribe the velocity gradient L [1/s] of every RVE, shape (B, 2, 2).
+    def _build_launches(self, model: Model, state: State) -> list[wp.Launch]:
+        ks, dev = self.kernels, self.device
+        b, n, k = model.n_rve, model.n_disc, model.capacity
+        cutoff = model.scalar(model.cutoff)
+        return [
+            _record(ks.begin_build, b, dev, max_bins=model.max_bins, rebuild=self.rebuild,
+                    cell=state.cell, cell_at_list_build=state.cell_at_list_build,
+                    force_rebuild=state.force_rebuild, bin_count=self.bin_count),
+            _record(ks.fill_bins, b * n, dev, n_disc=n, max_bins=model.max_bins,
+                    bin_capacity=BIN_CAPACITY, cutoff=cutoff, rebuild=self.rebuild,
+                    cell=state.cell, fractional_position=state.fractional_position,
+                    bin_count=self.bin_count, bin_items=self.bin_items, status=state.status),
+            _record(ks.build_lists, b * n, dev, n_disc=n, capacity=k,
+                    max_bins=model.max_bins, bin_capacity=BIN_CAPACITY,
+                    skin=model.scalar(model.skin), cutoff=cutoff, rebuild=self.rebuild,
+                    cell=state.cell, fractional_position=state.fractional_position,
+                    radius=model.constants.radius, bin_count=self.bin_count,
+                    bin_items=self.bin_items, contact_partner=state.contact_partner,
+                    contact_count=state.contact_count,
+                    contact_shear_force=state.contact_shear_force,
+                    partner_new=self.partner_new, count_new=self.count_new,
+                    shear_new=self.shear_new, status=state.status),
+            _record(ks.commit_lists, b * n, dev, n_disc=n, capacity=k, rebuild=self.rebuild,
+                    partner_new=self.partner_new, count_new=self.count_new,
+                    shear_new=self.shear_new, contact_partner=state.contact_partner,
+                    contact_count=state.contact_count,
+                    contact_shear_force=state.contact_shear_force,
+                    contact_mirror_slot=state.contact_mirror_slot,
+                    verlet_displacement=state.verlet_displacement),
+        ]
 
-        The cell advances exactly as ``H ← expm(L·dt)·H`` each step.
-        """
-        from scipy.linalg import expm
+    def _step_launches(self, model: Model, state: State,
+                       loading: LoadingControl) -> list[wp.Launch]:
+        ks, dev = self.kernels, self.device
+        b, n, k = model.n_rve, model.n_disc, model.capacity
+        c = model.constants
+        servo = loading.servo
+        launches = [
+            _record(ks.contact_forces, b * n, dev, n_disc=n, capacity=k, law=model.law,
+                    timestep=c.timestep, active=loading.active, friction=c.friction,
+                    cell=state.cell, velocity_gradient=loading.velocity_gradient,
+                    fractional_position=state.fractional_position, velocity=state.velocity,
+                    angular_velocity=state.angular_velocity, radius=c.radius,
+                    contact_partner=state.contact_partner, contact_count=state.contact_count,
+                    contact_mirror_slot=state.contact_mirror_slot,
+                    contact_shear_force=state.contact_shear_force,
+                    with_stress=int(servo is not None), pair=self.pair,
+                    pair_branch=self.pair_branch, status=state.status),
+            _record(ks.integrate, b * n, dev, n_disc=n, capacity=k, law=model.law,
+                    damping=model.scalar(model.meta.damping),
+                    with_stress=int(servo is not None), timestep=c.timestep,
+                    active=loading.active, cell=state.cell, radius=c.radius,
+                    inv_mass=c.inv_mass, inv_inertia=c.inv_inertia,
+                    contact_partner=state.contact_partner, contact_count=state.contact_count,
+                    pair=self.pair, pair_branch=self.pair_branch,
+                    fractional_position=state.fractional_position, velocity=state.velocity,
+                    angular_velocity=state.angular_velocity,
+                    verlet_displacement=state.verlet_displacement, part_stress=self.part_stress,
+                    part_stiffness=self.part_stiffness, status=state.status),
+        ]
+        if servo is not None:
+            launches.append(_record(
+                ks.servo, b, dev, n_disc=n, thickness=model.scalar(model.meta.thickness),
+                gain=model.scalar(servo.gain), max_strain=model.scalar(servo.max_strain),
+                timestep=c.timestep, active=loading.active, cell=state.cell,
+                part_stress=self.part_stress, part_stiffness=self.part_stiffness,
+                control=loading.control, target=loading.target,
+                velocity_gradient=loading.velocity_gradient, step_map=loading.step_map,
+            ))
+        launches.append(_record(
+            ks.advance_cell_and_check, b, dev, n_disc=n, skin=model.scalar(model.skin),
+            cutoff=model.scalar(model.cutoff), active=loading.active,
+            step_map=loading.step_map, cell=state.cell,
+            cell_at_list_build=state.cell_at_list_build,
+            verlet_displacement=state.verlet_displacement, force_rebuild=state.force_rebuild,
+            rebuild=self.rebuild, status=state.status,
+        ))
+        return launches
 
-        lg = np.asarray(vel_grad, dtype=np.float64)
-        maps = np.stack([expm(m * dt) for m, dt in zip(lg, self.model.dt, strict=True)])
-        self.vel_grad.assign(lg)
-        self.step_map.assign(maps)
-        self._servo_on = False
+    def _key(self, model: Model, state: State, loading: LoadingControl) -> tuple:
+        return (id(model), id(state), id(loading), loading.servo)
 
-    def set_servo(
-        self, control: np.ndarray, target: np.ndarray, gain: float, max_strain: float
-    ) -> None:
-        """Mixed control of the diagonal components xx, yy of every RVE.
-
-        Args:
-            control: CONTROL_STRAIN or CONTROL_STRESS per component, shape (B, 2), int.
-            target: strain increment per step [-] (strain control) or stress [Pa, tension
-                positive] (stress control), shape (B, 2).
-            gain: fraction of the stress error corrected per step, through the contact
-                stiffness estimate Σ kn (n_k d_k)² / V [Pa].
-            max_strain: cap on the servo's strain increment per step [-].
-        """
-        if not 0 < gain <= 1:
-            raise ValueError(f"servo gain must lie in (0, 1], got {gain!r}")
-        if not max_strain > 0:
-            raise ValueError(f"max_strain must be positive, got {max_strain!r}")
-        self.control.assign(np.asarray(control, dtype=np.int32).reshape(-1))
-        self.target.assign(np.asarray(target, dtype=np.float64))
-        self._servo_on = True
-        self._servo_gain = float(gain)
-        self._servo_max = float(max_strain)
+    def prepare(self, model: Model, state: State, loading: LoadingControl) -> tuple:
+        """The recorded launches (check, build, step) for this model, state and loading,
+        recorded (and the kernel module loaded) on first use. Call it from the main thread
+        before stepping shards in threads: warp's module loading is not for concurrent use."""
+        key = self._key(model, state, loading)
+        if key not in self._recorded:
+            if len(self._recorded) > 16:  # states and models come and go: keep a few
+                self._recorded.clear()
+                self._graphs.clear()
+            self._recorded[key] = ((model, state, loading), (
+                [self._check_launch(model, state, loading)],
+                self._build_launches(model, state),
+                self._step_launches(model, state, loading),
+            ))
+        return self._recorded[key][1]
 
     # -- stepping -------------------------------------------------------------------------
-    def _record(self, state: State) -> list:
-        m = self.model
-        ks = m.kernels
-        dev = m.device
-        b, n, k = m.n_rve, m.n_disc, m.capacity
-        dt = m.timestep
-
-        def rec(kernel: wp.Kernel, dim: int, inputs: list) -> wp.Launch:
-            return wp.launch(kernel, dim=dim, inputs=inputs, device=dev, record_cmd=True)
-
-        cmds = [
-            rec(ks.check_rebuild, b, [n, m.skin, m.cutoff, self.active, state.cell,
-                                      state.cell_ref, state.disp, state.force_rebuild,
-                                      self.rebuild, state.status]),
-            rec(ks.clear_bins, b * m.max_bins**2, [m.max_bins, self.rebuild, self.bin_count]),
-            rec(ks.fill_bins, b * n, [n, m.max_bins, BIN_CAPACITY, m.cutoff, self.rebuild,
-                                      state.cell, state.frac, self.bin_count, self.bin_items,
-                                      state.status]),
-            rec(ks.build_neighbors, b * n, [n, k, m.max_bins, BIN_CAPACITY, m.skin, m.cutoff,
-                                            self.rebuild, state.cell, state.frac, m.radius,
-                                            self.bin_count, self.bin_items, state.nbr,
-                                            state.nbr_count, state.shear, self.nbr_new,
-                                            self.nbr_count_new, self.shear_new,
-                                            state.status]),
-            rec(ks.commit_neighbors, b * n, [n, k, self.rebuild, self.nbr_new,
-                                             self.nbr_count_new, self.shear_new, state.nbr,
-                                             state.nbr_count, state.shear, state.disp]),
-            rec(ks.compute_forces, b * n, [n, k, dt, *m.law_args, self.active, m.friction,
-                                           state.cell, self.vel_grad, state.frac, state.vel,
-                                           state.ang_vel, m.radius, state.nbr,
-                                           state.nbr_count, state.shear, self.force,
-                                           self.torque, self.part_stress, self.part_stiff,
-                                           state.status]),
-        ]
-        if self._servo_on:
-            cmds.append(rec(ks.servo, b, [n, dt, m.meta.thickness, self._servo_gain,
-                                          self._servo_max, self.active, state.cell,
-                                          self.part_stress, self.part_stiff, self.control,
-                                          self.target, self.vel_grad,
-                                          self.step_map]))
-        cmds += [
-            rec(ks.integrate, b * n, [n, dt, m.meta.damping, self.active, state.cell, m.radius,
-                                      m.inv_mass, m.inv_inertia, self.force, self.torque,
-                                      state.frac, state.vel, state.ang_vel, state.disp,
-                                      state.status]),
-            rec(ks.advance_cell, b, [self.active, self.step_map, state.cell]),
-        ]
-        return cmds
-
     def run(
         self,
+        model: Model,
         state: State,
+        loading: LoadingControl,
         steps: int,
         check_every: int = 200,
         callback: Callable[[int], bool | None] | None = None,
@@ -188,51 +221,52 @@ class Solver:
         """
         if steps < 0:
             raise ValueError(f"steps must be >= 0, got {steps}")
-        cmds = self.prepare(state)
+        check, build, step = self.prepare(model, state, loading)
+        check[0].launch()
         done = 0
         while done < steps:
             chunk = min(check_every, steps - done)
-            self._advance(state, cmds, chunk)
+            self._advance(self._key(model, state, loading), build, step, chunk)
             done += chunk
             self.check(state)
             if callback is not None and callback(done):
                 break
         return done
 
-    def prepare(self, state: State) -> list:
-        """The recorded launches of one step for ``state`` (recorded, and the kernel module
-        loaded, on first use after a loading change). Call it from the main thread before
-        stepping shards in threads: warp's module loading is not for concurrent use."""
-        key = (id(state), self._servo_on, self._servo_gain, self._servo_max)
-        if self._cmds_key != key:
-            self._cmds = self._record(state)
-            self._cmds_key = key
-        return self._cmds
-
-    def _advance(self, state: State, cmds: list, steps: int) -> None:
+    def _advance(self, key: tuple, build: list, step: list, steps: int) -> None:
         """Launch ``steps`` steps; on CUDA whole blocks replay one captured graph."""
+        if self._host_rebuild is not None:  # CPU: launches are synchronous
+            flags = self._host_rebuild
+            for _ in range(steps):
+                if flags.any():
+                    for recorded in build:
+                        recorded.launch()
+                for recorded in step:
+                    recorded.launch()
+            return
         eager = steps
-        if wp.get_device(self.model.device).is_cuda and steps >= GRAPH_STEPS:
-            key = (id(state), self._servo_on, self._servo_gain, self._servo_max)
+        if steps >= GRAPH_STEPS:
             graph = self._graphs.get(key)
             if graph is None:
-                with wp.ScopedCapture(device=self.model.device) as capture:
+                with wp.ScopedCapture(device=self.device) as capture:
                     for _ in range(GRAPH_STEPS):
-                        for cmd in cmds:
-                            cmd.launch()
+                        for recorded in (*build, *step):
+                            recorded.launch()
                 graph = self._graphs[key] = capture.graph
             for _ in range(steps // GRAPH_STEPS):
                 wp.capture_launch(graph)
             eager = steps % GRAPH_STEPS
         for _ in range(eager):
-            for cmd in cmds:
-                cmd.launch()
+            for recorded in (*build, *step):
+                recorded.launch()
 
-    def refresh_neighbors(self, state: State) -> None:
-        """Rebuild the neighbour lists of every RVE now (tangential history is kept)."""
+    def refresh_lists(self, model: Model, state: State, loading: LoadingControl) -> None:
+        """Rebuild the neighbour lists of every active RVE now (tangential history kept)."""
         state.force_rebuild.fill_(1)
-        for cmd in self._record(state)[:5]:
-            cmd.launch()
+        check, build, _ = self.prepare(model, state, loading)
+        check[0].launch()
+        for recorded in build:
+            recorded.launch()
         self.check(state)
 
     def check(self, state: State) -> None:

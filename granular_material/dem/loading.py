@@ -1,0 +1,94 @@
+"""Loading control of a DEM batch: which RVEs step, and how their cells are driven.
+
+Held apart from the model (static) and the state (what evolves), so that changing a
+parameter of the model (e.g. the friction after consolidation) keeps the loading.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import warp as wp
+from scipy.linalg import expm
+
+from granular_material.dem.kernels import CONTROL_STRAIN, CONTROL_STRESS
+from granular_material.dem.model import Model
+
+__all__ = ["CONTROL_STRAIN", "CONTROL_STRESS", "LoadingControl", "ServoSettings"]
+
+
+@dataclass(frozen=True)
+class ServoSettings:
+    """How the stress servo corrects the diagonal strains.
+
+    Attributes:
+        gain: fraction of the stress error corrected per step, through the contact
+            stiffness estimate Σ kn (n_k d_k)² / V [Pa], in (0, 1].
+        max_strain: cap on the servo's strain increment per step [-], > 0.
+    """
+
+    gain: float
+    max_strain: float
+
+    def __post_init__(self) -> None:
+        if not 0 < self.gain <= 1:
+            raise ValueError(f"servo gain must lie in (0, 1], got {self.gain!r}")
+        if not self.max_strain > 0:
+            raise ValueError(f"max_strain must be positive, got {self.max_strain!r}")
+
+
+class LoadingControl:
+    """The loading of B RVEs on the model's device.
+
+    Attributes:
+        active: 1 where the RVE steps, 0 where it stays frozen, (B,), int32.
+        velocity_gradient: L [1/s] per RVE, (B,), mat22.
+        step_map: the cell's map of one step, H ← E·H, (B,), mat22.
+        control: CONTROL_STRAIN or CONTROL_STRESS per diagonal component, (2·B,), int32.
+        target: strain per step [-] or stress [Pa] per diagonal component, (B,), vec2.
+        servo: the servo's settings while it drives the cells, else None.
+    """
+
+    def __init__(self, model: Model) -> None:
+        ft = model.float_type
+        dev = model.device
+        b = model.n_rve
+        self._timestep = model.timestep
+        mat22 = wp.types.matrix((2, 2), ft)
+        self.active = wp.ones(b, dtype=wp.int32, device=dev)
+        self.velocity_gradient = wp.zeros(b, dtype=mat22, device=dev)
+        self.step_map = wp.array(np.repeat(np.eye(2)[None], b, 0), dtype=mat22, device=dev)
+        self.control = wp.zeros(2 * b, dtype=wp.int32, device=dev)
+        self.target = wp.zeros(b, dtype=wp.types.vector(2, ft), device=dev)
+        self.servo: ServoSettings | None = None
+
+    def set_active(self, active: np.ndarray) -> None:
+        """Which RVEs step (nonzero) and which stay frozen (0), shape (B,)."""
+        self.active.assign(np.asarray(active, dtype=np.int32))
+
+    def set_affine(self, velocity_gradient: np.ndarray) -> None:
+        """Prescribe the velocity gradient L [1/s] of every RVE, shape (B, 2, 2); the cell
+        advances exactly as ``H ← expm(L·dt)·H`` each step. The servo is switched off."""
+        lg = np.asarray(velocity_gradient, dtype=np.float64)
+        maps = np.stack([expm(m * dt) for m, dt in zip(lg, self._timestep, strict=True)])
+        self.velocity_gradient.assign(lg)
+        self.step_map.assign(maps)
+        self.servo = None
+
+    def set_servo(self, control: np.ndarray, target: np.ndarray,
+                  settings: ServoSettings) -> None:
+        """Mixed control of the diagonal components xx, yy of every RVE.
+
+        Args:
+            control: CONTROL_STRAIN or CONTROL_STRESS per component, shape (B, 2), int.
+            target: strain increment per step [-] (strain control) or stress [Pa, tension
+                positive] (stress control), shape (B, 2).
+            settings: the servo's gain and strain cap.
+        """
+        control = np.asarray(control, dtype=np.int32)
+        if not np.isin(control, (CONTROL_STRAIN, CONTROL_STRESS)).all():
+            raise ValueError("control must hold CONTROL_STRAIN or CONTROL_STRESS only")
+        self.control.assign(control.reshape(-1))
+        self.target.assign(np.asarray(target, dtype=np.float64))
+        self.servo = settings
