@@ -307,9 +307,9 @@ def contact_forces(
     pair: AnyArray, pair_branch: AnyArray, status: IntArray,
 ):
     """Per disc: the Cundall–Strack force of every pair it owns (partner of higher index),
-    written as ``pair = (f, overlap, fs)`` to both slots of the pair, f the force on that
-    slot's disc (zero where the discs do not touch); with ``with_stress`` also the branch
-    vector d = x_c − x_a."""
+    written as ``pair = (f, τ)`` to both slots of the pair: the force [N] on that slot's
+    disc and its torque [N·m] (zero where the discs do not touch); with ``with_stress`` also
+    the branch vector d = x_c − x_a of touching pairs (zero for the others)."""
     i = wp.tid()
     b = i // n_disc
     if active[b] == 0:
@@ -334,8 +334,8 @@ def contact_forces(
         pair[slot] = type(pair[slot])()
         pair[mirror] = type(pair[slot])()
         if with_stress != 0:
-            pair_branch[slot] = d
-            pair_branch[mirror] = d
+            pair_branch[slot] = type(d)()
+            pair_branch[mirror] = type(d)()
         if wp.dot(d, d) >= (ra + rc) * (ra + rc) * type(dt)(1.000001):
             contact_shear_force[slot] = zero  # clearly apart (decided without a root)
             continue
@@ -357,8 +357,12 @@ def contact_forces(
         fs = coulomb_shear(contact_shear_force[slot], kt, v_t, dt, mu, fn)
         contact_shear_force[slot] = fs
         f_a = contact_force(fn, fs, n)
-        pair[slot] = type(pair[slot])(f_a[0], f_a[1], overlap, fs)
-        pair[mirror] = type(pair[slot])(-f_a[0], -f_a[1], overlap, fs)
+        half = type(dt)(0.5)
+        pair[slot] = type(pair[slot])(f_a[0], f_a[1], (ra - half * overlap) * fs)
+        pair[mirror] = type(pair[slot])(-f_a[0], -f_a[1], (rc - half * overlap) * fs)
+        if with_stress != 0:
+            pair_branch[slot] = d
+            pair_branch[mirror] = d
 
 
 def integrate(
@@ -390,17 +394,18 @@ def integrate(
         record = pair[slot]
         f_i = type(f)(record[0], record[1])
         f = f + f_i
-        tq = tq + (ri - type(dt)(0.5) * record[2]) * record[3]
-        if with_stress != 0 and record[2] > zero:
+        tq = tq + record[2]
+        if with_stress != 0:
             d = pair_branch[slot]
-            j = b * n_disc + contact_partner[slot]
-            kn, _kt = pair_stiffness(law, radius[wp.min(i, j)], radius[wp.max(i, j)])
-            # Love's term takes the force on the pair's lower index
-            f_a = f_i
-            if j < i:
-                f_a = -f_i
-            s_sum = s_sum + love_term(f_a, d)
-            k_sum = k_sum + servo_stiffness_term(kn, d / wp.length(d), d)
+            if d[0] != zero or d[1] != zero:
+                j = b * n_disc + contact_partner[slot]
+                kn, _kt = pair_stiffness(law, radius[wp.min(i, j)], radius[wp.max(i, j)])
+                # Love's term takes the force on the pair's lower index
+                f_a = f_i
+                if j < i:
+                    f_a = -f_i
+                s_sum = s_sum + love_term(f_a, d)
+                k_sum = k_sum + servo_stiffness_term(kn, d / wp.length(d), d)
     if with_stress != 0:
         part_stress[i] = s_sum
         part_stiffness[i] = k_sum
@@ -584,7 +589,7 @@ class KernelSet:
     reduce_measures: wp.Kernel
 
 
-#: what each generic argument of the kernels holds: a scalar, vec2, vec4, mat22 or mat44 of the
+#: what each generic argument of the kernels holds: a scalar, vec2, vec3, mat22 or mat44 of the
 #: float type (scalar arguments are passed in the float type; arrays hold these dtypes)
 _ROLES = {
     "scalar": ("skin", "cutoff", "damping", "thickness", "gain", "max_strain", "timestep",
@@ -595,14 +600,14 @@ _ROLES = {
              "counts", "forces"),
     "mat22": ("cell", "cell_at_list_build", "velocity_gradient", "step_map", "part_stress",
               "part_fabric", "stress", "fabric"),
-    "vec4": ("pair",),
+    "vec3": ("pair",),
     "mat44": ("part_tangent", "tangent"),
 }
 
 
 def _concrete_types(kernel: wp.Kernel, ft: Any) -> dict[str, Any]:
     """The concrete type of every generic argument of ``kernel`` for float type ``ft``."""
-    dtypes = {"scalar": ft, "vec2": wp.types.vector(2, ft), "vec4": wp.types.vector(4, ft),
+    dtypes = {"scalar": ft, "vec2": wp.types.vector(2, ft), "vec3": wp.types.vector(3, ft),
               "mat22": wp.types.matrix((2, 2), ft), "mat44": wp.types.matrix((4, 4), ft)}
     role_of = {name: role for role, names in _ROLES.items() for name in names}
     types = {}

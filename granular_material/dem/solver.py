@@ -84,7 +84,7 @@ class Solver:
         self.bin_count = wp.zeros(b * model.max_bins**2, dtype=wp.int32, device=dev)
         self.bin_items = wp.zeros(b * model.max_bins**2 * BIN_CAPACITY, dtype=wp.int32,
                                   device=dev)
-        self.pair = wp.zeros(b * n * k, dtype=wp.types.vector(4, ft), device=dev)
+        self.pair = wp.zeros(b * n * k, dtype=wp.types.vector(3, ft), device=dev)
         self.pair_branch = wp.zeros(b * n * k, dtype=vec2, device=dev)
         self.part_stress = wp.zeros(b * n, dtype=wp.types.matrix((2, 2), ft), device=dev)
         self.part_stiffness = wp.zeros(b * n, dtype=vec2, device=dev)
