@@ -1,39 +1,94 @@
-"""DEM throughput: particle-steps per second for batches of RVEs, and YADE's in the same run.
+"""DEM throughput: particle-steps per second for batches of RVEs, beside YADE and an older commit.
 
 Usage::
 
     python benchmarks/dem_throughput.py [--device cpu|cuda] [--batches 1,16,64,256,600]
-        [--particles 400] [--seconds 2] [--out results.csv] [--no-yade]
+        [--particles 400] [--seconds 2] [--dtypes float64,float32] [--repeats 3]
+        [--baseline REV] [--out results.csv] [--no-yade]
 
 One 400-disc packing is prepared (seed 1, 100 kPa) and replicated B times; each batch is
 sheared at 1e-5 strain a step (so neighbour lists are rebuilt as in real runs) and timed after
-a warm-up. When Debian's ``yade`` is installed, the same packing is stepped in YADE on one core
-and every rate is also printed as a ratio to YADE's. Measures; never passes or fails.
+a warm-up. Every case runs in a fresh process, ``--repeats`` times, alternating with the same
+case of ``--baseline`` (a git revision of this repository, checked out into a temporary
+worktree) when given; the table holds medians. When Debian's ``yade`` is installed, the same
+packing is stepped in YADE on one core and every rate is also given as a ratio to YADE's.
+Measures; never passes or fails.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import math
+import os
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-from granular_material.cli import quiet_warp
-from granular_material.dem import DEMBatch, save_rve
-from granular_material.procedures import prepare_packing
+REPO = Path(__file__).resolve().parents[1]
 
 
-def _commit() -> str:
+def _commit(rev: str = "HEAD") -> str:
     try:
-        return subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True,
-                              text=True, check=True, cwd=Path(__file__).parent).stdout.strip()
+        return subprocess.run(["git", "rev-parse", "--short", rev], capture_output=True,
+                              text=True, check=True, cwd=REPO).stdout.strip()
     except (OSError, subprocess.CalledProcessError):
         return "unknown"
+
+
+def measure(rve: Path, n_rve: int, seconds: float, device: str | None, dtype: str,
+            shards: int | None) -> dict:
+    """Steps run, wall time [s] and rate of about ``seconds`` of shearing ``n_rve`` copies of
+    the RVE file ``rve`` (after a warm-up), with whichever engine this process imports."""
+    import warp as wp
+
+    wp.config.quiet = True
+    from granular_material.dem import DEMBatch, load_rve
+
+    batch = DEMBatch(load_rve(rve).replicate(n_rve), device=device, dtype=dtype,
+                     shards=shards)
+    shear = np.zeros((batch.n_rve, 2, 2))
+    shear[:, 0, 1] = 1e-5 / batch.dt  # 1e-5 strain a step
+    batch.set_affine(shear)
+    batch.run(20)  # warm-up: kernels loaded, lists built
+    t0 = time.perf_counter()
+    batch.run(20)
+    per_step = (time.perf_counter() - t0) / 20
+    steps = max(20, int(seconds / per_step))
+    t0 = time.perf_counter()
+    batch.run(steps, check_every=min(steps, 500))
+    wall = time.perf_counter() - t0
+    return {"device": batch.device, "shards": len(batch.shards), "steps": steps,
+            "wall_s": wall, "particle_steps_per_s": n_rve * batch.n_disc * steps / wall}
+
+
+def _worker(args: argparse.Namespace) -> None:
+    """``--worker``: one measurement, printed as JSON (run by :func:`_run_case`)."""
+    result = measure(args.rve, args.worker, args.seconds, args.device, args.dtypes,
+                     args.shards)
+    print(json.dumps(result))
+
+
+def _run_case(source: Path, rve: Path, n_rve: int, args: argparse.Namespace,
+              dtype: str) -> dict:
+    """One measurement in a fresh process importing the engine found at ``source``."""
+    command = [sys.executable, str(Path(__file__).resolve()), "--worker", str(n_rve),
+               "--rve", str(rve), "--seconds", str(args.seconds), "--dtypes", dtype]
+    if args.device:
+        command += ["--device", args.device]
+    if args.shards:
+        command += ["--shards", str(args.shards)]
+    env = {**os.environ, "PYTHONPATH": str(source)}
+    done = subprocess.run(command, capture_output=True, text=True, env=env, check=False)
+    if done.returncode != 0:
+        raise RuntimeError(f"benchmark worker for B={n_rve} ({source}) failed:\n"
+                           f"{done.stderr[-2000:]}")
+    return json.loads(done.stdout.strip().splitlines()[-1])
 
 
 def _yade_rate(rve_path: Path, steps: int) -> float | None:
@@ -48,63 +103,120 @@ def _yade_rate(rve_path: Path, steps: int) -> float | None:
         return None
 
 
-def measure(batch: DEMBatch, seconds: float) -> tuple[int, float]:
-    """Steps run and wall time [s] of about ``seconds`` of shearing (after a warm-up)."""
-    shear = np.zeros((batch.n_rve, 2, 2))
-    shear[:, 0, 1] = 1e-5 / batch.dt  # 1e-5 strain a step
-    batch.set_affine(shear)
-    batch.run(20)  # warm-up: kernels loaded, lists built
-    t0 = time.perf_counter()
-    batch.run(20)
-    per_step = (time.perf_counter() - t0) / 20
-    steps = max(20, int(seconds / per_step))
-    t0 = time.perf_counter()
-    batch.run(steps, check_every=min(steps, 500))
-    return steps, time.perf_counter() - t0
+def _worktree(rev: str, parent: Path) -> Path:
+    """A checkout of ``rev`` under ``parent`` (removed with the temporary folder)."""
+    path = parent / f"baseline-{rev}"
+    subprocess.run(["git", "worktree", "add", "--detach", "-q", str(path), rev], cwd=REPO,
+                   check=True)
+    return path
 
 
-def main(argv: list[str] | None = None) -> pd.DataFrame:
-    """Run the benchmark; prints and returns the table."""
+def _parse(argv: list[str] | None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--device", default=None, help="cpu or cuda (default: CUDA if present)")
     parser.add_argument("--batches", default="1,16,64,256,600",
                         help="comma-separated batch sizes B")
     parser.add_argument("--particles", type=int, default=400, help="discs per RVE")
     parser.add_argument("--seconds", type=float, default=2.0, help="timed seconds per case")
-    parser.add_argument("--dtype", default="float64", choices=["float64", "float32"])
+    parser.add_argument("--dtypes", default="float64",
+                        help="comma-separated float types (float64, float32)")
+    parser.add_argument("--repeats", type=int, default=3,
+                        help="processes per case; the table holds the medians")
     parser.add_argument("--shards", type=int, default=None,
                         help="CPU shards (threads); default: one per core")
+    parser.add_argument("--baseline", default=None, metavar="REV",
+                        help="git revision measured beside this checkout, case by case")
     parser.add_argument("--yade-steps", type=int, default=2000, help="steps YADE is timed on")
     parser.add_argument("--no-yade", action="store_true", help="skip the YADE measurement")
     parser.add_argument("--out", type=Path, default=None, help="CSV of the table")
-    args = parser.parse_args(argv)
-    quiet_warp()
+    parser.add_argument("--worker", type=int, default=None, help=argparse.SUPPRESS)
+    parser.add_argument("--rve", type=Path, default=None, help=argparse.SUPPRESS)
+    return parser.parse_args(argv)
 
-    base = prepare_packing(n_disc=args.particles, seed=1, device=args.device)
-    one = base.to_data()
-    rve_path = Path(args.out.parent if args.out else ".") / "benchmark_rve.npz"
-    save_rve(rve_path, one.select(0))
-    yade = None if args.no_yade else _yade_rate(rve_path, args.yade_steps)
 
-    rows = []
-    for b in (int(x) for x in args.batches.split(",")):
-        batch = DEMBatch(one.replicate(b), device=args.device, dtype=args.dtype,
-                         shards=args.shards)
-        steps, wall = measure(batch, args.seconds)
-        rate = b * args.particles * steps / wall
-        rows.append({"device": batch.device, "dtype": args.dtype,
-                     "shards": len(batch.shards), "batch": b,
-                     "particles": b * args.particles, "steps": steps, "wall_s": wall,
-                     "particle_steps_per_s": rate,
-                     "ratio_to_yade": rate / yade if yade else math.nan})
-        print(f"B={b:4d}  {rate:.3e} particle-steps/s", file=sys.stderr, flush=True)
-    table = pd.DataFrame(rows)
-    print(f"commit {_commit()}; one YADE core: "
-          + (f"{yade:.3e} particle-steps/s" if yade else "not measured"))
+def main(argv: list[str] | None = None) -> pd.DataFrame | None:
+    """Run the benchmark; prints and returns the table."""
+    args = _parse(argv)
+    if args.worker is not None:
+        _worker(args)
+        return None
+    if args.repeats < 1:
+        raise SystemExit(f"--repeats must be >= 1, got {args.repeats}")
+    import warp as wp
+
+    wp.config.quiet = True
+    from tqdm.auto import tqdm
+
+    from granular_material.dem import save_rve
+    from granular_material.procedures import prepare_packing
+
+    with tempfile.TemporaryDirectory() as scratch:
+        scratch = Path(scratch)
+        rve_path = scratch / "benchmark_rve.npz"
+        base = prepare_packing(n_disc=args.particles, seed=1, device=args.device)
+        save_rve(rve_path, base.to_data().select(0))
+        yade = None if args.no_yade else _yade_rate(rve_path, args.yade_steps)
+        sources = {"current": REPO}
+        if args.baseline:
+            sources["baseline"] = _worktree(args.baseline, scratch)
+        try:
+            table = _measure_all(args, sources, rve_path, tqdm)
+        finally:
+            if args.baseline:
+                subprocess.run(["git", "worktree", "remove", "--force",
+                                str(sources["baseline"])], cwd=REPO, check=False)
+    table["ratio_to_yade"] = table["particle_steps_per_s"] / yade if yade else math.nan
+    table["commit"] = _commit()
+    if args.baseline:
+        table["baseline_commit"] = _commit(args.baseline)
+        table["ratio_to_baseline"] = (table["particle_steps_per_s"]
+                                      / table["baseline_particle_steps_per_s"])
+    print(f"commit {_commit()}"
+          + (f" against {_commit(args.baseline)}" if args.baseline else "")
+          + "; one YADE core: " + (f"{yade:.3e} particle-steps/s" if yade else "not measured"))
     print(table.to_string(index=False, float_format=lambda v: f"{v:.4g}"))
     if args.out:
+        args.out.parent.mkdir(parents=True, exist_ok=True)
         table.to_csv(args.out, index=False)
     return table
+
+
+def _measure_all(args: argparse.Namespace, sources: dict[str, Path], rve: Path,
+                 tqdm) -> pd.DataFrame:
+    batches = [int(x) for x in args.batches.split(",")]
+    dtypes = args.dtypes.split(",")
+    cases = [(d, b) for d in dtypes for b in batches]
+    rows = []
+    with tqdm(total=len(cases) * args.repeats * len(sources), desc="throughput",
+              unit="run", disable=None) as bar:
+        for dtype, n_rve in cases:
+            rates: dict[str, list[dict]] = {name: [] for name in sources}
+            for _ in range(args.repeats):  # alternate, so that drift hits both alike
+                for name, source in sources.items():
+                    rates[name].append(_run_case(source, rve, n_rve, args, dtype))
+                    bar.update()
+            current = rates["current"]
+            row = {"device": current[0]["device"], "dtype": dtype,
+                   "shards": current[0]["shards"], "batch": n_rve,
+                   "particles": n_rve * args.particles,
+                   "steps": int(np.median([r["steps"] for r in current])),
+                   "wall_s": float(np.median([r["wall_s"] for r in current])),
+                   "particle_steps_per_s": float(np.median(
+                       [r["particle_steps_per_s"] for r in current])),
+                   "spread": _spread(current)}
+            if "baseline" in rates:
+                row["baseline_particle_steps_per_s"] = float(np.median(
+                    [r["particle_steps_per_s"] for r in rates["baseline"]]))
+            rows.append(row)
+            print(f"{dtype} B={n_rve:4d}  {row['particle_steps_per_s']:.3e} particle-steps/s",
+                  file=sys.stderr, flush=True)
+    return pd.DataFrame(rows)
+
+
+def _spread(runs: list[dict]) -> float:
+    """(max − min)/median of the rates of repeated runs [-]."""
+    rates = np.array([r["particle_steps_per_s"] for r in runs])
+    return float((rates.max() - rates.min()) / np.median(rates))
 
 
 if __name__ == "__main__":

@@ -116,6 +116,15 @@ def check_lists(
                  cutoff, cell_at_list_build, force_rebuild, rebuild, status)
 
 
+def any_rebuild(n_rve: int, rebuild: IntArray, any_flag: IntArray):
+    """One thread: ``any_flag[0]`` = 1 if any RVE rebuilds next step (the condition of the
+    captured rebuild on the CPU)."""
+    flag = int(0)  # noqa: UP018, RUF046 - a mutable loop variable in warp
+    for b in range(n_rve):
+        flag = flag | rebuild[b]
+    any_flag[0] = flag
+
+
 @wp.func
 def bins_per_axis(cell: Any, cutoff: Any, max_bins: int) -> wp.vec2i:
     """Bins along s0 and s1: each at least ``cutoff`` across, measured perpendicular."""
@@ -565,7 +574,7 @@ def reduce_measures(
 
 
 _KERNELS = (
-    check_lists, begin_build, fill_bins, build_lists, commit_lists, link_lists,
+    check_lists, any_rebuild, begin_build, fill_bins, build_lists, commit_lists, link_lists,
     contact_forces, integrate, servo, advance_cell_and_check, contact_measures,
     reduce_measures,
 )
@@ -576,6 +585,7 @@ class KernelSet:
     """The kernels of one warp module (one replica); attributes named as the functions."""
 
     check_lists: wp.Kernel
+    any_rebuild: wp.Kernel
     begin_build: wp.Kernel
     fill_bins: wp.Kernel
     build_lists: wp.Kernel
@@ -633,7 +643,7 @@ def kernels_for(dtype: str = "float64", replica: int = 0) -> KernelSet:
     module = f"granular_material_dem_{dtype}_r{replica}"
     kernels = {}
     for function in _KERNELS:
-        kernel = wp.kernel(function, module=module)
+        kernel = wp.kernel(function, module=module, enable_backward=False)
         types = _concrete_types(kernel, ft)
         if types:
             wp.overload(kernel, types)

@@ -25,7 +25,7 @@ from granular_material.dem.state import State
 __all__ = ["BIN_CAPACITY", "CONTROL_STRAIN", "CONTROL_STRESS", "DEMInstabilityError", "Solver"]
 
 BIN_CAPACITY = 32  #: discs a contact-detection bin can hold (an overflow is an error)
-GRAPH_STEPS = 50  #: steps captured in one CUDA graph and replayed
+GRAPH_STEPS = 50  #: steps captured in one graph and replayed
 
 _MESSAGES = {
     STATUS_BLOWUP: "a velocity became non-finite or a disc moved more than r/4 in one step "
@@ -58,8 +58,9 @@ class Solver:
     and leap-frog integration, optionally the stress servo, the cell update ``H ← E·H`` and
     the test of the Verlet skin; where the skin may have closed, the next step first rebuilds
     that RVE's lists (candidates from the 3 × 3 bins of a per-RVE grid in fractional
-    coordinates, or all discs in a cell under 3 bins across). On the CPU, where launches are
-    synchronous, the rebuild launches are skipped from the host when no RVE needs them.
+    coordinates, or all discs in a cell under 3 bins across). Blocks of steps are captured
+    and replayed as one graph (CUDA graphs; on the CPU warp's launch capture, with the
+    rebuild under the condition that some RVE needs it).
 
     Notes:
         The lists stay valid while ``2·max|Δx_fluct| + |H H_build⁻¹ − I|·cutoff ≤ skin``.
@@ -88,7 +89,8 @@ class Solver:
         self.pair_branch = wp.zeros(b * n * k, dtype=vec2, device=dev)
         self.part_stress = wp.zeros(b * n, dtype=wp.types.matrix((2, 2), ft), device=dev)
         self.part_stiffness = wp.zeros(b * n, dtype=vec2, device=dev)
-        self._host_rebuild = None if wp.get_device(dev).is_cuda else self.rebuild.numpy()
+        self.rebuild_any = wp.zeros(1, dtype=wp.int32, device=dev)
+        self._host_rebuild = None if wp.get_device(dev).is_cuda else self.rebuild_any.numpy()
         self._graphs: dict[tuple, wp.Graph] = {}
         # keyed by the ids of (model, state, loading); each entry holds those objects, so
         # that an id is never reused by another object while its launches are cached
@@ -104,6 +106,10 @@ class Solver:
             verlet_displacement=state.verlet_displacement, force_rebuild=state.force_rebuild,
             rebuild=self.rebuild, status=state.status,
         )
+
+    def _any_launch(self, model: Model) -> wp.Launch:
+        return _record(self.kernels.any_rebuild, 1, self.device, n_rve=model.n_rve,
+                       rebuild=self.rebuild, any_flag=self.rebuild_any)
 
     def _build_launches(self, model: Model, state: State) -> list[wp.Launch]:
         ks, dev = self.kernels, self.device
@@ -182,6 +188,8 @@ class Solver:
             verlet_displacement=state.verlet_displacement, force_rebuild=state.force_rebuild,
             rebuild=self.rebuild, status=state.status,
         ))
+        if self._host_rebuild is not None:
+            launches.append(self._any_launch(model))
         return launches
 
     def _key(self, model: Model, state: State, loading: LoadingControl) -> tuple:
@@ -197,10 +205,12 @@ class Solver:
                 self._recorded.clear()
                 self._graphs.clear()
             self._recorded[key] = ((model, state, loading), (
-                [self._check_launch(model, state, loading)],
+                [self._check_launch(model, state, loading), self._any_launch(model)],
                 self._build_launches(model, state),
                 self._step_launches(model, state, loading),
             ))
+            _, build, step = self._recorded[key][1]
+            self._graphs[key] = self._capture(build, step)
         return self._recorded[key][1]
 
     # -- stepping -------------------------------------------------------------------------
@@ -222,7 +232,8 @@ class Solver:
         if steps < 0:
             raise ValueError(f"steps must be >= 0, got {steps}")
         check, build, step = self.prepare(model, state, loading)
-        check[0].launch()
+        for recorded in check:
+            recorded.launch()
         done = 0
         while done < steps:
             chunk = min(check_every, steps - done)
@@ -234,37 +245,45 @@ class Solver:
         return done
 
     def _advance(self, key: tuple, build: list, step: list, steps: int) -> None:
-        """Launch ``steps`` steps; on CUDA whole blocks replay one captured graph."""
-        if self._host_rebuild is not None:  # CPU: launches are synchronous
-            flags = self._host_rebuild
-            for _ in range(steps):
-                if flags.any():
-                    for recorded in build:
-                        recorded.launch()
-                for recorded in step:
-                    recorded.launch()
-            return
+        """Launch ``steps`` steps; whole blocks of GRAPH_STEPS replay one captured graph (on
+        the CPU with the rebuild captured under its condition, on CUDA unconditionally: the
+        build kernels do nothing for RVEs that keep their lists)."""
         eager = steps
         if steps >= GRAPH_STEPS:
-            graph = self._graphs.get(key)
-            if graph is None:
-                with wp.ScopedCapture(device=self.device) as capture:
-                    for _ in range(GRAPH_STEPS):
-                        for recorded in (*build, *step):
-                            recorded.launch()
-                graph = self._graphs[key] = capture.graph
+            graph = self._graphs[key]  # captured by prepare(), in the main thread
             for _ in range(steps // GRAPH_STEPS):
                 wp.capture_launch(graph)
             eager = steps % GRAPH_STEPS
+        flags = self._host_rebuild
         for _ in range(eager):
-            for recorded in (*build, *step):
+            if flags is None or flags[0]:  # on the CPU, launches are synchronous
+                for recorded in build:
+                    recorded.launch()
+            for recorded in step:
                 recorded.launch()
+
+    def _capture(self, build: list, step: list) -> wp.Graph:
+        def rebuild() -> None:
+            for recorded in build:
+                recorded.launch()
+
+        cpu = self._host_rebuild is not None
+        with wp.ScopedCapture(device=self.device, apic=cpu) as capture:
+            for _ in range(GRAPH_STEPS):
+                if cpu:
+                    wp.capture_if(self.rebuild_any, on_true=rebuild)
+                else:
+                    rebuild()
+                for recorded in step:
+                    recorded.launch()
+        return capture.graph
 
     def refresh_lists(self, model: Model, state: State, loading: LoadingControl) -> None:
         """Rebuild the neighbour lists of every active RVE now (tangential history kept)."""
         state.force_rebuild.fill_(1)
         check, build, _ = self.prepare(model, state, loading)
-        check[0].launch()
+        for recorded in check:
+            recorded.launch()
         for recorded in build:
             recorded.launch()
         self.check(state)
