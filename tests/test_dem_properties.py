@@ -163,3 +163,36 @@ def test_parallel_shards_are_safe_and_change_nothing(small_rve_path):
             drive_grad_u(batch, grad / 20)
         results.append(batch.homogenize().stress)
     np.testing.assert_array_equal(results[0], results[1])
+
+
+def test_friction_change_keeps_the_servo_loading(small_rve_path):
+    """set_friction replaces the model only: a servo set before it still drives the cell."""
+    data = load_rve(small_rve_path)
+    batch = DEMBatch(data, device="cpu")
+    reference = DEMBatch(data, device="cpu")
+    target = np.array([[-100e3, -2e-5]])  # sxx held, eyy compressed 2e-5 a step
+    control = np.array([[1, 0]])
+    for b in (batch, reference):
+        b.set_servo(control, target, gain=0.5, max_strain=1e-4)
+    batch.set_friction(data.meta.friction_angle)  # same value: nothing may change
+    batch.run(300)
+    reference.run(300)
+    np.testing.assert_array_equal(batch.cell(), reference.cell())
+    assert batch.cell()[0, 1, 1] < data.cell[0, 1, 1] * (1 - 300 * 1.9e-5)
+
+
+def test_each_pair_is_one_contact_with_one_history(small_rve_path):
+    """A pair appears in both lists and, written to a file, carries one tangential force."""
+    batch = DEMBatch(load_rve(small_rve_path), device="cpu")
+    batch.set_affine(np.array([[[0.0, 2e-5 / batch.dt[0]], [0.0, 0.0]]]))
+    batch.run(400)
+    extra = batch.to_data().extra
+    partner, count = extra["contact_partner"][0], extra["contact_count"][0]
+    shear = extra["contact_shear_force"][0]
+    pairs = {}
+    for i in range(partner.shape[0]):
+        for k in range(count[i]):
+            pairs.setdefault(frozenset((i, int(partner[i, k]))), []).append(shear[i, k])
+    assert all(len(forces) == 2 for forces in pairs.values())
+    assert all(forces[0] == forces[1] for forces in pairs.values())
+    assert sum(1 for forces in pairs.values() if forces[0] != 0.0) > len(pairs) // 4
