@@ -8,7 +8,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from granular_material.fem.localization import mohr_coulomb_inclination, shear_band
+from granular_material.results.localization import mohr_coulomb_inclination, shear_band
 
 
 def _points(gamma_of_xy, n=(20, 40), step=7, strain=0.04) -> pd.DataFrame:

@@ -20,6 +20,7 @@ from granular_material.fem import (
     run_biaxial,
 )
 from granular_material.fem.linear_elastic import isotropic_tangent
+from granular_material.results import BiaxialWriter
 
 
 def _distorted_mesh() -> MeshQuad:
@@ -261,8 +262,9 @@ def test_an_interrupted_biaxial_run_keeps_and_writes_its_committed_steps(tmp_pat
         if record.step == 2:
             raise KeyboardInterrupt
 
-    result = run_biaxial(BiaxialSetup(nx=1, ny=2), LinearElastic(young=30e6, poisson=0.3),
-                         5, on_step=stop_after_two, out_dir=tmp_path)
+    with BiaxialWriter(tmp_path) as writer:
+        result = run_biaxial(BiaxialSetup(nx=1, ny=2), LinearElastic(young=30e6, poisson=0.3),
+                             5, on_step=stop_after_two, observer=writer)
     assert result.error == "interrupted after load step 2 of 5"
     assert result.steps["step"].tolist() == [0, 1, 2]
     assert len(pd.read_csv(tmp_path / "steps.csv")) == 3

@@ -97,13 +97,13 @@ def test_guo_zhao_packing_matches_design_figures(guo_zhao_seed1) -> None:
 def test_yade_biaxial_reproduces_design_anchors(guo_zhao_seed1, tmp_path: Path) -> None:
     """DESIGN §5 (seed 1): peak σ1/σ3 = 2.90 near 2 % axial strain, largest contraction
     εv = −0.45 % near 0.9 %. Run to 3 % here; σxx held at −100 kPa."""
-    from granular_material_validation.metrics import find_peak, stress_ratio
+    from granular_material_validation.metrics import PEAK_WINDOW, find_peak, stress_ratio
 
     rve, _, _ = guo_zhao_seed1
     curve, summary = yade_runner.yade_biaxial(rve, axial_strain=0.03, workdir=tmp_path)
     assert curve["axial_strain"].iloc[-1] == pytest.approx(0.03, abs=1e-4)
     assert np.abs(curve["sxx"] + 1e5).max() < 0.03 * 1e5
-    i, peak = find_peak(curve["axial_strain"].to_numpy(), stress_ratio(curve))
+    i, peak = find_peak(curve["axial_strain"].to_numpy(), stress_ratio(curve), PEAK_WINDOW)
     assert peak == pytest.approx(2.90, abs=0.05)
     assert curve["axial_strain"].iloc[i] == pytest.approx(0.02, abs=0.005)
     j = int(curve["volumetric_strain"].idxmin())

@@ -36,9 +36,9 @@ class EngineError(RuntimeError):
 
 
 def engine_available() -> bool:
-    """True when the engine's DEM commands are importable (``granular_material.dem_commands``)."""
+    """True when the engine's DEM commands are importable (``granular_material.cli.dem``)."""
     try:
-        import granular_material.dem_commands  # noqa: F401
+        import granular_material.cli.dem  # noqa: F401
     except ImportError:
         return False
     return True

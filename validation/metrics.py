@@ -21,9 +21,12 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from granular_material.results.peaks import find_peak
+
 __all__ = [
     "PEAK_RATIO_TOL",
     "PEAK_STRAIN_TOL",
+    "PEAK_WINDOW",
     "POST_PEAK_TOL",
     "PRE_PEAK_TOL",
     "CurveComparison",
@@ -40,6 +43,8 @@ PEAK_RATIO_TOL = 0.05
 PEAK_STRAIN_TOL = 0.005
 POST_PEAK_TOL = 0.10
 STRESSES = ("sxx", "syy", "sxy")
+#: running-median window of the peak search on the noisy DEM curves (points)
+PEAK_WINDOW = 5
 
 
 def principal_stresses(sxx: np.ndarray, syy: np.ndarray,
@@ -56,30 +61,6 @@ def stress_ratio(frame: pd.DataFrame) -> np.ndarray:
     s1, s3 = principal_stresses(frame["sxx"], frame["syy"], frame["sxy"])
     with np.errstate(divide="ignore", invalid="ignore"):
         return np.where(s3 > 0, s1 / s3, np.nan)
-
-
-def _smooth(values: np.ndarray, window: int) -> np.ndarray:
-    if window <= 1:
-        return values
-    return pd.Series(values).rolling(window, center=True, min_periods=1).median().to_numpy()
-
-
-def find_peak(strain: np.ndarray, ratio: np.ndarray, window: int = 5) -> tuple[int, float]:
-    """Index and value of the peak of ``ratio`` along ``strain`` (shape (n,)).
-
-    The index is located on a centred running median of ``window`` points (DEM curves are noisy);
-    the value returned is the raw ratio there. Returns (-1, nan) if the ratio is all NaN.
-    """
-    ratio = np.asarray(ratio, dtype=np.float64)
-    if len(strain) != len(ratio):
-        raise ValueError(f"strain and ratio lengths differ: {len(strain)} != {len(ratio)}")
-    if window < 1:
-        raise ValueError(f"window must be >= 1, got {window}")
-    smooth = _smooth(ratio, window)
-    if np.isnan(smooth).all():
-        return -1, float("nan")
-    i = int(np.nanargmax(smooth))
-    return i, float(ratio[i])
 
 
 @dataclass(frozen=True)
@@ -147,7 +128,7 @@ def _max_abs(values: np.ndarray) -> float:
 
 
 def compare_curves(ref: pd.DataFrame, ours: pd.DataFrame, strain: str = "axial_strain",
-                   window: int = 5) -> CurveComparison:
+                   window: int = PEAK_WINDOW) -> CurveComparison:
     """Compare ``ours`` against ``ref`` (YADE) along the column ``strain``.
 
     Both frames need ``strain`` (increasing), ``sxx``, ``syy``, ``sxy`` [Pa]; the columns
@@ -172,7 +153,6 @@ def compare_curves(ref: pd.DataFrame, ours: pd.DataFrame, strain: str = "axial_s
     ratio_ref = stress_ratio(ref)
     ratio_ours = stress_ratio(ours)
     i_ref, peak_ref = find_peak(x, ratio_ref, window)
-    i_ours, peak_ours = find_peak(x_ours, ratio_ours, window)
     x_ours_in = x_ours <= hi + 1e-12
     i_ours, peak_ours = find_peak(x_ours[x_ours_in], ratio_ours[x_ours_in], window)
     s1, _ = principal_stresses(ref["sxx"], ref["syy"], ref["sxy"])

@@ -7,11 +7,9 @@ import math
 from pathlib import Path
 from typing import Any
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
 from granular_material_validation import metrics
+
+from granular_material.results import pyplot
 
 __all__ = ["json_entries", "plot_case", "write_report"]
 
@@ -45,6 +43,7 @@ def plot_case(entry: dict[str, Any], path: Path) -> Path:
     xlabel = ("path strain max|∇u|·k/K [%]" if case["kind"] == "drive"
               else "axial strain εa [%] (compression positive)")
     ours_name = "ours FEM" if case["kind"] == "single-element" else "ours"
+    plt = pyplot()
     fig, axes = plt.subplots(2, 2, figsize=(11, 8), constrained_layout=True)
     for n, run in enumerate(entry["_runs"]):
         colour = f"C{n}"

@@ -22,8 +22,6 @@ Ip2_FrictMat_FrictMat_FrictPhys turns into exactly kn and kt for every pair.
 from __future__ import annotations
 
 import json
-import math
-from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -152,9 +150,3 @@ def import_scene(scene_path: str | Path, out: str | Path | None = None) -> RVEDa
         save_rve(out, data)
     return data
 
-
-def with_timestep(data: RVEData, timestep: float) -> RVEData:
-    """``data`` with ``meta.timestep`` set to ``timestep`` [s] (a positive finite number)."""
-    if not (math.isfinite(timestep) and timestep > 0):
-        raise ValueError(f"timestep must be a positive number, got {timestep!r}")
-    return replace(data, meta=replace(data.meta, timestep=float(timestep)))

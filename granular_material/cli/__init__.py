@@ -1,8 +1,12 @@
-"""The ``granular-material`` command line: core DEM commands plus plugin commands.
+"""The ``granular-material`` command line: the core commands plus plugin commands.
 
-Plugins add sub-commands through the ``granular_material.commands`` entry-point group; each
-entry point is a ``register(subparsers)`` callable that adds its parsers and sets ``func`` (a
-callable taking the parsed arguments and returning the exit code).
+The core commands are registered here directly: ``prepare``, ``biaxial-dem`` and
+``dem-drive`` (:mod:`granular_material.cli.dem`), ``single-element`` and ``biaxial``
+(:mod:`granular_material.cli.fem`); their shared options are defined once in
+:mod:`granular_material.cli.options`. Plugins add sub-commands through the
+``granular_material.commands`` entry-point group; each entry point is a
+``register(subparsers)`` callable that adds its parsers and sets ``func`` (a callable
+taking the parsed arguments and returning the exit code).
 """
 
 from __future__ import annotations
@@ -13,12 +17,10 @@ import warnings
 from importlib.metadata import entry_points
 
 from granular_material import __version__
+from granular_material.cli import dem, fem
+from granular_material.cli.options import UsageError
 
 __all__ = ["UsageError", "build_parser", "main", "quiet_warp"]
-
-
-class UsageError(ValueError):
-    """Bad input from the user: reported on stderr with exit code 2."""
 
 
 def _register_plugins(subparsers: argparse._SubParsersAction) -> None:
@@ -49,12 +51,8 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
-    try:
-        from granular_material import dem_commands
-    except ImportError:  # pragma: no cover - only while the engine is being built
-        pass
-    else:
-        dem_commands.register(subparsers)
+    dem.register(subparsers)
+    fem.register(subparsers)
     _register_plugins(subparsers)
     return parser
 
@@ -72,7 +70,3 @@ def main(argv: list[str] | None = None) -> int:
     except RuntimeError as exc:  # e.g. DEMInstabilityError naming the RVEs
         print(f"granular-material {args.command}: failed: {exc}", file=sys.stderr)
         return 1
-
-
-if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())

@@ -1,26 +1,47 @@
-"""The ``single-element`` and ``biaxial`` commands (registered through entry points)."""
+"""The FEM commands: ``single-element`` and ``biaxial``."""
 
 from __future__ import annotations
 
 import argparse
-import json
-import math
+import contextlib
 import sys
 import time
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import pandas as pd
 
-from granular_material.fem.localization import mohr_coulomb_inclination, shear_band
-from granular_material.fem.material import Material, create_material
-from granular_material.fem.newton import NewtonSettings
-from granular_material.fem.output import write_outputs
-from granular_material.fem.problems import BiaxialSetup
-from granular_material.fem.runner import BiaxialResult, run_biaxial
+from granular_material.cli.options import (
+    add_device,
+    add_json,
+    add_out,
+    add_progress,
+    emit,
+    progress_enabled,
+)
+from granular_material.fem import (
+    BiaxialResult,
+    BiaxialSetup,
+    Material,
+    NewtonSettings,
+    create_material,
+    default_settings,
+    default_stress_tol,
+    run_biaxial,
+)
+from granular_material.results import (
+    BiaxialWriter,
+    band_summary,
+    find_peak,
+    run_summary,
+    write_csv,
+    write_outputs,
+)
 
 __all__ = ["register", "run_biaxial_command", "run_single_element"]
+
+#: the Newton settings of the commands (fem.default_settings), shown as the option defaults
+_NEWTON = default_settings("dem")
 
 #: reduced CPU scale of the biaxial specimen: elements (nx, ny) and discs per RVE; 5 × 10 is
 #: the coarsest mesh on which a band showed (50 steps to 10 %: about 23 min on 2 CPU cores)
@@ -31,8 +52,9 @@ FULL_SCALE = ((10, 15), 400)
 
 def _newton_arguments(parser: argparse.ArgumentParser) -> None:
     g = parser.add_argument_group("Newton solver")
-    g.add_argument("--rtol", type=float, default=0.005,
-                   help="relative residual tolerance ||R||/||R0|| (default 0.005, Wu et al.)")
+    g.add_argument("--rtol", type=float, default=_NEWTON.rtol,
+                   help="relative residual tolerance ||R||/||R0|| "
+                        f"(default {_NEWTON.rtol:g}, Wu et al.)")
     g.add_argument("--stress-tol", type=float, default=None,
                    help="absolute tolerance as a stress error [Pa] at the Gauss points, for "
                         "DEM noise (default 0.005 x confining for dem, 0 for linear-elastic)")
@@ -40,13 +62,14 @@ def _newton_arguments(parser: argparse.ArgumentParser) -> None:
                    help="accept an iterate with ||R||/||R0|| below this once the residual has "
                         "stopped falling for 8 iterations (DEM stress noise; default 2 x rtol "
                         "for dem, off for linear-elastic; 0: off)")
-    g.add_argument("--max-iterations", type=int, default=25,
-                   help="iterations per increment before it is halved (default 25)")
-    g.add_argument("--max-cutbacks", type=int, default=6,
-                   help="how often an increment may be halved (default 6)")
-    g.add_argument("--predictor", choices=("tangent", "extrapolate"), default="extrapolate",
+    g.add_argument("--max-iterations", type=int, default=_NEWTON.max_iterations,
+                   help="iterations per increment before it is halved "
+                        f"(default {_NEWTON.max_iterations})")
+    g.add_argument("--max-cutbacks", type=int, default=_NEWTON.max_cutbacks,
+                   help=f"how often an increment may be halved (default {_NEWTON.max_cutbacks})")
+    g.add_argument("--predictor", choices=("tangent", "extrapolate"), default=_NEWTON.predictor,
                    help="first guess of a step: committed-tangent solve or the last increment "
-                        "scaled (default extrapolate)")
+                        f"scaled (default {_NEWTON.predictor})")
     g.add_argument("--tangent", choices=("kruyt-rothenburg", "perturbation"),
                    default="kruyt-rothenburg",
                    help="dem: tangent of the RVEs: Kruyt-Rothenburg (Wu et al. eq. 6, default) "
@@ -55,16 +78,19 @@ def _newton_arguments(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--perturbation", type=float, default=0.1,
                    help="dem, --tangent perturbation: perturbation of grad u relative to its "
                         "largest component (default 0.1)")
-    g.add_argument("--relaxation", choices=("none", "aitken"), default="aitken",
-                   help="relaxation of Newton corrections (default aitken: the DEM tangent "
-                        "leaves out the discs' rearrangement and is too stiff)")
-    g.add_argument("--tangent-update", choices=("none", "secant"), default="none",
-                   help="none: the material's tangent at every iterate (default); secant: "
+    g.add_argument("--relaxation", choices=("none", "aitken"), default=_NEWTON.relaxation,
+                   help=f"relaxation of Newton corrections (default {_NEWTON.relaxation}: the "
+                        "DEM tangent leaves out the discs' rearrangement and is too stiff)")
+    g.add_argument("--tangent-update", choices=("none", "secant"),
+                   default=_NEWTON.tangent_update,
+                   help=f"none: the material's tangent at every iterate (default "
+                        f"{_NEWTON.tangent_update}); secant: "
                         "each point's tangent corrected by Broyden updates from the stress "
                         "change its RVE gave (use with --relaxation none)")
-    g.add_argument("--secant-min-change", type=float, default=1e-4,
+    g.add_argument("--secant-min-change", type=float, default=_NEWTON.secant_min_change,
                    help="--tangent-update secant: smallest change of a point's grad u that "
-                        "updates its tangent (default 1e-4; smaller changes carry DEM noise)")
+                        f"updates its tangent (default {_NEWTON.secant_min_change:g}; smaller "
+                        "changes carry DEM noise)")
 
 
 def _common_arguments(parser: argparse.ArgumentParser) -> None:
@@ -74,17 +100,15 @@ def _common_arguments(parser: argparse.ArgumentParser) -> None:
                         help="lateral confining pressure [Pa], compression positive "
                              "(default 100e3)")
     parser.add_argument("--steps", type=int, default=100, help="load steps (default 100)")
-    parser.add_argument("--out", type=Path, default=None,
-                        help="output folder: steps.csv, points.csv, fields.xdmf, figures")
-    parser.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
-    parser.add_argument("--device", choices=("cpu", "cuda"), default=None,
-                        help="DEM device (default: CUDA when present, else CPU)")
+    add_out(parser, "output folder: steps.csv, points.csv, fields.xdmf, figures")
+    add_json(parser, "a summary")
+    add_device(parser, "DEM device")
     parser.add_argument("--shards", type=int, default=None,
                         help="CPU threads (shards) of the DEM batch (default: one per core)")
     parser.add_argument("--map-strain", type=float, nargs="+", default=[0.02],
                         help="axial strain(s) of the displacement/shear-strain maps and of the "
                              "shear-band measures (default 0.02)")
-    parser.add_argument("--no-progress", action="store_true", help="no progress bars")
+    add_progress(parser)
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -143,22 +167,18 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     b.set_defaults(func=run_biaxial_command)
 
 
-def _settings(args: argparse.Namespace) -> NewtonSettings:
-    stall = args.stall_rtol
-    if stall is None:
-        stall = 0.0 if getattr(args, "material", "dem") == "linear-elastic" else 2 * args.rtol
-    return NewtonSettings(rtol=args.rtol, stall_rtol=stall, max_iterations=args.max_iterations,
-                          max_cutbacks=args.max_cutbacks, predictor=args.predictor,
-                          relaxation=args.relaxation, tangent_update=args.tangent_update,
-                          secant_min_change=args.secant_min_change)
+def _settings(args: argparse.Namespace, material: str) -> NewtonSettings:
+    return default_settings(material, rtol=args.rtol, stall_rtol=args.stall_rtol,
+                            max_iterations=args.max_iterations, max_cutbacks=args.max_cutbacks,
+                            predictor=args.predictor, relaxation=args.relaxation,
+                            tangent_update=args.tangent_update,
+                            secant_min_change=args.secant_min_change)
 
 
-def _stress_tol(args: argparse.Namespace) -> float:
+def _stress_tol(args: argparse.Namespace, material: str) -> float:
     if args.stress_tol is not None:
         return args.stress_tol
-    # Wu et al.'s 0.005, taken of the confining stress: the floor below which DEM stress
-    # noise stalls Newton once a step's own load is small
-    return 0.0 if getattr(args, "material", "dem") == "linear-elastic" else 5e-3 * args.confining
+    return default_stress_tol(material, args.confining)
 
 
 def _check(args: argparse.Namespace) -> None:
@@ -170,52 +190,25 @@ def _check(args: argparse.Namespace) -> None:
         raise FileNotFoundError(f"--rve {args.rve} does not exist")
 
 
-def _summary(result: BiaxialResult, wall: float) -> dict[str, Any]:
-    steps = result.steps
-    ratio = steps["stress_ratio"].to_numpy()
-    peak = int(np.nanargmax(ratio))
-    done = steps[steps["step"] > 0]
-    return {
-        "peak_stress_ratio": float(ratio[peak]),
-        "axial_strain_at_peak": float(steps["axial_strain"].iloc[peak]),
-        "newton_iterations_mean": float(done["iterations"].mean()) if len(done) else math.nan,
-        "sxx": float(steps["sxx"].iloc[-1]),
-        "syy": float(steps["syy"].iloc[-1]),
-        "final_axial_strain": float(steps["axial_strain"].iloc[-1]),
-        "steps_completed": len(done),
-        "cutbacks": int(done["cutbacks"].sum()),
-        "stalled_increments": int(done["stalled"].sum()),
-        "dem_steps": int(done["work"].sum()),
-        "wall_time_s": wall,
-        "error": result.error,
-    }
-
-
-def _band_summary(result: BiaxialResult, map_strains: list[float],
-                  peak_ratio: float) -> dict[str, Any]:
-    """Shear-band measures at the map strains and at the last step (fem.localization)."""
-    steps = result.steps
-    if len(steps) < 2:
-        return {}
-    rows = sorted({result.row_nearest(e) for e in map_strains})
-    return {
-        "shear_bands": [shear_band(result.points, int(steps["step"].iloc[r])).as_dict()
-                        for r in rows],
-        "shear_band_final": shear_band(result.points).as_dict(),
-        "mohr_coulomb_inclination_deg": mohr_coulomb_inclination(max(peak_ratio, 1.0)),
-    }
-
-
 def _report(args: argparse.Namespace, summary: dict[str, Any]) -> int:
-    if args.json:
-        print(json.dumps(summary, indent=2, default=str))
-    else:
-        for key, value in summary.items():
-            print(f"{key:>24}: {value}")
+    emit(args, summary)
     if summary["error"]:
         print(f"error: {summary['error']}", file=sys.stderr)
         return 1
     return 0
+
+
+def _run(args: argparse.Namespace, setup: BiaxialSetup, material: Material,
+         material_name: str) -> tuple[BiaxialResult, dict[str, Any]]:
+    """The FEM run, written under ``--out`` as it goes; the result and its summary."""
+    t0 = time.perf_counter()
+    with contextlib.ExitStack() as stack:
+        writer = (stack.enter_context(BiaxialWriter(args.out)) if args.out is not None
+                  else None)
+        result = run_biaxial(setup, material, args.steps, _settings(args, material_name),
+                             progress=progress_enabled(args), observer=writer,
+                             stress_tol=_stress_tol(args, material_name))
+    return result, run_summary(result, time.perf_counter() - t0)
 
 
 def run_single_element(args: argparse.Namespace) -> int:
@@ -223,7 +216,7 @@ def run_single_element(args: argparse.Namespace) -> int:
     _check(args)
     setup = BiaxialSetup(width=1.0, height=1.0, nx=1, ny=1, confining=args.confining,
                          axial_strain=args.axial_strain)
-    progress = not args.no_progress
+    progress = progress_enabled(args)
     material: Material
     if args.material == "linear-elastic":
         material = create_material("linear-elastic", young=args.E, poisson=args.nu,
@@ -238,28 +231,28 @@ def run_single_element(args: argparse.Namespace) -> int:
     reference = None
     if args.material == "dem" and args.compare_dem:
         reference = _pure_dem(material, args, progress)
-    t0 = time.perf_counter()
-    result = run_biaxial(setup, material, args.steps, _settings(args), progress=progress,
-                         out_dir=args.out, stress_tol=_stress_tol(args))
-    summary = _summary(result, time.perf_counter() - t0)
+    result, summary = _run(args, setup, material, args.material)
     if reference is not None:
-        peak = int(reference["stress_ratio"].idxmax())
-        summary["dem_peak_stress_ratio"] = float(reference["stress_ratio"][peak])
-        summary["dem_axial_strain_at_peak"] = float(reference["axial_strain"][peak])
+        peak, ratio = find_peak(reference["axial_strain"].to_numpy(),
+                                reference["stress_ratio"].to_numpy())
+        summary["dem_peak_stress_ratio"] = ratio
+        summary["dem_axial_strain_at_peak"] = float(reference["axial_strain"].iloc[peak])
     if args.out is not None:
         write_outputs(result, args.out, map_strain=args.map_strain, reference=reference)
         if reference is not None:
-            reference.to_csv(Path(args.out) / "pure_dem.csv", index=False)
+            write_csv(reference, Path(args.out) / "pure_dem.csv")
         summary["out"] = str(args.out)
     return _report(args, summary)
 
 
-def _pure_dem(material: Material, args: argparse.Namespace, progress: bool) -> pd.DataFrame:
-    """Drained biaxial test of RVE 0 of the DEM material (its committed state)."""
+def _pure_dem(material: Any, args: argparse.Namespace, progress: bool) -> pd.DataFrame:
+    """Drained biaxial test of RVE 0 of the DEM ``material`` (a
+    :class:`~granular_material_skfem.DEMMaterial`; its committed state)."""
     from granular_material.dem import DEMBatch
     from granular_material.procedures import biaxial_test
 
-    batch = DEMBatch(material.batch.to_data().replicate(1), device=args.device, shards=1)
+    rve0 = material.committed_rves().take([0])
+    batch = DEMBatch(rve0, device=args.device, shards=1)
     curve = biaxial_test(batch, axial_strain=args.axial_strain, confining=args.confining,
                          progress=progress)
     return curve[curve["rve"] == 0].reset_index(drop=True)
@@ -279,19 +272,16 @@ def run_biaxial_command(args: argparse.Namespace) -> int:
     setup = BiaxialSetup(width=args.width, height=args.height, nx=nx, ny=ny,
                          confining=args.confining, axial_strain=args.axial_strain,
                          platens=args.platens)
-    progress = not args.no_progress
+    progress = progress_enabled(args)
     material = create_material("dem", rve=args.rve, particles=particles, seed=args.seed,
                                pressure=args.confining, device=device, shards=args.shards,
                                progress=progress, tangent=args.tangent,
                                perturbation=args.perturbation)
     material.allocate(setup.n_points)
-    t0 = time.perf_counter()
-    result = run_biaxial(setup, material, args.steps, _settings(args), progress=progress,
-                         out_dir=args.out, stress_tol=_stress_tol(args))
-    summary = _summary(result, time.perf_counter() - t0)
+    result, summary = _run(args, setup, material, "dem")
     summary.update(scale=scale, elements=[nx, ny], gauss_points=setup.n_points,
                    particles=particles, device=device)
-    summary.update(_band_summary(result, args.map_strain, summary["peak_stress_ratio"]))
+    summary.update(band_summary(result, args.map_strain, summary["peak_stress_ratio"]))
     if args.out is not None:
         write_outputs(result, args.out, map_strain=args.map_strain)
         summary["out"] = str(args.out)

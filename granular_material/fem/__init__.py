@@ -1,13 +1,17 @@
-"""FEM side of the FEM×DEM coupling: material protocol, Newton driver, problems, outputs.
+"""FEM side of the FEM×DEM coupling: material protocol, Newton driver, problems, runner.
 
 A material is anything that follows :class:`Material` (found by name through the
 ``granular_material.materials`` entry points: ``linear-elastic``, ``dem``); the
 :class:`NewtonSolver` drives it on a scikit-fem basis; :func:`run_biaxial` runs the drained
-biaxial test (one element or a specimen) and collects tables for :func:`write_outputs`.
+biaxial test (one element or a specimen) and collects its tables (written, plotted and
+summarised by :mod:`granular_material.results`). :func:`default_settings` holds the Newton
+settings the commands use.
 """
 
+from granular_material.fem.defaults import default_settings, default_stress_tol
 from granular_material.fem.layout import to_points, to_quadrature
 from granular_material.fem.linear_elastic import LinearElastic, LinearElasticParameters
+from granular_material.fem.loading import Loading
 from granular_material.fem.material import (
     Material,
     MaterialResponse,
@@ -17,15 +21,13 @@ from granular_material.fem.material import (
     load_material,
 )
 from granular_material.fem.newton import (
-    Loading,
     NewtonError,
     NewtonSettings,
     NewtonSolver,
     StepRecord,
 )
-from granular_material.fem.output import write_outputs
 from granular_material.fem.problems import BiaxialProblem, BiaxialSetup, build_biaxial
-from granular_material.fem.runner import BiaxialResult, run_biaxial
+from granular_material.fem.runner import BiaxialResult, RunObserver, run_biaxial
 
 __all__ = [
     "BiaxialProblem",
@@ -40,13 +42,15 @@ __all__ = [
     "NewtonSettings",
     "NewtonSolver",
     "PointStatus",
+    "RunObserver",
     "StepRecord",
     "available_materials",
     "build_biaxial",
     "create_material",
+    "default_settings",
+    "default_stress_tol",
     "load_material",
     "run_biaxial",
     "to_points",
     "to_quadrature",
-    "write_outputs",
 ]

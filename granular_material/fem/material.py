@@ -57,15 +57,14 @@ class MaterialResponse:
         stress: Cauchy stress σ [Pa], tension positive, shape (n, 2, 2), float64.
         tangent: D_ijkl = ∂σ_ij/∂(∂u_k/∂x_l) [Pa], shape (n, 2, 2, 2, 2), float64.
         status: :class:`PointStatus` per point, shape (n,), int8.
-        work: cost of the evaluation in the material's own unit (DEM steps run; 0 for
-            closed-form laws).
+        dem_steps: DEM steps the evaluation ran (0 for closed-form laws).
         fields: further per-point scalars for output (e.g. ``void_ratio``), each shape (n,).
     """
 
     stress: np.ndarray
     tangent: np.ndarray
     status: np.ndarray
-    work: int = 0
+    dem_steps: int = 0
     fields: Mapping[str, np.ndarray] = field(default_factory=dict)
 
     def __post_init__(self) -> None:

@@ -22,7 +22,9 @@ from skfem import Basis, condense, solve
 
 from granular_material.fem.acceleration import AitkenRelaxation, SecantTangent
 from granular_material.fem.forms import gauss_points_grad, internal_force, stiffness
+from granular_material.fem.loading import Loading
 from granular_material.fem.material import Material, MaterialResponse
+from granular_material.procedures.progress import progress_bar
 
 __all__ = ["Loading", "NewtonError", "NewtonSettings", "NewtonSolver", "StepRecord"]
 
@@ -106,40 +108,6 @@ class NewtonSettings:
             raise ValueError(f"divergence must be > 1, got {self.divergence!r}")
 
 
-@dataclass(frozen=True)
-class Loading:
-    """Boundary conditions as a linear function of the load factor λ ∈ [0, 1].
-
-    Attributes:
-        dirichlet_dofs: constrained degrees of freedom, shape (m,), int.
-        dirichlet_end: prescribed displacement at λ = 1 [m], shape (m,); u_D(λ) = λ · end.
-        force_start: external nodal forces at λ = 0 [N/m], shape (ndofs,) (e.g. confinement).
-        force_end: external nodal forces at λ = 1 [N/m], shape (ndofs,).
-    """
-
-    dirichlet_dofs: np.ndarray
-    dirichlet_end: np.ndarray
-    force_start: np.ndarray
-    force_end: np.ndarray
-
-    def __post_init__(self) -> None:
-        if self.dirichlet_dofs.shape != self.dirichlet_end.shape:
-            raise ValueError(
-                f"dirichlet_end shape {self.dirichlet_end.shape} does not match "
-                f"dirichlet_dofs shape {self.dirichlet_dofs.shape}"
-            )
-        if self.force_start.shape != self.force_end.shape:
-            raise ValueError(
-                f"force_end shape {self.force_end.shape} differs from force_start "
-                f"shape {self.force_start.shape}"
-            )
-
-    def at(self, load_factor: float) -> tuple[np.ndarray, np.ndarray]:
-        """(u_D [m] shape (m,), f_ext [N/m] shape (ndofs,)) at load factor λ."""
-        f = (1.0 - load_factor) * self.force_start + load_factor * self.force_end
-        return load_factor * self.dirichlet_end, f
-
-
 @dataclass
 class StepRecord:
     """What one load step cost and how it converged.
@@ -148,7 +116,8 @@ class StepRecord:
         step: load step number, 1-based.
         load_factor: λ at the end of the step.
         iterations: material evaluations used, all attempts and sub-increments included.
-        work: material work (DEM steps run), all attempts included.
+        dem_steps: DEM steps run by the material, all attempts included (0 for closed-form
+            laws).
         cutbacks: how many times an increment of this step was halved.
         stalled: increments accepted on a stalled residual (``NewtonSettings.stall_rtol``).
         residual_history: ‖R‖₂ / ‖R₀‖₂ of every iteration, one list per attempt.
@@ -158,7 +127,7 @@ class StepRecord:
     step: int
     load_factor: float
     iterations: int = 0
-    work: int = 0
+    dem_steps: int = 0
     cutbacks: int = 0
     stalled: int = 0
     residual_history: list[list[float]] = field(default_factory=list)
@@ -181,7 +150,7 @@ class _Attempt:
     f_int: np.ndarray | None
     history: list[float]
     iterations: int
-    work: int
+    dem_steps: int
     reason: str
     stalled: bool = False
 
@@ -255,7 +224,7 @@ class NewtonSolver:
             last_step, last_du = self._last
             du[interior] = (target - self.load_factor) / last_step * last_du[interior]
         history: list[float] = []
-        work = 0
+        dem_steps = 0
         aitken = AitkenRelaxation() if s.relaxation == "aitken" else None
         secant = None
         if s.tangent_update == "secant":
@@ -265,28 +234,28 @@ class NewtonSolver:
         for it in range(1, s.max_iterations + 1):
             grad_u = gauss_points_grad(self.basis, du)
             response = self.material.evaluate(grad_u)
-            work += int(response.work)
+            dem_steps += int(response.dem_steps)
             if not response.ok:
                 bad = response.failed_points()
-                return _Attempt(False, du, None, None, history, it, work,
+                return _Attempt(False, du, None, None, history, it, dem_steps,
                                 f"material failed at points {bad[:8].tolist()}")
             f_int = internal_force(self.basis, response.stress)
             residual = f_int - f_ext
             r = float(np.linalg.norm(residual[interior]))
             history.append(r / r0 if r0 > 0 else r)
             if r <= s.atol or (r0 > 0 and r <= s.rtol * r0):
-                return _Attempt(True, du, response, f_int, history, it, work, "")
+                return _Attempt(True, du, response, f_int, history, it, dem_steps, "")
             if _stalled(history, s):
-                return _Attempt(True, du, response, f_int, history, it, work, "", stalled=True)
+                return _Attempt(True, du, response, f_int, history, it, dem_steps, "", stalled=True)
             if not math.isfinite(r) or (r0 > 0 and r > s.divergence * r0):
-                return _Attempt(False, du, None, None, history, it, work, "diverged")
+                return _Attempt(False, du, None, None, history, it, dem_steps, "diverged")
             tangent = (response.tangent if secant is None
                        else secant.update(grad_u, response.stress))
             K = stiffness(self.basis, tangent)
             A, b, x, interior = condense(K, -residual, D=D)
             correction = solve(A, b, x, interior)
             du = du + correction if aitken is None else aitken.update(du, correction)
-        return _Attempt(False, du, None, None, history, s.max_iterations, work,
+        return _Attempt(False, du, None, None, history, s.max_iterations, dem_steps,
                         f"not converged in {s.max_iterations} iterations")
 
     def step(self, target: float, step: int) -> StepRecord:
@@ -304,7 +273,7 @@ class NewtonSolver:
             end = min(self.load_factor + increment, target)
             attempt = self._increment(end)
             record.iterations += attempt.iterations
-            record.work += attempt.work
+            record.dem_steps += attempt.dem_steps
             record.residual_history.append(attempt.history)
             if attempt.converged:
                 self.material.commit()
@@ -344,12 +313,9 @@ class NewtonSolver:
         """
         if n_steps < 1:
             raise ValueError(f"n_steps must be >= 1, got {n_steps}")
-        from tqdm.auto import tqdm
-
         start = self.load_factor
         first = len(self.records) + 1
-        bar = tqdm(total=n_steps, desc=description, disable=not progress, unit="step")
-        try:
+        with progress_bar(n_steps, description, progress) as bar:
             for k in range(n_steps):
                 target = start + (1.0 - start) * (k + 1) / n_steps
                 record = self.step(target, first + k)
@@ -357,8 +323,6 @@ class NewtonSolver:
                     on_step(self, record)
                 last = record.residual_history[-1][-1] if record.residual_history[-1] else 0.0
                 bar.set_postfix(it=record.iterations, cut=record.cutbacks,
-                                res=f"{last:.2g}", work=record.work)
+                                res=f"{last:.2g}", dem_steps=record.dem_steps)
                 bar.update()
-        finally:
-            bar.close()
         return self.records

@@ -17,7 +17,7 @@ import numpy as np
 from skfem import Basis, ElementQuad1, ElementVector, FacetBasis, LinearForm, MeshQuad
 
 from granular_material.fem.layout import to_points
-from granular_material.fem.newton import Loading
+from granular_material.fem.loading import Loading
 
 __all__ = ["BiaxialProblem", "BiaxialSetup", "build_biaxial"]
 

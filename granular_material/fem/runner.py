@@ -7,7 +7,7 @@ Tables (tension positive unless the column says otherwise):
     the top platen reaction, compression +), confining [Pa] (compression +), stress_ratio
     (platen_stress / confining), sxx, syy, sxy [Pa] (volume averages over Gauss points),
     volumetric_strain (tr ε volume average, contraction negative), void_ratio (mean, NaN if
-    the material has none), iterations, work (DEM steps), cutbacks, stalled (increments
+    the material has none), iterations, dem_steps (DEM steps run), cutbacks, stalled (increments
     accepted on a stalled residual), wall_time [s],
     residual_history (JSON list of lists of ‖R‖/‖R₀‖).
 
@@ -22,7 +22,7 @@ from __future__ import annotations
 import json
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
-from pathlib import Path
+from typing import Any, Protocol
 
 import numpy as np
 import pandas as pd
@@ -32,7 +32,25 @@ from granular_material.fem.material import Material
 from granular_material.fem.newton import NewtonError, NewtonSettings, NewtonSolver, StepRecord
 from granular_material.fem.problems import BiaxialProblem, BiaxialSetup, build_biaxial
 
-__all__ = ["BiaxialResult", "run_biaxial"]
+__all__ = ["BiaxialResult", "RunObserver", "run_biaxial"]
+
+
+class RunObserver(Protocol):
+    """Something that follows a run as it goes (e.g. the writers of
+    :class:`granular_material.results.BiaxialWriter`)."""
+
+    def start(self, problem: BiaxialProblem) -> None:
+        """Called once, before the initial state is recorded."""
+        ...
+
+    def record(self, row: dict[str, Any], points: pd.DataFrame, u: np.ndarray) -> None:
+        """Called with every committed step (step 0 first): its ``steps`` row, its Gauss-point
+        table and the nodal displacement [m] (ndofs,)."""
+        ...
+
+    def finish(self, result: BiaxialResult) -> None:
+        """Called once with what the run produced, however it ended."""
+        ...
 
 
 @dataclass
@@ -80,7 +98,7 @@ def _rows(solver: NewtonSolver, problem: BiaxialProblem, record: StepRecord | No
         "volumetric_strain": float(w @ np.trace(strain, axis1=1, axis2=2)),
         "void_ratio": float(w @ fields["void_ratio"]) if "void_ratio" in fields else np.nan,
         "iterations": record.iterations if record else 0,
-        "work": record.work if record else 0,
+        "dem_steps": record.dem_steps if record else 0,
         "cutbacks": record.cutbacks if record else 0,
         "stalled": record.stalled if record else 0,
         "wall_time": record.wall_time if record else 0.0,
@@ -108,7 +126,7 @@ def run_biaxial(
     settings: NewtonSettings | None = None,
     progress: bool = False,
     on_step: Callable[[NewtonSolver, StepRecord, pd.DataFrame], None] | None = None,
-    out_dir: str | Path | None = None,
+    observer: RunObserver | None = None,
     stress_tol: float = 0.0,
 ) -> BiaxialResult:
     """Drive ``material`` through a drained biaxial test in ``n_steps`` load steps.
@@ -118,13 +136,11 @@ def run_biaxial(
     does not reduce, while the relative test ‖R‖/‖R₀‖ tightens with every halving.
 
     A :class:`NewtonError` does not propagate: the committed steps are returned with
-    ``error`` set (and written to ``out_dir`` when given, with the fields file). Nor does an
-    interrupt (Ctrl-C): a long run stopped by hand returns, and writes, the steps committed
-    so far. With ``out_dir`` the tables are also written after every step; the fields file
-    is finished when the run returns (a killed process leaves the tables only).
+    ``error`` set. Nor does an interrupt (Ctrl-C): a long run stopped by hand returns the
+    steps committed so far. ``observer`` (e.g. :class:`granular_material.results.BiaxialWriter`)
+    sees every committed step as it comes and the result at the end, in both cases.
+    ``on_step(solver, record, points)`` is called after every committed load step.
     """
-    from granular_material.fem.output import FieldWriter, write_tables
-
     problem = build_biaxial(setup)
     if stress_tol < 0 or not np.isfinite(stress_tol):
         raise ValueError(f"stress_tol must be a stress >= 0 Pa, got {stress_tol!r}")
@@ -133,21 +149,16 @@ def run_biaxial(
                            atol=problem.force_tolerance(stress_tol))
     solver = NewtonSolver(problem.basis, material, problem.loading, settings)
     rows, tables, disps = [], [], []
-    writer = FieldWriter(Path(out_dir) / "fields.xdmf", problem) if out_dir else None
+    if observer is not None:
+        observer.start(problem)
 
     def collect(solver: NewtonSolver, record: StepRecord | None) -> None:
         row, points = _rows(solver, problem, record)
         rows.append(row)
         tables.append(points)
         disps.append(solver.u.copy())
-        if writer is not None:
-            writer.write(row["axial_strain"], solver.u, points)
-            # the tables grow on disk step by step, so a long run can be followed (and is
-            # not lost if it is stopped); the end of the run writes them once more, whole
-            out = Path(out_dir)
-            pd.DataFrame(rows).to_csv(out / "steps.csv", index=False)
-            points.to_csv(out / "points.csv", index=False, mode="a" if len(rows) > 1 else "w",
-                          header=len(rows) == 1)
+        if observer is not None:
+            observer.record(row, points, solver.u)
         if on_step is not None and record is not None:
             on_step(solver, record, points)
 
@@ -160,13 +171,10 @@ def run_biaxial(
         error = str(exc)
     except KeyboardInterrupt:
         error = f"interrupted after load step {len(rows) - 1} of {n_steps}"
-    finally:
-        if writer is not None:
-            writer.close()
     result = BiaxialResult(
         problem=problem, steps=pd.DataFrame(rows), points=pd.concat(tables, ignore_index=True),
         displacements=np.array(disps), records=list(solver.records), error=error,
     )
-    if out_dir is not None:
-        write_tables(result, out_dir)
+    if observer is not None:
+        observer.finish(result)
     return result

@@ -1,18 +1,18 @@
-"""Element tests of DEM batches: the drained biaxial test and its key figures."""
+"""Element tests of DEM batches: the drained biaxial test (its key figures:
+:func:`granular_material.results.summarize_biaxial`)."""
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
-from tqdm.auto import tqdm
 
 from granular_material.dem import DEMBatch
+from granular_material.procedures.progress import progress_bar
 from granular_material.procedures.servo import CONTROL_STRAIN, CONTROL_STRESS, servo_steps
 
-__all__ = ["BiaxialSummary", "biaxial_test", "summarize_biaxial"]
+__all__ = ["biaxial_test"]
 
 
 def biaxial_test(
@@ -74,7 +74,7 @@ def biaxial_test(
     record(0)
     target = np.tile([-float(confining), step_strain], (b, 1))
     control = np.tile([CONTROL_STRESS, CONTROL_STRAIN], (b, 1))
-    bar = tqdm(total=total, desc="biaxial", unit="step", disable=not progress)
+    bar = progress_bar(total, "biaxial", progress)
     done = 0
     try:
         while done < total:
@@ -89,24 +89,3 @@ def biaxial_test(
     finally:
         bar.close()
     return pd.concat(rows, ignore_index=True)
-
-
-@dataclass(frozen=True)
-class BiaxialSummary:
-    """Key figures of one RVE's biaxial curve (volumetric strain tension positive)."""
-
-    peak_stress_ratio: float
-    axial_strain_at_peak: float
-    max_contraction: float
-    final_void_ratio: float
-
-
-def summarize_biaxial(curve: pd.DataFrame) -> BiaxialSummary:
-    """Peak σ1/σ3 and its axial strain, the most negative εv, the last void ratio."""
-    peak = int(np.argmax(curve["stress_ratio"].to_numpy()))
-    return BiaxialSummary(
-        peak_stress_ratio=float(curve["stress_ratio"].iloc[peak]),
-        axial_strain_at_peak=float(curve["axial_strain"].iloc[peak]),
-        max_contraction=float(curve["volumetric_strain"].min()),
-        final_void_ratio=float(curve["void_ratio"].iloc[-1]),
-    )

@@ -6,9 +6,9 @@ import math
 from collections.abc import Callable
 
 import numpy as np
-from tqdm.auto import tqdm
 
 from granular_material.dem import CONTROL_STRAIN, CONTROL_STRESS, DEMBatch
+from granular_material.procedures.progress import progress_bar
 
 __all__ = ["CONTROL_STRAIN", "CONTROL_STRESS", "consolidate", "servo_steps"]
 
@@ -56,8 +56,7 @@ def consolidate(
     target = np.full((b, 2), -float(pressure))
     control = np.full((b, 2), CONTROL_STRESS)
     done = np.zeros(b, dtype=bool)
-    bar = tqdm(total=b, desc=f"consolidating to {pressure:.3g} Pa", unit="rve",
-               disable=not progress)
+    bar = progress_bar(b, f"consolidating to {pressure:.3g} Pa", progress, unit="rve")
 
     def converged(steps_done: int) -> bool:
         h = batch.homogenize()

@@ -10,7 +10,6 @@ import math
 
 import numpy as np
 from scipy.linalg import logm
-from tqdm.auto import tqdm
 
 from granular_material.dem import DEMBatch
 
@@ -64,14 +63,15 @@ def drive_grad_u(
     grad_u: np.ndarray,
     max_strain_per_step: float = 1.0e-5,
     min_steps: int = 2,
-    progress: bool = False,
 ) -> int:
     """Apply the displacement gradient ∇u to every RVE, measured from its current state.
 
     RVE b is deformed over ``n_b = max(ceil(max|∇u_b| / max_strain_per_step), min_steps)``
     steps (Guo & Zhao 2014: at most 1e-5 strain a step) with the constant velocity gradient
     ``L = log(I + ∇u)/(n_b·dt)``, so a rigid rotation stays a rotation all along; at the end
-    its cell is exactly ``(I + ∇u)·H``. Returns the largest ``n_b`` (steps run).
+    its cell is exactly ``(I + ∇u)·H``. Returns the largest ``n_b`` (steps run). It shows no
+progress (it runs on every Newton iteration); a caller that drives one long path in
+increments can show a bar over them.
 
     Args:
         grad_u: ∇u [-], shape (B, 2, 2) or (2, 2) for all RVEs; ``grad_u[b, i, j] = ∂u_i/∂x_j``.
@@ -95,15 +95,12 @@ def drive_grad_u(
     cell0 = batch.cell()
     batch.set_affine(vel_grad)
     done = 0
-    bar = tqdm(total=int(n_steps.max()), desc="strain path", unit="step", disable=not progress)
     try:
         for stop in np.unique(n_steps):
             batch.set_active(n_steps > done)
             batch.run(int(stop) - done)
-            bar.update(int(stop) - done)
             done = int(stop)
     finally:
-        bar.close()
         batch.set_active(np.ones(batch.n_rve))
         batch.set_affine(np.zeros_like(g))
     # the cells already are (I + ∇u)·H up to rounding: make that exact, lists stay valid

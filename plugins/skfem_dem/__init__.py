@@ -6,8 +6,8 @@ Registered as the ``dem`` entry point of ``granular_material.materials``::
     material = create_material("dem", particles=400, seed=1)
 """
 
-from granular_material_skfem.adapter import DEMBackend, DEMEvaluation, InProcessBackend
+from granular_material_skfem.backend import DEMBackend, Evaluation, InProcessBackend
 from granular_material_skfem.material import DEMMaterial, DEMMaterialParameters
 
-__all__ = ["DEMBackend", "DEMEvaluation", "DEMMaterial", "DEMMaterialParameters",
+__all__ = ["DEMBackend", "DEMMaterial", "DEMMaterialParameters", "Evaluation",
            "InProcessBackend"]

@@ -9,40 +9,55 @@ would implement the same four calls.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, fields, replace
 from pathlib import Path
 from typing import Protocol
 
 import numpy as np
 
-from granular_material.dem import DEMBatch, DEMInstabilityError, load_rve, save_rve
+from granular_material.dem import DEMBatch, DEMInstabilityError, Homogenized, RVEData, save_rve
 from granular_material.procedures import drive_grad_u, has_real_logarithm
 
-__all__ = ["TANGENTS", "DEMBackend", "DEMEvaluation", "InProcessBackend"]
+__all__ = ["TANGENTS", "DEMBackend", "Evaluation", "InProcessBackend", "check_driving"]
 
 TANGENTS = ("kruyt-rothenburg", "perturbation")
 _COMPONENTS = ((0, 0), (0, 1), (1, 0), (1, 1))  # the (k, l) of ∂u_k/∂x_l
 
 
+def check_driving(tangent: str, perturbation: float, min_perturbation: float,
+                  max_strain_per_step: float, min_steps: int) -> None:
+    """The one check of how RVEs are driven; ``ValueError`` naming the field and value."""
+    if tangent not in TANGENTS:
+        raise ValueError(f"tangent must be one of {', '.join(TANGENTS)}, got {tangent!r}")
+    for name, value in (("perturbation", perturbation), ("min_perturbation", min_perturbation),
+                        ("max_strain_per_step", max_strain_per_step)):
+        if not (math.isfinite(value) and value > 0):
+            raise ValueError(f"{name} must be a finite number > 0, got {value!r}")
+    if int(min_steps) != min_steps or min_steps < 1:
+        raise ValueError(f"min_steps must be an integer >= 1, got {min_steps!r}")
+
+
 @dataclass(frozen=True)
-class DEMEvaluation:
-    """Homogenised response of the RVEs after one strain path.
+class Evaluation:
+    """What one evaluation of the RVEs gave.
 
     Attributes:
-        stress: Love stress [Pa], tension positive, shape (B, 2, 2).
-        tangent: Kruyt–Rothenburg tangent dσ_ij/d(∂u_k/∂x_l) [Pa], shape (B, 2, 2, 2, 2).
+        homogenized: the homogenised RVEs (stress, tangent, void ratio, ... of
+            :class:`~granular_material.dem.Homogenized`); with the "perturbation" tangent its
+            ``tangent`` is the forward-difference one. NaN throughout when the batch failed.
         failed: RVEs whose state blew up or whose ∇u inverts the cell, shape (B,), bool.
-        steps: DEM steps run (the longest strain path of the batch).
-        void_ratio: 2D void ratio [-], shape (B,).
-        coordination: coordination number [-], shape (B,).
+        dem_steps: DEM steps run, all strain paths of the evaluation together.
     """
 
-    stress: np.ndarray
-    tangent: np.ndarray
+    homogenized: Homogenized
     failed: np.ndarray
-    steps: int
-    void_ratio: np.ndarray
-    coordination: np.ndarray
+    dem_steps: int
+
+
+def _nan_like(h: Homogenized) -> Homogenized:
+    return Homogenized(**{f.name: np.full_like(np.asarray(getattr(h, f.name), dtype=np.float64),
+                                               np.nan) for f in fields(h)})
 
 
 class DEMBackend(Protocol):
@@ -50,8 +65,12 @@ class DEMBackend(Protocol):
 
     n_rve: int
 
-    def evaluate(self, grad_u: np.ndarray) -> DEMEvaluation:
+    def evaluate(self, grad_u: np.ndarray) -> Evaluation:
         """Deform every RVE from its committed state by ∇u (B, 2, 2) and homogenise."""
+        ...
+
+    def committed_rves(self) -> RVEData:
+        """The committed RVE states (contact history included)."""
         ...
 
     def commit(self) -> None:
@@ -85,11 +104,7 @@ class InProcessBackend:
     def __init__(self, batch: DEMBatch, max_strain_per_step: float = 1.0e-5,
                  min_steps: int = 2, tangent: str = "kruyt-rothenburg",
                  perturbation: float = 0.1, min_perturbation: float = 1.0e-4) -> None:
-        if tangent not in TANGENTS:
-            raise ValueError(f"tangent must be one of {', '.join(TANGENTS)}, got {tangent!r}")
-        if not (perturbation > 0 and min_perturbation > 0):
-            raise ValueError("perturbation and min_perturbation must be > 0, got "
-                             f"{perturbation!r}, {min_perturbation!r}")
+        check_driving(tangent, perturbation, min_perturbation, max_strain_per_step, min_steps)
         self.batch = batch
         self.max_strain_per_step = max_strain_per_step
         self.min_steps = min_steps
@@ -102,12 +117,6 @@ class InProcessBackend:
     def n_rve(self) -> int:
         """Number of RVEs B."""
         return self.batch.n_rve
-
-    @classmethod
-    def from_file(cls, path: str | Path, device: str | None = None,
-                  **kwargs: float) -> InProcessBackend:
-        """A backend holding the RVE batch of ``path`` (written by :meth:`checkpoint`)."""
-        return cls(DEMBatch(load_rve(path), device=device), **kwargs)
 
     def _drive(self, grad_u: np.ndarray, failed: np.ndarray) -> tuple[int, bool]:
         """From the committed state, drive ∇u (failed RVEs held still); marks RVEs that blow
@@ -125,14 +134,13 @@ class InProcessBackend:
             return 0, False
         return steps, True
 
-    def evaluate(self, grad_u: np.ndarray) -> DEMEvaluation:
+    def evaluate(self, grad_u: np.ndarray) -> Evaluation:
         """Restore the committed state, apply ∇u [-] (B, 2, 2), homogenise."""
-        b = self.n_rve
         self._trial = False
         finite = np.isfinite(grad_u).all(axis=(1, 2))
         grad_u = np.where(finite[:, None, None], grad_u, 0.0)
         failed = ~finite
-        work, perturbed, ok = 0, [], True
+        dem_steps, perturbed, ok = 0, [], True
         if self.tangent == "perturbation":
             size = np.maximum(self.perturbation * np.abs(grad_u).max(axis=(1, 2)),
                               self.min_perturbation)
@@ -140,28 +148,24 @@ class InProcessBackend:
                 g = grad_u.copy()
                 g[:, row, col] += size
                 steps, ok = self._drive(g, failed)
-                work += steps
+                dem_steps += steps
                 if not ok:  # the evaluation has failed: the remaining runs are wasted work
                     break
                 perturbed.append(self.batch.homogenize().stress)
         if ok:
             steps, ok = self._drive(grad_u, failed)
-            work += steps
-        if not ok:
-            nan = np.full(b, np.nan)
-            return DEMEvaluation(np.full((b, 2, 2), np.nan), np.full((b, 2, 2, 2, 2), np.nan),
-                                 failed, work, nan, nan.copy())
+            dem_steps += steps
         h = self.batch.homogenize()
-        stress = np.asarray(h.stress, dtype=np.float64)
-        tangent = np.asarray(h.tangent, dtype=np.float64)
+        if not ok:
+            return Evaluation(_nan_like(h), failed, dem_steps)
         if perturbed:
-            tangent = np.empty_like(tangent)
+            stress = np.asarray(h.stress, dtype=np.float64)
+            tangent = np.empty(h.tangent.shape)
             for (row, col), sigma in zip(_COMPONENTS, perturbed, strict=True):
                 tangent[:, :, :, row, col] = (sigma - stress) / size[:, None, None]
+            h = replace(h, tangent=tangent)
         self._trial = True
-        return DEMEvaluation(stress, tangent, failed, work,
-                             np.asarray(h.void_ratio, dtype=np.float64),
-                             np.asarray(h.coordination, dtype=np.float64))
+        return Evaluation(h, failed, dem_steps)
 
     def commit(self) -> None:
         """Snapshot the state of the last successful evaluate as the committed state."""
@@ -175,11 +179,15 @@ class InProcessBackend:
         self.batch.restore(self._committed)
         self._trial = False
 
-    def checkpoint(self, path: str | Path) -> None:
-        """Write the committed state (contact history included) to the RVE file ``path``."""
+    def committed_rves(self) -> RVEData:
+        """The committed RVE states (contact history included); the trial state is kept."""
         trial = self.batch.snapshot()
         self.batch.restore(self._committed)
         try:
-            save_rve(path, self.batch.to_data())
+            return self.batch.to_data()
         finally:
             self.batch.restore(trial)
+
+    def checkpoint(self, path: str | Path) -> None:
+        """Write the committed state (contact history included) to the RVE file ``path``."""
+        save_rve(path, self.committed_rves())

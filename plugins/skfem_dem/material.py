@@ -10,13 +10,14 @@ D = (1/V) Σ_c (k_n n⊗d⊗n⊗d + k_t t⊗d⊗t⊗d) (Wu, Fu & Zhou 2025, eqs.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from granular_material_skfem.adapter import TANGENTS, InProcessBackend
+from granular_material_skfem.backend import InProcessBackend, check_driving
 
 from granular_material.dem import DEMBatch, RVEData, load_rve
+from granular_material.dem.model import resolve_device
 from granular_material.fem.material import MaterialResponse, PointStatus
 from granular_material.procedures import prepare_packing
 
@@ -42,7 +43,7 @@ class DEMMaterialParameters:
             random gas of seed + p, consolidated on its own).
         tangent: "kruyt-rothenburg" (Wu et al. eq. 6) or "perturbation" (forward
             differences of the RVE response, four extra DEM runs per evaluation; see
-            :class:`~granular_material_skfem.adapter.InProcessBackend`).
+            :class:`~granular_material_skfem.backend.InProcessBackend`).
         perturbation: relative perturbation of ∇u for the "perturbation" tangent [-].
     """
 
@@ -59,24 +60,16 @@ class DEMMaterialParameters:
     perturbation: float = 0.1
 
     def __post_init__(self) -> None:
-        if self.tangent not in TANGENTS:
-            raise ValueError(f"tangent must be one of {', '.join(TANGENTS)}, got {self.tangent!r}")
-        if not (math.isfinite(self.perturbation) and self.perturbation > 0):
-            raise ValueError(f"perturbation must be > 0, got {self.perturbation!r}")
+        check_driving(self.tangent, self.perturbation, 1.0e-4, self.max_strain_per_step,
+                      self.min_steps)
         if self.shards is not None and (int(self.shards) != self.shards or self.shards < 1):
             raise ValueError(f"shards must be an integer >= 1 or None, got {self.shards!r}")
         if int(self.particles) != self.particles or self.particles < 4:
             raise ValueError(f"particles must be an integer >= 4, got {self.particles!r}")
         if not (math.isfinite(self.pressure) and self.pressure > 0):
             raise ValueError(f"pressure must be a positive number of Pa, got {self.pressure!r}")
-        if self.device not in (None, "cpu", "cuda") and not str(self.device).startswith("cuda:"):
-            raise ValueError(f"device must be 'cpu', 'cuda' or None, got {self.device!r}")
-        if not (math.isfinite(self.max_strain_per_step) and self.max_strain_per_step > 0):
-            raise ValueError(
-                f"max_strain_per_step must be positive, got {self.max_strain_per_step!r}"
-            )
-        if self.min_steps < 1:
-            raise ValueError(f"min_steps must be >= 1, got {self.min_steps!r}")
+        if self.device is not None:
+            resolve_device(self.device)  # the engine's one device check
 
 
 class DEMMaterial:
@@ -100,12 +93,14 @@ class DEMMaterial:
         """Number of Gauss points (RVEs) allocated."""
         return 0 if self.backend is None else self.backend.n_rve
 
-    @property
-    def batch(self) -> DEMBatch:
-        """The RVE batch (after :meth:`allocate`)."""
+    def _allocated(self) -> InProcessBackend:
         if self.backend is None:
             raise RuntimeError("allocate() the DEM material first")
-        return self.backend.batch
+        return self.backend
+
+    def committed_rves(self) -> RVEData:
+        """The committed RVE states, one per Gauss point (contact history included)."""
+        return self._allocated().committed_rves()
 
     def _backend(self, batch: DEMBatch) -> InProcessBackend:
         p = self.parameters
@@ -129,7 +124,7 @@ class DEMMaterial:
         elif p.replicate:
             data = self._prepare(1, p.seed).replicate(n_points)
         elif p.shards == 1:
-            data = _concatenate([self._prepare(1, p.seed + k) for k in range(n_points)])
+            data = RVEData.concatenate([self._prepare(1, p.seed + k) for k in range(n_points)])
         else:
             data = self._prepare(n_points, p.seed)
         self.backend = self._backend(DEMBatch(data, device=p.device, shards=p.shards))
@@ -143,7 +138,7 @@ class DEMMaterial:
     def evaluate(self, grad_u: np.ndarray) -> MaterialResponse:
         """Love stress and Kruyt–Rothenburg tangent for ∇u (n, 2, 2) since the commit.
 
-        ``work`` is the number of DEM steps run; ``fields`` holds ``void_ratio`` and
+        ``dem_steps`` is the number of DEM steps run; ``fields`` holds ``void_ratio`` and
         ``coordination``. RVEs that blew up are reported with ``PointStatus.FAILED``.
         """
         if self.backend is None:
@@ -152,16 +147,21 @@ class DEMMaterial:
         if grad_u.shape != (self.n_points, 2, 2):
             raise ValueError(f"grad_u must have shape ({self.n_points}, 2, 2), got {grad_u.shape}")
         ev = self.backend.evaluate(grad_u)
+        h = ev.homogenized
         status = np.where(ev.failed, PointStatus.FAILED, PointStatus.OK).astype(np.int8)
+
+        def f64(values: np.ndarray) -> np.ndarray:
+            return np.asarray(values, dtype=np.float64)
+
         return MaterialResponse(
-            stress=ev.stress, tangent=ev.tangent, status=status, work=ev.steps,
-            fields={"void_ratio": ev.void_ratio, "coordination": ev.coordination},
+            stress=f64(h.stress), tangent=f64(h.tangent), status=status,
+            dem_steps=ev.dem_steps,
+            fields={"void_ratio": f64(h.void_ratio), "coordination": f64(h.coordination)},
         )
 
     def commit(self) -> None:
         """The RVE states of the last evaluation become the committed states."""
-        self.batch  # noqa: B018 - raises before allocate
-        self.backend.commit()
+        self._allocated().commit()
 
     def revert(self) -> None:
         """Every RVE back to its committed state."""
@@ -170,24 +170,10 @@ class DEMMaterial:
 
     def checkpoint(self, path: str | Path) -> None:
         """Write the committed RVE states (an RVE file, B = n_points) to ``path``."""
-        self.batch  # noqa: B018 - raises before allocate
-        self.backend.checkpoint(path)
+        self._allocated().checkpoint(path)
 
     def restore(self, path: str | Path) -> None:
         """Load committed RVE states written by :meth:`checkpoint`."""
         p = self.parameters
         self.backend = self._backend(DEMBatch(load_rve(path), device=p.device, shards=p.shards))
 
-
-def _concatenate(parts: list[RVEData]) -> RVEData:
-    """One batch from several (same meta; extra arrays concatenated along the batch axis)."""
-    first = parts[0]
-
-    def cat(name: str) -> np.ndarray:
-        return np.concatenate([getattr(d, name) for d in parts])
-
-    return replace(
-        first, radius=cat("radius"), position=cat("position"), cell=cat("cell"),
-        velocity=cat("velocity"), angular_velocity=cat("angular_velocity"),
-        extra={k: np.concatenate([d.extra[k] for d in parts]) for k in first.extra},
-    )

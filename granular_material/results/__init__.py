@@ -1,0 +1,49 @@
+"""Results floor: tables and their writers (CSV, XDMF), figures, localisation (shear-band)
+measures, peak finding and the summaries the commands report. Reads what the procedures and
+the FEM produce; imports nothing above it."""
+
+from granular_material.results.localization import (
+    ShearBand,
+    mohr_coulomb_inclination,
+    shear_band,
+)
+from granular_material.results.peaks import find_peak
+from granular_material.results.plots import (
+    plot_biaxial_curves,
+    plot_maps,
+    plot_stress_strain,
+    pyplot,
+)
+from granular_material.results.summary import (
+    BiaxialSummary,
+    band_summary,
+    run_summary,
+    summarize_biaxial,
+)
+from granular_material.results.writers import (
+    BiaxialWriter,
+    FieldWriter,
+    write_csv,
+    write_outputs,
+    write_tables,
+)
+
+__all__ = [
+    "BiaxialSummary",
+    "BiaxialWriter",
+    "FieldWriter",
+    "ShearBand",
+    "band_summary",
+    "find_peak",
+    "mohr_coulomb_inclination",
+    "plot_biaxial_curves",
+    "plot_maps",
+    "plot_stress_strain",
+    "pyplot",
+    "run_summary",
+    "shear_band",
+    "summarize_biaxial",
+    "write_csv",
+    "write_outputs",
+    "write_tables",
+]

@@ -1,0 +1,124 @@
+"""Figures of the runs. The one module that selects matplotlib's backend (Agg: files only,
+no display needed); everything that draws gets pyplot from :func:`pyplot`.
+
+Plots follow the geotechnical habit and say so on their axes: axial strain, stress and
+volumetric strain are drawn compression positive.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from types import ModuleType
+from typing import TYPE_CHECKING
+
+import numpy as np
+import pandas as pd
+
+from granular_material.results.localization import shear_band
+
+if TYPE_CHECKING:
+    from granular_material.fem.runner import BiaxialResult
+
+__all__ = ["plot_biaxial_curves", "plot_maps", "plot_stress_strain", "pyplot"]
+
+
+def pyplot() -> ModuleType:
+    """``matplotlib.pyplot`` on the non-interactive Agg backend."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def plot_biaxial_curves(curve: pd.DataFrame, path: str | Path) -> Path:
+    """σ1/σ3 and εv against εa of the pure-DEM biaxial curve(s) of
+    :func:`~granular_material.procedures.biaxial_test` (one line per RVE)."""
+    plt = pyplot()
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(10, 4), constrained_layout=True)
+    for rve, group in curve.groupby("rve"):
+        eps = 100 * group["axial_strain"]
+        ax1.plot(eps, group["stress_ratio"], label=f"RVE {rve}")
+        ax2.plot(eps, -100 * group["volumetric_strain"], label=f"RVE {rve}")
+    ax1.set_xlabel("axial strain εa [%] (compression positive)")
+    ax1.set_ylabel("stress ratio σ1/σ3 [-]")
+    ax2.set_xlabel("axial strain εa [%] (compression positive)")
+    ax2.set_ylabel("volumetric strain εv [%] (contraction positive)")
+    if curve["rve"].nunique() <= 10:
+        ax1.legend()
+    fig.suptitle("Drained biaxial test of the RVE(s)")
+    path = Path(path)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+def plot_stress_strain(steps: pd.DataFrame, path: str | Path, reference: pd.DataFrame | None = None,
+                       label: str = "FEM") -> Path:
+    """Stress ratio and volumetric strain against axial strain (compression positive).
+
+    ``reference``, if given, is a table with ``axial_strain``, ``stress_ratio`` and
+    ``volumetric_strain`` columns in the same conventions (e.g. the pure-DEM biaxial test).
+    """
+    plt = pyplot()
+    fig, (a, b) = plt.subplots(1, 2, figsize=(10, 4), constrained_layout=True)
+    series = [(steps, label)] + ([(reference, "DEM (single RVE)")] if reference is not None else [])
+    for table, name in series:
+        a.plot(100 * table["axial_strain"], table["stress_ratio"], label=name)
+        b.plot(100 * table["axial_strain"], -100 * table["volumetric_strain"], label=name)
+    a.set_xlabel("axial strain ε_a [%] (compression +)")
+    a.set_ylabel("stress ratio σ_1/σ_3 [-] (compression +)")
+    b.set_xlabel("axial strain ε_a [%] (compression +)")
+    b.set_ylabel("volumetric strain ε_v [%] (contraction +)")
+    for ax in (a, b):
+        ax.grid(alpha=0.3)
+        ax.legend()
+    path = Path(path)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+def plot_maps(result: BiaxialResult, axial_strain: float, path: str | Path) -> Path:
+    """Maps of u_x, u_y [mm] and shear strain γ [%] at the step nearest ``axial_strain``.
+
+    Drawn on the deformed mesh (true scale), after Wu et al. (2025), Fig. 8.
+    """
+    plt = pyplot()
+    from matplotlib.tri import Triangulation
+
+    steps = result.steps
+    row = result.row_nearest(axial_strain)
+    step = int(steps["step"].iloc[row])
+    u = result.displacements[row]
+    basis = result.problem.basis
+    mesh = basis.mesh
+    ux, uy = u[basis.nodal_dofs[0]], u[basis.nodal_dofs[1]]
+    x, y = mesh.p[0] + ux, mesh.p[1] + uy
+    quads = mesh.t.T
+    tri = Triangulation(1e3 * x, 1e3 * y, np.vstack([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]]))
+    points = result.points[result.points["step"] == step]
+    gamma = points.groupby("element")["shear_strain"].mean().to_numpy()
+    fig, axes = plt.subplots(1, 3, figsize=(12, 5), constrained_layout=True)
+    for ax, values, title in ((axes[0], 1e3 * ux, "u_x [mm]"), (axes[1], 1e3 * uy, "u_y [mm]")):
+        im = ax.tripcolor(tri, values, shading="gouraud", cmap="viridis")
+        fig.colorbar(im, ax=ax, label=title)
+    im = axes[2].tripcolor(tri, facecolors=100 * np.concatenate([gamma, gamma]), cmap="inferno",
+                          vmin=0.0, vmax=max(100 * float(gamma.max()), 1e-12))
+    fig.colorbar(im, ax=axes[2], label="shear strain γ [%]")
+    for ax, title in zip(axes, ("displacement u_x", "displacement u_y", "shear strain"),
+                         strict=True):
+        ax.set_aspect("equal")
+        ax.set_title(title)
+        ax.set_xlabel("x [mm]")
+        ax.set_ylabel("y [mm]")
+    band = shear_band(result.points, step)
+    fig.suptitle(f"step {step}, axial strain {100 * steps['axial_strain'].iloc[row]:.2f} % "
+                 f"(compression +)\nlargest-γ {100 * band.band_fraction:.0f} % of points: "
+                 f"inclination {band.inclination_deg:.0f}°, elongation "
+                 f"{band.elongation:.2f}, γ ratio {band.localization:.1f}")
+    path = Path(path)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path

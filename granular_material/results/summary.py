@@ -1,0 +1,77 @@
+"""Key figures of the runs, as the commands report them (the JSON summary)."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+import pandas as pd
+
+from granular_material.results.localization import mohr_coulomb_inclination, shear_band
+from granular_material.results.peaks import find_peak
+
+if TYPE_CHECKING:
+    from granular_material.fem.runner import BiaxialResult
+
+__all__ = ["BiaxialSummary", "band_summary", "run_summary", "summarize_biaxial"]
+
+
+@dataclass(frozen=True)
+class BiaxialSummary:
+    """Key figures of one RVE's biaxial curve (volumetric strain tension positive)."""
+
+    peak_stress_ratio: float
+    axial_strain_at_peak: float
+    max_contraction: float
+    final_void_ratio: float
+
+
+def summarize_biaxial(curve: pd.DataFrame) -> BiaxialSummary:
+    """Peak σ1/σ3 and its axial strain, the most negative εv, the last void ratio of one
+    RVE's curve of :func:`~granular_material.procedures.biaxial_test`."""
+    peak, ratio = find_peak(curve["axial_strain"].to_numpy(), curve["stress_ratio"].to_numpy())
+    return BiaxialSummary(
+        peak_stress_ratio=ratio,
+        axial_strain_at_peak=float(curve["axial_strain"].iloc[peak]),
+        max_contraction=float(curve["volumetric_strain"].min()),
+        final_void_ratio=float(curve["void_ratio"].iloc[-1]),
+    )
+
+
+def run_summary(result: BiaxialResult, wall: float) -> dict[str, Any]:
+    """The summary of a FEM biaxial run: peak, Newton cost, DEM steps, wall time [s], error."""
+    steps = result.steps
+    peak, ratio = find_peak(steps["axial_strain"].to_numpy(), steps["stress_ratio"].to_numpy())
+    done = steps[steps["step"] > 0]
+    return {
+        "peak_stress_ratio": ratio,
+        "axial_strain_at_peak": float(steps["axial_strain"].iloc[peak]),
+        "newton_iterations_mean": float(done["iterations"].mean()) if len(done) else math.nan,
+        "sxx": float(steps["sxx"].iloc[-1]),
+        "syy": float(steps["syy"].iloc[-1]),
+        "final_axial_strain": float(steps["axial_strain"].iloc[-1]),
+        "steps_completed": len(done),
+        "cutbacks": int(done["cutbacks"].sum()),
+        "stalled_increments": int(done["stalled"].sum()),
+        "dem_steps": int(done["dem_steps"].sum()),
+        "wall_time_s": wall,
+        "error": result.error,
+    }
+
+
+def band_summary(result: BiaxialResult, map_strains: Sequence[float],
+                 peak_ratio: float) -> dict[str, Any]:
+    """Shear-band measures at the map strains and at the last step (see
+    :mod:`granular_material.results.localization`)."""
+    steps = result.steps
+    if len(steps) < 2:
+        return {}
+    rows = sorted({result.row_nearest(e) for e in map_strains})
+    return {
+        "shear_bands": [shear_band(result.points, int(steps["step"].iloc[r])).as_dict()
+                        for r in rows],
+        "shear_band_final": shear_band(result.points).as_dict(),
+        "mohr_coulomb_inclination_deg": mohr_coulomb_inclination(max(peak_ratio, 1.0)),
+    }
