@@ -71,7 +71,7 @@ class LoadingControl:
         """Prescribe the velocity gradient L [1/s] of every RVE, shape (B, 2, 2); the cell
         advances exactly as ``H ← expm(L·dt)·H`` each step. The servo is switched off."""
         lg = np.asarray(velocity_gradient, dtype=np.float64)
-        maps = np.stack([expm(m * dt) for m, dt in zip(lg, self._timestep, strict=True)])
+        maps = expm(lg * self._timestep[:, None, None])  # batched over the RVEs
         self.velocity_gradient.assign(lg)
         self.step_map.assign(maps)
         self.servo = None
