@@ -9,6 +9,8 @@ import time
 from pathlib import Path
 from typing import Any
 
+from granular_material.cli.options import add_device
+
 __all__ = ["register", "run_validation"]
 
 
@@ -85,7 +87,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--seeds", nargs="+", type=int, default=None, metavar="SEED",
                    help="packing seeds for every case (default: each case's own)")
     p.add_argument("--out", default="validation-yade", help="report folder")
-    p.add_argument("--device", choices=["cpu", "cuda"], default=None,
-                   help="our engine's device (default: CUDA when present, else CPU)")
+    add_device(p, "our engine's device")
     p.add_argument("--json", action="store_true", help="print one JSON entry per case")
     p.set_defaults(func=_run)

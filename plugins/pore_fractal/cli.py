@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 import argparse
-import json
 import math
 from pathlib import Path
 
 import numpy as np
 
+from granular_material.cli.options import emit
 from granular_material.dem.rve_file import load_rve
 
 from .image import DEFAULT_PIXEL
@@ -112,7 +112,7 @@ def run(args: argparse.Namespace) -> int:
 
         save_figure(spectrum_figure(image, spectrum), args.plot)
     if args.json:
-        print(json.dumps(result, indent=2))
+        emit(args, result)
     else:
         _print_text(args, result)
     return 0
