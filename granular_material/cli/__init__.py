@@ -17,7 +17,6 @@ import warnings
 from importlib.metadata import entry_points
 
 from granular_material import __version__
-from granular_material.cli import dem, fem
 from granular_material.cli.options import UsageError
 
 __all__ = ["UsageError", "build_parser", "main", "quiet_warp"]
@@ -51,6 +50,8 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    from granular_material.cli import dem, fem  # here, so quiet_warp imports light
+
     dem.register(subparsers)
     fem.register(subparsers)
     _register_plugins(subparsers)

@@ -261,7 +261,7 @@ def _pure_dem(material: Any, args: argparse.Namespace, progress: bool) -> pd.Dat
 def run_biaxial_command(args: argparse.Namespace) -> int:
     """The ``biaxial`` command; returns the exit code."""
     _check(args)
-    from granular_material.dem.model import resolve_device
+    from granular_material.dem import resolve_device
 
     device = resolve_device(args.device)
     scale = args.scale or ("full" if device.startswith("cuda") else "reduced")

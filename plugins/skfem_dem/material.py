@@ -16,8 +16,7 @@ from pathlib import Path
 import numpy as np
 from granular_material_skfem.backend import InProcessBackend, check_driving
 
-from granular_material.dem import DEMBatch, RVEData, load_rve
-from granular_material.dem.model import resolve_device
+from granular_material.dem import DEMBatch, RVEData, load_rve, resolve_device
 from granular_material.fem.material import MaterialResponse, PointStatus
 from granular_material.procedures import prepare_packing
 
