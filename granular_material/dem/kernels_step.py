@@ -1,0 +1,210 @@
+"""Kernels of one DEM step: contact forces once per pair, their gather and the integration,
+the stress servo, the cell update.
+
+A step is ``contact_forces`` → ``integrate`` → optionally ``servo`` →
+``advance_cell_and_check``.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import warp as wp
+
+from granular_material.dem.kernel_common import (
+    CONTROL_STRESS,
+    STATUS_BLOWUP,
+    STATUS_COINCIDENT,
+    AnyArray,
+    IntArray,
+)
+from granular_material.dem.kernels_lists import flag_rebuild, largest_displacement
+from granular_material.dem.laws import (
+    ContactLaw,
+    branch_vector,
+    contact_force,
+    coulomb_shear,
+    local_damping,
+    love_term,
+    pair_stiffness,
+    servo_stiffness_term,
+)
+
+__all__ = ["advance_cell_and_check", "contact_forces", "integrate", "servo"]
+
+
+def contact_forces(
+    n_disc: int, capacity: int, law: ContactLaw, timestep: AnyArray, active: IntArray,
+    friction: AnyArray, cell: AnyArray, velocity_gradient: AnyArray,
+    fractional_position: AnyArray, velocity: AnyArray, angular_velocity: AnyArray,
+    radius: AnyArray, contact_partner: IntArray, contact_count: IntArray,
+    contact_mirror_slot: IntArray, contact_shear_force: AnyArray, with_stress: int,
+    pair: AnyArray, pair_branch: AnyArray, status: IntArray,
+):
+    """Per disc: the Cundall–Strack force of every pair it owns (partner of higher index),
+    written as ``pair = (f, τ)`` to both slots of the pair: the force [N] on that slot's
+    disc and its torque [N·m] (zero where the discs do not touch); with ``with_stress`` also
+    the branch vector d = x_c − x_a of touching pairs (zero for the others)."""
+    i = wp.tid()
+    b = i // n_disc
+    if active[b] == 0:
+        return
+    base = b * n_disc
+    h = cell[b]
+    lg = velocity_gradient[b]
+    mu = friction[b]
+    dt = timestep[b]
+    zero = dt - dt
+    # affine spin w = (L10 - L01)/2 of every disc
+    spin = type(dt)(0.5) * (lg[1, 0] - lg[0, 1])
+    ra = radius[i]
+    for k in range(contact_count[i]):
+        slot = i * capacity + k
+        c = base + contact_partner[slot]
+        if c <= i:
+            continue
+        d = branch_vector(fractional_position[i], fractional_position[c], h)
+        rc = radius[c]
+        mirror = base * capacity + wp.max(contact_mirror_slot[slot], 0)
+        pair[slot] = type(pair[slot])()
+        pair[mirror] = type(pair[slot])()
+        if with_stress != 0:
+            pair_branch[slot] = type(d)()
+            pair_branch[mirror] = type(d)()
+        if wp.dot(d, d) >= (ra + rc) * (ra + rc) * type(dt)(1.000001):
+            contact_shear_force[slot] = zero  # clearly apart (decided without a root)
+            continue
+        dist = wp.length(d)
+        overlap = ra + rc - dist
+        if overlap <= zero:
+            contact_shear_force[slot] = zero
+            continue
+        if dist <= type(dt)(1.0e-12) * (ra + rc):
+            wp.atomic_or(status, b, STATUS_COINCIDENT)
+            continue
+        n = d / dist
+        t = type(n)(-n[1], n[0])
+        kn, kt = pair_stiffness(law, ra, rc)
+        v_rel = velocity[c] - velocity[i] + lg * d
+        v_t = wp.dot(v_rel, t) - (angular_velocity[i] * ra + angular_velocity[c] * rc) \
+            - spin * (ra + rc)
+        fn = kn * overlap
+        fs = coulomb_shear(contact_shear_force[slot], kt, v_t, dt, mu, fn)
+        contact_shear_force[slot] = fs
+        f_a = contact_force(fn, fs, n)
+        half = type(dt)(0.5)
+        pair[slot] = type(pair[slot])(f_a[0], f_a[1], (ra - half * overlap) * fs)
+        pair[mirror] = type(pair[slot])(-f_a[0], -f_a[1], (rc - half * overlap) * fs)
+        if with_stress != 0:
+            pair_branch[slot] = d
+            pair_branch[mirror] = d
+
+
+def integrate(
+    n_disc: int, capacity: int, law: ContactLaw, damping: Any, with_stress: int,
+    timestep: AnyArray, active: IntArray, cell: AnyArray, radius: AnyArray,
+    inv_mass: AnyArray, inv_inertia: AnyArray, contact_partner: IntArray,
+    contact_count: IntArray, pair: AnyArray, pair_branch: AnyArray,
+    fractional_position: AnyArray, velocity: AnyArray, angular_velocity: AnyArray,
+    verlet_displacement: AnyArray, part_stress: AnyArray, part_stiffness: AnyArray,
+    status: IntArray,
+):
+    """Per disc: gather its contact forces in list order, damp, leap-frog; with
+    ``with_stress`` also its halves of the Love sum and of the servo's stiffness."""
+    i = wp.tid()
+    b = i // n_disc
+    if active[b] == 0:
+        return
+    dt = timestep[b]
+    zero = dt - dt
+    ri = radius[i]
+    f = type(velocity[i])()
+    tq = zero
+    s_sum = type(cell[b])()
+    k_sum = type(velocity[i])()
+    # a separated pair's record is zero, so it adds exact zeros: the sums are those of the
+    # touching pairs, in list order
+    for k in range(contact_count[i]):
+        slot = i * capacity + k
+        record = pair[slot]
+        f_i = type(f)(record[0], record[1])
+        f = f + f_i
+        tq = tq + record[2]
+        if with_stress != 0:
+            d = pair_branch[slot]
+            if d[0] != zero or d[1] != zero:
+                j = b * n_disc + contact_partner[slot]
+                kn, _kt = pair_stiffness(law, radius[wp.min(i, j)], radius[wp.max(i, j)])
+                # Love's term takes the force on the pair's lower index
+                f_a = f_i
+                if j < i:
+                    f_a = -f_i
+                s_sum = s_sum + love_term(f_a, d)
+                k_sum = k_sum + servo_stiffness_term(kn, d / wp.length(d), d)
+    if with_stress != 0:
+        part_stress[i] = s_sum
+        part_stiffness[i] = k_sum
+    v = velocity[i]
+    f = type(v)(local_damping(f[0], v[0], damping), local_damping(f[1], v[1], damping))
+    w = angular_velocity[i]
+    tq = local_damping(tq, w, damping)
+    v = v + dt * inv_mass[i] * f
+    w = w + dt * inv_inertia[i] * tq
+    dx = dt * v
+    if not (wp.isfinite(v) and wp.isfinite(w)) or wp.length(dx) > type(dt)(0.25) * ri:
+        wp.atomic_or(status, b, STATUS_BLOWUP)
+        return
+    velocity[i] = v
+    angular_velocity[i] = w
+    verlet_displacement[i] = verlet_displacement[i] + dx
+    s = fractional_position[i] + wp.inverse(cell[b]) * dx
+    fractional_position[i] = type(s)(s[0] - wp.floor(s[0]), s[1] - wp.floor(s[1]))
+
+
+def servo(
+    n_disc: int, thickness: Any, gain: Any, max_strain: Any, timestep: AnyArray,
+    active: IntArray, cell: AnyArray, part_stress: AnyArray, part_stiffness: AnyArray,
+    control: IntArray, target: AnyArray, velocity_gradient: AnyArray, step_map: AnyArray,
+):
+    """Per RVE: the strain increment of xx and yy for the next step, stress- or
+    strain-controlled (``control``), as the velocity gradient and the cell's step map."""
+    b = wp.tid()
+    if active[b] == 0:
+        return
+    dt = timestep[b]
+    zero = dt - dt
+    one = type(dt)(1.0)
+    volume = wp.determinant(cell[b]) * thickness
+    s_sum = type(cell[b])()
+    k_sum = type(target[b])()
+    for j in range(n_disc):
+        s_sum = s_sum + part_stress[b * n_disc + j]
+        k_sum = k_sum + part_stiffness[b * n_disc + j]
+    sigma = s_sum / volume
+    goal = target[b]
+    de = type(goal)()
+    for k in range(2):
+        if control[2 * b + k] == CONTROL_STRESS:
+            modulus = wp.max(k_sum[k] / volume, type(dt)(1.0e-30))
+            step = gain * (goal[k] - sigma[k, k]) / modulus
+            de[k] = wp.clamp(step, -max_strain, max_strain)
+        else:
+            de[k] = goal[k]
+    velocity_gradient[b] = type(cell[b])(de[0] / dt, zero, zero, de[1] / dt)
+    step_map[b] = type(cell[b])(one + de[0], zero, zero, one + de[1])
+
+
+def advance_cell_and_check(
+    n_disc: int, skin: Any, cutoff: Any, active: IntArray, step_map: AnyArray,
+    cell: AnyArray, cell_at_list_build: AnyArray, verlet_displacement: AnyArray,
+    force_rebuild: IntArray, rebuild: IntArray, status: IntArray,
+):
+    """Per RVE, the end of a step: ``H ← E·H``, then whether the next step must rebuild."""
+    b = wp.tid()
+    rebuild[b] = 0
+    if active[b] == 0:
+        return
+    h = step_map[b] * cell[b]
+    cell[b] = h
+    flag_rebuild(b, h, largest_displacement(b, n_disc, verlet_displacement), skin, cutoff,
+                 cell_at_list_build, force_rebuild, rebuild, status)
