@@ -63,7 +63,8 @@ def measure(rve: Path, n_rve: int, seconds: float, device: str | None, dtype: st
     t0 = time.perf_counter()
     batch.run(steps, check_every=min(steps, 500))
     wall = time.perf_counter() - t0
-    return {"device": batch.device, "shards": len(batch.shards), "steps": steps,
+    threads = len(getattr(batch, "lanes", batch.shards))  # older engines: a thread a shard
+    return {"device": batch.device, "shards": threads, "steps": steps,
             "wall_s": wall, "particle_steps_per_s": n_rve * batch.n_disc * steps / wall}
 
 

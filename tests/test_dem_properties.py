@@ -167,7 +167,7 @@ def test_parallel_shards_are_safe_and_change_nothing(small_rve_path):
     results = []
     for shards in (1, 2):
         batch = DEMBatch(data, device="cpu", shards=shards)
-        assert len(batch.shards) == shards
+        assert len(batch.lanes) == shards
         for _ in range(20):
             drive_grad_u(batch, grad / 20)
         results.append(batch.homogenize().stress)
@@ -205,3 +205,20 @@ def test_each_pair_is_one_contact_with_one_history(small_rve_path):
     assert all(len(forces) == 2 for forces in pairs.values())
     assert all(forces[0] == forces[1] for forces in pairs.values())
     assert sum(1 for forces in pairs.values() if forces[0] != 0.0) > len(pairs) // 4
+
+
+def test_a_thread_stepping_several_shards_changes_nothing(small_rve_path, monkeypatch):
+    """Small CPU shards (several a thread, stepped one after the other) give the same
+    result as one shard holding the batch."""
+    import granular_material.dem.batch as batch_module
+
+    data = load_rve(small_rve_path).replicate(5)
+    grad = np.array([[2e-4, 1e-3], [0.0, -5e-4]])
+    one = DEMBatch(data, device="cpu", shards=1)
+    monkeypatch.setattr(batch_module, "CPU_SHARD_DISCS", data.n_disc)  # one RVE a shard
+    many = DEMBatch(data, device="cpu", shards=2)
+    assert len(many.shards) == 5 and [len(lane) for lane in many.lanes] == [3, 2]
+    for batch in (one, many):
+        drive_grad_u(batch, grad)
+    np.testing.assert_array_equal(one.homogenize().stress, many.homogenize().stress)
+    np.testing.assert_array_equal(one.to_data().position, many.to_data().position)
