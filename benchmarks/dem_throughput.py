@@ -119,12 +119,12 @@ def _parse(argv: list[str] | None) -> argparse.Namespace:
                         help="comma-separated batch sizes B")
     parser.add_argument("--particles", type=int, default=400, help="discs per RVE")
     parser.add_argument("--seconds", type=float, default=2.0, help="timed seconds per case")
-    parser.add_argument("--dtypes", default="float64",
+    parser.add_argument("--dtypes", "--dtype", default="float64",
                         help="comma-separated float types (float64, float32)")
     parser.add_argument("--repeats", type=int, default=3,
                         help="processes per case; the table holds the medians")
     parser.add_argument("--shards", type=int, default=None,
-                        help="CPU shards (threads); default: one per core")
+                        help="CPU threads; default: one per core")
     parser.add_argument("--baseline", default=None, metavar="REV",
                         help="git revision measured beside this checkout, case by case")
     parser.add_argument("--yade-steps", type=int, default=2000, help="steps YADE is timed on")
