@@ -217,6 +217,7 @@ class DEMBatch:
         """Make ``snapshot`` the current state again (revert), exactly."""
         for shard, state in zip(self.shards, snapshot.states, strict=True):
             shard.state.assign(state)
+            shard.solver.forget_pairs()
 
     def cell(self) -> np.ndarray:
         """Cell matrices H [m], shape (B, 2, 2), float64."""

@@ -246,9 +246,10 @@ def commit_lists(
     n_disc: int, capacity: int, rebuild: IntArray, partner_new: IntArray,
     count_new: IntArray, shear_new: AnyArray, contact_partner: IntArray,
     contact_count: IntArray, contact_shear_force: AnyArray, contact_mirror_slot: IntArray,
-    verlet_displacement: AnyArray,
+    verlet_displacement: AnyArray, pair: AnyArray,
 ):
-    """Per disc of a rebuilding RVE: the new list becomes current; owners linked."""
+    """Per disc of a rebuilding RVE: the new list becomes current, partners linked, the
+    slots' force records zeroed (a slot may now hold another pair)."""
     i = wp.tid()
     b = i // n_disc
     if rebuild[b] == 0:
@@ -258,6 +259,7 @@ def commit_lists(
     for k in range(count):
         contact_partner[i * capacity + k] = partner_new[i * capacity + k]
         contact_shear_force[i * capacity + k] = shear_new[i * capacity + k]
+        pair[i * capacity + k] = type(pair[i * capacity + k])()
     # the partners' new lists are complete (build_lists ran before): link from them
     link_mirrors(i, b * n_disc, capacity, partner_new, count_new, contact_mirror_slot)
     verlet_displacement[i] = type(verlet_displacement[i])()

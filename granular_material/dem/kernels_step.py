@@ -33,6 +33,18 @@ from granular_material.dem.laws import (
 __all__ = ["advance_cell_and_check", "contact_forces", "integrate", "servo"]
 
 
+@wp.func
+def clear_pair(pair: AnyArray, slot: int, mirror: int):
+    """Zero both records of a pair that does not touch; both are zero already where the
+    pair's own record is (they are written together, and zeroed together at list builds
+    and when a state is restored), so the scattered write is skipped then."""
+    record = pair[slot]
+    zero = record[0] - record[0]
+    if record[0] != zero or record[1] != zero or record[2] != zero:
+        pair[slot] = type(record)()
+        pair[mirror] = type(record)()
+
+
 def contact_forces(
     n_disc: int, capacity: int, law: ContactLaw, timestep: AnyArray, active: IntArray,
     friction: AnyArray, cell: AnyArray, velocity_gradient: AnyArray,
@@ -44,7 +56,7 @@ def contact_forces(
     """Per disc: the Cundall–Strack force of every pair it owns (partner of higher index),
     written as ``pair = (f, τ)`` to both slots of the pair: the force [N] on that slot's
     disc and its torque [N·m] (zero where the discs do not touch); with ``with_stress`` also
-    the branch vector d = x_c − x_a of touching pairs (zero for the others)."""
+    the branch vector d = x_c − x_a of touching pairs (the others' is stale: unused)."""
     i = wp.tid()
     b = i // n_disc
     if active[b] == 0:
@@ -66,21 +78,19 @@ def contact_forces(
         d = branch_vector(fractional_position[i], fractional_position[c], h)
         rc = radius[c]
         mirror = base * capacity + wp.max(contact_mirror_slot[slot], 0)
-        pair[slot] = type(pair[slot])()
-        pair[mirror] = type(pair[slot])()
-        if with_stress != 0:
-            pair_branch[slot] = type(d)()
-            pair_branch[mirror] = type(d)()
         if wp.dot(d, d) >= (ra + rc) * (ra + rc) * type(dt)(1.000001):
             contact_shear_force[slot] = zero  # clearly apart (decided without a root)
+            clear_pair(pair, slot, mirror)
             continue
         dist = wp.length(d)
         overlap = ra + rc - dist
         if overlap <= zero:
             contact_shear_force[slot] = zero
+            clear_pair(pair, slot, mirror)
             continue
         if dist <= type(dt)(1.0e-12) * (ra + rc):
             wp.atomic_or(status, b, STATUS_COINCIDENT)
+            clear_pair(pair, slot, mirror)
             continue
         n = d / dist
         t = type(n)(-n[1], n[0])
@@ -132,7 +142,7 @@ def integrate(
         tq = tq + record[2]
         if with_stress != 0:
             d = pair_branch[slot]
-            if d[0] != zero or d[1] != zero:
+            if f_i[0] != zero or f_i[1] != zero:  # touching: |f| >= fn > 0
                 j = b * n_disc + contact_partner[slot]
                 kn, _kt = pair_stiffness(law, radius[wp.min(i, j)], radius[wp.max(i, j)])
                 # Love's term takes the force on the pair's lower index

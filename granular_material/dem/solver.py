@@ -139,7 +139,7 @@ class Solver:
                     contact_count=state.contact_count,
                     contact_shear_force=state.contact_shear_force,
                     contact_mirror_slot=state.contact_mirror_slot,
-                    verlet_displacement=state.verlet_displacement),
+                    verlet_displacement=state.verlet_displacement, pair=self.pair),
         ]
 
     def _step_launches(self, model: Model, state: State,
@@ -287,6 +287,12 @@ class Solver:
         for recorded in build:
             recorded.launch()
         self.check(state)
+
+    def forget_pairs(self) -> None:
+        """Zero the pairs' force records: call it when the state's lists were replaced
+        other than by a build (a restored snapshot), as each step writes a separated pair's
+        records only where its own is not zero yet."""
+        self.pair.zero_()
 
     def check(self, state: State) -> None:
         """Raise :class:`DEMInstabilityError` if any RVE's status has an error bit."""
