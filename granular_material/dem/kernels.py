@@ -119,6 +119,9 @@ def _concrete_types(kernel: wp.Kernel, ft: Any) -> dict[str, Any]:
         is_array = wp.types.is_array(arg.type)
         if (arg.type.dtype if is_array else arg.type) is not Any:
             continue
+        if arg.label not in role_of:
+            raise TypeError(f"kernel {kernel.key}: generic argument {arg.label!r} has no entry "
+                            "in kernels._ROLES (scalar, vec2, vec3, mat22 or mat44)")
         dtype = dtypes[role_of[arg.label]]
         types[arg.label] = wp.array(dtype=dtype) if is_array else dtype
     return types
@@ -130,7 +133,7 @@ def kernels_for(dtype: str = "float64", replica: int = 0) -> KernelSet:
     specialised to the float type before the module is first built (so it builds once).
 
     On x86-64 a CPU module keeps a static pointer to the running launch's tile storage, so
-    two threads must never run kernels of the same module at once: every CPU shard steps
+    two threads must never run kernels of the same module at once: every CPU thread steps
     with its own replica.
     """
     ft = {"float64": wp.float64, "float32": wp.float32}[dtype]

@@ -68,7 +68,7 @@ class Solver:
     Args:
         model: gives the sizes and float type of the work arrays; any model of the same
             sizes (e.g. :meth:`Model.with_friction`) may be stepped.
-        replica: the kernel module to launch (one per CPU shard, see ``kernels_for``).
+        replica: the kernel module to launch (one per CPU thread, see ``kernels_for``).
     """
 
     def __init__(self, model: Model, replica: int = 0) -> None:
