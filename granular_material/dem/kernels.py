@@ -30,14 +30,6 @@ from typing import Any
 
 import warp as wp
 
-from granular_material.dem.kernel_common import (
-    CONTROL_STRAIN,
-    CONTROL_STRESS,
-    STATUS_BLOWUP,
-    STATUS_CELL_TOO_SMALL,
-    STATUS_COINCIDENT,
-    STATUS_OVERFLOW,
-)
 from granular_material.dem.kernels_lists import (
     any_rebuild,
     begin_build,
@@ -56,12 +48,6 @@ from granular_material.dem.kernels_step import (
 )
 
 __all__ = [
-    "CONTROL_STRAIN",
-    "CONTROL_STRESS",
-    "STATUS_BLOWUP",
-    "STATUS_CELL_TOO_SMALL",
-    "STATUS_COINCIDENT",
-    "STATUS_OVERFLOW",
     "KernelSet",
     "kernels_for",
     "launch",

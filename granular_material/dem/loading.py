@@ -12,7 +12,7 @@ import numpy as np
 import warp as wp
 from scipy.linalg import expm
 
-from granular_material.dem.kernels import CONTROL_STRAIN, CONTROL_STRESS
+from granular_material.dem.kernel_common import CONTROL_STRAIN, CONTROL_STRESS
 from granular_material.dem.model import Model
 
 __all__ = ["CONTROL_STRAIN", "CONTROL_STRESS", "LoadingControl", "ServoSettings"]

@@ -8,16 +8,15 @@ from typing import Any
 import numpy as np
 import warp as wp
 
-from granular_material.dem.kernels import (
+from granular_material.dem.kernel_common import (
     CONTROL_STRAIN,
     CONTROL_STRESS,
     STATUS_BLOWUP,
     STATUS_CELL_TOO_SMALL,
     STATUS_COINCIDENT,
     STATUS_OVERFLOW,
-    kernels_for,
-    launch,
 )
+from granular_material.dem.kernels import kernels_for, launch
 from granular_material.dem.loading import LoadingControl
 from granular_material.dem.model import Model
 from granular_material.dem.state import State
