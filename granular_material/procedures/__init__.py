@@ -10,6 +10,7 @@ from granular_material.procedures.strain_path import (
     drive_grad_u,
     has_real_logarithm,
     path_increment,
+    path_steps,
 )
 
 __all__ = [
@@ -18,6 +19,7 @@ __all__ = [
     "drive_grad_u",
     "has_real_logarithm",
     "path_increment",
+    "path_steps",
     "prepare_packing",
     "progress_bar",
     "random_gas",

@@ -13,7 +13,7 @@ from scipy.linalg import logm
 
 from granular_material.dem import DEMBatch
 
-__all__ = ["drive_grad_u", "has_real_logarithm", "path_increment"]
+__all__ = ["drive_grad_u", "has_real_logarithm", "path_increment", "path_steps"]
 
 
 def _as_batch_grad(batch: DEMBatch, grad_u: np.ndarray) -> np.ndarray:
@@ -58,34 +58,73 @@ def path_increment(grad_u: np.ndarray, k: int, increments: int) -> np.ndarray:
     return f_next @ np.linalg.inv(f_now) - np.eye(2)
 
 
-def drive_grad_u(
-    batch: DEMBatch,
-    grad_u: np.ndarray,
-    max_strain_per_step: float = 1.0e-5,
-    min_steps: int = 2,
-) -> int:
-    """Apply the displacement gradient ∇u to every RVE, measured from its current state.
+#: the most DEM steps one path may take: beyond it a float64 count is no longer exact
+_STEP_LIMIT = 10**15
 
-    RVE b is deformed over ``n_b = max(ceil(max|∇u_b| / max_strain_per_step), min_steps)``
-    steps (Guo & Zhao 2014: at most 1e-5 strain a step) with the constant velocity gradient
-    ``L = log(I + ∇u)/(n_b·dt)``, so a rigid rotation stays a rotation all along; at the end
-    its cell is exactly ``(I + ∇u)·H``. Returns the largest ``n_b`` (steps run). It shows no
-progress (it runs on every Newton iteration); a caller that drives one long path in
-increments can show a bar over them.
 
-    Args:
-        grad_u: ∇u [-], shape (B, 2, 2) or (2, 2) for all RVEs; ``grad_u[b, i, j] = ∂u_i/∂x_j``.
+def path_steps(grad_u: np.ndarray, max_strain_per_step: float = 1.0e-5,
+               min_steps: int = 2, max_steps: int | None = None) -> np.ndarray:
+    """DEM steps of each RVE's path to ∇u (B, 2, 2): ``max(ceil(max|∇u_b| / max_strain_per_step),
+    min_steps)``, shape (B,), int64.
+
+    ``ValueError`` naming the RVE when a path would need more than ``max_steps`` steps (or
+    more than 10¹⁵, where the count stops being an integer).
     """
     if not (math.isfinite(max_strain_per_step) and max_strain_per_step > 0):
         raise ValueError(f"max_strain_per_step must be positive, got {max_strain_per_step!r}")
     if min_steps < 1:
         raise ValueError(f"min_steps must be >= 1, got {min_steps}")
+    g = np.asarray(grad_u, dtype=np.float64)
+    if g.size == 0:
+        return np.zeros(0, dtype=np.int64)
+    wanted = np.maximum(np.ceil(np.abs(g).max(axis=(1, 2)) / max_strain_per_step), min_steps)
+    cap = _STEP_LIMIT if max_steps is None else min(int(max_steps), _STEP_LIMIT)
+    if (wanted > cap).any():
+        rve = int(np.argmax(wanted))
+        raise ValueError(
+            f"grad_u of RVE {rve} (max |grad_u| = {np.abs(g[rve]).max():.4g}) needs "
+            f"{wanted[rve]:.4g} DEM steps at {max_strain_per_step:g} strain a step, more than "
+            f"the cap of {cap} (max_dem_steps); apply it in load steps, or raise the cap"
+        )
+    return wanted.astype(np.int64)
+
+
+
+def drive_grad_u(
+    batch: DEMBatch,
+    grad_u: np.ndarray,
+    max_strain_per_step: float = 1.0e-5,
+    min_steps: int = 2,
+    active: np.ndarray | None = None,
+    max_steps: int | None = None,
+) -> int:
+    """Apply the displacement gradient ∇u to every RVE, measured from its current state.
+
+    RVE b is deformed over ``n_b`` steps (:func:`path_steps`; Guo & Zhao 2014: at most 1e-5
+    strain a step) with the constant velocity gradient ``L = log(I + ∇u)/(n_b·dt)``, so a
+    rigid rotation stays a rotation all along; at the end its cell is exactly ``(I + ∇u)·H``.
+    Returns the largest ``n_b`` (steps run). It shows no progress (it runs on every Newton
+    iteration); a caller that drives one long path in increments can show a bar over them.
+
+    Args:
+        grad_u: ∇u [-], shape (B, 2, 2) or (2, 2) for all RVEs; ``grad_u[b, i, j] = ∂u_i/∂x_j``.
+        active: which RVEs are driven, shape (B,), bool; the others are left exactly as
+            they are (not stepped, their ∇u ignored). None: all.
+        max_steps: cap on any RVE's step count (``ValueError`` beyond it); None: no cap but
+            the integer limit.
+    """
+    n_rve = batch.n_rve
+    active = np.ones(n_rve, bool) if active is None else np.asarray(active, dtype=bool)
+    if active.shape != (n_rve,):
+        raise ValueError(f"active must have shape ({n_rve},), got {active.shape}")
     g = _as_batch_grad(batch, grad_u)
-    n_steps = np.maximum(np.ceil(np.abs(g).max(axis=(1, 2)) / max_strain_per_step), min_steps)
-    n_steps = n_steps.astype(np.int64)
+    g = np.where(active[:, None, None], g, 0.0)
+    n_steps = np.where(active, path_steps(g, max_strain_per_step, min_steps, max_steps), 0)
+    if not active.any():
+        return 0
     dt = batch.dt
-    vel_grad = np.empty_like(g)
-    for b in range(batch.n_rve):
+    vel_grad = np.zeros_like(g)
+    for b in np.flatnonzero(active):
         log_f = logm(np.eye(2) + g[b])
         if np.iscomplexobj(log_f):
             if np.abs(log_f.imag).max() > 1e-12:
@@ -96,13 +135,14 @@ increments can show a bar over them.
     batch.set_affine(vel_grad)
     done = 0
     try:
-        for stop in np.unique(n_steps):
+        for stop in np.unique(n_steps[active]):
             batch.set_active(n_steps > done)
             batch.run(int(stop) - done)
             done = int(stop)
     finally:
-        batch.set_active(np.ones(batch.n_rve))
+        batch.set_active(np.ones(n_rve))
         batch.set_affine(np.zeros_like(g))
     # the cells already are (I + ∇u)·H up to rounding: make that exact, lists stay valid
+    # (a frozen RVE's ∇u is 0 here: its cell is written back unchanged)
     batch.set_cell(np.einsum("bij,bjk->bik", np.eye(2) + g, cell0), refresh=False)
     return int(n_steps.max())
