@@ -27,6 +27,13 @@ from granular_material.dem.state import State, state_from_data, state_to_data
 
 __all__ = ["CPU_SHARD_DISCS", "BatchSnapshot", "DEMBatch", "Shard"]
 
+
+def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """The runs ``(first, stop)`` of consecutive True entries of a 1-D boolean mask."""
+    edges = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
+    return list(zip(np.flatnonzero(edges == 1).tolist(), np.flatnonzero(edges == -1).tolist(),
+                    strict=True))
+
 #: most discs in one CPU shard: a thread steps its shards one after the other, each for a
 #: whole block of steps, so that a shard's arrays stay in cache (measured with 400-disc
 #: RVEs in benchmarks/dem_throughput.py: 16 to 32 RVEs a shard keep the rate of B = 16)
@@ -185,13 +192,15 @@ class DEMBatch:
         return done
 
     def _run_shards(self, steps: int) -> None:
-        for shard in self.shards:  # record launches and load modules here, not in threads
+        stepping = [s for s in self.shards if s.loading.any_active]  # a frozen shard waits
+        for shard in stepping:  # record launches and load modules here, not in threads
             shard.solver.prepare(shard.model, shard.state, shard.loading)
+
         def lane(shards: list[Shard]) -> list[DEMInstabilityError | None]:
-            return [self._guard(shard, steps) for shard in shards]
+            return [self._guard(shard, steps) for shard in shards if shard.loading.any_active]
 
         if self._pool is None:
-            results = lane(self.shards)
+            results = lane(stepping)
         else:
             results = [r for part in self._pool.map(lane, self.lanes) for r in part]
         failures = [r for r in results if r is not None]
@@ -213,10 +222,21 @@ class DEMBatch:
         """A device copy of the whole dynamic state (commit)."""
         return BatchSnapshot(tuple(s.state.clone() for s in self.shards))
 
-    def restore(self, snapshot: BatchSnapshot) -> None:
-        """Make ``snapshot`` the current state again (revert), exactly."""
+    def restore(self, snapshot: BatchSnapshot, rves: np.ndarray | None = None) -> None:
+        """Make ``snapshot`` the current state again (revert), exactly: of every RVE, or
+        only of those where the mask ``rves`` (B,) is True (the others keep their state)."""
         for shard, state in zip(self.shards, snapshot.states, strict=True):
-            shard.state.assign(state)
+            if rves is None:
+                shard.state.assign(state)
+            else:
+                mine = np.asarray(rves, dtype=bool)[shard.rves]
+                if not mine.any():
+                    continue
+                if mine.all():
+                    shard.state.assign(state)
+                else:
+                    for first, stop in _runs(mine):
+                        shard.state.assign_rves(state, first, stop, shard.model.n_rve)
             shard.solver.forget_pairs()
 
     def cell(self) -> np.ndarray:
@@ -232,11 +252,20 @@ class DEMBatch:
             if refresh:
                 shard.solver.refresh_lists(shard.model, shard.state, shard.loading)
 
-    def homogenize(self) -> Homogenized:
-        """Stress, tangent, void ratio, coordination, fabric of every RVE."""
-        return Homogenized.concatenate([
-            homogenize(s.model, s.state, s.measures, s.solver.kernels) for s in self.shards
-        ])
+    def homogenize(self, rves: np.ndarray | None = None) -> Homogenized:
+        """Stress, tangent, void ratio, coordination, fabric of every RVE, or with the
+        boolean mask ``rves`` (B,) of the masked RVEs only, in batch order (shards without
+        a masked RVE are not measured)."""
+        if rves is None:
+            return Homogenized.concatenate([
+                homogenize(s.model, s.state, s.measures, s.solver.kernels) for s in self.shards
+            ])
+        mask = np.asarray(rves, dtype=bool)
+        parts = [homogenize(s.model, s.state, s.measures, s.solver.kernels).take(mask[s.rves])
+                 for s in self.shards if mask[s.rves].any()]
+        if not parts:
+            return self.homogenize().take(mask)  # empty, of the right shapes
+        return Homogenized.concatenate(parts)
 
     def to_data(self) -> RVEData:
         """The batch as an :class:`RVEData` (host copy), contact history included."""

@@ -50,6 +50,21 @@ class Homogenized:
         return cls(**{f.name: np.concatenate([getattr(p, f.name) for p in parts])
                       for f in fields(cls)})
 
+    def take(self, rves: np.ndarray) -> Homogenized:
+        """The results of the RVEs ``rves`` (indices or a boolean mask over B)."""
+        return Homogenized(**{f.name: np.asarray(getattr(self, f.name))[rves]
+                              for f in fields(self)})
+
+    def with_rves(self, rves: np.ndarray, other: Homogenized) -> Homogenized:
+        """A copy whose RVEs ``rves`` (boolean mask over B) hold ``other``'s results (one
+        per masked RVE, in order); the others keep these."""
+        out = {}
+        for f in fields(self):
+            values = np.array(getattr(self, f.name), copy=True)
+            values[rves] = getattr(other, f.name)
+            out[f.name] = values
+        return Homogenized(**out)
+
     @property
     def mean_stress(self) -> np.ndarray:
         """p = tr σ / 2 [Pa] (2D, tension positive), shape (B,)."""

@@ -43,6 +43,7 @@ class LoadingControl:
 
     Attributes:
         active: 1 where the RVE steps, 0 where it stays frozen, (B,), int32.
+        any_active: whether any RVE steps (host-side).
         velocity_gradient: L [1/s] per RVE, (B,), mat22.
         step_map: the cell's map of one step, H ← E·H, (B,), mat22.
         control: CONTROL_STRAIN or CONTROL_STRESS per diagonal component, (2·B,), int32.
@@ -57,6 +58,8 @@ class LoadingControl:
         self._timestep = model.timestep
         mat22 = wp.types.matrix((2, 2), ft)
         self.active = wp.ones(b, dtype=wp.int32, device=dev)
+        #: whether any RVE steps (a host copy: a shard with none is not launched at all)
+        self.any_active = True
         self.velocity_gradient = wp.zeros(b, dtype=mat22, device=dev)
         self.step_map = wp.array(np.repeat(np.eye(2)[None], b, 0), dtype=mat22, device=dev)
         self.control = wp.zeros(2 * b, dtype=wp.int32, device=dev)
@@ -65,7 +68,9 @@ class LoadingControl:
 
     def set_active(self, active: np.ndarray) -> None:
         """Which RVEs step (nonzero) and which stay frozen (0), shape (B,)."""
-        self.active.assign(np.asarray(active, dtype=np.int32))
+        active = np.asarray(active, dtype=np.int32)
+        self.active.assign(active)
+        self.any_active = bool(active.any())
 
     def set_affine(self, velocity_gradient: np.ndarray) -> None:
         """Prescribe the velocity gradient L [1/s] of every RVE, shape (B, 2, 2); the cell

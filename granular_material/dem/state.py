@@ -69,6 +69,16 @@ class State:
         for f in fields(self):
             wp.copy(getattr(self, f.name), getattr(other, f.name))
 
+    def assign_rves(self, other: State, first: int, stop: int, n_rve: int) -> None:
+        """Copy RVEs ``first : stop`` of ``other`` into this state (of ``n_rve`` RVEs), in
+        place; the other RVEs are left as they are. Every array is batch-first, the same
+        number of entries per RVE."""
+        for f in fields(self):
+            dest, src = getattr(self, f.name), getattr(other, f.name)
+            per_rve = dest.shape[0] // n_rve
+            wp.copy(dest, src, dest_offset=first * per_rve, src_offset=first * per_rve,
+                    count=(stop - first) * per_rve)
+
 
 def _types(model: Model) -> tuple:
     ft = model.float_type
