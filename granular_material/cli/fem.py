@@ -20,10 +20,13 @@ from granular_material.cli.options import (
     progress_enabled,
 )
 from granular_material.fem import (
+    DEM_REUSE_TOL,
     BiaxialResult,
     BiaxialSetup,
     Material,
     NewtonSettings,
+    Tracking,
+    available_postprocessors,
     create_material,
     default_settings,
     default_stress_tol,
@@ -93,6 +96,47 @@ def _newton_arguments(parser: argparse.ArgumentParser) -> None:
                         "changes carry DEM noise)")
 
 
+def _dem_arguments(parser: argparse.ArgumentParser) -> None:
+    g = parser.add_argument_group("DEM material: what is stepped, and what is post-processed")
+    g.add_argument("--reuse-tol", type=float, default=DEM_REUSE_TOL,
+                   help="a Gauss point whose grad u moved by at most this strain (every "
+                        "component) since its RVE was last driven keeps that response instead "
+                        f"of being stepped; 0: every RVE every iteration (default "
+                        f"{DEM_REUSE_TOL:g})")
+    g.add_argument("--reuse-correction", choices=("none", "tangent"), default="none",
+                   help="a reused response as it is (none, default) or corrected to first "
+                        "order by its tangent")
+    g.add_argument("--drive", choices=("restart", "continue"), default="restart",
+                   help="restart: each iteration drives an RVE from its committed state along "
+                        "the whole step (Guo & Zhao, default); continue: from its last trial "
+                        "state by the change of grad u (fewer DEM steps, path-dependent)")
+    g.add_argument("--max-dem-steps", type=int, default=None,
+                   help="cap on the DEM steps of one RVE path per iteration (default: none)")
+    g.add_argument("--track", nargs="+", default=None, metavar="POINT",
+                   help="Gauss point ids (or 'all') whose RVEs the post-processors analyse; "
+                        "results in tracked.csv")
+    g.add_argument("--every", type=int, default=1,
+                   help="with --track: every this many load steps, step 0 included (default 1)")
+    g.add_argument("--postprocess", nargs="+", default=["pore-fractal"], metavar="NAME",
+                   help="with --track: post-processors to run (installed: "
+                        f"{', '.join(available_postprocessors()) or 'none'}; default "
+                        "pore-fractal)")
+
+
+def _dem_parameters(args: argparse.Namespace) -> dict[str, Any]:
+    """The DEM material's keywords of the reuse and stepping options."""
+    return {"reuse_tol": args.reuse_tol, "reuse_correction": args.reuse_correction,
+            "drive": args.drive, "max_dem_steps": args.max_dem_steps}
+
+
+def _tracking(args: argparse.Namespace) -> Tracking | None:
+    if args.track is None:
+        return None
+    if getattr(args, "material", "dem") != "dem":
+        raise ValueError("--track needs --material dem (its Gauss points carry RVEs)")
+    return Tracking.parse(args.postprocess, args.track, args.every)
+
+
 def _common_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--axial-strain", type=float, default=0.1,
                         help="final axial strain, compression positive (default 0.1)")
@@ -137,6 +181,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="dem: also run the pure-DEM drained biaxial of the same RVE")
     _common_arguments(p)
     _newton_arguments(p)
+    _dem_arguments(p)
     p.set_defaults(func=run_single_element)
 
     b = subparsers.add_parser(
@@ -164,6 +209,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "rough: no platen node moves sideways")
     _common_arguments(b)
     _newton_arguments(b)
+    _dem_arguments(b)
     b.set_defaults(func=run_biaxial_command)
 
 
@@ -199,16 +245,24 @@ def _report(args: argparse.Namespace, summary: dict[str, Any]) -> int:
 
 
 def _run(args: argparse.Namespace, setup: BiaxialSetup, material: Material,
-         material_name: str) -> tuple[BiaxialResult, dict[str, Any]]:
+         material_name: str, tracking: Tracking | None = None,
+         ) -> tuple[BiaxialResult, dict[str, Any]]:
     """The FEM run, written under ``--out`` as it goes; the result and its summary."""
+    if tracking is not None:
+        tracking.check_points(setup.n_points)
     t0 = time.perf_counter()
     with contextlib.ExitStack() as stack:
         writer = (stack.enter_context(BiaxialWriter(args.out)) if args.out is not None
                   else None)
         result = run_biaxial(setup, material, args.steps, _settings(args, material_name),
                              progress=progress_enabled(args), observer=writer,
-                             stress_tol=_stress_tol(args, material_name))
-    return result, run_summary(result, time.perf_counter() - t0)
+                             stress_tol=_stress_tol(args, material_name), tracking=tracking)
+    summary = run_summary(result, time.perf_counter() - t0)
+    if tracking is not None:
+        summary["tracked_rows"] = len(result.tracked)
+        summary["tracking_time_s"] = (float(result.tracked["seconds"].sum())
+                                      if len(result.tracked) else 0.0)
+    return result, summary
 
 
 def run_single_element(args: argparse.Namespace) -> int:
@@ -216,6 +270,9 @@ def run_single_element(args: argparse.Namespace) -> int:
     _check(args)
     setup = BiaxialSetup(width=1.0, height=1.0, nx=1, ny=1, confining=args.confining,
                          axial_strain=args.axial_strain)
+    tracking = _tracking(args)
+    if tracking is not None:
+        tracking.check_points(setup.n_points)
     progress = progress_enabled(args)
     material: Material
     if args.material == "linear-elastic":
@@ -226,12 +283,13 @@ def run_single_element(args: argparse.Namespace) -> int:
                                    seed=args.seed, pressure=args.confining,
                                    replicate=not args.independent, device=args.device,
                                    shards=args.shards, progress=progress,
-                                   tangent=args.tangent, perturbation=args.perturbation)
+                                   tangent=args.tangent, perturbation=args.perturbation,
+                                   **_dem_parameters(args))
         material.allocate(setup.n_points)
     reference = None
     if args.material == "dem" and args.compare_dem:
         reference = _pure_dem(material, args, progress)
-    result, summary = _run(args, setup, material, args.material)
+    result, summary = _run(args, setup, material, args.material, tracking)
     if reference is not None:
         peak, ratio = find_peak(reference["axial_strain"].to_numpy(),
                                 reference["stress_ratio"].to_numpy())
@@ -272,13 +330,16 @@ def run_biaxial_command(args: argparse.Namespace) -> int:
     setup = BiaxialSetup(width=args.width, height=args.height, nx=nx, ny=ny,
                          confining=args.confining, axial_strain=args.axial_strain,
                          platens=args.platens)
+    tracking = _tracking(args)
+    if tracking is not None:
+        tracking.check_points(setup.n_points)
     progress = progress_enabled(args)
     material = create_material("dem", rve=args.rve, particles=particles, seed=args.seed,
                                pressure=args.confining, device=device, shards=args.shards,
                                progress=progress, tangent=args.tangent,
-                               perturbation=args.perturbation)
+                               perturbation=args.perturbation, **_dem_parameters(args))
     material.allocate(setup.n_points)
-    result, summary = _run(args, setup, material, "dem")
+    result, summary = _run(args, setup, material, "dem", tracking)
     summary.update(scale=scale, elements=[nx, ny], gauss_points=setup.n_points,
                    particles=particles, device=device)
     summary.update(band_summary(result, args.map_strain, summary["peak_stress_ratio"]))

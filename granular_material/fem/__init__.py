@@ -8,7 +8,11 @@ summarised by :mod:`granular_material.results`). :func:`default_settings` holds 
 settings the commands use.
 """
 
-from granular_material.fem.defaults import default_settings, default_stress_tol
+from granular_material.fem.defaults import (
+    DEM_REUSE_TOL,
+    default_settings,
+    default_stress_tol,
+)
 from granular_material.fem.layout import to_points, to_quadrature
 from granular_material.fem.linear_elastic import LinearElastic, LinearElasticParameters
 from granular_material.fem.loading import Loading
@@ -28,8 +32,14 @@ from granular_material.fem.newton import (
 )
 from granular_material.fem.problems import BiaxialProblem, BiaxialSetup, build_biaxial
 from granular_material.fem.runner import BiaxialResult, RunObserver, run_biaxial
+from granular_material.fem.tracking import (
+    Tracking,
+    available_postprocessors,
+    load_postprocessor,
+)
 
 __all__ = [
+    "DEM_REUSE_TOL",
     "BiaxialProblem",
     "BiaxialResult",
     "BiaxialSetup",
@@ -44,12 +54,15 @@ __all__ = [
     "PointStatus",
     "RunObserver",
     "StepRecord",
+    "Tracking",
     "available_materials",
+    "available_postprocessors",
     "build_biaxial",
     "create_material",
     "default_settings",
     "default_stress_tol",
     "load_material",
+    "load_postprocessor",
     "run_biaxial",
     "to_points",
     "to_quadrature",

@@ -12,7 +12,7 @@ from typing import Any
 
 from granular_material.fem.newton import NewtonSettings
 
-__all__ = ["NOISY_MATERIALS", "default_settings", "default_stress_tol"]
+__all__ = ["DEM_REUSE_TOL", "NOISY_MATERIALS", "default_settings", "default_stress_tol"]
 
 #: materials whose stress carries noise (DEM RVEs): they get a stall tolerance and an
 #: absolute stress tolerance by default
@@ -22,6 +22,10 @@ NOISY_MATERIALS = frozenset({"dem"})
 #: increment extrapolated as the predictor, and Aitken relaxation (the DEM tangent leaves out
 #: the discs' rearrangement and is too stiff)
 COMMAND_DEFAULTS: dict[str, Any] = {"predictor": "extrapolate", "relaxation": "aitken"}
+
+#: the commands' reuse tolerance of the DEM material [-]: an RVE whose ∇u moved by at most
+#: this since it was last driven keeps its response (see the README's measurements)
+DEM_REUSE_TOL = 0.0
 
 
 def default_settings(material: str, **overrides: Any) -> NewtonSettings:

@@ -58,6 +58,9 @@ class MaterialResponse:
         tangent: D_ijkl = ∂σ_ij/∂(∂u_k/∂x_l) [Pa], shape (n, 2, 2, 2, 2), float64.
         status: :class:`PointStatus` per point, shape (n,), int8.
         dem_steps: DEM steps the evaluation ran (0 for closed-form laws).
+        rve_evaluations: RVE strain paths the evaluation ran (points not stepped, e.g.
+            reused, do not count).
+        particle_steps: disc-steps the evaluation ran (Σ steps × discs over the paths).
         fields: further per-point scalars for output (e.g. ``void_ratio``), each shape (n,).
     """
 
@@ -65,6 +68,8 @@ class MaterialResponse:
     tangent: np.ndarray
     status: np.ndarray
     dem_steps: int = 0
+    rve_evaluations: int = 0
+    particle_steps: int = 0
     fields: Mapping[str, np.ndarray] = field(default_factory=dict)
 
     def __post_init__(self) -> None:

@@ -118,6 +118,8 @@ class StepRecord:
         iterations: material evaluations used, all attempts and sub-increments included.
         dem_steps: DEM steps run by the material, all attempts included (0 for closed-form
             laws).
+        rve_evaluations: RVE strain paths run, all attempts included.
+        particle_steps: DEM disc-steps run, all attempts included.
         cutbacks: how many times an increment of this step was halved.
         stalled: increments accepted on a stalled residual (``NewtonSettings.stall_rtol``).
         residual_history: ‖R‖₂ / ‖R₀‖₂ of every iteration, one list per attempt.
@@ -128,6 +130,8 @@ class StepRecord:
     load_factor: float
     iterations: int = 0
     dem_steps: int = 0
+    rve_evaluations: int = 0
+    particle_steps: int = 0
     cutbacks: int = 0
     stalled: int = 0
     residual_history: list[list[float]] = field(default_factory=list)
@@ -150,7 +154,7 @@ class _Attempt:
     f_int: np.ndarray | None
     history: list[float]
     iterations: int
-    dem_steps: int
+    cost: np.ndarray  # DEM steps, RVE paths, particle-steps
     reason: str
     stalled: bool = False
 
@@ -224,7 +228,7 @@ class NewtonSolver:
             last_step, last_du = self._last
             du[interior] = (target - self.load_factor) / last_step * last_du[interior]
         history: list[float] = []
-        dem_steps = 0
+        cost = np.zeros(3, dtype=np.int64)
         aitken = AitkenRelaxation() if s.relaxation == "aitken" else None
         secant = None
         if s.tangent_update == "secant":
@@ -234,28 +238,29 @@ class NewtonSolver:
         for it in range(1, s.max_iterations + 1):
             grad_u = gauss_points_grad(self.basis, du)
             response = self.material.evaluate(grad_u)
-            dem_steps += int(response.dem_steps)
+            cost += (int(response.dem_steps), int(response.rve_evaluations),
+                     int(response.particle_steps))
             if not response.ok:
                 bad = response.failed_points()
-                return _Attempt(False, du, None, None, history, it, dem_steps,
+                return _Attempt(False, du, None, None, history, it, cost,
                                 f"material failed at points {bad[:8].tolist()}")
             f_int = internal_force(self.basis, response.stress)
             residual = f_int - f_ext
             r = float(np.linalg.norm(residual[interior]))
             history.append(r / r0 if r0 > 0 else r)
             if r <= s.atol or (r0 > 0 and r <= s.rtol * r0):
-                return _Attempt(True, du, response, f_int, history, it, dem_steps, "")
+                return _Attempt(True, du, response, f_int, history, it, cost, "")
             if _stalled(history, s):
-                return _Attempt(True, du, response, f_int, history, it, dem_steps, "", stalled=True)
+                return _Attempt(True, du, response, f_int, history, it, cost, "", stalled=True)
             if not math.isfinite(r) or (r0 > 0 and r > s.divergence * r0):
-                return _Attempt(False, du, None, None, history, it, dem_steps, "diverged")
+                return _Attempt(False, du, None, None, history, it, cost, "diverged")
             tangent = (response.tangent if secant is None
                        else secant.update(grad_u, response.stress))
             K = stiffness(self.basis, tangent)
             A, b, x, interior = condense(K, -residual, D=D)
             correction = solve(A, b, x, interior)
             du = du + correction if aitken is None else aitken.update(du, correction)
-        return _Attempt(False, du, None, None, history, s.max_iterations, dem_steps,
+        return _Attempt(False, du, None, None, history, s.max_iterations, cost,
                         f"not converged in {s.max_iterations} iterations")
 
     def step(self, target: float, step: int) -> StepRecord:
@@ -273,7 +278,9 @@ class NewtonSolver:
             end = min(self.load_factor + increment, target)
             attempt = self._increment(end)
             record.iterations += attempt.iterations
-            record.dem_steps += attempt.dem_steps
+            record.dem_steps += int(attempt.cost[0])
+            record.rve_evaluations += int(attempt.cost[1])
+            record.particle_steps += int(attempt.cost[2])
             record.residual_history.append(attempt.history)
             if attempt.converged:
                 self.material.commit()
@@ -323,6 +330,7 @@ class NewtonSolver:
                     on_step(self, record)
                 last = record.residual_history[-1][-1] if record.residual_history[-1] else 0.0
                 bar.set_postfix(it=record.iterations, cut=record.cutbacks,
-                                res=f"{last:.2g}", dem_steps=record.dem_steps)
+                                res=f"{last:.2g}", dem_steps=record.dem_steps,
+                                rves=record.rve_evaluations)
                 bar.update()
         return self.records

@@ -7,14 +7,18 @@ Tables (tension positive unless the column says otherwise):
     the top platen reaction, compression +), confining [Pa] (compression +), stress_ratio
     (platen_stress / confining), sxx, syy, sxy [Pa] (volume averages over Gauss points),
     volumetric_strain (tr ε volume average, contraction negative), void_ratio (mean, NaN if
-    the material has none), iterations, dem_steps (DEM steps run), cutbacks, stalled (increments
-    accepted on a stalled residual), wall_time [s],
+    the material has none), iterations, dem_steps (DEM steps run: each evaluation's longest
+    RVE path, summed), rve_evaluations (RVE paths run), particle_steps (DEM disc-steps run),
+    cutbacks, stalled (increments accepted on a stalled residual), wall_time [s],
     residual_history (JSON list of lists of ‖R‖/‖R₀‖).
 
 ``points`` — one row per load step and Gauss point:
     step, axial_strain, point, element, x, y [m], sxx, syy, sxy [Pa], exx, eyy, exy,
     volumetric_strain (tr ε), shear_strain (γ = √((ε_xx − ε_yy)² + (2ε_xy)²)), plus the
     material's own fields (void_ratio, coordination, ...).
+
+``tracked`` — with a :class:`~granular_material.fem.tracking.Tracking`: one row per tracked
+    step, point and post-processor (see :mod:`granular_material.fem.tracking`).
 """
 
 from __future__ import annotations
@@ -31,6 +35,7 @@ from granular_material.fem.layout import to_points
 from granular_material.fem.material import Material
 from granular_material.fem.newton import NewtonError, NewtonSettings, NewtonSolver, StepRecord
 from granular_material.fem.problems import BiaxialProblem, BiaxialSetup, build_biaxial
+from granular_material.fem.tracking import Tracking
 
 __all__ = ["BiaxialResult", "RunObserver", "run_biaxial"]
 
@@ -43,9 +48,11 @@ class RunObserver(Protocol):
         """Called once, before the initial state is recorded."""
         ...
 
-    def record(self, row: dict[str, Any], points: pd.DataFrame, u: np.ndarray) -> None:
+    def record(self, row: dict[str, Any], points: pd.DataFrame, u: np.ndarray,
+               tracked: pd.DataFrame | None = None) -> None:
         """Called with every committed step (step 0 first): its ``steps`` row, its Gauss-point
-        table and the nodal displacement [m] (ndofs,)."""
+        table, the nodal displacement [m] (ndofs,) and the step's tracked rows (None when
+        the step is not tracked)."""
         ...
 
     def finish(self, result: BiaxialResult) -> None:
@@ -65,6 +72,7 @@ class BiaxialResult:
         records: the Newton records of the committed steps.
         error: why the run stopped early (the :class:`NewtonError` message, or an
             interrupt), if it did.
+        tracked: the tracked post-processors' rows (empty without tracking).
     """
 
     problem: BiaxialProblem
@@ -73,6 +81,7 @@ class BiaxialResult:
     displacements: np.ndarray
     records: list[StepRecord] = field(default_factory=list)
     error: str | None = None
+    tracked: pd.DataFrame = field(default_factory=pd.DataFrame)
 
     def row_nearest(self, axial_strain: float) -> int:
         """Row of ``steps`` (and of ``displacements``) whose axial strain [-] is nearest."""
@@ -99,6 +108,8 @@ def _rows(solver: NewtonSolver, problem: BiaxialProblem, record: StepRecord | No
         "void_ratio": float(w @ fields["void_ratio"]) if "void_ratio" in fields else np.nan,
         "iterations": record.iterations if record else 0,
         "dem_steps": record.dem_steps if record else 0,
+        "rve_evaluations": record.rve_evaluations if record else 0,
+        "particle_steps": record.particle_steps if record else 0,
         "cutbacks": record.cutbacks if record else 0,
         "stalled": record.stalled if record else 0,
         "wall_time": record.wall_time if record else 0.0,
@@ -128,6 +139,7 @@ def run_biaxial(
     on_step: Callable[[NewtonSolver, StepRecord, pd.DataFrame], None] | None = None,
     observer: RunObserver | None = None,
     stress_tol: float = 0.0,
+    tracking: Tracking | None = None,
 ) -> BiaxialResult:
     """Drive ``material`` through a drained biaxial test in ``n_steps`` load steps.
 
@@ -140,15 +152,18 @@ def run_biaxial(
     steps committed so far. ``observer`` (e.g. :class:`granular_material.results.BiaxialWriter`)
     sees every committed step as it comes and the result at the end, in both cases.
     ``on_step(solver, record, points)`` is called after every committed load step.
+    ``tracking`` runs post-processors on chosen points' committed RVEs (``result.tracked``).
     """
     problem = build_biaxial(setup)
+    if tracking is not None:
+        tracking.check_points(setup.n_points)
     if stress_tol < 0 or not np.isfinite(stress_tol):
         raise ValueError(f"stress_tol must be a stress >= 0 Pa, got {stress_tol!r}")
     if stress_tol > 0:
         settings = replace(settings or NewtonSettings(),
                            atol=problem.force_tolerance(stress_tol))
     solver = NewtonSolver(problem.basis, material, problem.loading, settings)
-    rows, tables, disps = [], [], []
+    rows, tables, disps, tracked = [], [], [], []
     if observer is not None:
         observer.start(problem)
 
@@ -157,8 +172,13 @@ def run_biaxial(
         rows.append(row)
         tables.append(points)
         disps.append(solver.u.copy())
+        step_tracked = None
+        if tracking is not None and tracking.due(row["step"]):
+            step_tracked = tracking.rows(material, row["step"], row["axial_strain"],
+                                         setup.n_points)
+            tracked.append(step_tracked)
         if observer is not None:
-            observer.record(row, points, solver.u)
+            observer.record(row, points, solver.u, step_tracked)
         if on_step is not None and record is not None:
             on_step(solver, record, points)
 
@@ -174,6 +194,7 @@ def run_biaxial(
     result = BiaxialResult(
         problem=problem, steps=pd.DataFrame(rows), points=pd.concat(tables, ignore_index=True),
         displacements=np.array(disps), records=list(solver.records), error=error,
+        tracked=pd.concat(tracked, ignore_index=True) if tracked else pd.DataFrame(),
     )
     if observer is not None:
         observer.finish(result)

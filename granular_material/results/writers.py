@@ -28,15 +28,22 @@ _CELL_FIELDS = ("sxx", "syy", "sxy", "exx", "eyy", "exy", "volumetric_strain",
 
 
 def write_csv(frame: pd.DataFrame, path: str | Path, append: bool = False) -> Path:
-    """Write ``frame`` to ``path`` without its index; a new file replaces the old one only once
-    it is complete. ``append`` adds the rows (no header) to an existing file instead."""
+    """Write ``frame`` to ``path`` without its index (its folder made if need be); a new file
+    replaces the old one only once it is complete, and a failed write leaves no ``.part``
+    behind. ``append`` adds the rows (no header) to an existing file instead."""
     path = Path(path)
+    if path.is_dir():
+        raise IsADirectoryError(f"{path} is a folder, not a CSV file")
     if append:
         frame.to_csv(path, index=False, mode="a", header=False)
         return path
+    path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(path.name + ".part")
-    frame.to_csv(tmp, index=False)
-    os.replace(tmp, path)
+    try:
+        frame.to_csv(tmp, index=False)
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)  # only there when writing or replacing failed
     return path
 
 
@@ -112,6 +119,7 @@ class BiaxialWriter:
         self._stack = ExitStack()
         self._fields: FieldWriter | None = None
         self._rows: list[dict[str, Any]] = []
+        self._tracked: list[pd.DataFrame] = []
 
     def __enter__(self) -> BiaxialWriter:
         self.out_dir.mkdir(parents=True, exist_ok=True)
@@ -126,19 +134,27 @@ class BiaxialWriter:
             FieldWriter(self.out_dir / "fields.xdmf", problem)
         )
         self._rows = []
+        self._tracked = []
 
-    def record(self, row: dict[str, Any], points: pd.DataFrame, u: np.ndarray) -> None:
-        """One committed step: its ``steps`` row, its Gauss-point table, the displacement."""
+    def record(self, row: dict[str, Any], points: pd.DataFrame, u: np.ndarray,
+               tracked: pd.DataFrame | None = None) -> None:
+        """One committed step: its ``steps`` row, its Gauss-point table, the displacement,
+        its tracked rows (added to ``tracked.csv``)."""
         if self._fields is None:
             raise RuntimeError("BiaxialWriter.start(problem) must come before record()")
         self._rows.append(row)
         self._fields.write(row["axial_strain"], u, points)
         write_tables(pd.DataFrame(self._rows), points, self.out_dir,
                      append_points=len(self._rows) > 1)
+        if tracked is not None and len(tracked):
+            self._tracked.append(tracked)
+            write_csv(pd.concat(self._tracked, ignore_index=True), self.out_dir / "tracked.csv")
 
     def finish(self, result: BiaxialResult) -> None:
         """Write the whole tables of the run."""
         write_tables(result.steps, result.points, self.out_dir)
+        if len(result.tracked):
+            write_csv(result.tracked, self.out_dir / "tracked.csv")
 
 
 def write_outputs(result: BiaxialResult, out_dir: str | Path,
@@ -152,6 +168,8 @@ def write_outputs(result: BiaxialResult, out_dir: str | Path,
     """
     out = Path(out_dir)
     paths = write_tables(result.steps, result.points, out)
+    if len(result.tracked):
+        paths["tracked"] = write_csv(result.tracked, out / "tracked.csv")
     paths["stress_strain"] = plot_stress_strain(result.steps, out / "stress_strain.png",
                                                 reference)
     if map_strain is None:

@@ -17,11 +17,26 @@ from typing import Protocol
 import numpy as np
 
 from granular_material.dem import DEMBatch, DEMInstabilityError, Homogenized, RVEData, save_rve
-from granular_material.procedures import drive_grad_u, has_real_logarithm
+from granular_material.procedures import drive_grad_u, has_real_logarithm, path_steps
 
-__all__ = ["TANGENTS", "DEMBackend", "Evaluation", "InProcessBackend", "check_driving"]
+__all__ = [
+    "DRIVES",
+    "REUSE_CORRECTIONS",
+    "TANGENTS",
+    "DEMBackend",
+    "Evaluation",
+    "InProcessBackend",
+    "check_driving",
+    "check_reuse",
+]
 
 TANGENTS = ("kruyt-rothenburg", "perturbation")
+#: how an RVE that must move is driven to a new trial ∇u: from the committed state along the
+#: whole path of the step (``restart``, Guo & Zhao), or from its last trial state by the change
+DRIVES = ("restart", "continue")
+#: what a reused RVE returns: its last response as it is, or corrected to first order by
+#: its tangent for the change of ∇u
+REUSE_CORRECTIONS = ("none", "tangent")
 _COMPONENTS = ((0, 0), (0, 1), (1, 0), (1, 1))  # the (k, l) of ∂u_k/∂x_l
 
 
@@ -38,6 +53,20 @@ def check_driving(tangent: str, perturbation: float, min_perturbation: float,
         raise ValueError(f"min_steps must be an integer >= 1, got {min_steps!r}")
 
 
+def check_reuse(reuse_tol: float, reuse_correction: str, drive: str, tangent: str) -> None:
+    """The one check of the reuse settings; ``ValueError`` naming the field and value."""
+    if not (math.isfinite(reuse_tol) and reuse_tol >= 0):
+        raise ValueError(f"reuse_tol must be a finite strain >= 0 (0: off), got {reuse_tol!r}")
+    if reuse_correction not in REUSE_CORRECTIONS:
+        raise ValueError(f"reuse_correction must be one of {', '.join(REUSE_CORRECTIONS)}, "
+                         f"got {reuse_correction!r}")
+    if drive not in DRIVES:
+        raise ValueError(f"drive must be one of {', '.join(DRIVES)}, got {drive!r}")
+    if drive == "continue" and tangent == "perturbation":
+        raise ValueError("drive 'continue' does not combine with the 'perturbation' tangent "
+                         "(its perturbed runs start from the committed state)")
+
+
 @dataclass(frozen=True)
 class Evaluation:
     """What one evaluation of the RVEs gave.
@@ -47,12 +76,17 @@ class Evaluation:
             :class:`~granular_material.dem.Homogenized`); with the "perturbation" tangent its
             ``tangent`` is the forward-difference one. NaN throughout when the batch failed.
         failed: RVEs whose state blew up or whose ∇u inverts the cell, shape (B,), bool.
-        dem_steps: DEM steps run, all strain paths of the evaluation together.
+        dem_steps: DEM steps run: the longest path of each drive, the drives of the
+            evaluation together.
+        rve_evaluations: RVE paths run (an RVE stepped in a drive counts once per drive).
+        particle_steps: disc-steps run, Σ over the stepped RVEs of their steps × discs.
     """
 
     homogenized: Homogenized
     failed: np.ndarray
     dem_steps: int
+    rve_evaluations: int = 0
+    particle_steps: int = 0
 
 
 def _nan_like(h: Homogenized) -> Homogenized:
@@ -89,6 +123,16 @@ class DEMBackend(Protocol):
 class InProcessBackend:
     """All RVEs in one :class:`DEMBatch` of this process.
 
+    Reuse of undisturbed RVEs: the backend remembers, per RVE, the ∇u its state was last
+    driven to (measured from its committed state) and the response there. An RVE whose new
+    ∇u differs from that one by at most ``reuse_tol`` in every component is not stepped: it
+    keeps its state and returns that response (``reuse_correction="tangent"``: plus its
+    tangent times the difference). When a step commits, a reused RVE's committed state is the
+    one it reached; the small mismatch to the ∇u the FEM committed is carried as the RVE's
+    *lag* F_lag = (I + ∇u_FEM)(I + ∇u_RVE)⁻¹ and the next step drives it by
+    (I + ∇u)·F_lag − I, so that no error accumulates over the steps. ``reuse_tol = 0`` steps
+    every RVE at every evaluation, exactly as without reuse.
+
     Args:
         batch: the RVEs, in their committed state.
         max_strain_per_step: largest strain component per DEM step (Guo & Zhao: 1e-5).
@@ -99,94 +143,194 @@ class InProcessBackend:
             h = max(perturbation · max|∇u|, min_perturbation) per RVE).
         perturbation: relative size of the perturbation [-].
         min_perturbation: smallest perturbation [-].
+        reuse_tol: largest change of ∇u [-] (max over the components) for which an RVE keeps
+            its last response instead of being stepped; 0: off.
+        reuse_correction: "none" or "tangent" (first-order correction of a reused response).
+        drive: "restart" (an RVE that moves is restored to the committed state and driven
+            along the whole path of the step) or "continue" (driven from its last trial state
+            by the change, (I + ∇u_new)(I + ∇u_last)⁻¹ − I: fewer steps, but the response then
+            depends on the Newton iterates' path).
+        max_steps: cap on one RVE path's DEM steps (``ValueError`` beyond it); None: no cap.
     """
 
     def __init__(self, batch: DEMBatch, max_strain_per_step: float = 1.0e-5,
                  min_steps: int = 2, tangent: str = "kruyt-rothenburg",
-                 perturbation: float = 0.1, min_perturbation: float = 1.0e-4) -> None:
+                 perturbation: float = 0.1, min_perturbation: float = 1.0e-4,
+                 reuse_tol: float = 0.0, reuse_correction: str = "none",
+                 drive: str = "restart", max_steps: int | None = None) -> None:
         check_driving(tangent, perturbation, min_perturbation, max_strain_per_step, min_steps)
+        check_reuse(reuse_tol, reuse_correction, drive, tangent)
         self.batch = batch
         self.max_strain_per_step = max_strain_per_step
         self.min_steps = min_steps
         self.tangent = tangent
         self.perturbation, self.min_perturbation = perturbation, min_perturbation
+        self.reuse_tol, self.reuse_correction, self.drive = reuse_tol, reuse_correction, drive
+        self.max_steps = max_steps
         self._committed = batch.snapshot()
         self._trial = False
+        b = batch.n_rve
+        #: F_lag − I per RVE: what the FEM's committed configuration is ahead of the RVE's
+        self.lag = np.zeros((b, 2, 2))
+        #: ∇u (from the committed state) that each RVE's current state was driven to
+        self._reached = np.zeros((b, 2, 2))
+        #: the ∇u of the last evaluation, per RVE (what the FEM commits)
+        self._target = np.zeros((b, 2, 2))
+        #: response of each RVE's current state (None until measured), and the committed one
+        self._current: Homogenized | None = None
+        self._committed_response: Homogenized | None = None
 
     @property
     def n_rve(self) -> int:
         """Number of RVEs B."""
         return self.batch.n_rve
 
-    def _drive(self, grad_u: np.ndarray, failed: np.ndarray) -> tuple[int, bool]:
-        """From the committed state, drive ∇u (failed RVEs held still); marks RVEs that blow
-        up, or whose ∇u has no constant velocity gradient, in ``failed``. Returns (DEM steps,
-        whether the batch came through)."""
-        failed |= ~has_real_logarithm(np.eye(2) + grad_u)
-        self.batch.restore(self._committed)
+    def _drive(self, grad_u: np.ndarray, failed: np.ndarray, moving: np.ndarray,
+               restart: bool = True) -> tuple[int, int, int] | None:
+        """Drive the ``moving`` RVEs by ∇u (from the committed state when ``restart``, else
+        from their current state); the others are left as they are. Marks RVEs that blow up,
+        or whose ∇u has no constant velocity gradient, in ``failed``. Returns the cost (DEM
+        steps, RVE paths, particle-steps), or None when the batch did not come through (all
+        RVEs are then back in their committed state)."""
+        failed |= moving & ~has_real_logarithm(np.eye(2) + grad_u)
+        moving = moving & ~failed
+        if restart:
+            self.batch.restore(self._committed, None if moving.all() else moving)
+        if not moving.any():
+            return 0, 0, 0
+        grad_u = np.where(moving[:, None, None], grad_u, 0.0)
+        steps = path_steps(grad_u, self.max_strain_per_step, self.min_steps, self.max_steps)
         try:
-            steps = drive_grad_u(self.batch, np.where(failed[:, None, None], 0.0, grad_u),
-                                 max_strain_per_step=self.max_strain_per_step,
-                                 min_steps=self.min_steps)
+            dem_steps = drive_grad_u(self.batch, grad_u,
+                                     max_strain_per_step=self.max_strain_per_step,
+                                     min_steps=self.min_steps,
+                                     active=None if moving.all() else moving,
+                                     max_steps=self.max_steps)
         except DEMInstabilityError as exc:
             failed[np.asarray(exc.rve, dtype=int)] = True
-            self.batch.restore(self._committed)
-            return 0, False
-        return steps, True
+            self._back_to_committed()
+            return None
+        return dem_steps, int(moving.sum()), int(steps[moving].sum()) * self.batch.n_disc
+
+    def _back_to_committed(self) -> None:
+        self.batch.restore(self._committed)
+        self._reached[:] = 0.0
+        if self._committed_response is None and self.reuse_tol > 0:
+            self._committed_response = self.batch.homogenize()  # the state itself, unstepped
+        self._current = self._committed_response
+
+    def _moving(self, target: np.ndarray, failed: np.ndarray) -> np.ndarray:
+        """The RVEs that must be stepped for ``target``: all with reuse off or before any
+        response is known; else those that moved by more than ``reuse_tol``."""
+        if self.reuse_tol <= 0 or self._current is None:
+            return ~failed
+        change = np.abs(target - self._reached).max(axis=(1, 2))
+        return (change > self.reuse_tol) & ~failed
+
+    def _measure(self, moved: np.ndarray) -> Homogenized:
+        """The current response: measured afresh for the ``moved`` RVEs, kept for the
+        others."""
+        if self._current is None or moved.all():
+            return self.batch.homogenize()
+        if not moved.any():
+            return self._current
+        return self._current.with_rves(moved, self.batch.homogenize(moved))
 
     def evaluate(self, grad_u: np.ndarray) -> Evaluation:
-        """Restore the committed state, apply ∇u [-] (B, 2, 2), homogenise."""
+        """Respond to ∇u [-] (B, 2, 2) since the commit: the RVEs that moved are driven to
+        it, the others reused (see the class docstring); homogenised results."""
         self._trial = False
         finite = np.isfinite(grad_u).all(axis=(1, 2))
         grad_u = np.where(finite[:, None, None], grad_u, 0.0)
+        # with no lag this is grad_u exactly (the lag is exactly zero where no RVE was reused)
+        target = grad_u + self.lag + grad_u @ self.lag
         failed = ~finite
-        dem_steps, perturbed, ok = 0, [], True
-        if self.tangent == "perturbation":
-            size = np.maximum(self.perturbation * np.abs(grad_u).max(axis=(1, 2)),
+        moving = self._moving(target, failed)
+        total = np.zeros(3, dtype=np.int64)  # DEM steps, RVE paths, particle-steps
+        perturbed: list[np.ndarray] = []
+        cost: tuple[int, int, int] | None = (0, 0, 0)
+        if self.tangent == "perturbation" and moving.any():
+            size = np.maximum(self.perturbation * np.abs(target).max(axis=(1, 2)),
                               self.min_perturbation)
             for row, col in _COMPONENTS:
-                g = grad_u.copy()
+                g = target.copy()
                 g[:, row, col] += size
-                steps, ok = self._drive(g, failed)
-                dem_steps += steps
-                if not ok:  # the evaluation has failed: the remaining runs are wasted work
+                cost = self._drive(g, failed, moving)
+                if cost is None:  # the evaluation has failed: the remaining runs are wasted
                     break
-                perturbed.append(self.batch.homogenize().stress)
-        if ok:
-            steps, ok = self._drive(grad_u, failed)
-            dem_steps += steps
-        h = self.batch.homogenize()
-        if not ok:
-            return Evaluation(_nan_like(h), failed, dem_steps)
+                total += cost
+                sigma = np.full((self.n_rve, 2, 2), np.nan)
+                sigma[moving] = self.batch.homogenize(moving).stress
+                perturbed.append(sigma)
+        if cost is not None:
+            if self.drive == "restart" or perturbed:
+                cost = self._drive(target, failed, moving)
+            else:  # from the current trial state, by the change since it
+                eye = np.eye(2)
+                change = (eye + target) @ np.linalg.inv(eye + self._reached) - eye
+                cost = self._drive(change, failed, moving, restart=False)
+        if cost is None:
+            h = self._current if self._current is not None else self.batch.homogenize()
+            return Evaluation(_nan_like(h), failed, *(int(c) for c in total))
+        total += cost
+        moved = moving & ~failed
+        new = self._measure(moved)
         if perturbed:
-            stress = np.asarray(h.stress, dtype=np.float64)
-            tangent = np.empty(h.tangent.shape)
+            stress = np.asarray(new.stress, dtype=np.float64)
+            tangent = np.array(new.tangent, dtype=np.float64, copy=True)
             for (row, col), sigma in zip(_COMPONENTS, perturbed, strict=True):
-                tangent[:, :, :, row, col] = (sigma - stress) / size[:, None, None]
-            h = replace(h, tangent=tangent)
+                tangent[moved, :, :, row, col] = ((sigma[moved] - stress[moved])
+                                                  / size[moved, None, None])
+            new = replace(new, tangent=tangent)
+        self._reached[moved] = target[moved]
+        self._current = new
+        self._target = target
         self._trial = True
-        return Evaluation(h, failed, dem_steps)
+        return Evaluation(self._response(new, target), failed, *(int(c) for c in total))
+
+    def _response(self, current: Homogenized, target: np.ndarray) -> Homogenized:
+        """What the RVEs answer for ``target``: their current response, reused RVEs'
+        corrected to first order when asked (σ + D : Δ∇u)."""
+        if self.reuse_correction != "tangent":
+            return current
+        change = target - self._reached
+        if not change.any():
+            return current
+        stress = current.stress + np.einsum("bijkl,bkl->bij", current.tangent, change)
+        return replace(current, stress=stress)
 
     def commit(self) -> None:
-        """Snapshot the state of the last successful evaluate as the committed state."""
+        """Snapshot the state of the last successful evaluate as the committed state; the
+        mismatch of reused RVEs becomes their lag."""
         if not self._trial:
             raise RuntimeError("commit() needs a successful evaluate() since the last commit")
         self._committed = self.batch.snapshot()
+        reused = (self._target != self._reached).any(axis=(1, 2))
+        self.lag[:] = 0.0
+        if reused.any():
+            eye = np.eye(2)
+            self.lag[reused] = ((eye + self._target[reused])
+                                @ np.linalg.inv(eye + self._reached[reused]) - eye)
+        self._reached[:] = 0.0
+        self._target[:] = 0.0
+        self._committed_response = self._current
         self._trial = False
 
     def revert(self) -> None:
         """Restore the committed state on the device."""
-        self.batch.restore(self._committed)
+        self._back_to_committed()
         self._trial = False
 
-    def committed_rves(self) -> RVEData:
-        """The committed RVE states (contact history included); the trial state is kept."""
+    def committed_rves(self, rves: np.ndarray | None = None) -> RVEData:
+        """The committed RVE states (contact history included), of all RVEs or of the
+        indices ``rves``; the trial state is kept."""
         trial = self.batch.snapshot()
         self.batch.restore(self._committed)
         try:
-            return self.batch.to_data()
+            data = self.batch.to_data()
         finally:
             self.batch.restore(trial)
+        return data if rves is None else data.take(np.asarray(rves, dtype=int))
 
     def checkpoint(self, path: str | Path) -> None:
         """Write the committed state (contact history included) to the RVE file ``path``."""

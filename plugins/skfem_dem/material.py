@@ -14,7 +14,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from granular_material_skfem.backend import InProcessBackend, check_driving
+from granular_material_skfem.backend import InProcessBackend, check_driving, check_reuse
 
 from granular_material.dem import DEMBatch, RVEData, load_rve, resolve_device
 from granular_material.fem.material import MaterialResponse, PointStatus
@@ -44,6 +44,14 @@ class DEMMaterialParameters:
             differences of the RVE response, four extra DEM runs per evaluation; see
             :class:`~granular_material_skfem.backend.InProcessBackend`).
         perturbation: relative perturbation of ∇u for the "perturbation" tangent [-].
+        reuse_tol: strain [-]: an RVE whose ∇u moved by at most this (every component) since
+            it was last driven keeps its response instead of being stepped (see
+            :class:`~granular_material_skfem.backend.InProcessBackend`); 0: every RVE is
+            stepped at every evaluation.
+        reuse_correction: "none" or "tangent" (a reused response corrected to first order).
+        drive: "restart" (every trial from the committed state, Guo & Zhao) or "continue"
+            (from the last trial state by the change of ∇u).
+        max_dem_steps: cap on one RVE path's DEM steps per evaluation; None: no cap.
     """
 
     rve: str | None = None
@@ -57,10 +65,19 @@ class DEMMaterialParameters:
     shards: int | None = None
     tangent: str = "kruyt-rothenburg"
     perturbation: float = 0.1
+    reuse_tol: float = 0.0
+    reuse_correction: str = "none"
+    drive: str = "restart"
+    max_dem_steps: int | None = None
 
     def __post_init__(self) -> None:
         check_driving(self.tangent, self.perturbation, 1.0e-4, self.max_strain_per_step,
                       self.min_steps)
+        check_reuse(self.reuse_tol, self.reuse_correction, self.drive, self.tangent)
+        if self.max_dem_steps is not None and (int(self.max_dem_steps) != self.max_dem_steps
+                                               or self.max_dem_steps < 1):
+            raise ValueError(f"max_dem_steps must be an integer >= 1 or None, "
+                             f"got {self.max_dem_steps!r}")
         if self.shards is not None and (int(self.shards) != self.shards or self.shards < 1):
             raise ValueError(f"shards must be an integer >= 1 or None, got {self.shards!r}")
         if int(self.particles) != self.particles or self.particles < 4:
@@ -79,10 +96,13 @@ class DEMMaterial:
                  device: str | None = None, max_strain_per_step: float = 1.0e-5,
                  min_steps: int = 2, shards: int | None = None,
                  progress: bool = False, tangent: str = "kruyt-rothenburg",
-                 perturbation: float = 0.1) -> None:
+                 perturbation: float = 0.1, reuse_tol: float = 0.0,
+                 reuse_correction: str = "none", drive: str = "restart",
+                 max_dem_steps: int | None = None) -> None:
         self.parameters = DEMMaterialParameters(
             None if rve is None else str(rve), particles, seed, pressure, replicate, device,
-            max_strain_per_step, min_steps, shards, tangent, perturbation,
+            max_strain_per_step, min_steps, shards, tangent, perturbation, reuse_tol,
+            reuse_correction, drive, max_dem_steps,
         )
         self.progress = progress
         self.backend: InProcessBackend | None = None
@@ -97,14 +117,17 @@ class DEMMaterial:
             raise RuntimeError("allocate() the DEM material first")
         return self.backend
 
-    def committed_rves(self) -> RVEData:
-        """The committed RVE states, one per Gauss point (contact history included)."""
-        return self._allocated().committed_rves()
+    def committed_rves(self, points: np.ndarray | None = None) -> RVEData:
+        """The committed RVE states, one per Gauss point or of the point indices ``points``
+        (contact history included)."""
+        return self._allocated().committed_rves(points)
 
     def _backend(self, batch: DEMBatch) -> InProcessBackend:
         p = self.parameters
         return InProcessBackend(batch, p.max_strain_per_step, p.min_steps, tangent=p.tangent,
-                                perturbation=p.perturbation)
+                                perturbation=p.perturbation, reuse_tol=p.reuse_tol,
+                                reuse_correction=p.reuse_correction, drive=p.drive,
+                                max_steps=p.max_dem_steps)
 
     def allocate(self, n_points: int) -> None:
         """Load or prepare ``n_points`` RVEs in their consolidated state."""
@@ -137,7 +160,8 @@ class DEMMaterial:
     def evaluate(self, grad_u: np.ndarray) -> MaterialResponse:
         """Love stress and Kruyt–Rothenburg tangent for ∇u (n, 2, 2) since the commit.
 
-        ``dem_steps`` is the number of DEM steps run; ``fields`` holds ``void_ratio`` and
+        ``dem_steps`` is the number of DEM steps run, ``rve_evaluations`` the RVE paths and
+        ``particle_steps`` the disc-steps; ``fields`` holds ``void_ratio`` and
         ``coordination``. RVEs that blew up are reported with ``PointStatus.FAILED``.
         """
         if self.backend is None:
@@ -154,7 +178,8 @@ class DEMMaterial:
 
         return MaterialResponse(
             stress=f64(h.stress), tangent=f64(h.tangent), status=status,
-            dem_steps=ev.dem_steps,
+            dem_steps=ev.dem_steps, rve_evaluations=ev.rve_evaluations,
+            particle_steps=ev.particle_steps,
             fields={"void_ratio": f64(h.void_ratio), "coordination": f64(h.coordination)},
         )
 
