@@ -20,16 +20,27 @@ the lists); a rebuild is ``begin_build`` → ``fill_bins`` → ``build_lists`` �
 The kernels are plain functions in ``kernels_lists``, ``kernels_step`` and
 ``kernels_measures``; :func:`kernels_for` makes one warp module of them per float type and
 replica (see there), each specialised to the float type before the module is built.
+
+A scene that makes a term of the step irrelevant need not pay for it: ``contact_forces`` and
+``integrate`` test the compile-time flags ``TANGENTIAL``, ``DAMPING`` and ``STRESS`` of
+``kernels_step`` through ``wp.static``, and :func:`step_kernels_for` builds, for a
+:class:`StepFeatures` other than the generic one, copies of the two kernels that see other
+values (no tangential force, history or torque; no local damping; no stress sums) as a module
+of their own, built on first use only. A variant gives the generic kernels' results bit for
+bit (up to the sign of zeros) on the scenes it is made for.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cache
+from types import FunctionType
 from typing import Any
 
 import warp as wp
 
+from granular_material.dem import kernels_step
 from granular_material.dem.kernels_lists import (
     any_rebuild,
     begin_build,
@@ -48,9 +59,13 @@ from granular_material.dem.kernels_step import (
 )
 
 __all__ = [
+    "GENERIC_STEP",
     "KernelSet",
+    "StepFeatures",
+    "StepKernels",
     "kernels_for",
     "launch",
+    "step_kernels_for",
 ]
 
 _KERNELS = (
@@ -113,6 +128,15 @@ def _concrete_types(kernel: wp.Kernel, ft: Any) -> dict[str, Any]:
     return types
 
 
+def _kernel(function: Callable, module: str, ft: Any) -> wp.Kernel:
+    """``function`` as a kernel of warp module ``module``, specialised to float type ``ft``."""
+    kernel = wp.kernel(function, module=module, enable_backward=False)
+    types = _concrete_types(kernel, ft)
+    if types:
+        wp.overload(kernel, types)
+    return kernel
+
+
 @cache
 def kernels_for(dtype: str = "float64", replica: int = 0) -> KernelSet:
     """The kernels for ``dtype`` ("float64" or "float32") as warp module ``replica``, each
@@ -124,14 +148,76 @@ def kernels_for(dtype: str = "float64", replica: int = 0) -> KernelSet:
     """
     ft = {"float64": wp.float64, "float32": wp.float32}[dtype]
     module = f"granular_material_dem_{dtype}_r{replica}"
-    kernels = {}
-    for function in _KERNELS:
-        kernel = wp.kernel(function, module=module, enable_backward=False)
-        types = _concrete_types(kernel, ft)
-        if types:
-            wp.overload(kernel, types)
-        kernels[function.__name__] = kernel
-    return KernelSet(**kernels)
+    return KernelSet(**{f.__name__: _kernel(f, module, ft) for f in _KERNELS})
+
+
+@dataclass(frozen=True)
+class StepFeatures:
+    """What ``contact_forces`` and ``integrate`` compute (compile-time flags).
+
+    Attributes:
+        tangential: the tangential force, its history and the torques (False: every RVE is
+            frictionless, μ = 0; the history is kept at zero).
+        damping: YADE's local damping (False: damping 0).
+        stress: the stress sums for the servo where ``with_stress`` asks at run time (False:
+            never, no servo runs).
+    """
+
+    tangential: bool = True
+    damping: bool = True
+    stress: bool = True
+
+    @property
+    def tag(self) -> str:
+        """A name for the variant: "generic", or the terms it leaves out."""
+        left_out = [name for name, kept in (("tangential", self.tangential),
+                                            ("damping", self.damping),
+                                            ("stress", self.stress)) if not kept]
+        return "no_" + "_".join(left_out) if left_out else "generic"
+
+
+GENERIC_STEP = StepFeatures()  #: every term, as in :func:`kernels_for`'s module
+
+
+@dataclass(frozen=True)
+class StepKernels:
+    """``contact_forces`` and ``integrate`` of one :class:`StepFeatures` (same arguments
+    as the generic ones)."""
+
+    contact_forces: wp.Kernel
+    integrate: wp.Kernel
+
+
+def _with_flags(function: Callable, flags: dict[str, bool]) -> Callable:
+    """A copy of ``function`` (same code) whose globals hold ``flags`` in place of those of
+    ``kernels_step``: what its ``wp.static`` tests read when warp builds it."""
+    copy = FunctionType(function.__code__, {**function.__globals__, **flags},
+                              function.__name__, function.__defaults__, function.__closure__)
+    copy.__qualname__ = function.__qualname__
+    copy.__module__ = function.__module__
+    copy.__doc__ = function.__doc__
+    copy.__annotations__ = dict(function.__annotations__)
+    return copy
+
+
+@cache
+def step_kernels_for(dtype: str = "float64", replica: int = 0,
+                     features: StepFeatures = GENERIC_STEP) -> StepKernels:
+    """The step kernels of ``features`` for ``dtype`` and ``replica``: the generic ones are
+    those of :func:`kernels_for`; any other variant is a warp module of its own (two
+    kernels), built when first launched."""
+    if features == GENERIC_STEP:
+        ks = kernels_for(dtype, replica)
+        return StepKernels(ks.contact_forces, ks.integrate)
+    ft = {"float64": wp.float64, "float32": wp.float32}[dtype]
+    module = f"granular_material_dem_{dtype}_r{replica}_{features.tag}"
+    flags = {"TANGENTIAL": features.tangential, "DAMPING": features.damping,
+             "STRESS": features.stress}
+    assert set(flags) <= set(vars(kernels_step))  # the names the kernels test
+    return StepKernels(
+        contact_forces=_kernel(_with_flags(contact_forces, flags), module, ft),
+        integrate=_kernel(_with_flags(integrate, flags), module, ft),
+    )
 
 
 def launch(kernel: wp.Kernel, dim: int, device: str, record: bool = False,

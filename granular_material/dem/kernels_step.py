@@ -30,7 +30,15 @@ from granular_material.dem.laws import (
     servo_stiffness_term,
 )
 
-__all__ = ["advance_cell_and_check", "contact_forces", "integrate", "servo"]
+__all__ = ["DAMPING", "STRESS", "TANGENTIAL", "advance_cell_and_check", "contact_forces",
+           "integrate", "servo"]
+
+#: compile-time features of ``contact_forces`` and ``integrate``, read through ``wp.static``:
+#: the generic kernels see these values; :func:`~.kernels.step_kernels_for` builds variants of
+#: the two kernels that see others (their own warp module each), for scenes that need less
+TANGENTIAL = True  #: the tangential (Cundall–Strack) force, its history and the torques
+DAMPING = True  #: YADE's local damping of forces and torques
+STRESS = True  #: the Love and servo-stiffness sums, where ``with_stress`` asks at run time
 
 
 @wp.func
@@ -99,15 +107,22 @@ def contact_forces(
         v_t = wp.dot(v_rel, t) - (angular_velocity[i] * ra + angular_velocity[c] * rc) \
             - spin * (ra + rc)
         fn = kn * overlap
-        fs = coulomb_shear(contact_shear_force[slot], kt, v_t, dt, mu, fn)
-        contact_shear_force[slot] = fs
-        f_a = contact_force(fn, fs, n)
         half = type(dt)(0.5)
-        pair[slot] = type(pair[slot])(f_a[0], f_a[1], (ra - half * overlap) * fs)
-        pair[mirror] = type(pair[slot])(-f_a[0], -f_a[1], (rc - half * overlap) * fs)
-        if with_stress != 0:
-            pair_branch[slot] = d
-            pair_branch[mirror] = d
+        if wp.static(TANGENTIAL):
+            fs = coulomb_shear(contact_shear_force[slot], kt, v_t, dt, mu, fn)
+            contact_shear_force[slot] = fs
+            f_a = contact_force(fn, fs, n)
+            pair[slot] = type(pair[slot])(f_a[0], f_a[1], (ra - half * overlap) * fs)
+            pair[mirror] = type(pair[slot])(-f_a[0], -f_a[1], (rc - half * overlap) * fs)
+        else:  # frictionless (μ = 0 caps fs at 0): v_t is unused, the compiler drops it
+            contact_shear_force[slot] = zero
+            f_a = -fn * n
+            pair[slot] = type(pair[slot])(f_a[0], f_a[1], zero)
+            pair[mirror] = type(pair[slot])(-f_a[0], -f_a[1], zero)
+        if wp.static(STRESS):
+            if with_stress != 0:
+                pair_branch[slot] = d
+                pair_branch[mirror] = d
 
 
 def integrate(
@@ -139,27 +154,32 @@ def integrate(
         record = pair[slot]
         f_i = type(f)(record[0], record[1])
         f = f + f_i
-        tq = tq + record[2]
+        if wp.static(TANGENTIAL):
+            tq = tq + record[2]
+        if wp.static(STRESS):
+            if with_stress != 0:
+                d = pair_branch[slot]
+                if f_i[0] != zero or f_i[1] != zero:  # touching: |f| >= fn > 0
+                    j = b * n_disc + contact_partner[slot]
+                    kn, _kt = pair_stiffness(law, radius[wp.min(i, j)], radius[wp.max(i, j)])
+                    # Love's term takes the force on the pair's lower index
+                    f_a = f_i
+                    if j < i:
+                        f_a = -f_i
+                    s_sum = s_sum + love_term(f_a, d)
+                    k_sum = k_sum + servo_stiffness_term(kn, d / wp.length(d), d)
+    if wp.static(STRESS):
         if with_stress != 0:
-            d = pair_branch[slot]
-            if f_i[0] != zero or f_i[1] != zero:  # touching: |f| >= fn > 0
-                j = b * n_disc + contact_partner[slot]
-                kn, _kt = pair_stiffness(law, radius[wp.min(i, j)], radius[wp.max(i, j)])
-                # Love's term takes the force on the pair's lower index
-                f_a = f_i
-                if j < i:
-                    f_a = -f_i
-                s_sum = s_sum + love_term(f_a, d)
-                k_sum = k_sum + servo_stiffness_term(kn, d / wp.length(d), d)
-    if with_stress != 0:
-        part_stress[i] = s_sum
-        part_stiffness[i] = k_sum
+            part_stress[i] = s_sum
+            part_stiffness[i] = k_sum
     v = velocity[i]
-    f = type(v)(local_damping(f[0], v[0], damping), local_damping(f[1], v[1], damping))
     w = angular_velocity[i]
-    tq = local_damping(tq, w, damping)
+    if wp.static(DAMPING):  # (with damping 0 it multiplies by exactly 1)
+        f = type(v)(local_damping(f[0], v[0], damping), local_damping(f[1], v[1], damping))
+        tq = local_damping(tq, w, damping)
     v = v + dt * inv_mass[i] * f
-    w = w + dt * inv_inertia[i] * tq
+    if wp.static(TANGENTIAL):  # (frictionless: no torque, the spin keeps its value)
+        w = w + dt * inv_inertia[i] * tq
     dx = dt * v
     if not (wp.isfinite(v) and wp.isfinite(w)) or wp.length(dx) > type(dt)(0.25) * ri:
         wp.atomic_or(status, b, STATUS_BLOWUP)

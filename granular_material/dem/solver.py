@@ -16,7 +16,12 @@ from granular_material.dem.kernel_common import (
     STATUS_COINCIDENT,
     STATUS_OVERFLOW,
 )
-from granular_material.dem.kernels import kernels_for, launch
+from granular_material.dem.kernels import (
+    StepFeatures,
+    kernels_for,
+    launch,
+    step_kernels_for,
+)
 from granular_material.dem.loading import LoadingControl
 from granular_material.dem.model import Model
 from granular_material.dem.state import State
@@ -25,6 +30,10 @@ __all__ = ["BIN_CAPACITY", "CONTROL_STRAIN", "CONTROL_STRESS", "DEMInstabilityEr
 
 BIN_CAPACITY = 32  #: discs a contact-detection bin can hold (an overflow is an error)
 GRAPH_STEPS = 50  #: steps captured in one graph and replayed
+#: whether a scene without servo gets the step kernels without the stress sums' code; False:
+#: they keep it behind the run-time test of ``with_stress`` (the generic kernels' way), so that
+#: the default scene (frictional, damped, no servo) needs no kernel module beyond the generic one
+SKIP_STRESS_CODE = False
 
 _MESSAGES = {
     STATUS_BLOWUP: "a velocity became non-finite or a disc moved more than r/4 in one step "
@@ -61,6 +70,14 @@ class Solver:
     and replayed as one graph (CUDA graphs; on the CPU warp's launch capture, with the
     rebuild under the condition that some RVE needs it).
 
+    The step kernels are the variant (see :func:`step_kernels_for`) that leaves out what the
+    scene makes irrelevant: the tangential force and its history where every RVE of the
+    model is frictionless, local damping where the damping is 0 (and, with
+    ``SKIP_STRESS_CODE``, the stress sums' code where no servo runs); see
+    :meth:`step_features`. It is picked again whenever the model or the servo changes (a new
+    model from :meth:`Model.with_friction`, ``set_servo``, ``set_affine``), and the recorded
+    launches and the graph follow.
+
     Notes:
         The lists stay valid while ``2·max|Δx_fluct| + |H H_build⁻¹ − I|·cutoff ≤ skin``.
 
@@ -68,10 +85,16 @@ class Solver:
         model: gives the sizes and float type of the work arrays; any model of the same
             sizes (e.g. :meth:`Model.with_friction`) may be stepped.
         replica: the kernel module to launch (one per CPU thread, see ``kernels_for``).
+        features: the step kernels to use whatever the scene (``kernels.GENERIC_STEP`` forces
+            the generic ones; a variant must fit the scene); None: picked from the scene.
     """
 
-    def __init__(self, model: Model, replica: int = 0) -> None:
+    def __init__(self, model: Model, replica: int = 0,
+                 features: StepFeatures | None = None) -> None:
         self.kernels = kernels_for(model.dtype, replica)
+        self.replica = replica
+        #: the step kernels used whatever the scene, or None to pick them from the scene
+        self.features = features
         ft = model.float_type
         dev = model.device
         b, n, k = model.n_rve, model.n_disc, model.capacity
@@ -141,14 +164,24 @@ class Solver:
                     verlet_displacement=state.verlet_displacement, pair=self.pair),
         ]
 
+    def step_features(self, model: Model, loading: LoadingControl) -> StepFeatures:
+        """The terms the step computes for ``model`` under ``loading``: ``self.features``
+        if set, else only those the scene needs (reads the friction back from the device)."""
+        if self.features is not None:
+            return self.features
+        frictional = bool(np.any(model.constants.friction.numpy() != 0))
+        return StepFeatures(tangential=frictional, damping=model.meta.damping != 0,
+                            stress=not SKIP_STRESS_CODE or loading.servo is not None)
+
     def _step_launches(self, model: Model, state: State,
                        loading: LoadingControl) -> list[wp.Launch]:
         ks, dev = self.kernels, self.device
+        sk = step_kernels_for(model.dtype, self.replica, self.step_features(model, loading))
         b, n, k = model.n_rve, model.n_disc, model.capacity
         c = model.constants
         servo = loading.servo
         launches = [
-            _record(ks.contact_forces, b * n, dev, n_disc=n, capacity=k, law=model.law,
+            _record(sk.contact_forces, b * n, dev, n_disc=n, capacity=k, law=model.law,
                     timestep=c.timestep, active=loading.active, friction=c.friction,
                     cell=state.cell, velocity_gradient=loading.velocity_gradient,
                     fractional_position=state.fractional_position, velocity=state.velocity,
@@ -158,7 +191,7 @@ class Solver:
                     contact_shear_force=state.contact_shear_force,
                     with_stress=int(servo is not None), pair=self.pair,
                     pair_branch=self.pair_branch, status=state.status),
-            _record(ks.integrate, b * n, dev, n_disc=n, capacity=k, law=model.law,
+            _record(sk.integrate, b * n, dev, n_disc=n, capacity=k, law=model.law,
                     damping=model.scalar(model.meta.damping),
                     with_stress=int(servo is not None), timestep=c.timestep,
                     active=loading.active, cell=state.cell, radius=c.radius,
@@ -192,7 +225,7 @@ class Solver:
         return launches
 
     def _key(self, model: Model, state: State, loading: LoadingControl) -> tuple:
-        return (id(model), id(state), id(loading), loading.servo)
+        return (id(model), id(state), id(loading), loading.servo, self.features)
 
     def prepare(self, model: Model, state: State, loading: LoadingControl) -> tuple:
         """The recorded launches (check, build, step) for this model, state and loading,
