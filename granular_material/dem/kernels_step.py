@@ -104,8 +104,11 @@ def contact_forces(
         t = type(n)(-n[1], n[0])
         kn, kt = pair_stiffness(law, ra, rc)
         v_rel = velocity[c] - velocity[i] + lg * d
-        v_t = wp.dot(v_rel, t) - (angular_velocity[i] * ra + angular_velocity[c] * rc) \
-            - spin * (ra + rc)
+        # slip rate at the contact (YADE's ScGeom with avoidGranularRatcheting, after
+        # McNamara et al.): full radii for the spins and the centres' relative velocity scaled
+        # by (ra + rc)/|d|, so that a rigid rotation (affine spin included) gives v_t = 0
+        v_t = (ra + rc) / dist * wp.dot(v_rel, t) \
+            - (angular_velocity[i] * ra + angular_velocity[c] * rc) - spin * (ra + rc)
         fn = kn * overlap
         half = type(dt)(0.5)
         if wp.static(TANGENTIAL):
