@@ -3,30 +3,44 @@
 from __future__ import annotations
 
 import argparse
+import math
+import sys
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pandas as pd
 
 from granular_material.cli.options import (
+    UsageError,
     add_device,
     add_dtype,
     add_json,
+    add_max_dem_steps,
     add_out,
     add_progress,
+    check_output_file,
     emit,
-    ensure_parents,
+    make_parents,
     positive,
     positive_int,
     progress_enabled,
     scalar_or_list,
+    warn,
 )
 
 if TYPE_CHECKING:
     from granular_material.dem import DEMBatch as DEMBatchType
 
 __all__ = ["register"]
+
+#: how far above --target-void-ratio a packing may end and only be warned about: the
+#: compaction stops within 2e-3 of it (checked every 10 steps)
+VOID_RATIO_TOLERANCE = 0.005
+#: |σxx/(−confining) − 1| of biaxial-dem: above SERVO_WARN at some record a warning; above
+#: SERVO_FAIL over half the records (the median) the servo did not hold it: exit 1
+SERVO_WARN = 0.02
+SERVO_FAIL = 0.05
 
 
 def _grad_u(text: str) -> np.ndarray:
@@ -60,11 +74,34 @@ def _load_batch(args: argparse.Namespace) -> DEMBatchType:
     return DEMBatch(data, device=args.device, dtype=args.dtype)
 
 
+def _finish(args: argparse.Namespace, report: dict[str, Any], error: str | None) -> int:
+    """Emit ``report`` with its ``error``; exit code 1 (said on stderr) when there is one."""
+    report["error"] = error
+    emit(args, report)
+    if error is not None:
+        print(f"granular-material {args.command}: failed: {error}", file=sys.stderr)
+        return 1
+    return 0
+
+
+def _rve_list(indices: np.ndarray, values: np.ndarray, fmt: str) -> str:
+    """``RVE 0: …, RVE 3: …`` of the first five ``indices`` with their ``values``."""
+    shown = ", ".join(f"RVE {i}: {format(values[i], fmt)}" for i in indices[:5])
+    return shown + (f" and {len(indices) - 5} more" if len(indices) > 5 else "")
+
+
 # -- prepare -------------------------------------------------------------------------------
 def _run_prepare(args: argparse.Namespace) -> int:
     from granular_material.dem import RVEMeta, save_rve
     from granular_material.procedures import prepare_packing
+    from granular_material.procedures.packing import (
+        MAX_OVERLAP,
+        max_pressure,
+        min_discs,
+        smallest_normal_stiffness,
+    )
 
+    check_output_file(args.out)
     if args.radius_min > args.radius_max:
         raise ValueError(f"--radius-min {args.radius_min} exceeds --radius-max {args.radius_max}")
     if args.law == "constant":
@@ -75,16 +112,33 @@ def _run_prepare(args: argparse.Namespace) -> int:
                    friction_angle=args.friction_angle, damping=args.damping,
                    stiffness=stiffness, seed=args.seed)
     meta.validate()
-    ensure_parents(args.out)
+    radius_range = (args.radius_min, args.radius_max)
+    fewest = min_discs(radius_range)
+    if args.particles < fewest:
+        raise UsageError(
+            f"--particles {args.particles} is too few: with radii {args.radius_min:g}–"
+            f"{args.radius_max:g} m the consolidated cell must stay wider than twice the "
+            f"contact cut-off (2·r_max + skin; the engine sees one periodic image of each "
+            f"pair), which takes at least {fewest} discs"
+        )
+    highest = max_pressure(meta, radius_range)
+    if args.pressure > highest:
+        overlap = 2 * args.pressure * args.thickness / smallest_normal_stiffness(meta,
+                                                                                radius_range)
+        raise UsageError(
+            f"--pressure {args.pressure:g} Pa would press the discs about {overlap:.0%} of "
+            f"their radius into each other (2·p·thickness/kn); the linear contact law holds "
+            f"to {MAX_OVERLAP:.0%} (the void space is gone near 20%): at most "
+            f"{highest:.4g} Pa with these stiffnesses (or stiffer --kn / --young)"
+        )
     batch = prepare_packing(
         n_disc=args.particles, n_rve=args.batch, seed=args.seed, pressure=args.pressure,
         meta=meta, target_void_ratio=args.target_void_ratio,
-        radius_range=(args.radius_min, args.radius_max), device=args.device, dtype=args.dtype,
+        radius_range=radius_range, device=args.device, dtype=args.dtype,
         progress=progress_enabled(args),
     )
     h = batch.homogenize()
-    save_rve(args.out, batch.to_data())
-    emit(args, {
+    report: dict[str, Any] = {
         "void_ratio": scalar_or_list(h.void_ratio),
         "mean_stress": scalar_or_list(h.mean_stress),
         "coordination": scalar_or_list(h.coordination),
@@ -92,38 +146,127 @@ def _run_prepare(args: argparse.Namespace) -> int:
         "particles": batch.n_disc,
         "batch": batch.n_rve,
         "timestep": scalar_or_list(batch.dt),
-        "out": str(args.out),
-    })
-    return 0
+    }
+    warnings: list[str] = []
+    error = None
+    target = args.target_void_ratio
+    if target is not None and (h.void_ratio > target).any():
+        missed = np.flatnonzero(h.void_ratio > target)
+        reached = _rve_list(missed, h.void_ratio, ".4g")
+        text = (f"--target-void-ratio {target:g} not reached under --pressure "
+                f"{args.pressure:g} Pa: void ratio of {reached} (frictionless compaction "
+                "reached the pressure first; a denser packing "
+                "needs a higher --pressure)")
+        if (h.void_ratio > target + VOID_RATIO_TOLERANCE).any():
+            error = text + "; no RVE file written"
+        else:
+            warnings.append(warn(args, text))
+    report["warnings"] = warnings
+    if error is None:
+        make_parents(args.out)
+        save_rve(args.out, batch.to_data())
+        report["out"] = str(args.out)
+    return _finish(args, report, error)
 
 
 # -- biaxial-dem ---------------------------------------------------------------------------
 def _run_biaxial(args: argparse.Namespace) -> int:
     from granular_material.procedures import biaxial_test
+    from granular_material.procedures.element_tests import biaxial_steps, lateral_stress_error
     from granular_material.results import plot_biaxial_curves, summarize_biaxial, write_csv
 
-    ensure_parents(args.out, args.plot)
+    check_output_file(args.out)
+    check_output_file(args.plot, "--plot")
+    if args.axial_strain >= 0.9:
+        raise UsageError(f"--axial-strain must be below 0.9, got {args.axial_strain:g}")
+    try:
+        total: float = biaxial_steps(args.axial_strain, args.strain_per_step)
+    except ValueError:
+        total = math.inf
+    if total > args.max_dem_steps:
+        raise UsageError(
+            f"--axial-strain {args.axial_strain:g} at --strain-per-step "
+            f"{args.strain_per_step:g} needs {total:.4g} DEM steps, more than --max-dem-steps "
+            f"{args.max_dem_steps}; raise --max-dem-steps or --strain-per-step"
+        )
     batch = _load_batch(args)
     curve = biaxial_test(batch, axial_strain=args.axial_strain, confining=args.confining,
                          strain_per_step=args.strain_per_step,
-                         record_every=args.record_every, progress=progress_enabled(args))
+                         record_every=args.record_every, progress=progress_enabled(args),
+                         max_steps=args.max_dem_steps)
     summaries = [summarize_biaxial(g) for _, g in curve.groupby("rve")]
     if args.out:
+        make_parents(args.out)
         write_csv(curve, args.out)
     if args.plot:
+        make_parents(args.plot)
         plot_biaxial_curves(curve, args.plot)
     keys = ("peak_stress_ratio", "axial_strain_at_peak", "max_contraction", "final_void_ratio")
-    emit(args, {key: scalar_or_list(np.array([getattr(s, key) for s in summaries]))
-                 for key in keys} | {"steps": int(curve["step"].max())})
-    return 0
+    report: dict[str, Any] = {key: scalar_or_list(np.array([getattr(s, key) for s in summaries]))
+                              for key in keys}
+    held = lateral_stress_error(curve, args.confining)
+    report |= {"steps": int(curve["step"].max()),
+               "final_sxx": scalar_or_list(held["final_sxx"].to_numpy()),
+               "max_confining_error": scalar_or_list(held["max_error"].to_numpy())}
+    warnings: list[str] = []
+    error = None
+    lost = np.flatnonzero(held["median_error"].to_numpy() > SERVO_FAIL)
+    loose = np.flatnonzero(held["max_error"].to_numpy() > SERVO_WARN)
+    final = held["final_sxx"].to_numpy()
+    if lost.size:
+        error = (f"the servo did not hold σxx at −{args.confining:g} Pa (--confining), off "
+                 f"by more than {SERVO_FAIL:.0%} in most records: final σxx [Pa] of "
+                 f"{_rve_list(lost, final, '.4g')}; not a drained test at this confining "
+                 "pressure (a smaller --strain-per-step, or a packing prepared near "
+                 "--confining, lets the servo follow)")
+    elif loose.size:
+        worst = held["max_error"].to_numpy()
+        warnings.append(warn(args, (
+            f"σxx strayed from −{args.confining:g} Pa (--confining) by more than "
+            f"{SERVO_WARN:.0%} in some records: largest error [%] of "
+            f"{_rve_list(loose, 100 * worst, '.3g')}")))
+    report["warnings"] = warnings
+    if args.out:
+        report["out"] = str(args.out)
+    return _finish(args, report, error)
 
 
 # -- dem-drive -----------------------------------------------------------------------------
+def _drive_plan(args: argparse.Namespace) -> list[int]:
+    """DEM steps of each increment of ``dem-drive``, checked against --max-dem-steps before
+    any work (UsageError naming the options)."""
+    from granular_material.procedures import path_increment, path_steps
+
+    cap = args.max_dem_steps
+    shown = ",".join(f"{v:g}" for v in args.grad_u.ravel())
+    plan = []
+    for k in range(1, args.increments + 1):
+        increment = path_increment(args.grad_u, k, args.increments)[None]
+        try:
+            plan.append(int(path_steps(increment, args.max_strain_per_step,
+                                       max_steps=cap)[0]))
+        except ValueError:
+            wanted = float(np.abs(increment).max()) / args.max_strain_per_step
+            raise UsageError(
+                f"--grad-u {shown} needs more than --max-dem-steps {cap} DEM steps: increment "
+                f"{k} of {args.increments} alone takes {wanted:.4g} at --max-strain-per-step "
+                f"{args.max_strain_per_step:g}; raise --max-dem-steps or --max-strain-per-step"
+            ) from None
+    if sum(plan) > cap:
+        raise UsageError(
+            f"--grad-u {shown} needs {sum(plan)} DEM steps in {args.increments} increments at "
+            f"--max-strain-per-step {args.max_strain_per_step:g}, more than --max-dem-steps "
+            f"{cap}; raise --max-dem-steps or --max-strain-per-step"
+        )
+    return plan
+
+
 def _run_drive(args: argparse.Namespace) -> int:
     from granular_material.procedures import drive_grad_u, path_increment, progress_bar
     from granular_material.results import write_csv
 
-    ensure_parents(args.out)
+    check_output_file(args.out)
+    plan = _drive_plan(args)
     batch = _load_batch(args)
     grad = args.grad_u
     b = batch.n_rve
@@ -144,27 +287,33 @@ def _run_drive(args: argparse.Namespace) -> int:
         }))
 
     record(0)
-    with progress_bar(args.increments, "dem-drive", progress_enabled(args),
-                      unit="increment") as bar:
+    # the bar counts DEM steps (what takes the time), moved at the end of each increment
+    with progress_bar(sum(plan), "dem-drive", progress_enabled(args)) as bar:
         for inc in range(1, args.increments + 1):
             step_grad = path_increment(grad, inc, args.increments)
-            steps += drive_grad_u(batch, step_grad,
-                                  max_strain_per_step=args.max_strain_per_step)
+            done = drive_grad_u(batch, step_grad, max_strain_per_step=args.max_strain_per_step,
+                                max_steps=args.max_dem_steps)
+            steps += done
             record(inc)
-            bar.update()
+            bar.update(done)
+            bar.set_postfix(increment=f"{inc}/{args.increments}")
     table = pd.concat(rows, ignore_index=True)
     if args.out:
+        make_parents(args.out)
         write_csv(table, args.out)
     last = table[table["increment"] == args.increments]
-    emit(args, {
+    report: dict[str, Any] = {
         "sxx": scalar_or_list(last["sxx"].to_numpy()),
         "syy": scalar_or_list(last["syy"].to_numpy()),
         "sxy": scalar_or_list(last["sxy"].to_numpy()),
         "void_ratio": scalar_or_list(last["void_ratio"].to_numpy()),
         "coordination": scalar_or_list(last["coordination"].to_numpy()),
         "steps": steps,
-    })
-    return 0
+        "warnings": [],
+    }
+    if args.out:
+        report["out"] = str(args.out)
+    return _finish(args, report, None)
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -211,6 +360,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--strain-per-step", type=positive, default=1e-5, help="(1e-5)")
     p.add_argument("--record-every", type=positive_int, default=100,
                    help="steps between CSV rows (100)")
+    add_max_dem_steps(p, "the test")
     add_out(p, "CSV of the curve(s)")
     p.add_argument("--plot", type=Path, default=None, help="PNG of σ1/σ3 and εv vs εa")
     _add_run_options(p)
@@ -228,6 +378,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="total displacement gradient ∂u_i/∂x_j")
     p.add_argument("--increments", type=positive_int, default=10, help="K (10)")
     p.add_argument("--max-strain-per-step", type=positive, default=1e-5, help="(1e-5)")
+    add_max_dem_steps(p, "the whole path (all increments)")
     add_out(p, "CSV of the path")
     _add_run_options(p)
     p.set_defaults(func=_run_drive)

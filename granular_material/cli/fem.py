@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import math
 import sys
 import time
 from pathlib import Path
@@ -12,12 +13,16 @@ from typing import Any
 import pandas as pd
 
 from granular_material.cli.options import (
+    UsageError,
     add_device,
     add_json,
     add_out,
     add_progress,
+    check_output_dir,
+    cleanup_on_rejection,
     emit,
     progress_enabled,
+    rve_file_shape,
 )
 from granular_material.fem import (
     DEM_REUSE_TOL,
@@ -230,10 +235,34 @@ def _stress_tol(args: argparse.Namespace, material: str) -> float:
 def _check(args: argparse.Namespace) -> None:
     if args.steps < 1:
         raise ValueError(f"--steps must be >= 1, got {args.steps}")
-    if args.out is not None and args.out.exists() and not args.out.is_dir():
-        raise ValueError(f"--out {args.out} exists and is not a folder")
+    if not (math.isfinite(args.confining) and args.confining > 0):
+        raise UsageError(f"--confining must be a positive number of Pa (σxx is held at "
+                         f"−confining, σ1/σ3 divides by it), got {args.confining:g}")
+    check_output_dir(args.out)
     if args.rve is not None and not args.rve.exists():
         raise FileNotFoundError(f"--rve {args.rve} does not exist")
+
+
+def _replicate(args: argparse.Namespace) -> bool:
+    """single-element, dem: whether one RVE is replicated to the 4 Gauss points (else four
+    are used: --independent, or the four of an --rve file); checked before any work."""
+    if args.rve is None:
+        return not args.independent
+    n_rve, _ = rve_file_shape(args.rve)
+    if n_rve == 4:
+        return False
+    if n_rve != 1:
+        raise UsageError(f"--rve {args.rve} holds {n_rve} RVEs; single-element takes 1 "
+                         "(replicated to the 4 Gauss points) or 4 (one per point)")
+    if args.independent:
+        raise UsageError(f"--independent needs four RVEs, --rve {args.rve} holds 1")
+    return True
+
+
+def _scale_name(scale: str, elements: tuple[int, int], particles: int) -> str:
+    """The preset that ran (``scale``) when mesh and discs are its own, else ``custom``."""
+    preset = FULL_SCALE if scale == "full" else REDUCED_SCALE
+    return scale if (tuple(elements), particles) == (tuple(preset[0]), preset[1]) else "custom"
 
 
 def _report(args: argparse.Namespace, summary: dict[str, Any]) -> int:
@@ -252,6 +281,7 @@ def _run(args: argparse.Namespace, setup: BiaxialSetup, material: Material,
         tracking.check_points(setup.n_points)
     t0 = time.perf_counter()
     with contextlib.ExitStack() as stack:
+        stack.enter_context(cleanup_on_rejection(args.out))
         writer = (stack.enter_context(BiaxialWriter(args.out)) if args.out is not None
                   else None)
         result = run_biaxial(setup, material, args.steps, _settings(args, material_name),
@@ -281,7 +311,7 @@ def run_single_element(args: argparse.Namespace) -> int:
     else:
         material = create_material("dem", rve=args.rve, particles=args.particles,
                                    seed=args.seed, pressure=args.confining,
-                                   replicate=not args.independent, device=args.device,
+                                   replicate=_replicate(args), device=args.device,
                                    shards=args.shards, progress=progress,
                                    tangent=args.tangent, perturbation=args.perturbation,
                                    **_dem_parameters(args))
@@ -327,6 +357,8 @@ def run_biaxial_command(args: argparse.Namespace) -> int:
     if args.elements is not None:
         nx, ny = args.elements
     particles = args.particles or particles
+    if args.rve is not None:  # the discs that run are the file's
+        particles = rve_file_shape(args.rve)[1]
     setup = BiaxialSetup(width=args.width, height=args.height, nx=nx, ny=ny,
                          confining=args.confining, axial_strain=args.axial_strain,
                          platens=args.platens)
@@ -340,7 +372,8 @@ def run_biaxial_command(args: argparse.Namespace) -> int:
                                perturbation=args.perturbation, **_dem_parameters(args))
     material.allocate(setup.n_points)
     result, summary = _run(args, setup, material, "dem", tracking)
-    summary.update(scale=scale, elements=[nx, ny], gauss_points=setup.n_points,
+    summary.update(scale=_scale_name(scale, (nx, ny), particles), elements=[nx, ny],
+                   gauss_points=setup.n_points,
                    particles=particles, device=device)
     summary.update(band_summary(result, args.map_strain, summary["peak_stress_ratio"]))
     if args.out is not None:

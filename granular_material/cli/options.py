@@ -4,28 +4,45 @@ their argument types, the one way results are reported on stdout."""
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
+import os
 import sys
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 __all__ = [
+    "DEFAULT_MAX_DEM_STEPS",
     "UsageError",
     "add_device",
     "add_dtype",
     "add_json",
+    "add_max_dem_steps",
     "add_out",
     "add_progress",
+    "check_output_dir",
+    "check_output_file",
+    "cleanup_on_rejection",
     "emit",
-    "ensure_parents",
+    "make_parents",
     "positive",
     "positive_int",
     "progress_enabled",
+    "rve_file_shape",
     "scalar_or_list",
+    "warn",
 ]
+
+#: default ``--max-dem-steps`` of the DEM commands: 10⁶ steps is about 100 times the default
+#: biaxial test (1.05 × 10⁴ steps to 10 % at 1e-5 a step) or a path of |∇u| = 10 at 1e-5 a step;
+#: one 64-disc RVE runs about 4 × 10³ steps/s on one CPU core (a 400-disc one about six times
+#: fewer), so the cap is minutes to half an hour of work: far past any run a typo would start
+#: on purpose, well short of the 10⁷ – 10³⁰⁰ steps a mistyped strain asks for.
+DEFAULT_MAX_DEM_STEPS = 1_000_000
 
 
 class UsageError(ValueError):
@@ -82,6 +99,13 @@ def add_out(parser: argparse.ArgumentParser, help: str, default: Path | None = N
     parser.add_argument("--out", type=Path, default=default, help=help)
 
 
+def add_max_dem_steps(parser: argparse.ArgumentParser, what: str) -> None:
+    """``--max-dem-steps N``: the most DEM steps ``what`` may take, checked before work."""
+    parser.add_argument("--max-dem-steps", type=positive_int, default=DEFAULT_MAX_DEM_STEPS,
+                        help=f"the most DEM steps {what} may take; a run needing more is "
+                             f"refused before it starts (default {DEFAULT_MAX_DEM_STEPS:.0e})")
+
+
 def progress_enabled(args: argparse.Namespace) -> bool:
     """Whether to show progress bars: ``--progress/--no-progress``, else stderr is a tty."""
     return sys.stderr.isatty() if args.progress is None else bool(args.progress)
@@ -104,8 +128,86 @@ def emit(args: argparse.Namespace, result: dict[str, Any]) -> None:
             print(f"{key:>24}: {value}")
 
 
-def ensure_parents(*paths: Path | None) -> None:
-    """Create the folders of the output files up front, so a bad path fails before the run."""
-    for path in paths:
-        if path is not None:
-            Path(path).parent.mkdir(parents=True, exist_ok=True)
+def warn(args: argparse.Namespace, message: str) -> str:
+    """Say ``message`` on stderr as a warning of the command; returns it (for ``warnings``)."""
+    print(f"granular-material {args.command}: warning: {message}", file=sys.stderr)
+    return message
+
+
+def _writable_folder(path: Path, option: str, given: Path) -> None:
+    """The folder ``path`` or, where it does not exist yet, its nearest existing ancestor must
+    be a folder this process may create files in (nothing is created here); messages name
+    the option's value ``given``."""
+    folder = path
+    while not folder.exists():
+        if folder.parent == folder:
+            break
+        folder = folder.parent
+    if not folder.is_dir():
+        raise UsageError(f"{option} {given}: {folder} is not a folder")
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise UsageError(f"{option} {given}: cannot write in {folder} (permission denied or a "
+                         "read-only file system)")
+
+
+def check_output_file(path: Path | None, option: str = "--out") -> None:
+    """Before any work: ``path`` (an output file; None: none) can be written — it is not a
+    folder and its folder exists or can be made. Creates nothing (:func:`make_parents` does,
+    when the file is written), so a rejected run leaves nothing behind."""
+    if path is None:
+        return
+    path = Path(path)
+    if path.is_dir():
+        raise UsageError(f"{option} {path} is a folder; give a file name")
+    if path.exists() and not os.access(path, os.W_OK):
+        raise UsageError(f"{option} {path} exists and cannot be overwritten")
+    _writable_folder(path.parent, option, path)
+
+
+def check_output_dir(path: Path | None, option: str = "--out") -> None:
+    """Before any work: ``path`` (an output folder; None: none) is a folder, or can be made,
+    and can be written in. Creates nothing."""
+    if path is None:
+        return
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise UsageError(f"{option} {path} exists and is not a folder")
+    _writable_folder(path, option, path)
+
+
+@contextlib.contextmanager
+def cleanup_on_rejection(folder: Path | None) -> Iterator[None]:
+    """Folders the block makes at and above the output folder ``folder`` (None: none) are
+    removed again, where still empty, when it raises ``ValueError`` (rejected input, e.g.
+    settings checked once the writer is open): a rejected run leaves nothing behind."""
+    if folder is None:
+        yield
+        return
+    made = []
+    path = Path(folder)
+    while not path.exists() and path.parent != path:
+        made.append(path)
+        path = path.parent
+    try:
+        yield
+    except ValueError:
+        for path in made:  # deepest first
+            with contextlib.suppress(OSError):
+                path.rmdir()
+        raise
+
+
+def make_parents(path: Path | None) -> None:
+    """Create the folders of the output file ``path`` (None: nothing), when it is written."""
+    if path is not None:
+        Path(path).parent.mkdir(parents=True, exist_ok=True)
+
+
+def rve_file_shape(path: Path, option: str = "--rve") -> tuple[int, int]:
+    """(B, N): the RVEs and discs per RVE of the RVE file ``path``, read before any work."""
+    from granular_material.dem import load_rve
+
+    if not Path(path).exists():
+        raise UsageError(f"{option} {path} does not exist")
+    data = load_rve(path)
+    return data.n_rve, data.n_disc

@@ -12,7 +12,32 @@ from granular_material.dem import DEMBatch
 from granular_material.procedures.progress import progress_bar
 from granular_material.procedures.servo import CONTROL_STRAIN, CONTROL_STRESS, servo_steps
 
-__all__ = ["biaxial_test"]
+__all__ = ["biaxial_steps", "biaxial_test", "lateral_stress_error"]
+
+
+def biaxial_steps(axial_strain: float, strain_per_step: float) -> int:
+    """DEM steps of :func:`biaxial_test`: ``ceil(−ln(1 − ε_a)/strain_per_step)`` (ε_a
+    engineering, compression positive); ``ValueError`` past 10¹⁵ (no longer an integer)."""
+    total = math.ceil(-math.log1p(-axial_strain) / strain_per_step)
+    if total > 10**15:
+        raise ValueError(f"axial_strain {axial_strain!r} at strain_per_step "
+                         f"{strain_per_step!r} needs {total:.4g} DEM steps, more than 1e15")
+    return total
+
+
+def lateral_stress_error(curve: pd.DataFrame, confining: float) -> pd.DataFrame:
+    """How well the servo of :func:`biaxial_test` held σxx at −``confining`` [Pa], per RVE,
+    over the records after the first (the first is the packing as it came): ``max_error``
+    and ``median_error`` of |σxx/(−confining) − 1|, ``final_sxx`` [Pa] and ``records``."""
+    later = curve[curve["step"] > 0]
+    error = (later["sxx"] / -float(confining) - 1.0).abs()
+    grouped = error.groupby(later["rve"])
+    return pd.DataFrame({
+        "max_error": grouped.max(),
+        "median_error": grouped.median(),
+        "final_sxx": later.groupby("rve")["sxx"].last(),
+        "records": grouped.size(),
+    })
 
 
 def biaxial_test(
@@ -23,6 +48,7 @@ def biaxial_test(
     record_every: int = 100,
     gain: float = 0.5,
     progress: bool = False,
+    max_steps: int | None = None,
 ) -> pd.DataFrame:
     """Drained biaxial test: σxx held at −``confining`` while εyy is driven in compression.
 
@@ -32,7 +58,10 @@ def biaxial_test(
         strain_per_step: largest axial (logarithmic) strain per step [-].
         record_every: steps between recorded rows.
         gain: servo gain on σxx (0.5 holds it within 0.8 % of ``confining`` on the 400-disc
-            Guo & Zhao RVE; YADE's PeriTriaxController holds 1.2–1.5 %).
+            Guo & Zhao RVE; YADE's PeriTriaxController holds 1.2–1.5 %; check it with
+            :func:`lateral_stress_error`).
+        max_steps: ``ValueError`` before any step when the test needs more DEM steps
+            (:func:`biaxial_steps`); None: no cap.
 
     Returns:
         One row per record and RVE: ``rve``, ``step``, ``axial_strain`` (compression
@@ -46,11 +75,14 @@ def biaxial_test(
             raise ValueError(f"{name} must be a positive number, got {value!r}")
     if axial_strain >= 0.9:
         raise ValueError(f"axial_strain must be below 0.9, got {axial_strain!r}")
+    # n equal logarithmic steps ending exactly at the requested engineering strain
+    total = biaxial_steps(axial_strain, strain_per_step)
+    if max_steps is not None and total > max_steps:
+        raise ValueError(f"axial_strain {axial_strain:g} at strain_per_step {strain_per_step:g}"
+                         f" needs {total} DEM steps, more than max_steps = {max_steps}")
     b = batch.n_rve
     cell0 = batch.cell()
     area0 = np.linalg.det(cell0)
-    # n equal logarithmic steps ending exactly at the requested engineering strain
-    total = math.ceil(-math.log1p(-axial_strain) / strain_per_step)
     step_strain = (1.0 - axial_strain) ** (1.0 / total) - 1.0
     rows: list[pd.DataFrame] = []
 

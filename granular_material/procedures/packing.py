@@ -8,11 +8,72 @@ from dataclasses import replace
 import numpy as np
 
 from granular_material.dem import DEMBatch, RVEData, RVEMeta
+from granular_material.dem.model import SKIN_FRACTION
 from granular_material.procedures.servo import consolidate
 
-__all__ = ["prepare_packing", "random_gas"]
+__all__ = ["MAX_OVERLAP", "max_pressure", "min_discs", "prepare_packing", "random_gas"]
 
 DEFAULT_RADIUS_RANGE = (3.0e-3, 7.0e-3)  # Wu et al. (2025) Table 1; Guo & Zhao rMean 5 mm ± 40 %
+
+#: solid fraction of the densest consolidated packing :func:`min_discs` allows for (e = 0.11;
+#: random frictionless disc packings consolidate to 0.84–0.86, pressure adds a little)
+DENSE_SOLID_FRACTION = 0.9
+#: largest estimated contact overlap δ/r = 2·p·t/kn a packing is consolidated to
+#: (:func:`max_pressure`): the void ratio falls to zero, and the RVE is invalid, near 0.2
+MAX_OVERLAP = 0.1
+
+
+def min_discs(radius_range: tuple[float, float] = DEFAULT_RADIUS_RANGE) -> int:
+    """Fewest discs per RVE whose consolidated cell stays wider than twice the contact
+    cut-off ``2·r_max + skin`` [m] (the engine finds each pair in its nearest periodic image
+    only, and stops a cell whose half height falls below the cut-off): radii uniform in
+    ``radius_range`` [m], solid fraction :data:`DENSE_SOLID_FRACTION`. 12 for 3–7 mm."""
+    r_min, r_max = radius_range
+    mean_square = (r_min**2 + r_min * r_max + r_max**2) / 3.0
+    cutoff = 2.0 * r_max + 2.0 * SKIN_FRACTION * 0.5 * (r_min + r_max)
+    return math.floor(DENSE_SOLID_FRACTION * (2.0 * cutoff) ** 2 / (math.pi * mean_square)) + 1
+
+
+def smallest_normal_stiffness(meta: RVEMeta, radius_range: tuple[float, float]) -> float:
+    """The normal stiffness [N/m] of the softest contact: kn (constant law), or E·r_min
+    (FrictMat, kn = 2E·r1·r2/(r1 + r2), two r_min discs)."""
+    stiffness = meta.stiffness
+    if stiffness.get("law") == "frictmat":
+        return float(stiffness["young"]) * float(radius_range[0])
+    return float(stiffness["kn"])
+
+
+def max_pressure(meta: RVEMeta, radius_range: tuple[float, float] = DEFAULT_RADIUS_RANGE,
+                 ) -> float:
+    """Highest consolidation pressure [Pa] of the linear contact law of ``meta``: a disc of
+    radius r carries about F = 2·p·r·t, so its contacts overlap δ/r ≈ 2·p·t/kn; this keeps
+    that at most :data:`MAX_OVERLAP` (1.5 MPa for kn = 3e6 N/m, t = 0.1 m)."""
+    return MAX_OVERLAP * smallest_normal_stiffness(meta, radius_range) / (2.0 * meta.thickness)
+
+
+def _check_limits(n_disc: int, pressure: float, meta: RVEMeta,
+                  radius_range: tuple[float, float]) -> None:
+    """``ValueError`` naming the limit when the packing cannot be prepared."""
+    r_min, r_max = radius_range
+    if not (0 < r_min <= r_max and math.isfinite(r_max)):
+        raise ValueError(f"radius_range must satisfy 0 < r_min <= r_max, got {radius_range!r}")
+    if not (math.isfinite(pressure) and pressure > 0):
+        raise ValueError(f"pressure must be a positive number [Pa], got {pressure!r}")
+    fewest = min_discs(radius_range)
+    if n_disc < fewest:
+        raise ValueError(
+            f"n_disc = {n_disc} is too few for radii {radius_range[0]:g}–{radius_range[1]:g} m: "
+            f"the consolidated cell must stay wider than twice the contact cut-off "
+            f"(2·r_max + skin), which takes at least {fewest} discs"
+        )
+    highest = max_pressure(meta, radius_range)
+    if pressure > highest:
+        raise ValueError(
+            f"pressure = {pressure:g} Pa overlaps the contacts by about "
+            f"{2 * pressure * meta.thickness / smallest_normal_stiffness(meta, radius_range):.0%}"
+            f" of the radius (2·p·t/kn); the linear contact law holds to "
+            f"{MAX_OVERLAP:.0%}: at most {highest:.4g} Pa with these stiffnesses"
+        )
 
 
 def _place_discs(radius: np.ndarray, side: float, rng: np.random.Generator) -> np.ndarray:
@@ -96,10 +157,14 @@ def prepare_packing(
     reaches that 2D void ratio (or p0), then friction is set and the packing consolidated
     (Wu et al. 2025: e0 = 0.18, then p0 = 100 kPa); the void ratio reached under p0 is a
     little below e0 (reported by :meth:`DEMBatch.homogenize`). A target below what
-    frictionless consolidation reaches cannot be held.
+    frictionless consolidation reaches cannot be held (the caller compares the void ratio).
+
+    ``ValueError`` before any work when ``n_disc`` is below :func:`min_discs` or ``pressure``
+    above :func:`max_pressure`.
     """
     meta = meta or RVEMeta()
     meta.validate()
+    _check_limits(n_disc, pressure, meta, radius_range)
     gas = random_gas(n_disc, n_rve, seed, radius_range, meta=replace(meta, friction_angle=0.0))
     batch = DEMBatch(gas, device=device, dtype=dtype, shards=shards)
     if target_void_ratio is not None:
