@@ -5,6 +5,8 @@ Usage::
     python benchmarks/dem_throughput.py [--device cpu|cuda] [--batches 1,16,64,256,600]
         [--particles 400] [--seconds 2] [--dtypes float64,float32] [--repeats 3]
         [--baseline REV] [--out results.csv] [--no-yade]
+    python benchmarks/dem_throughput.py --physics [--batches 16,64] [--dtypes float64,float32]
+        [--repeats 3] [--seconds 2] [--out physics.csv]
 
 One 400-disc packing is prepared (seed 1, 100 kPa) and replicated B times; each batch is
 sheared at 1e-5 strain a step (so neighbour lists are rebuilt as in real runs) and timed after
@@ -12,6 +14,14 @@ a warm-up. Every case runs in a fresh process, ``--repeats`` times, alternating 
 case of ``--baseline`` (a git revision of this repository, checked out into a temporary
 worktree) when given; the table holds medians. When Debian's ``yade`` is installed, the same
 packing is stepped in YADE on one core and every rate is also given as a ratio to YADE's.
+
+With ``--physics`` it times, instead, what each compile-time variant of the step kernels
+saves (see ``kernels.step_kernels_for``): the same packing made frictionless and undamped and
+sheared without a servo, stepped by the generic kernels and by each variant (no tangential
+force, no damping, no stress sums, none of them), from the same snapshot, the variants taking
+turns ``--repeats`` times in one process per float type and B; the table holds medians and
+the ratios to the generic kernels (and of float32 to float64). It also times the build of
+each kernel module from an empty kernel cache, in a fresh process.
 Measures; never passes or fails.
 """
 
@@ -68,18 +78,111 @@ def measure(rve: Path, n_rve: int, seconds: float, device: str | None, dtype: st
             "wall_s": wall, "particle_steps_per_s": n_rve * batch.n_disc * steps / wall}
 
 
+#: the step kernels ``--physics`` times: name -> StepFeatures fields
+PHYSICS_VARIANTS = {
+    "generic": {},
+    "no_tangential": {"tangential": False},
+    "no_damping": {"damping": False},
+    "no_stress": {"stress": False},
+    "none": {"tangential": False, "damping": False, "stress": False},
+}
+
+
+def measure_physics(rve: Path, n_rve: int, seconds: float, repeats: int, device: str | None,
+                    dtype: str, shards: int | None) -> dict:
+    """Rates [particle-steps/s] of every variant of ``PHYSICS_VARIANTS`` shearing ``n_rve``
+    frictionless, undamped copies of ``rve`` (no servo), each timed ``repeats`` times from
+    the same snapshot, the variants taking turns; also the first ``prepare`` of each [s]."""
+    from dataclasses import replace
+
+    import warp as wp
+
+    wp.config.quiet = True
+    from granular_material.dem import DEMBatch, load_rve
+    from granular_material.dem.kernels import StepFeatures
+
+    data = load_rve(rve).replicate(n_rve)
+    data = replace(data, meta=replace(data.meta, friction_angle=0.0, damping=0.0))
+    batch = DEMBatch(data, device=device, dtype=dtype, shards=shards)
+    shear = np.zeros((batch.n_rve, 2, 2))
+    shear[:, 0, 1] = 1e-5 / batch.dt
+    batch.set_affine(shear)
+
+    def use(name: str) -> float:
+        """Switch every shard to variant ``name``; the seconds its first prepare took."""
+        t0 = time.perf_counter()
+        for shard in batch.shards:
+            shard.solver.features = StepFeatures(**PHYSICS_VARIANTS[name])
+            shard.solver.prepare(shard.model, shard.state, shard.loading)
+        return time.perf_counter() - t0
+
+    prepare_s = {name: use(name) for name in PHYSICS_VARIANTS}  # modules loaded (or built)
+    use("generic")
+    batch.run(50)  # warm-up: lists built
+    start = batch.snapshot()
+    t0 = time.perf_counter()
+    batch.run(50)
+    steps = max(50, int(seconds / ((time.perf_counter() - t0) / 50)))
+    rates: dict[str, list[float]] = {name: [] for name in PHYSICS_VARIANTS}
+    for _ in range(repeats):
+        for name in PHYSICS_VARIANTS:
+            use(name)
+            batch.restore(start)
+            batch.run(50)  # the same 50 steps for each, graphs and caches warm
+            t0 = time.perf_counter()
+            batch.run(steps, check_every=steps)
+            rates[name].append(n_rve * batch.n_disc * steps / (time.perf_counter() - t0))
+    return {"device": batch.device, "shards": len(batch.lanes), "steps": steps,
+            "rates": rates, "prepare_s": prepare_s}
+
+
+def measure_compile(device: str | None, dtype: str) -> dict[str, float]:
+    """Seconds to build each kernel module (the generic one, then each variant of the step
+    kernels) into an empty kernel cache; run in a fresh process."""
+    import warp as wp
+
+    wp.config.quiet = True
+    from granular_material.dem.kernels import StepFeatures, kernels_for, step_kernels_for
+    from granular_material.dem.model import resolve_device
+
+    seconds = {}
+    with tempfile.TemporaryDirectory(prefix="warp-cache-") as cache:
+        wp.config.kernel_cache_dir = cache
+        device = resolve_device(device)  # initialises warp, with that cache
+        for name, fields in PHYSICS_VARIANTS.items():
+            t0 = time.perf_counter()
+            if name == "generic":
+                module = kernels_for(dtype, 0).contact_forces.module
+            else:
+                features = StepFeatures(**fields)
+                module = step_kernels_for(dtype, 0, features).contact_forces.module
+            wp.load_module(module, device=device)
+            seconds[name] = time.perf_counter() - t0
+    return seconds
+
+
 def _worker(args: argparse.Namespace) -> None:
     """``--worker``: one measurement, printed as JSON (run by :func:`_run_case`)."""
+    if args.physics:
+        print(json.dumps(measure_physics(args.rve, args.worker, args.seconds, args.repeats,
+                                         args.device, args.dtypes, args.shards)))
+        return
+    if args.compile:
+        print(json.dumps(measure_compile(args.device, args.dtypes)))
+        return
     result = measure(args.rve, args.worker, args.seconds, args.device, args.dtypes,
                      args.shards)
     print(json.dumps(result))
 
 
 def _run_case(source: Path, rve: Path, n_rve: int, args: argparse.Namespace,
-              dtype: str) -> dict:
-    """One measurement in a fresh process importing the engine found at ``source``."""
+              dtype: str, mode: str | None = None) -> dict:
+    """One measurement in a fresh process importing the engine found at ``source``
+    (``mode``: None, "physics" or "compile", the worker's kind)."""
     command = [sys.executable, str(Path(__file__).resolve()), "--worker", str(n_rve),
                "--rve", str(rve), "--seconds", str(args.seconds), "--dtypes", dtype]
+    if mode:  # (the plain worker of an older baseline may know no --repeats)
+        command += [f"--{mode}", "--repeats", str(args.repeats)]
     if args.device:
         command += ["--device", args.device]
     if args.shards:
@@ -115,14 +218,20 @@ def _worktree(rev: str, parent: Path) -> Path:
 def _parse(argv: list[str] | None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--device", default=None, help="cpu or cuda (default: CUDA if present)")
-    parser.add_argument("--batches", default="1,16,64,256,600",
-                        help="comma-separated batch sizes B")
+    parser.add_argument("--batches", default=None,
+                        help="comma-separated batch sizes B (default 1,16,64,256,600; "
+                        "with --physics 16,64)")
     parser.add_argument("--particles", type=int, default=400, help="discs per RVE")
     parser.add_argument("--seconds", type=float, default=2.0, help="timed seconds per case")
-    parser.add_argument("--dtypes", "--dtype", default="float64",
-                        help="comma-separated float types (float64, float32)")
+    parser.add_argument("--dtypes", "--dtype", default=None,
+                        help="comma-separated float types (float64, float32); default "
+                        "float64, with --physics float64,float32")
+    parser.add_argument("--physics", action="store_true",
+                        help="time the step kernels' variants against the generic ones")
+    parser.add_argument("--compile", action="store_true", help=argparse.SUPPRESS)
     parser.add_argument("--repeats", type=int, default=3,
-                        help="processes per case; the table holds the medians")
+                        help="processes per case (--physics: turns of the variants in one "
+                        "process); the table holds the medians")
     parser.add_argument("--shards", type=int, default=None,
                         help="CPU threads; default: one per core")
     parser.add_argument("--baseline", default=None, metavar="REV",
@@ -132,7 +241,14 @@ def _parse(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--out", type=Path, default=None, help="CSV of the table")
     parser.add_argument("--worker", type=int, default=None, help=argparse.SUPPRESS)
     parser.add_argument("--rve", type=Path, default=None, help=argparse.SUPPRESS)
-    return parser.parse_args(argv)
+    args = parser.parse_args(argv)
+    if args.batches is None:
+        args.batches = "16,64" if args.physics else "1,16,64,256,600"
+    if args.dtypes is None:
+        args.dtypes = "float64,float32" if args.physics else "float64"
+    if args.physics and args.baseline:
+        parser.error("--physics times this checkout's variants: no --baseline")
+    return args
 
 
 def main(argv: list[str] | None = None) -> pd.DataFrame | None:
@@ -156,6 +272,8 @@ def main(argv: list[str] | None = None) -> pd.DataFrame | None:
         rve_path = scratch / "benchmark_rve.npz"
         base = prepare_packing(n_disc=args.particles, seed=1, device=args.device)
         save_rve(rve_path, base.to_data().select(0))
+        if args.physics:
+            return _physics(args, rve_path, tqdm)
         yade = None if args.no_yade else _yade_rate(rve_path, args.yade_steps)
         sources = {"current": REPO}
         if args.baseline:
@@ -216,8 +334,58 @@ def _measure_all(args: argparse.Namespace, sources: dict[str, Path], rve: Path,
 
 def _spread(runs: list[dict]) -> float:
     """(max − min)/median of the rates of repeated runs [-]."""
-    rates = np.array([r["particle_steps_per_s"] for r in runs])
+    return _spread_of([r["particle_steps_per_s"] for r in runs])
+
+
+def _spread_of(values: list[float]) -> float:
+    """(max − min)/median of repeated rates [-]."""
+    rates = np.array(values)
     return float((rates.max() - rates.min()) / np.median(rates))
+
+
+def _physics(args: argparse.Namespace, rve: Path, tqdm) -> pd.DataFrame:
+    """``--physics``: the table of the variants' rates and ratios, and the module builds."""
+    batches = [int(x) for x in args.batches.split(",")]
+    dtypes = args.dtypes.split(",")
+    rows = []
+    compile_s = {}
+    with tqdm(total=len(dtypes) * (len(batches) + 1), desc="physics", unit="run",
+              disable=None) as bar:
+        for dtype in dtypes:
+            compile_s[dtype] = _run_case(REPO, rve, 1, args, dtype, "compile")
+            bar.update()
+            for n_rve in batches:
+                result = _run_case(REPO, rve, n_rve, args, dtype, "physics")
+                bar.update()
+                generic = np.array(result["rates"]["generic"])
+                for name, rates in result["rates"].items():
+                    rows.append({
+                        "device": result["device"], "dtype": dtype, "shards": result["shards"],
+                        "batch": n_rve, "particles": n_rve * args.particles,
+                        "variant": name, "steps": result["steps"], "repeats": len(rates),
+                        "particle_steps_per_s": float(np.median(rates)),
+                        "spread": _spread_of(rates),
+                        # per repeat, the variant against the generic run just before it
+                        "ratio_to_generic": float(np.median(np.array(rates) / generic)),
+                        "build_s": compile_s[dtype][name],
+                        "prepare_s": result["prepare_s"][name],
+                    })
+    table = pd.DataFrame(rows)
+    f64 = table[table["dtype"] == "float64"].set_index(["batch", "variant"])
+    table["ratio_to_float64"] = [
+        row.particle_steps_per_s / f64.loc[(row.batch, row.variant), "particle_steps_per_s"]
+        if (row.batch, row.variant) in f64.index else math.nan
+        for row in table.itertuples()
+    ]
+    table["commit"] = _commit()
+    print(f"commit {_commit()}; frictionless, undamped, no servo; build_s: the module's build "
+          "from an empty kernel cache (generic: the whole module, variants: two kernels); "
+          "prepare_s: the first prepare (module load from the cache, records, graph)")
+    print(table.to_string(index=False, float_format=lambda v: f"{v:.4g}"))
+    if args.out:
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        table.to_csv(args.out, index=False)
+    return table
 
 
 if __name__ == "__main__":

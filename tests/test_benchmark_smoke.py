@@ -19,3 +19,17 @@ def test_throughput_benchmark_smoke(tmp_path):
     assert table["batch"].tolist() == [1, 3]
     assert (table["particle_steps_per_s"] > 0).all()
     assert (table["steps"] >= 20).all()
+
+
+def test_physics_benchmark_smoke(tmp_path):
+    """``--physics``: every variant timed against the generic kernels, with build times."""
+    spec = importlib.util.spec_from_file_location("dem_throughput", BENCH)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    table = module.main(["--physics", "--device", "cpu", "--batches", "2", "--particles", "30",
+                         "--seconds", "0.02", "--repeats", "1", "--dtypes", "float64",
+                         "--out", str(tmp_path / "physics.csv")])
+    assert set(table["variant"]) == set(module.PHYSICS_VARIANTS)
+    assert (table["particle_steps_per_s"] > 0).all()
+    assert (table["build_s"] > 0).all()
+    assert table.loc[table["variant"] == "generic", "ratio_to_generic"].tolist() == [1.0]
