@@ -2,7 +2,9 @@
 the stress servo, the cell update.
 
 A step is ``contact_forces`` → ``integrate`` → optionally ``servo`` →
-``advance_cell_and_check``.
+``advance_cell_and_check``. The first two test the compile-time flags ``TANGENTIAL``,
+``DAMPING`` and ``STRESS`` below through ``wp.static``, so that a variant built with other
+values (:func:`~.kernels.step_kernels_for`) leaves those terms out of its code.
 """
 
 from __future__ import annotations
