@@ -10,7 +10,7 @@ import numpy as np
 import warp as wp
 
 from granular_material.dem.laws import LAW_CONSTANT, LAW_FRICTMAT, ContactLaw
-from granular_material.dem.rve_file import RVEData, RVEMeta
+from granular_material.dem.rve_file import RVEData, RVEFileError, RVEMeta
 
 __all__ = [
     "DEFAULT_CAPACITY",
@@ -159,6 +159,24 @@ class Model:
         return replace(self, meta=meta, constants=replace(self.constants, friction=friction))
 
 
+def _check_cell_heights(data: RVEData) -> None:
+    """``RVEFileError`` where a cell is narrower than twice the contact cut-off 2·r_max + skin
+    (the engine would stop at its first step: minimum images would no longer be unique)."""
+    skin = SKIN_FRACTION * 2.0 * float(np.mean(data.radius))
+    cutoff = 2.0 * float(np.max(data.radius)) + skin
+    with np.errstate(all="ignore"):
+        area = np.linalg.det(data.cell)
+        lengths = np.linalg.norm(data.cell, axis=1)  # |column 0|, |column 1|
+        heights = np.minimum(area / lengths[:, 1], area / lengths[:, 0])
+    narrow = ~(cutoff < 0.5 * heights)  # NaN included
+    if narrow.any():
+        rve = int(np.argmax(narrow))
+        raise RVEFileError(
+            f"cell of RVE {rve} is too narrow for its discs: perpendicular height "
+            f"{heights[rve]:.6g} m is not above twice the contact cut-off {cutoff:.6g} m"
+        )
+
+
 def build_model(
     data: RVEData,
     device: str | None = None,
@@ -171,14 +189,24 @@ def build_model(
 
     The time step is ``timestep`` if given, else ``data.meta.timestep`` if present, else
     ``safety`` × :func:`critical_timestep` of each RVE's own discs. A step above the critical
-    one raises ValueError.
+    one, contact lists that do not fit ``capacity``, or a cell narrower than twice the
+    contact cut-off raise ValueError (``RVEFileError`` for the data).
     """
-    data.validate()
+    if isinstance(capacity, bool) or not isinstance(capacity, int) or capacity < 1:
+        raise ValueError(f"capacity must be a positive integer, got {capacity!r}")
+    data.validate(capacity=capacity)
     device = resolve_device(device)
     ft = float_type(dtype)
     meta = data.meta
     # per RVE, so that an RVE's time step (and result) never depends on its batch neighbours
-    crit = np.array([critical_timestep(r, meta) for r in data.radius])
+    with np.errstate(all="ignore"):
+        crit = np.array([critical_timestep(r, meta) for r in data.radius])
+    if not (np.isfinite(crit) & (crit > 0)).all():
+        raise RVEFileError(
+            "meta.density, meta.thickness and meta.stiffness give no finite positive "
+            f"critical time step (got {crit.min()!r} s): a value is out of range"
+        )
+    _check_cell_heights(data)
     if timestep is None:
         timestep = meta.timestep
     if timestep is None:
