@@ -235,13 +235,18 @@ def _run_biaxial(args: argparse.Namespace) -> int:
 def _drive_plan(args: argparse.Namespace) -> list[int]:
     """DEM steps of each increment of ``dem-drive``, checked against --max-dem-steps before
     any work (UsageError naming the options)."""
-    from granular_material.procedures import path_increment, path_steps
+    from granular_material.procedures import has_real_logarithm, path_increment, path_steps
 
     cap = args.max_dem_steps
     shown = ",".join(f"{v:g}" for v in args.grad_u.ravel())
+    n = args.increments
     plan = []
-    for k in range(1, args.increments + 1):
-        increment = path_increment(args.grad_u, k, args.increments)[None]
+    for k in range(1, n + 1):
+        det = float(np.linalg.det(np.eye(2) + args.grad_u * k / n))
+        if not det > 0:
+            raise UsageError(f"--grad-u {shown} inverts the cell at increment {k} of {n}: "
+                             f"det(I + {k}/{n}·∇u) = {det:.4g} <= 0")
+        increment = path_increment(args.grad_u, k, n)[None]
         try:
             plan.append(int(path_steps(increment, args.max_strain_per_step,
                                        max_steps=cap)[0]))
@@ -249,12 +254,15 @@ def _drive_plan(args: argparse.Namespace) -> list[int]:
             wanted = float(np.abs(increment).max()) / args.max_strain_per_step
             raise UsageError(
                 f"--grad-u {shown} needs more than --max-dem-steps {cap} DEM steps: increment "
-                f"{k} of {args.increments} alone takes {wanted:.4g} at --max-strain-per-step "
+                f"{k} of {n} alone takes {wanted:.4g} at --max-strain-per-step "
                 f"{args.max_strain_per_step:g}; raise --max-dem-steps or --max-strain-per-step"
             ) from None
+        if not has_real_logarithm(np.eye(2) + increment)[0]:
+            raise UsageError(f"increment {k} of {n} of --grad-u {shown} has no real logarithm "
+                             "(it turns the cell by half a turn or more); use more --increments")
     if sum(plan) > cap:
         raise UsageError(
-            f"--grad-u {shown} needs {sum(plan)} DEM steps in {args.increments} increments at "
+            f"--grad-u {shown} needs {sum(plan)} DEM steps in {n} increments at "
             f"--max-strain-per-step {args.max_strain_per_step:g}, more than --max-dem-steps "
             f"{cap}; raise --max-dem-steps or --max-strain-per-step"
         )
