@@ -52,9 +52,9 @@ def _assert_same(batch: DEMBatch, reference: DEMBatch) -> None:
 
 
 @pytest.mark.parametrize(("friction", "damping", "expected"), [
-    (0.0, None, StepFeatures(tangential=False)),
-    (None, 0.0, StepFeatures(damping=False)),
-    (0.0, 0.0, StepFeatures(tangential=False, damping=False)),
+    (0.0, None, StepFeatures(tangential=False, stress=False)),
+    (None, 0.0, StepFeatures(damping=False, stress=False)),
+    (0.0, 0.0, StepFeatures(tangential=False, damping=False, stress=False)),
 ])
 def test_variant_is_picked_and_matches_the_generic_kernels(small_rve_path, friction, damping,
                                                            expected):
@@ -88,7 +88,7 @@ def test_servo_on_and_off_and_friction_change_follow(small_rve_path):
     for b in (batch, reference):
         _shear(b)
         b.run(120)
-    assert not _features(batch).tangential
+    assert _features(batch) == StepFeatures(tangential=False, stress=False)
     _assert_same(batch, reference)
     for b in (batch, reference):
         b.set_friction(0.5)
@@ -105,14 +105,17 @@ def test_float32_variant_matches_float32_generic(small_rve_path):
         b.set_friction(0.0)
         _shear(b)
         b.run(200)
-    assert _features(batch) == StepFeatures(tangential=False, damping=False)
+    assert _features(batch) == StepFeatures(tangential=False, damping=False, stress=False)
     _assert_same(batch, reference)
 
 
 def test_the_stress_variant_matches_without_servo(small_rve_path):
-    """The variant without the stress sums (no servo) forced on a frictional, damped run."""
+    """A frictional, damped scene keeps the generic kernels (no extra module); the variant
+    without the stress sums, forced on it without servo, matches them."""
     batch = _batch(small_rve_path)
     reference = _batch(small_rve_path, generic=True)
+    _shear(batch)
+    assert _features(batch) == GENERIC_STEP
     for shard in batch.shards:
         shard.solver.features = StepFeatures(stress=False)
     for b in (batch, reference):

@@ -30,10 +30,6 @@ __all__ = ["BIN_CAPACITY", "CONTROL_STRAIN", "CONTROL_STRESS", "DEMInstabilityEr
 
 BIN_CAPACITY = 32  #: discs a contact-detection bin can hold (an overflow is an error)
 GRAPH_STEPS = 50  #: steps captured in one graph and replayed
-#: whether a scene without servo gets the step kernels without the stress sums' code; False:
-#: they keep it behind the run-time test of ``with_stress`` (the generic kernels' way), so that
-#: the default scene (frictional, damped, no servo) needs no kernel module beyond the generic one
-SKIP_STRESS_CODE = False
 
 _MESSAGES = {
     STATUS_BLOWUP: "a velocity became non-finite or a disc moved more than r/4 in one step "
@@ -72,11 +68,10 @@ class Solver:
 
     The step kernels are the variant (see :func:`step_kernels_for`) that leaves out what the
     scene makes irrelevant: the tangential force and its history where every RVE of the
-    model is frictionless, local damping where the damping is 0 (and, with
-    ``SKIP_STRESS_CODE``, the stress sums' code where no servo runs); see
-    :meth:`step_features`. It is picked again whenever the model or the servo changes (a new
-    model from :meth:`Model.with_friction`, ``set_servo``, ``set_affine``), and the recorded
-    launches and the graph follow.
+    model is frictionless, local damping where the damping is 0, and then also the stress
+    sums' code where no servo runs; see :meth:`step_features`. It is picked again whenever
+    the model or the servo changes (a new model from :meth:`Model.with_friction`,
+    ``set_servo``, ``set_affine``), and the recorded launches and the graph follow.
 
     Notes:
         The lists stay valid while ``2·max|Δx_fluct| + |H H_build⁻¹ − I|·cutoff ≤ skin``.
@@ -166,12 +161,17 @@ class Solver:
 
     def step_features(self, model: Model, loading: LoadingControl) -> StepFeatures:
         """The terms the step computes for ``model`` under ``loading``: ``self.features``
-        if set, else only those the scene needs (reads the friction back from the device)."""
+        if set, else only those the scene needs (reads the friction back from the device).
+
+        The stress sums' code is left out (no servo) only where a variant is built anyway:
+        behind the generic kernels' run-time test of ``with_stress`` it costs nothing
+        measurable, and so a frictional, damped scene needs no module but the generic one."""
         if self.features is not None:
             return self.features
-        frictional = bool(np.any(model.constants.friction.numpy() != 0))
-        return StepFeatures(tangential=frictional, damping=model.meta.damping != 0,
-                            stress=not SKIP_STRESS_CODE or loading.servo is not None)
+        tangential = bool(np.any(model.constants.friction.numpy() != 0))
+        damping = model.meta.damping != 0
+        stress = loading.servo is not None or (tangential and damping)
+        return StepFeatures(tangential=tangential, damping=damping, stress=stress)
 
     def _step_launches(self, model: Model, state: State,
                        loading: LoadingControl) -> list[wp.Launch]:
