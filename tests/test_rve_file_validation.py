@@ -281,3 +281,22 @@ def test_cli_bad_partner_index_exits_2_naming_the_field(rve64, tmp_path):
     assert "contact_partner" in proc.stderr and "1000000" in proc.stderr
     assert "Traceback" not in proc.stderr
     assert not out.exists()
+
+
+@pytest.mark.parametrize(("key", "value"), [("velocity", 1e6), ("angular_velocity", 1e9)])
+def test_a_state_already_blown_up_is_bad_input(rve64, tmp_path, key, value):
+    """A speed that moves a disc more than r/4 in one step (the engine's blow-up limit)."""
+    arrays = _arrays(rve64)
+    arrays[key][0, 3] = value
+    path = _write(tmp_path / "fast.npz", arrays)
+    data = load_rve(path)  # a finite number: the file itself is readable
+    with pytest.raises(RVEFileError, match=f"{key} of disc 3 of RVE 0 is beyond"):
+        DEMBatch(data, device="cpu", shards=1)
+    assert main(["dem-drive", str(path), "--grad-u", "0,0.001,0,0", "--increments", "1",
+                 "--out", str(tmp_path / "o" / "x.csv")]) == 2
+
+
+def test_coincident_discs_are_named(two_discs):
+    data = two_discs((0.05, 0.1), (0.05, 0.1))
+    with pytest.raises(RVEFileError, match="position of discs 0 and 1 of RVE 0 coincide"):
+        DEMBatch(data, device="cpu")

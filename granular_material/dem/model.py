@@ -177,6 +177,22 @@ def _check_cell_heights(data: RVEData) -> None:
         )
 
 
+def _check_speeds(data: RVEData, dt: np.ndarray) -> None:
+    """``RVEFileError`` where a disc's velocity [m/s] (or its surface's, ω·r) would carry it
+    more than r/4 in one step of ``dt`` [s]: the engine's blow-up limit, already passed."""
+    limit = 0.25 * data.radius / dt[:, None]
+    for name, speed in (("velocity", np.linalg.norm(data.velocity, axis=-1)),
+                        ("angular_velocity", np.abs(data.angular_velocity) * data.radius)):
+        fast = speed > limit
+        if fast.any():
+            b, j = (int(v) for v in np.argwhere(fast)[0])
+            raise RVEFileError(
+                f"{name} of disc {j} of RVE {b} is beyond the engine's blow-up limit: "
+                f"{speed[b, j]:.4g} m/s would move it more than r/4 in one time step "
+                f"({dt[b]:.4g} s)"
+            )
+
+
 def build_model(
     data: RVEData,
     device: str | None = None,
@@ -223,6 +239,7 @@ def build_model(
                 f"RVE {rve}"
             )
         dt = np.full(data.n_rve, float(timestep))
+    _check_speeds(data, dt)
     r = data.radius.reshape(-1)
     mass = disc_mass(r, meta)
     inertia = 0.5 * mass * r**2
