@@ -213,3 +213,16 @@ def test_biaxial_summary_reports_what_ran(rve64, tmp_path, capsys):
     assert code == 0, report["error"]
     assert report["particles"] == 20 and report["scale"] == "custom"
     assert np.isfinite(report["peak_stress_ratio"])
+
+
+def test_single_element_uses_the_four_rves_of_a_file(rve64, tmp_path):
+    import argparse
+
+    from granular_material.cli.fem import _replicate
+
+    four = tmp_path / "four.npz"
+    save_rve(four, load_rve(rve64[0]).replicate(4))
+    args = argparse.Namespace(rve=four, independent=False)
+    assert _replicate(args) is False  # one RVE per Gauss point, not RVE 0 four times
+    assert _replicate(argparse.Namespace(rve=rve64[0], independent=False)) is True
+    assert _replicate(argparse.Namespace(rve=None, independent=True)) is False
