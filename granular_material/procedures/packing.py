@@ -11,7 +11,8 @@ from granular_material.dem import DEMBatch, RVEData, RVEMeta
 from granular_material.dem.model import SKIN_FRACTION
 from granular_material.procedures.servo import consolidate
 
-__all__ = ["MAX_OVERLAP", "max_pressure", "min_discs", "prepare_packing", "random_gas"]
+__all__ = ["MAX_OVERLAP", "max_pressure", "min_discs", "prepare_packing", "random_gas",
+           "smallest_normal_stiffness"]
 
 DEFAULT_RADIUS_RANGE = (3.0e-3, 7.0e-3)  # Wu et al. (2025) Table 1; Guo & Zhao rMean 5 mm ± 40 %
 
