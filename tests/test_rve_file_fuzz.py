@@ -7,7 +7,7 @@ driving it 0.01 % in shear must end in one of: ``RVEFileError``/``ValueError`` (
 naming a field of the file, ``DEMInstabilityError`` (exit 1, a blow-up named by RVE), or a
 finite stress. Any other exception fails the test, and a signal kills it.
 
-The default run tries ``GM_FUZZ_EXAMPLES`` files (200); the ``slow`` test tries 1000.
+The default run tries ``GM_FUZZ_EXAMPLES`` files (300); the ``slow`` test tries 1000.
 """
 
 from __future__ import annotations
@@ -272,7 +272,7 @@ def _check(valid: Valid, mutations: list[Mutation]) -> None:
         OUTCOMES[outcome] += 1
 
 
-EXAMPLES = int(os.environ.get("GM_FUZZ_EXAMPLES", "200"))
+EXAMPLES = int(os.environ.get("GM_FUZZ_EXAMPLES", "300"))
 _SETTINGS = {"deadline": None, "database": None, "derandomize": False,
              "suppress_health_check": [HealthCheck.too_slow, HealthCheck.data_too_large,
                                        HealthCheck.function_scoped_fixture]}

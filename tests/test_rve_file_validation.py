@@ -16,6 +16,7 @@ from granular_material.dem import DEMBatch, RVEFileError, load_rve, save_rve
 from granular_material.dem.model import build_model
 from granular_material.dem.rve_file import CONTACT_HISTORY_KEYS
 from granular_material.dem.state import HISTORY_KEYS
+from granular_material.procedures import drive_grad_u
 
 N_DISC = 64
 
@@ -178,8 +179,19 @@ def test_fractional_position_must_match_and_lie_in_the_unit_cell(rve64, tmp_path
         load_rve(_write(tmp_path / "drift.npz", arrays))
     arrays = _arrays(rve64)
     arrays["fractional_position"][0, 7, 1] = 1.5
-    with pytest.raises(RVEFileError, match=r"fractional_position must lie in \[0, 1\)"):
+    with pytest.raises(RVEFileError, match=r"fractional_position must lie in \[0, 1\]"):
         load_rve(_write(tmp_path / "out.npz", arrays))
+
+
+def test_fractional_position_one_as_the_engine_rounds_it_loads(rve64, tmp_path):
+    """``s − floor(s)`` is exactly 1 for s = −1e-17: such a file (the engine's) loads."""
+    arrays = _arrays(rve64)
+    frac = arrays["fractional_position"][0]
+    frac[:, 0] = (frac[:, 0] - frac[7, 0]) % 1.0  # a rigid shift: disc 7 at s0 = 0
+    frac[7, 0] = 1.0  # the same place
+    arrays["position"][0] = frac @ arrays["cell"][0].T
+    data = load_rve(_write(tmp_path / "one.npz", arrays))
+    drive_grad_u(DEMBatch(data, device="cpu", shards=1), np.array([[0.0, 1e-4], [0.0, 0.0]]))
 
 
 @pytest.mark.parametrize(("key", "dtype"), [("contact_partner", np.float64),

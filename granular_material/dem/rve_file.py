@@ -49,7 +49,7 @@ CONTACT_HISTORY_KEYS = (
     "contact_partner",  # (B, N, K) integers, partner index within the RVE, -1 = empty slot
     "contact_count",  # (B, N) integers, used slots (the first ones)
     "contact_shear_force",  # (B, N, K) tangential spring force [N], both slots of a pair
-    "fractional_position",  # (B, N, 2) s = H⁻¹x in [0, 1)
+    "fractional_position",  # (B, N, 2) s = H⁻¹x in [0, 1]
     "verlet_displacement",  # (B, N, 2) displacement since the last list build [m]
     "cell_at_list_build",  # (B, 2, 2) H at the last list build [m]
 )
@@ -391,12 +391,13 @@ class RVEData:
         return arrays
 
     def _check_fractional(self, frac: np.ndarray) -> None:
-        """``fractional_position`` in [0, 1) and ``cell`` times it = ``position``."""
-        outside = (frac < 0) | (frac >= 1)
+        """``fractional_position`` in [0, 1] and ``cell`` times it = ``position`` (1 itself
+        occurs: the engine's ``s − floor(s)`` rounds to 1 for s just below 0)."""
+        outside = (frac < 0) | (frac > 1)
         if outside.any():
             where = np.argwhere(outside)[0].tolist()
             raise RVEFileError(
-                f"fractional_position must lie in [0, 1), got {frac[tuple(where)]!r} at "
+                f"fractional_position must lie in [0, 1], got {frac[tuple(where)]!r} at "
                 f"index {where}"
             )
         drift = np.abs(np.einsum("bij,bnj->bni", self.cell, frac) - self.position)
