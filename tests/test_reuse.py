@@ -134,6 +134,13 @@ def test_continue_drives_from_the_trial_state_with_fewer_steps(small_rve_path):
         DEMMaterial(drive="continue", tangent="perturbation")
 
 
+def test_a_path_over_the_step_cap_is_a_failed_point_not_a_crash(small_rve_path):
+    material = _material(small_rve_path, max_dem_steps=25)  # GRAD[1] needs 30 steps
+    response = material.evaluate(GRAD)
+    assert response.failed_points().tolist() == [1]
+    assert material.evaluate(0.5 * GRAD).ok
+
+
 def test_drive_grad_u_leaves_frozen_rves_untouched(small_rve_path):
     batch = DEMBatch(load_rve(small_rve_path).replicate(4), device="cpu")
     before = batch.to_data()

@@ -115,8 +115,10 @@ def _dem_arguments(parser: argparse.ArgumentParser) -> None:
                    help="restart: each iteration drives an RVE from its committed state along "
                         "the whole step (Guo & Zhao, default); continue: from its last trial "
                         "state by the change of grad u (fewer DEM steps, path-dependent)")
-    g.add_argument("--max-dem-steps", type=int, default=None,
-                   help="cap on the DEM steps of one RVE path per iteration (default: none)")
+    g.add_argument("--max-dem-steps", type=int, default=10**6,
+                   help="cap on the DEM steps of one RVE's path in one Newton iteration: an "
+                        "iterate that needs more is an error naming the point (default 1e6, "
+                        "a strain of 10 at 1e-5 a step)")
     g.add_argument("--track", nargs="+", default=None, metavar="POINT",
                    help="Gauss point ids (or 'all') whose RVEs the post-processors analyse; "
                         "results in tracked.csv")

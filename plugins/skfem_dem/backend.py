@@ -38,6 +38,7 @@ DRIVES = ("restart", "continue")
 #: its tangent for the change of ∇u
 REUSE_CORRECTIONS = ("none", "tangent")
 _COMPONENTS = ((0, 0), (0, 1), (1, 0), (1, 1))  # the (k, l) of ∂u_k/∂x_l
+_STEP_LIMIT = 10**15  # steps of one path beyond which the count is no longer exact
 
 
 def check_driving(tangent: str, perturbation: float, min_perturbation: float,
@@ -150,7 +151,8 @@ class InProcessBackend:
             along the whole path of the step) or "continue" (driven from its last trial state
             by the change, (I + ∇u_new)(I + ∇u_last)⁻¹ − I: fewer steps, but the response then
             depends on the Newton iterates' path).
-        max_steps: cap on one RVE path's DEM steps (``ValueError`` beyond it); None: no cap.
+        max_steps: cap on one RVE path's DEM steps: an RVE whose path needs more is reported
+            failed (the Newton driver then cuts the increment back); None: no cap.
     """
 
     def __init__(self, batch: DEMBatch, max_strain_per_step: float = 1.0e-5,
@@ -189,10 +191,13 @@ class InProcessBackend:
                restart: bool = True) -> tuple[int, int, int] | None:
         """Drive the ``moving`` RVEs by ∇u (from the committed state when ``restart``, else
         from their current state); the others are left as they are. Marks RVEs that blow up,
-        or whose ∇u has no constant velocity gradient, in ``failed``. Returns the cost (DEM
+        whose ∇u has no constant velocity gradient, or whose path would need more than
+        ``max_steps`` DEM steps, in ``failed``. Returns the cost (DEM
         steps, RVE paths, particle-steps), or None when the batch did not come through (all
         RVEs are then back in their committed state)."""
         failed |= moving & ~has_real_logarithm(np.eye(2) + grad_u)
+        cap = _STEP_LIMIT if self.max_steps is None else min(self.max_steps, _STEP_LIMIT)
+        failed |= moving & (np.abs(grad_u).max(axis=(1, 2)) / self.max_strain_per_step > cap)
         moving = moving & ~failed
         if restart:
             self.batch.restore(self._committed, None if moving.all() else moving)

@@ -18,7 +18,7 @@ from granular_material_skfem.backend import InProcessBackend, check_driving, che
 
 from granular_material.dem import DEMBatch, RVEData, load_rve, resolve_device
 from granular_material.fem.material import MaterialResponse, PointStatus
-from granular_material.procedures import prepare_packing
+from granular_material.procedures.packing import min_discs, prepare_packing
 
 __all__ = ["DEMMaterial", "DEMMaterialParameters"]
 
@@ -29,7 +29,7 @@ class DEMMaterialParameters:
 
     Attributes:
         rve: RVE file to load (B = 1, or B = number of Gauss points); None: prepare packings.
-        particles: discs per prepared RVE (ignored with ``rve``), >= 4.
+        particles: discs per prepared RVE (ignored with ``rve``), >= ``min_discs()`` (12).
         seed: seed of the first prepared RVE; RVE p uses seed + p (independent packings).
         pressure: isotropic consolidation pressure of prepared RVEs [Pa], > 0.
         replicate: one RVE (the first of the file, or one prepared with ``seed``) copied to
@@ -51,7 +51,8 @@ class DEMMaterialParameters:
         reuse_correction: "none" or "tangent" (a reused response corrected to first order).
         drive: "restart" (every trial from the committed state, Guo & Zhao) or "continue"
             (from the last trial state by the change of ∇u).
-        max_dem_steps: cap on one RVE path's DEM steps per evaluation; None: no cap.
+        max_dem_steps: cap on one RVE path's DEM steps per evaluation: a point whose path
+            needs more is reported failed (Newton cuts back); None: no cap.
     """
 
     rve: str | None = None
@@ -80,8 +81,11 @@ class DEMMaterialParameters:
                              f"got {self.max_dem_steps!r}")
         if self.shards is not None and (int(self.shards) != self.shards or self.shards < 1):
             raise ValueError(f"shards must be an integer >= 1 or None, got {self.shards!r}")
-        if int(self.particles) != self.particles or self.particles < 4:
-            raise ValueError(f"particles must be an integer >= 4, got {self.particles!r}")
+        fewest = min_discs()
+        if int(self.particles) != self.particles or self.particles < fewest:
+            raise ValueError(f"particles must be an integer >= {fewest} (the periodic cell must "
+                             f"stay wider than twice the contact cut-off), got "
+                             f"{self.particles!r}")
         if not (math.isfinite(self.pressure) and self.pressure > 0):
             raise ValueError(f"pressure must be a positive number of Pa, got {self.pressure!r}")
         if self.device is not None:
