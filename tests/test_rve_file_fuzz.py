@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import json
 import os
+import warnings
 from collections import Counter
 from collections.abc import Callable
 from pathlib import Path
@@ -96,7 +97,8 @@ def set_value(draw: st.DrawFn) -> Mutation:
             if np.iinfo(flat.dtype).min <= as_int <= np.iinfo(flat.dtype).max:
                 flat[position % flat.size] = as_int
             return None
-        flat[position % flat.size] = as_float
+        with np.errstate(over="ignore", invalid="ignore"):  # e.g. 1e300 into float32: inf
+            flat[position % flat.size] = as_float
         return key if not np.isfinite(as_float) else None
 
     return Mutation(f"{key}.flat[{position}] = {as_int} / {as_float}", key, mutate)
@@ -110,7 +112,8 @@ def set_dtype(draw: st.DrawFn) -> Mutation:
 
     def mutate(arrays: Arrays) -> str | None:
         try:
-            with np.errstate(all="ignore"):
+            with np.errstate(all="ignore"), warnings.catch_warnings():
+                warnings.simplefilter("ignore")  # complex to real drops the imaginary part
                 arrays[key] = arrays[key].astype(dtype)
         except (ValueError, OverflowError):  # e.g. "True" (a bool made text) as a float
             return None
@@ -191,7 +194,8 @@ def scale(draw: st.DrawFn) -> Mutation:
 
     def mutate(arrays: Arrays) -> str | None:
         if key in arrays and arrays[key].dtype.kind == "f":
-            arrays[key] = arrays[key] * factor
+            with np.errstate(over="ignore"):
+                arrays[key] = arrays[key] * factor
         return None
 
     return Mutation(f"{key} *= {factor}", key, mutate)

@@ -181,8 +181,10 @@ def _check_speeds(data: RVEData, dt: np.ndarray) -> None:
     """``RVEFileError`` where a disc's velocity [m/s] (or its surface's, ω·r) would carry it
     more than r/4 in one step of ``dt`` [s]: the engine's blow-up limit, already passed."""
     limit = 0.25 * data.radius / dt[:, None]
-    for name, speed in (("velocity", np.linalg.norm(data.velocity, axis=-1)),
-                        ("angular_velocity", np.abs(data.angular_velocity) * data.radius)):
+    with np.errstate(over="ignore"):  # a speed of 1e300 m/s overflows to inf: refused too
+        speeds = (("velocity", np.linalg.norm(data.velocity, axis=-1)),
+                  ("angular_velocity", np.abs(data.angular_velocity) * data.radius))
+    for name, speed in speeds:
         fast = speed > limit
         if fast.any():
             b, j = (int(v) for v in np.argwhere(fast)[0])
