@@ -1,0 +1,154 @@
+"""What stepping only what needs it saves: FEM × DEM runs with each RVE-stepping setting
+beside the exact one (every RVE driven from its committed state at every Newton iteration),
+from the same RVEs, in one run.
+
+Usage::
+
+    python benchmarks/fem_stepping.py [--elements 5 10] [--particles 64] [--steps 50]
+        [--axial-strain 0.1] [--repeats 1] [--variants exact,continue,...] [--out DIR]
+
+One RVE file (``--particles`` discs, seed 1, 100 kPa, one RVE per Gauss point) is prepared
+and every variant runs the drained biaxial specimen (or, with ``--elements 1 1``, the single
+element) from it, each in a fresh process, the variants taking turns ``--repeats`` times.
+The table (``stepping.csv`` and ``stepping.md`` under ``--out``) holds, per variant, over
+the load steps every run completed: the median wall time of those steps, the counts (Newton
+iterations, RVE paths, DEM particle-steps), the ratios to the exact run, and the errors
+against it: peak σ1/σ3 and its axial strain, the RMS difference of the stress-ratio and εv
+curves (relative to the exact curve's largest value) and the final shear-band inclination.
+Measures; never passes or fails.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+#: the variants: name -> options of the FEM commands
+VARIANTS = {
+    "exact": ["--drive", "restart", "--reuse-tol", "0"],
+    "reuse-1e-6": ["--drive", "restart", "--reuse-tol", "1e-6"],
+    "reuse-3e-6-tangent": ["--drive", "restart", "--reuse-tol", "3e-6",
+                           "--reuse-correction", "tangent"],
+    "continue": ["--drive", "continue", "--reuse-tol", "0"],
+    "continue-reuse-1e-6": ["--drive", "continue", "--reuse-tol", "1e-6"],
+}
+
+
+def _run(rve: Path, out: Path, elements: tuple[int, int], steps: int, axial_strain: float,
+         options: list[str], newton: list[str]) -> dict:
+    """One FEM run in a fresh process; its JSON summary and steps table."""
+    command = "single-element" if elements == (1, 1) else "biaxial"
+    argv = [sys.executable, "-m", "granular_material.cli", command, "--rve", str(rve),
+            "--steps", str(steps), "--axial-strain", str(axial_strain), "--out", str(out),
+            "--no-progress", "--json", *newton, *options]
+    if command == "biaxial":
+        argv += ["--elements", *map(str, elements), "--map-strain", "0.02"]
+    done = subprocess.run(argv, capture_output=True, text=True)
+    if done.returncode not in (0, 1) or not done.stdout.strip():
+        raise RuntimeError(f"{' '.join(argv)} failed ({done.returncode}): {done.stderr[-2000:]}")
+    summary = json.loads(done.stdout)
+    summary["table"] = pd.read_csv(out / "steps.csv")
+    return summary
+
+
+def _errors(run: dict, exact: dict) -> dict:
+    """Errors of ``run`` against ``exact`` over the steps both completed."""
+    a, b = run["table"], exact["table"]
+    n = min(len(a), len(b))
+    q_a, q_b = a["stress_ratio"].to_numpy()[1:n], b["stress_ratio"].to_numpy()[1:n]
+    e_a, e_b = a["volumetric_strain"].to_numpy()[1:n], b["volumetric_strain"].to_numpy()[1:n]
+    rms = lambda x, y: float(np.sqrt(np.mean((x - y) ** 2))) if len(x) else np.nan  # noqa: E731
+    band = run.get("shear_band_final") or {}
+    return {
+        "peak_stress_ratio": run["peak_stress_ratio"],
+        "peak_error_pct": 100 * (run["peak_stress_ratio"] / exact["peak_stress_ratio"] - 1),
+        "axial_strain_at_peak_pct": 100 * run["axial_strain_at_peak"],
+        "stress_ratio_rms_pct": 100 * rms(q_a, q_b) / np.abs(q_b).max() if n > 1 else np.nan,
+        "volumetric_strain_rms": rms(e_a, e_b),
+        "volumetric_strain_rms_pct": (100 * rms(e_a, e_b) / np.abs(e_b).max()
+                                      if n > 1 and np.abs(e_b).max() > 0 else np.nan),
+        "band_inclination_deg": band.get("inclination_deg", np.nan),
+        "compared_steps": n - 1,
+    }
+
+
+def _markdown(table: pd.DataFrame) -> str:
+    """The table as a Markdown table (4 significant digits)."""
+    def cell(value: object) -> str:
+        return f"{value:.4g}" if isinstance(value, float) else str(value)
+
+    lines = ["| " + " | ".join(table.columns) + " |", "|" + "---|" * len(table.columns)]
+    lines += ["| " + " | ".join(cell(v) for v in row) + " |" for row in table.itertuples(False)]
+    return "\n".join(lines) + "\n"
+
+
+def main(argv: list[str] | None = None) -> pd.DataFrame:
+    """Run the benchmark; returns the table (also written under ``--out``)."""
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--elements", type=int, nargs=2, default=(5, 10))
+    parser.add_argument("--particles", type=int, default=64)
+    parser.add_argument("--steps", type=int, default=50)
+    parser.add_argument("--axial-strain", type=float, default=0.1)
+    parser.add_argument("--repeats", type=int, default=1)
+    parser.add_argument("--variants", default=",".join(VARIANTS),
+                        help=f"comma-separated, from {', '.join(VARIANTS)}; exact comes first")
+    parser.add_argument("--newton", default="--max-iterations 60 --max-cutbacks 8",
+                        help="Newton options of every run (default: %(default)s)")
+    parser.add_argument("--out", type=Path, default=Path("out/stepping"))
+    args = parser.parse_args(argv)
+    names = [v for v in args.variants.split(",") if v]
+    unknown = sorted(set(names) - set(VARIANTS))
+    if unknown:
+        parser.error(f"unknown variants {unknown}; choose from {', '.join(VARIANTS)}")
+    names = ["exact", *[n for n in names if n != "exact"]]
+    elements = tuple(args.elements)
+    points = 4 * elements[0] * elements[1]
+    args.out.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory() as tmp:
+        rve = Path(tmp) / "rves.npz"
+        subprocess.run([sys.executable, "-m", "granular_material.cli", "prepare",
+                        "--particles", str(args.particles), "--batch", str(points),
+                        "--seed", "1", "--out", str(rve), "--no-progress"],
+                       check=True, capture_output=True)
+        runs: dict[str, list[dict]] = {n: [] for n in names}
+        for repeat in range(args.repeats):
+            for name in names:
+                out = Path(tmp) / f"{name}-{repeat}"
+                runs[name].append(_run(rve, out, elements, args.steps, args.axial_strain,
+                                       VARIANTS[name], args.newton.split()))
+                print(f"{name} #{repeat + 1}: {runs[name][-1]['wall_time_s']:.1f} s",
+                      file=sys.stderr)
+    exact = runs["exact"][0]
+    common = min(r["steps_completed"] for rs in runs.values() for r in rs)
+    rows = []
+    for name in names:
+        first = runs[name][0]
+        done = first["table"].iloc[1:common + 1]
+        row = {"variant": name, "options": " ".join(VARIANTS[name]),
+               "wall_s": float(np.median([r["table"]["wall_time"].iloc[1:common + 1].sum()
+                                          for r in runs[name]])),
+               "newton_iterations": int(done["iterations"].sum()),
+               "rve_evaluations": int(done["rve_evaluations"].sum()),
+               "particle_steps": int(done["particle_steps"].sum()),
+               "steps_completed": first["steps_completed"], "error": first["error"],
+               **_errors(first, exact)}
+        rows.append(row)
+    table = pd.DataFrame(rows)
+    base = table.iloc[0]
+    table["wall_ratio"] = base["wall_s"] / table["wall_s"]
+    table["particle_steps_ratio"] = base["particle_steps"] / table["particle_steps"]
+    table.to_csv(args.out / "stepping.csv", index=False)
+    (args.out / "stepping.md").write_text(_markdown(table.drop(columns=["options"])))
+    print(table.drop(columns=["options"]).to_string(index=False))
+    return table
+
+
+if __name__ == "__main__":
+    main()
