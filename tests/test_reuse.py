@@ -16,7 +16,6 @@ from granular_material_skfem import DEMMaterial
 from granular_material.cli import main
 from granular_material.dem import DEMBatch, load_rve
 from granular_material.fem import BiaxialSetup, NewtonSettings, Tracking, run_biaxial
-from granular_material.fem.forms import gauss_points_grad
 from granular_material.procedures import drive_grad_u, path_steps
 
 GRAD = np.array([
@@ -195,30 +194,3 @@ def test_cli_reports_counts_and_writes_tracked_csv(small_rve_path, tmp_path, cap
     assert main(["single-element", "--rve", str(small_rve_path), "--track", "9",
                  "--out", str(bad)]) == 2
     assert not bad.exists()
-
-
-def test_continue_verify_commits_the_straight_path_state(small_rve_path):
-    """continue-verify: Newton's converged iterate is driven again from the commit, so the
-    committed RVEs are exactly those of a restart drive to the converged ∇u."""
-    setup = BiaxialSetup(width=1.0, height=1.0, nx=1, ny=1, confining=100e3,
-                         axial_strain=0.004)
-    material = DEMMaterial(rve=small_rve_path, device="cpu", drive="continue-verify")
-    result = run_biaxial(setup, material, 2, NewtonSettings(predictor="extrapolate"),
-                         stress_tol=300.0)
-    assert result.error is None and material.verifies_converged
-    final = material.committed_rves()
-    # the committed state of step 2 equals a restart from step 1's commit to step 2's ∇u
-    again = DEMMaterial(rve=small_rve_path, device="cpu")
-    again.allocate(4)
-    grads = [gauss_points_grad(result.problem.basis, u) for u in result.displacements]
-    for k in (1, 2):
-        again.evaluate(grads[k] - grads[k - 1])  # the step's ∇(Δu), as Newton drives it
-        again.commit()
-    exact = again.committed_rves()
-    # equal up to the rounding of ∇(u_k − u_(k−1)) against ∇Δu (a detour differs by ~1e-7 m)
-    np.testing.assert_allclose(final.position, exact.position, rtol=0, atol=1e-14)
-    cont = DEMMaterial(rve=small_rve_path, device="cpu", drive="continue")
-    detour = run_biaxial(setup, cont, 2, NewtonSettings(predictor="extrapolate"),
-                         stress_tol=300.0)
-    assert detour.error is None
-    assert np.abs(cont.committed_rves().position - exact.position).max() > 1e-10

@@ -111,13 +111,10 @@ def _dem_arguments(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--reuse-correction", choices=("none", "tangent"), default="none",
                    help="a reused response as it is (none, default) or corrected to first "
                         "order by its tangent")
-    g.add_argument("--drive", choices=("restart", "continue", "continue-verify"),
-                   default="restart",
+    g.add_argument("--drive", choices=("restart", "continue"), default="restart",
                    help="restart: each iteration drives an RVE from its committed state along "
                         "the whole step (Guo & Zhao, default); continue: from its last trial "
-                        "state by the change of grad u (fewer DEM steps, path-dependent); "
-                        "continue-verify: continue, and a converged iterate is driven once "
-                        "more from the committed state and accepted only if it still converges")
+                        "state by the change of grad u (fewer DEM steps, path-dependent)")
     g.add_argument("--max-dem-steps", type=int, default=10**6,
                    help="cap on the DEM steps of one RVE's path in one Newton iteration: an "
                         "iterate that needs more is an error naming the point (default 1e6, "

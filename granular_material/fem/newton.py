@@ -235,18 +235,9 @@ class NewtonSolver:
             stress = self.response.stress
             secant = SecantTangent(np.zeros_like(stress), stress, self.response.tangent,
                                    s.secant_min_change)
-        # a material whose iterates depend on their path (DEM RVEs driven on from the last
-        # iterate) may ask for a converged iterate to be evaluated once more from the commit
-        verify = bool(getattr(self.material, "verifies_converged", False))
-        check = False
-        grad_u = np.zeros(0)
         for it in range(1, s.max_iterations + 1):
-            if check:  # same du: the path-independent response of the converged iterate
-                response = self.material.evaluate_from_commit(grad_u)  # type: ignore[attr-defined]
-            else:
-                grad_u = gauss_points_grad(self.basis, du)
-                response = self.material.evaluate(grad_u)
-            checked, check = check, False
+            grad_u = gauss_points_grad(self.basis, du)
+            response = self.material.evaluate(grad_u)
             cost += (int(response.dem_steps), int(response.rve_evaluations),
                      int(response.particle_steps))
             if not response.ok:
@@ -257,14 +248,10 @@ class NewtonSolver:
             residual = f_int - f_ext
             r = float(np.linalg.norm(residual[interior]))
             history.append(r / r0 if r0 > 0 else r)
-            converged = r <= s.atol or (r0 > 0 and r <= s.rtol * r0)
-            stalled = not converged and _stalled(history, s)
-            if (converged or stalled) and verify and not checked:
-                check = True
-                continue
-            if converged or stalled:
-                return _Attempt(True, du, response, f_int, history, it, cost, "",
-                                stalled=stalled)
+            if r <= s.atol or (r0 > 0 and r <= s.rtol * r0):
+                return _Attempt(True, du, response, f_int, history, it, cost, "")
+            if _stalled(history, s):
+                return _Attempt(True, du, response, f_int, history, it, cost, "", stalled=True)
             if not math.isfinite(r) or (r0 > 0 and r > s.divergence * r0):
                 return _Attempt(False, du, None, None, history, it, cost, "diverged")
             tangent = (response.tangent if secant is None

@@ -33,9 +33,7 @@ __all__ = [
 TANGENTS = ("kruyt-rothenburg", "perturbation")
 #: how an RVE that must move is driven to a new trial ∇u: from the committed state along the
 #: whole path of the step (``restart``, Guo & Zhao), or from its last trial state by the change
-#: (``continue``), or so and then, once Newton has converged, once more from the committed
-#: state to check (``continue-verify``)
-DRIVES = ("restart", "continue", "continue-verify")
+DRIVES = ("restart", "continue")
 #: what a reused RVE returns: its last response as it is, or corrected to first order by
 #: its tangent for the change of ∇u
 REUSE_CORRECTIONS = ("none", "tangent")
@@ -65,8 +63,8 @@ def check_reuse(reuse_tol: float, reuse_correction: str, drive: str, tangent: st
                          f"got {reuse_correction!r}")
     if drive not in DRIVES:
         raise ValueError(f"drive must be one of {', '.join(DRIVES)}, got {drive!r}")
-    if drive != "restart" and tangent == "perturbation":
-        raise ValueError(f"drive {drive!r} does not combine with the 'perturbation' tangent "
+    if drive == "continue" and tangent == "perturbation":
+        raise ValueError("drive 'continue' does not combine with the 'perturbation' tangent "
                          "(its perturbed runs start from the committed state)")
 
 
@@ -152,10 +150,7 @@ class InProcessBackend:
         drive: "restart" (an RVE that moves is restored to the committed state and driven
             along the whole path of the step) or "continue" (driven from its last trial state
             by the change, (I + ∇u_new)(I + ∇u_last)⁻¹ − I: fewer steps, but the response then
-            depends on the Newton iterates' path), or "continue-verify" (as continue, and
-            :meth:`evaluate` with ``restart=True`` re-drives from the committed state the
-            RVEs that reached their ∇u by a detour: the Newton driver asks for it when an
-            iterate has converged, so that what is committed is path-independent).
+            depends on the Newton iterates' path).
         max_steps: cap on one RVE path's DEM steps: an RVE whose path needs more is reported
             failed (the Newton driver then cuts the increment back); None: no cap.
     """
@@ -183,8 +178,6 @@ class InProcessBackend:
         self._reached = np.zeros((b, 2, 2))
         #: the ∇u of the last evaluation, per RVE (what the FEM commits)
         self._target = np.zeros((b, 2, 2))
-        #: whether each RVE's current state lies on the straight path from its committed state
-        self._straight = np.ones(b, bool)
         #: response of each RVE's current state (None until measured), and the committed one
         self._current: Homogenized | None = None
         self._committed_response: Homogenized | None = None
@@ -224,31 +217,19 @@ class InProcessBackend:
             return None
         return dem_steps, int(moving.sum()), int(steps[moving].sum()) * self.batch.n_disc
 
-    @property
-    def verifies_converged(self) -> bool:
-        """Whether a converged iterate should be evaluated again with ``restart=True``."""
-        return self.drive == "continue-verify"
-
     def _back_to_committed(self) -> None:
         self.batch.restore(self._committed)
         self._reached[:] = 0.0
-        self._straight[:] = True
         if self._committed_response is None and self.reuse_tol > 0:
             self._committed_response = self.batch.homogenize()  # the state itself, unstepped
         self._current = self._committed_response
 
-    def _moving(self, target: np.ndarray, failed: np.ndarray, restart: bool) -> np.ndarray:
+    def _moving(self, target: np.ndarray, failed: np.ndarray) -> np.ndarray:
         """The RVEs that must be stepped for ``target``: all with reuse off or before any
-        response is known; else those that moved by more than ``reuse_tol``. With
-        ``restart`` (a check of a converged iterate), an RVE on the straight path at exactly
-        (or within reuse_tol of) its target is kept, every other one is stepped."""
-        if self._current is None:
+        response is known; else those that moved by more than ``reuse_tol``."""
+        if self.reuse_tol <= 0 or self._current is None:
             return ~failed
         change = np.abs(target - self._reached).max(axis=(1, 2))
-        if restart:
-            return ~(self._straight & (change <= self.reuse_tol)) & ~failed
-        if self.reuse_tol <= 0:
-            return ~failed
         return (change > self.reuse_tol) & ~failed
 
     def _measure(self, moved: np.ndarray) -> Homogenized:
@@ -260,18 +241,16 @@ class InProcessBackend:
             return self._current
         return self._current.with_rves(moved, self.batch.homogenize(moved))
 
-    def evaluate(self, grad_u: np.ndarray, restart: bool = False) -> Evaluation:
+    def evaluate(self, grad_u: np.ndarray) -> Evaluation:
         """Respond to ∇u [-] (B, 2, 2) since the commit: the RVEs that moved are driven to
-        it, the others reused (see the class docstring); homogenised results. ``restart``
-        drives from the committed state whatever the drive, every RVE not on the straight
-        path to its ∇u (the check of ``continue-verify``)."""
+        it, the others reused (see the class docstring); homogenised results."""
         self._trial = False
         finite = np.isfinite(grad_u).all(axis=(1, 2))
         grad_u = np.where(finite[:, None, None], grad_u, 0.0)
         # with no lag this is grad_u exactly (the lag is exactly zero where no RVE was reused)
         target = grad_u + self.lag + grad_u @ self.lag
         failed = ~finite
-        moving = self._moving(target, failed, restart)
+        moving = self._moving(target, failed)
         total = np.zeros(3, dtype=np.int64)  # DEM steps, RVE paths, particle-steps
         perturbed: list[np.ndarray] = []
         cost: tuple[int, int, int] | None = (0, 0, 0)
@@ -289,7 +268,7 @@ class InProcessBackend:
                 sigma[moving] = self.batch.homogenize(moving).stress
                 perturbed.append(sigma)
         if cost is not None:
-            if self.drive == "restart" or perturbed or restart:
+            if self.drive == "restart" or perturbed:
                 cost = self._drive(target, failed, moving)
             else:  # from the current trial state, by the change since it
                 eye = np.eye(2)
@@ -308,9 +287,6 @@ class InProcessBackend:
                 tangent[moved, :, :, row, col] = ((sigma[moved] - stress[moved])
                                                   / size[moved, None, None])
             new = replace(new, tangent=tangent)
-        from_commit = (self.drive == "restart" or bool(perturbed) or restart
-                       or not self._reached.any())
-        self._straight[moved] = from_commit or ~self._reached[moved].any(axis=(1, 2))
         self._reached[moved] = target[moved]
         self._current = new
         self._target = target
@@ -342,7 +318,6 @@ class InProcessBackend:
                                 @ np.linalg.inv(eye + self._reached[reused]) - eye)
         self._reached[:] = 0.0
         self._target[:] = 0.0
-        self._straight[:] = True
         self._committed_response = self._current
         self._trial = False
 

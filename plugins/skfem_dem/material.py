@@ -49,10 +49,8 @@ class DEMMaterialParameters:
             :class:`~granular_material_skfem.backend.InProcessBackend`); 0: every RVE is
             stepped at every evaluation.
         reuse_correction: "none" or "tangent" (a reused response corrected to first order).
-        drive: "restart" (every trial from the committed state, Guo & Zhao), "continue"
-            (from the last trial state by the change of ∇u) or "continue-verify" (continue,
-            and a converged iterate is driven once more from the committed state before it
-            is committed).
+        drive: "restart" (every trial from the committed state, Guo & Zhao) or "continue"
+            (from the last trial state by the change of ∇u).
         max_dem_steps: cap on one RVE path's DEM steps per evaluation: a point whose path
             needs more is reported failed (Newton cuts back); None: no cap.
     """
@@ -163,12 +161,6 @@ class DEMMaterial:
                                 device=p.device, progress=self.progress)
         return batch.to_data()
 
-    @property
-    def verifies_converged(self) -> bool:
-        """True with ``drive="continue-verify"``: the Newton driver then evaluates a converged
-        iterate once more with :meth:`evaluate_from_commit` before it commits."""
-        return self.backend is not None and self.backend.verifies_converged
-
     def evaluate(self, grad_u: np.ndarray) -> MaterialResponse:
         """Love stress and Kruyt–Rothenburg tangent for ∇u (n, 2, 2) since the commit.
 
@@ -176,20 +168,12 @@ class DEMMaterial:
         ``particle_steps`` the disc-steps; ``fields`` holds ``void_ratio`` and
         ``coordination``. RVEs that blew up are reported with ``PointStatus.FAILED``.
         """
-        return self._evaluate(grad_u, restart=False)
-
-    def evaluate_from_commit(self, grad_u: np.ndarray) -> MaterialResponse:
-        """As :meth:`evaluate`, but every RVE that reached its ∇u by a detour (``continue``
-        drives) is driven again from its committed state along the straight path."""
-        return self._evaluate(grad_u, restart=True)
-
-    def _evaluate(self, grad_u: np.ndarray, restart: bool) -> MaterialResponse:
         if self.backend is None:
             raise RuntimeError("allocate() the DEM material before evaluate()")
         grad_u = np.asarray(grad_u, dtype=np.float64)
         if grad_u.shape != (self.n_points, 2, 2):
             raise ValueError(f"grad_u must have shape ({self.n_points}, 2, 2), got {grad_u.shape}")
-        ev = self.backend.evaluate(grad_u, restart=restart)
+        ev = self.backend.evaluate(grad_u)
         h = ev.homogenized
         status = np.where(ev.failed, PointStatus.FAILED, PointStatus.OK).astype(np.int8)
 
