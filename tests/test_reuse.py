@@ -130,6 +130,9 @@ def test_continue_drives_from_the_trial_state_with_fewer_steps(small_rve_path):
     p = 0.5 * np.abs(np.trace(a.stress, axis1=1, axis2=2))
     # the same response up to the path dependence of a small detour
     assert (np.abs(a.stress - b.stress).max(axis=(1, 2)) < 0.05 * p).all()
+    again = cont.evaluate(nudged)  # already there: not stepped, the same answer
+    assert again.rve_evaluations == 0
+    np.testing.assert_array_equal(again.stress, b.stress)
     with pytest.raises(ValueError, match="continue"):
         DEMMaterial(drive="continue", tangent="perturbation")
 

@@ -7,9 +7,10 @@ converged, commits it. Arrays are batch-first: point ``p`` of a mesh is ``elemen
 
 Semantics every implementation keeps:
 
-- ``evaluate(grad_u)`` always starts from the *committed* state, so calling it twice with the
-  same ``grad_u`` gives the same answer (idempotent) and a failed Newton iteration costs no
-  state;
+- ``evaluate(grad_u)`` starts from the *committed* state, so calling it twice with the same
+  ``grad_u`` gives the same answer (idempotent) and a failed Newton iteration costs no state
+  (a DEM material with ``drive="continue"`` drives its RVEs on from their last trial state
+  instead: still idempotent, but its answer depends on the iterates that came before);
 - ``commit()`` makes the state of the last ``evaluate`` the committed one;
 - ``revert()`` drops the trial state (the next ``evaluate`` starts from the committed one
   anyway, but a material that keeps its trial state in place restores it here);

@@ -226,11 +226,17 @@ class InProcessBackend:
 
     def _moving(self, target: np.ndarray, failed: np.ndarray) -> np.ndarray:
         """The RVEs that must be stepped for ``target``: all with reuse off or before any
-        response is known; else those that moved by more than ``reuse_tol``."""
-        if self.reuse_tol <= 0 or self._current is None:
+        response is known; else those that moved by more than ``reuse_tol``. Driven on
+        (``continue``), an RVE already at exactly ``target`` is not stepped either, so that
+        evaluating the same ∇u twice gives the same answer."""
+        if self._current is None:
             return ~failed
         change = np.abs(target - self._reached).max(axis=(1, 2))
-        return (change > self.reuse_tol) & ~failed
+        if self.reuse_tol > 0:
+            return (change > self.reuse_tol) & ~failed
+        if self.drive == "continue":
+            return (change > 0) & ~failed
+        return ~failed
 
     def _measure(self, moved: np.ndarray) -> Homogenized:
         """The current response: measured afresh for the ``moved`` RVEs, kept for the
