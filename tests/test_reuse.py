@@ -188,6 +188,7 @@ def test_cli_reports_counts_and_writes_tracked_csv(small_rve_path, tmp_path, cap
     assert code == 0
     summary = json.loads(capsys.readouterr().out)
     assert summary["rve_evaluations"] > 0 and summary["particle_steps"] > 0
+    assert json.loads((out / "summary.json").read_text()) == summary
     assert summary["tracked_rows"] == 4
     steps = (out / "steps.csv").read_text().splitlines()[0].split(",")
     assert {"dem_steps", "rve_evaluations", "particle_steps"} <= set(steps)

@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import json
 import math
+import os
 import sys
 import time
 from pathlib import Path
@@ -151,7 +153,7 @@ def _common_arguments(parser: argparse.ArgumentParser) -> None:
                         help="lateral confining pressure [Pa], compression positive "
                              "(default 100e3)")
     parser.add_argument("--steps", type=int, default=100, help="load steps (default 100)")
-    add_out(parser, "output folder: steps.csv, points.csv, fields.xdmf, figures")
+    add_out(parser, "output folder: steps.csv, points.csv, fields.xdmf, summary.json, figures")
     add_json(parser, "a summary")
     add_device(parser, "DEM device")
     parser.add_argument("--shards", type=int, default=None,
@@ -268,6 +270,13 @@ def _scale_name(scale: str, elements: tuple[int, int], particles: int) -> str:
 
 
 def _report(args: argparse.Namespace, summary: dict[str, Any]) -> int:
+    """Print the summary and, with ``--out``, write it there as ``summary.json`` too (whole,
+    or not at all); the exit code."""
+    if args.out is not None and Path(args.out).is_dir():
+        path = Path(args.out) / "summary.json"
+        part = path.with_name(path.name + ".part")
+        part.write_text(json.dumps(summary, indent=2, default=str) + "\n")
+        os.replace(part, path)
     emit(args, summary)
     if summary["error"]:
         print(f"error: {summary['error']}", file=sys.stderr)
