@@ -138,12 +138,15 @@ def _dem_parameters(args: argparse.Namespace) -> dict[str, Any]:
             "drive": args.drive, "max_dem_steps": args.max_dem_steps}
 
 
-def _tracking(args: argparse.Namespace) -> Tracking | None:
+def _tracking(args: argparse.Namespace, n_points: int) -> Tracking | None:
+    """The ``--track`` request, checked against the mesh's ``n_points`` before any work."""
     if args.track is None:
         return None
     if getattr(args, "material", "dem") != "dem":
         raise ValueError("--track needs --material dem (its Gauss points carry RVEs)")
-    return Tracking.parse(args.postprocess, args.track, args.every)
+    tracking = Tracking.parse(args.postprocess, args.track, args.every)
+    tracking.check_points(n_points)
+    return tracking
 
 
 def _common_arguments(parser: argparse.ArgumentParser) -> None:
@@ -288,8 +291,6 @@ def _run(args: argparse.Namespace, setup: BiaxialSetup, material: Material,
          material_name: str, tracking: Tracking | None = None,
          ) -> tuple[BiaxialResult, dict[str, Any]]:
     """The FEM run, written under ``--out`` as it goes; the result and its summary."""
-    if tracking is not None:
-        tracking.check_points(setup.n_points)
     t0 = time.perf_counter()
     with contextlib.ExitStack() as stack:
         stack.enter_context(cleanup_on_rejection(args.out))
@@ -311,9 +312,7 @@ def run_single_element(args: argparse.Namespace) -> int:
     _check(args)
     setup = BiaxialSetup(width=1.0, height=1.0, nx=1, ny=1, confining=args.confining,
                          axial_strain=args.axial_strain)
-    tracking = _tracking(args)
-    if tracking is not None:
-        tracking.check_points(setup.n_points)
+    tracking = _tracking(args, setup.n_points)
     progress = progress_enabled(args)
     material: Material
     if args.material == "linear-elastic":
@@ -373,9 +372,7 @@ def run_biaxial_command(args: argparse.Namespace) -> int:
     setup = BiaxialSetup(width=args.width, height=args.height, nx=nx, ny=ny,
                          confining=args.confining, axial_strain=args.axial_strain,
                          platens=args.platens)
-    tracking = _tracking(args)
-    if tracking is not None:
-        tracking.check_points(setup.n_points)
+    tracking = _tracking(args, setup.n_points)
     progress = progress_enabled(args)
     material = create_material("dem", rve=args.rve, particles=particles, seed=args.seed,
                                pressure=args.confining, device=device, shards=args.shards,

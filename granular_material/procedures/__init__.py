@@ -9,6 +9,7 @@ from granular_material.procedures.servo import consolidate, servo_steps
 from granular_material.procedures.strain_path import (
     drive_grad_u,
     has_real_logarithm,
+    over_step_cap,
     path_increment,
     path_steps,
 )
@@ -18,6 +19,7 @@ __all__ = [
     "consolidate",
     "drive_grad_u",
     "has_real_logarithm",
+    "over_step_cap",
     "path_increment",
     "path_steps",
     "prepare_packing",

@@ -13,7 +13,13 @@ from scipy.linalg import logm
 
 from granular_material.dem import DEMBatch
 
-__all__ = ["drive_grad_u", "has_real_logarithm", "path_increment", "path_steps"]
+__all__ = [
+    "drive_grad_u",
+    "has_real_logarithm",
+    "over_step_cap",
+    "path_increment",
+    "path_steps",
+]
 
 
 def _as_batch_grad(batch: DEMBatch, grad_u: np.ndarray) -> np.ndarray:
@@ -62,6 +68,30 @@ def path_increment(grad_u: np.ndarray, k: int, increments: int) -> np.ndarray:
 _STEP_LIMIT = 10**15
 
 
+def _wanted_steps(grad_u: np.ndarray, max_strain_per_step: float,
+                  min_steps: int) -> np.ndarray:
+    """Uncapped step counts ``max(ceil(max|∇u_b| / max_strain_per_step), min_steps)``, float."""
+    if not (math.isfinite(max_strain_per_step) and max_strain_per_step > 0):
+        raise ValueError(f"max_strain_per_step must be positive, got {max_strain_per_step!r}")
+    if min_steps < 1:
+        raise ValueError(f"min_steps must be >= 1, got {min_steps}")
+    g = np.asarray(grad_u, dtype=np.float64)
+    if g.size == 0:
+        return np.zeros(0)
+    return np.maximum(np.ceil(np.abs(g).max(axis=(1, 2)) / max_strain_per_step), min_steps)
+
+
+def _cap(max_steps: int | None) -> int:
+    return _STEP_LIMIT if max_steps is None else min(int(max_steps), _STEP_LIMIT)
+
+
+def over_step_cap(grad_u: np.ndarray, max_strain_per_step: float = 1.0e-5,
+                  min_steps: int = 2, max_steps: int | None = None) -> np.ndarray:
+    """Which RVEs' paths to ∇u (B, 2, 2) would need more than ``max_steps`` DEM steps (or
+    more than 10¹⁵, where the count stops being an integer), shape (B,), bool."""
+    return _wanted_steps(grad_u, max_strain_per_step, min_steps) > _cap(max_steps)
+
+
 def path_steps(grad_u: np.ndarray, max_strain_per_step: float = 1.0e-5,
                min_steps: int = 2, max_steps: int | None = None) -> np.ndarray:
     """DEM steps of each RVE's path to ∇u (B, 2, 2): ``max(ceil(max|∇u_b| / max_strain_per_step),
@@ -70,15 +100,9 @@ def path_steps(grad_u: np.ndarray, max_strain_per_step: float = 1.0e-5,
     ``ValueError`` naming the RVE when a path would need more than ``max_steps`` steps (or
     more than 10¹⁵, where the count stops being an integer).
     """
-    if not (math.isfinite(max_strain_per_step) and max_strain_per_step > 0):
-        raise ValueError(f"max_strain_per_step must be positive, got {max_strain_per_step!r}")
-    if min_steps < 1:
-        raise ValueError(f"min_steps must be >= 1, got {min_steps}")
     g = np.asarray(grad_u, dtype=np.float64)
-    if g.size == 0:
-        return np.zeros(0, dtype=np.int64)
-    wanted = np.maximum(np.ceil(np.abs(g).max(axis=(1, 2)) / max_strain_per_step), min_steps)
-    cap = _STEP_LIMIT if max_steps is None else min(int(max_steps), _STEP_LIMIT)
+    wanted = _wanted_steps(g, max_strain_per_step, min_steps)
+    cap = _cap(max_steps)
     if (wanted > cap).any():
         rve = int(np.argmax(wanted))
         raise ValueError(
@@ -87,7 +111,6 @@ def path_steps(grad_u: np.ndarray, max_strain_per_step: float = 1.0e-5,
             f"the cap of {cap} (max_dem_steps); apply it in load steps, or raise the cap"
         )
     return wanted.astype(np.int64)
-
 
 
 def drive_grad_u(

@@ -56,8 +56,8 @@ def run_summary(result: BiaxialResult, wall: float) -> dict[str, Any]:
         "cutbacks": int(done["cutbacks"].sum()),
         "stalled_increments": int(done["stalled"].sum()),
         "dem_steps": int(done["dem_steps"].sum()),
-        "rve_evaluations": int(done["rve_evaluations"].sum()) if len(done) else 0,
-        "particle_steps": int(done["particle_steps"].sum()) if len(done) else 0,
+        "rve_evaluations": int(done["rve_evaluations"].sum()),
+        "particle_steps": int(done["particle_steps"].sum()),
         "wall_time_s": wall,
         "error": result.error,
     }

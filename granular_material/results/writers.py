@@ -119,7 +119,7 @@ class BiaxialWriter:
         self._stack = ExitStack()
         self._fields: FieldWriter | None = None
         self._rows: list[dict[str, Any]] = []
-        self._tracked: list[pd.DataFrame] = []
+        self._tracked_any = False  # tracked.csv begun: later rows are appended
 
     def __enter__(self) -> BiaxialWriter:
         self.out_dir.mkdir(parents=True, exist_ok=True)
@@ -134,7 +134,7 @@ class BiaxialWriter:
             FieldWriter(self.out_dir / "fields.xdmf", problem)
         )
         self._rows = []
-        self._tracked = []
+        self._tracked_any = False
 
     def record(self, row: dict[str, Any], points: pd.DataFrame, u: np.ndarray,
                tracked: pd.DataFrame | None = None) -> None:
@@ -147,8 +147,8 @@ class BiaxialWriter:
         write_tables(pd.DataFrame(self._rows), points, self.out_dir,
                      append_points=len(self._rows) > 1)
         if tracked is not None and len(tracked):
-            self._tracked.append(tracked)
-            write_csv(pd.concat(self._tracked, ignore_index=True), self.out_dir / "tracked.csv")
+            write_csv(tracked, self.out_dir / "tracked.csv", append=self._tracked_any)
+            self._tracked_any = True
 
     def finish(self, result: BiaxialResult) -> None:
         """Write the whole tables of the run."""

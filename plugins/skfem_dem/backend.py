@@ -17,7 +17,12 @@ from typing import Protocol
 import numpy as np
 
 from granular_material.dem import DEMBatch, DEMInstabilityError, Homogenized, RVEData, save_rve
-from granular_material.procedures import drive_grad_u, has_real_logarithm, path_steps
+from granular_material.procedures import (
+    drive_grad_u,
+    has_real_logarithm,
+    over_step_cap,
+    path_steps,
+)
 
 __all__ = [
     "DRIVES",
@@ -38,7 +43,6 @@ DRIVES = ("restart", "continue")
 #: its tangent for the change of ∇u
 REUSE_CORRECTIONS = ("none", "tangent")
 _COMPONENTS = ((0, 0), (0, 1), (1, 0), (1, 1))  # the (k, l) of ∂u_k/∂x_l
-_STEP_LIMIT = 10**15  # steps of one path beyond which the count is no longer exact
 
 
 def check_driving(tangent: str, perturbation: float, min_perturbation: float,
@@ -196,8 +200,8 @@ class InProcessBackend:
         steps, RVE paths, particle-steps), or None when the batch did not come through (all
         RVEs are then back in their committed state)."""
         failed |= moving & ~has_real_logarithm(np.eye(2) + grad_u)
-        cap = _STEP_LIMIT if self.max_steps is None else min(self.max_steps, _STEP_LIMIT)
-        failed |= moving & (np.abs(grad_u).max(axis=(1, 2)) / self.max_strain_per_step > cap)
+        failed |= moving & over_step_cap(grad_u, self.max_strain_per_step, self.min_steps,
+                                         self.max_steps)
         moving = moving & ~failed
         if restart:
             self.batch.restore(self._committed, None if moving.all() else moving)
