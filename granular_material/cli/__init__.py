@@ -17,7 +17,11 @@ import warnings
 from importlib.metadata import entry_points
 
 from granular_material import __version__
-from granular_material.cli.options import UsageError
+from granular_material.cli.options import (
+    UsageError,
+    interrupt_exit_code,
+    stop_signals_as_interrupt,
+)
 
 __all__ = ["UsageError", "build_parser", "main", "quiet_warp"]
 
@@ -59,12 +63,19 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run the command line; returns the exit code (2 for bad input)."""
+    """Run the command line; returns the exit code (2 for bad input, 1 for a failed or stopped
+    run, 130/143 for Ctrl-C/SIGTERM before a command had anything to write)."""
     quiet_warp()  # keep stdout clean for --json
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
-        return int(args.func(args) or 0)
+        with stop_signals_as_interrupt():
+            return int(args.func(args) or 0)
+    except KeyboardInterrupt as exc:  # Ctrl-C or SIGTERM that the command did not catch
+        what = "terminated (SIGTERM)" if interrupt_exit_code(exc) == 143 else "interrupted"
+        print(f"granular-material {args.command}: {what} before it had anything to write",
+              file=sys.stderr)
+        return interrupt_exit_code(exc)
     except (UsageError, ValueError, OSError) as exc:
         print(f"granular-material {args.command}: error: {exc}", file=sys.stderr)
         return 2

@@ -8,6 +8,7 @@ import contextlib
 import json
 import math
 import os
+import signal
 import sys
 from collections.abc import Iterator
 from pathlib import Path
@@ -17,6 +18,7 @@ import numpy as np
 
 __all__ = [
     "DEFAULT_MAX_DEM_STEPS",
+    "Terminated",
     "UsageError",
     "add_device",
     "add_dtype",
@@ -28,12 +30,14 @@ __all__ = [
     "check_output_file",
     "cleanup_on_rejection",
     "emit",
+    "interrupt_exit_code",
     "make_parents",
     "positive",
     "positive_int",
     "progress_enabled",
     "rve_file_shape",
     "scalar_or_list",
+    "stop_signals_as_interrupt",
     "warn",
 ]
 
@@ -47,6 +51,37 @@ DEFAULT_MAX_DEM_STEPS = 1_000_000
 
 class UsageError(ValueError):
     """Bad input from the user: reported on stderr with exit code 2."""
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM (a batch scheduler's or ``timeout``'s stop), raised where Ctrl-C raises
+    ``KeyboardInterrupt``, so that every command stops on it as on Ctrl-C."""
+
+
+def _raise_terminated(signum: int, frame: object) -> None:
+    raise Terminated(f"signal {signal.Signals(signum).name}")
+
+
+@contextlib.contextmanager
+def stop_signals_as_interrupt() -> Iterator[None]:
+    """While the block runs, SIGTERM raises :class:`Terminated` (a ``KeyboardInterrupt``) in
+    the main thread, as Ctrl-C does; the previous handler comes back afterwards. A no-op
+    outside the main thread, where Python cannot install signal handlers."""
+    try:
+        previous = signal.signal(signal.SIGTERM, _raise_terminated)
+    except ValueError:  # not the main thread
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def interrupt_exit_code(exc: KeyboardInterrupt) -> int:
+    """The shell's exit code of a command stopped by ``exc`` and not caught by it: 128 + the
+    signal number (130 for Ctrl-C, 143 for SIGTERM)."""
+    return 128 + (signal.SIGTERM if isinstance(exc, Terminated) else signal.SIGINT)
 
 
 def positive(text: str) -> float:
