@@ -9,6 +9,7 @@ import math
 import os
 import sys
 import time
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -23,6 +24,8 @@ from granular_material.cli.options import (
     check_output_dir,
     cleanup_on_rejection,
     emit,
+    interrupt_exit_code,
+    positive_int,
     progress_enabled,
     rve_file_shape,
 )
@@ -30,8 +33,10 @@ from granular_material.fem import (
     DEM_REUSE_TOL,
     BiaxialResult,
     BiaxialSetup,
+    CheckpointError,
     Material,
     NewtonSettings,
+    RunCheckpoint,
     Tracking,
     available_postprocessors,
     create_material,
@@ -164,6 +169,15 @@ def _common_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--map-strain", type=float, nargs="+", default=[0.02],
                         help="axial strain(s) of the displacement/shear-strain maps and of the "
                              "shear-band measures (default 0.02)")
+    g = parser.add_argument_group("checkpoints (with --out)")
+    g.add_argument("--checkpoint-every", type=positive_int, default=1, metavar="N",
+                   help="save the committed state (RVEs with contact history, displacement, "
+                        "Newton state) in OUT/checkpoint after every N load steps and after "
+                        "the last (default 1); the tables of every step are kept regardless")
+    g.add_argument("--resume", type=Path, default=None, metavar="DIR",
+                   help="continue the stopped or killed run whose --out was DIR, in DIR, "
+                        "from its last checkpoint (give the other options as then); the "
+                        "result is the one of a run that never stopped")
     add_progress(parser)
 
 
@@ -239,7 +253,81 @@ def _stress_tol(args: argparse.Namespace, material: str) -> float:
     return default_stress_tol(material, args.confining)
 
 
+#: options that may differ between a run and its resume: where it writes, how it reports, how
+#: often it saves, and the CPU threads (sharding never changes a result)
+_RESUME_FREE = frozenset({"resume", "out", "progress", "json", "checkpoint_every", "shards",
+                          "func", "command"})
+
+
+def _run_options(args: argparse.Namespace) -> dict[str, Any]:
+    """The options that decide a run's result, as JSON values (kept in its checkpoint)."""
+    return {k: (str(v) if isinstance(v, Path) else v) for k, v in sorted(vars(args).items())
+            if k not in _RESUME_FREE}
+
+
+def _check_resume(args: argparse.Namespace) -> None:
+    """``--resume DIR``: the output folder is DIR, and a checkpoint there is of a run with
+    the options given now (UsageError naming what differs). DIR with no checkpoint yet (a
+    run killed before it saved one, or none started) is allowed: the run starts there."""
+    if args.resume is None:
+        return
+    if args.out is not None and Path(args.out).resolve() != Path(args.resume).resolve():
+        raise UsageError(f"--resume {args.resume} continues in that folder; --out {args.out} "
+                         "names another (leave --out out)")
+    args.out = args.resume
+    checkpoint = RunCheckpoint(Path(args.resume) / "checkpoint")
+    if not checkpoint.has_options():
+        return
+    try:
+        saved = checkpoint.read_options()
+    except CheckpointError as exc:
+        raise UsageError(f"--resume {args.resume}: {exc}") from None
+    given = json.loads(json.dumps(_run_options(args), default=str))
+    if saved.get("command") not in (None, args.command):
+        raise UsageError(f"--resume {args.resume} is a {saved['command']} run, not "
+                         f"{args.command}")
+    saved.pop("command", None)
+    differ = [f"--{k.replace('_', '-')} {given.get(k)!r} (the run had {saved.get(k)!r})"
+              for k in sorted(set(saved) | set(given)) if saved.get(k) != given.get(k)]
+    if differ:
+        raise UsageError(f"--resume {args.resume}: give the options the run was started with; "
+                         f"these differ: {'; '.join(differ)}")
+
+
+def _open_checkpoint(args: argparse.Namespace) -> tuple[RunCheckpoint | None, bool]:
+    """The run's checkpoint (None without --out) and whether it resumes from a saved state
+    (else it starts afresh: see :func:`_checkpointed`)."""
+    if args.out is None:
+        return None, False
+    checkpoint = RunCheckpoint(Path(args.out) / "checkpoint", every=args.checkpoint_every)
+    if args.resume is not None and checkpoint.has_state():
+        return checkpoint, True
+    if args.resume is not None:
+        print(f"granular-material {args.command}: {args.resume} holds no saved step yet; "
+              "the run starts from the beginning", file=sys.stderr)
+    return checkpoint, False
+
+
+@contextlib.contextmanager
+def _checkpointed(args: argparse.Namespace, checkpoint: RunCheckpoint | None,
+                  resuming: bool) -> Iterator[None]:
+    """The block that writes under ``--out``: a fresh run first empties the checkpoint and
+    records its options; input rejected in the block (``ValueError``) leaves neither the
+    fresh checkpoint nor the folders made for it behind."""
+    with cleanup_on_rejection(args.out):
+        if checkpoint is None or resuming:
+            yield
+            return
+        checkpoint.start({"command": args.command, **_run_options(args)})
+        try:
+            yield
+        except ValueError:
+            checkpoint.remove()
+            raise
+
+
 def _check(args: argparse.Namespace) -> None:
+    _check_resume(args)
     if args.steps < 1:
         raise ValueError(f"--steps must be >= 1, got {args.steps}")
     if not (math.isfinite(args.confining) and args.confining > 0):
@@ -272,15 +360,23 @@ def _scale_name(scale: str, elements: tuple[int, int], particles: int) -> str:
     return scale if (tuple(elements), particles) == (tuple(preset[0]), preset[1]) else "custom"
 
 
-def _report(args: argparse.Namespace, summary: dict[str, Any]) -> int:
+def _report(args: argparse.Namespace, summary: dict[str, Any],
+            interrupt: KeyboardInterrupt | None = None) -> int:
     """Print the summary and, with ``--out``, write it there as ``summary.json`` too (whole,
-    or not at all); the exit code."""
+    or not at all); the exit code: 0, 1 when the run stopped short, 130/143 when Ctrl-C or
+    SIGTERM (``interrupt``) stopped it."""
     if args.out is not None and Path(args.out).is_dir():
         path = Path(args.out) / "summary.json"
         part = path.with_name(path.name + ".part")
         part.write_text(json.dumps(summary, indent=2, default=str) + "\n")
         os.replace(part, path)
     emit(args, summary)
+    if interrupt is not None:
+        print(f"error: {summary['error']}", file=sys.stderr)
+        if args.out is not None:
+            print(f"continue it with --resume {args.out} and the same options",
+                  file=sys.stderr)
+        return interrupt_exit_code(interrupt)
     if summary["error"]:
         print(f"error: {summary['error']}", file=sys.stderr)
         return 1
@@ -289,17 +385,20 @@ def _report(args: argparse.Namespace, summary: dict[str, Any]) -> int:
 
 def _run(args: argparse.Namespace, setup: BiaxialSetup, material: Material,
          material_name: str, tracking: Tracking | None = None,
+         checkpoint: RunCheckpoint | None = None, resuming: bool = False,
          ) -> tuple[BiaxialResult, dict[str, Any]]:
-    """The FEM run, written under ``--out`` as it goes; the result and its summary."""
+    """The FEM run, written under ``--out`` as it goes (and checkpointed there), resumed
+    from its checkpoint when ``resuming``; the result and its summary."""
     t0 = time.perf_counter()
     with contextlib.ExitStack() as stack:
-        stack.enter_context(cleanup_on_rejection(args.out))
         writer = (stack.enter_context(BiaxialWriter(args.out)) if args.out is not None
                   else None)
         result = run_biaxial(setup, material, args.steps, _settings(args, material_name),
                              progress=progress_enabled(args), observer=writer,
-                             stress_tol=_stress_tol(args, material_name), tracking=tracking)
+                             stress_tol=_stress_tol(args, material_name), tracking=tracking,
+                             checkpoint=checkpoint, resume=resuming)
     summary = run_summary(result, time.perf_counter() - t0)
+    summary["resumed_from_step"] = result.resumed_from
     if tracking is not None:
         summary["tracked_rows"] = len(result.tracked)
         summary["tracking_time_s"] = (float(result.tracked["seconds"].sum())
@@ -325,11 +424,15 @@ def run_single_element(args: argparse.Namespace) -> int:
                                    shards=args.shards, progress=progress,
                                    tangent=args.tangent, perturbation=args.perturbation,
                                    **_dem_parameters(args))
-        material.allocate(setup.n_points)
-    reference = None
-    if args.material == "dem" and args.compare_dem:
-        reference = _pure_dem(material, args, progress)
-    result, summary = _run(args, setup, material, args.material, tracking)
+    checkpoint, resuming = _open_checkpoint(args)
+    with _checkpointed(args, checkpoint, resuming):
+        if not resuming:
+            material.allocate(setup.n_points)
+        reference = None
+        if args.material == "dem" and args.compare_dem:
+            reference = _reference(material, args, progress, checkpoint)
+        result, summary = _run(args, setup, material, args.material, tracking, checkpoint,
+                               resuming)
     if reference is not None:
         peak, ratio = find_peak(reference["axial_strain"].to_numpy(),
                                 reference["stress_ratio"].to_numpy())
@@ -340,7 +443,20 @@ def run_single_element(args: argparse.Namespace) -> int:
         if reference is not None:
             write_csv(reference, Path(args.out) / "pure_dem.csv")
         summary["out"] = str(args.out)
-    return _report(args, summary)
+    return _report(args, summary, result.interrupt)
+
+
+def _reference(material: Any, args: argparse.Namespace, progress: bool,
+               checkpoint: RunCheckpoint | None) -> pd.DataFrame:
+    """The pure-DEM curve beside the element: computed once, from the RVE before the first
+    load step, and kept in the checkpoint (a resumed run reads it back)."""
+    saved = None if checkpoint is None else checkpoint.load_table("pure_dem")
+    if saved is not None:
+        return saved
+    curve = _pure_dem(material, args, progress)
+    if checkpoint is not None:
+        checkpoint.save_table("pure_dem", curve)
+    return curve
 
 
 def _pure_dem(material: Any, args: argparse.Namespace, progress: bool) -> pd.DataFrame:
@@ -378,8 +494,11 @@ def run_biaxial_command(args: argparse.Namespace) -> int:
                                pressure=args.confining, device=device, shards=args.shards,
                                progress=progress, tangent=args.tangent,
                                perturbation=args.perturbation, **_dem_parameters(args))
-    material.allocate(setup.n_points)
-    result, summary = _run(args, setup, material, "dem", tracking)
+    checkpoint, resuming = _open_checkpoint(args)
+    with _checkpointed(args, checkpoint, resuming):
+        if not resuming:
+            material.allocate(setup.n_points)
+        result, summary = _run(args, setup, material, "dem", tracking, checkpoint, resuming)
     summary.update(scale=_scale_name(scale, (nx, ny), particles), elements=[nx, ny],
                    gauss_points=setup.n_points,
                    particles=particles, device=device)
@@ -387,4 +506,4 @@ def run_biaxial_command(args: argparse.Namespace) -> int:
     if args.out is not None:
         write_outputs(result, args.out, map_strain=args.map_strain)
         summary["out"] = str(args.out)
-    return _report(args, summary)
+    return _report(args, summary, result.interrupt)

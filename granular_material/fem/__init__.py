@@ -8,6 +8,7 @@ summarised by :mod:`granular_material.results`). :func:`default_settings` holds 
 settings the commands use.
 """
 
+from granular_material.fem.checkpoint import CheckpointError, RunCheckpoint, SavedRun
 from granular_material.fem.defaults import (
     DEM_REUSE_TOL,
     default_settings,
@@ -25,6 +26,7 @@ from granular_material.fem.material import (
     load_material,
 )
 from granular_material.fem.newton import (
+    CommittedState,
     NewtonError,
     NewtonSettings,
     NewtonSolver,
@@ -43,6 +45,8 @@ __all__ = [
     "BiaxialProblem",
     "BiaxialResult",
     "BiaxialSetup",
+    "CheckpointError",
+    "CommittedState",
     "LinearElastic",
     "LinearElasticParameters",
     "Loading",
@@ -52,7 +56,9 @@ __all__ = [
     "NewtonSettings",
     "NewtonSolver",
     "PointStatus",
+    "RunCheckpoint",
     "RunObserver",
+    "SavedRun",
     "StepRecord",
     "Tracking",
     "available_materials",

@@ -26,7 +26,14 @@ from granular_material.fem.loading import Loading
 from granular_material.fem.material import Material, MaterialResponse
 from granular_material.procedures.progress import progress_bar
 
-__all__ = ["Loading", "NewtonError", "NewtonSettings", "NewtonSolver", "StepRecord"]
+__all__ = [
+    "CommittedState",
+    "Loading",
+    "NewtonError",
+    "NewtonSettings",
+    "NewtonSolver",
+    "StepRecord",
+]
 
 
 @dataclass(frozen=True)
@@ -138,6 +145,30 @@ class StepRecord:
     wall_time: float = 0.0
 
 
+@dataclass
+class CommittedState:
+    """What a :class:`NewtonSolver` carries from one load step to the next, beside the
+    material's own committed state: enough to resume a run exactly (see
+    :mod:`granular_material.fem.checkpoint`).
+
+    Attributes:
+        u: nodal displacement [m], shape (ndofs,), float64.
+        load_factor: λ of the committed state.
+        run_start: λ at which the current :meth:`NewtonSolver.run` began.
+        last_increment: the last converged (Δλ, Δu [m]) for the extrapolating predictor, or
+            None before the first.
+        records: the committed steps' records.
+        response: the material response of the committed state.
+    """
+
+    u: np.ndarray
+    load_factor: float
+    run_start: float
+    last_increment: tuple[float, np.ndarray] | None
+    records: list[StepRecord]
+    response: MaterialResponse
+
+
 class NewtonError(RuntimeError):
     """A load step could not be converged even with the smallest increment allowed."""
 
@@ -195,6 +226,7 @@ class NewtonSolver:
             )
         self.u = np.zeros(basis.N)
         self.load_factor = 0.0
+        self._run_start = 0.0
         self._last: tuple[float, np.ndarray] | None = None  # last converged (Δλ, Δu)
         self.records: list[StepRecord] = []
         # initial stress and tangent of the committed state (∇u = 0)
@@ -205,6 +237,29 @@ class NewtonSolver:
                 f"material fails in its initial state at points {self.response.failed_points()}"
             )
         self.f_int = internal_force(basis, self.response.stress)
+
+    def committed_state(self) -> CommittedState:
+        """The solver's committed state (copies), to checkpoint a run."""
+        last = None if self._last is None else (self._last[0], self._last[1].copy())
+        return CommittedState(self.u.copy(), self.load_factor, self._run_start, last,
+                              list(self.records), self.response)
+
+    def resume(self, state: CommittedState) -> None:
+        """Continue from ``state`` (from :meth:`committed_state`, perhaps of another process):
+        the material must already hold the committed state that belongs to it."""
+        if state.u.shape != self.u.shape:
+            raise ValueError(f"the saved displacement has shape {state.u.shape}, this mesh "
+                             f"{self.u.shape}")
+        if state.response.stress.shape[0] != self.material.n_points:
+            raise ValueError(f"the saved response has {state.response.stress.shape[0]} points, "
+                             f"the material {self.material.n_points}")
+        self.u = np.array(state.u, dtype=np.float64)
+        self.load_factor = float(state.load_factor)
+        self._run_start = float(state.run_start)
+        self._last = state.last_increment
+        self.records = list(state.records)
+        self.response = state.response
+        self.f_int = internal_force(self.basis, self.response.stress)
 
     @property
     def reaction(self) -> np.ndarray:
@@ -313,17 +368,25 @@ class NewtonSolver:
         on_step: Callable[[NewtonSolver, StepRecord], None] | None = None,
         progress: bool = False,
         description: str = "load steps",
+        done: int = 0,
     ) -> list[StepRecord]:
         """Apply the loading in ``n_steps`` equal steps of λ from the current value to 1.
 
         ``on_step(solver, record)`` is called after every committed step (for output).
+        ``done`` > 0 resumes a run (see :meth:`resume`) of which that many steps are
+        committed: the remaining steps go to the same load factors as in one go.
         """
         if n_steps < 1:
             raise ValueError(f"n_steps must be >= 1, got {n_steps}")
-        start = self.load_factor
-        first = len(self.records) + 1
+        if not 0 <= done <= n_steps:
+            raise ValueError(f"done must lie in [0, {n_steps}], got {done}")
+        if done == 0:
+            self._run_start = self.load_factor
+        start = self._run_start
+        first = len(self.records) + 1 - done
         with progress_bar(n_steps, description, progress) as bar:
-            for k in range(n_steps):
+            bar.update(done)
+            for k in range(done, n_steps):
                 target = start + (1.0 - start) * (k + 1) / n_steps
                 record = self.step(target, first + k)
                 if on_step is not None:

@@ -31,6 +31,7 @@ from typing import Any, Protocol
 import numpy as np
 import pandas as pd
 
+from granular_material.fem.checkpoint import RunCheckpoint, SavedRun
 from granular_material.fem.layout import to_points
 from granular_material.fem.material import Material
 from granular_material.fem.newton import NewtonError, NewtonSettings, NewtonSolver, StepRecord
@@ -73,6 +74,9 @@ class BiaxialResult:
         error: why the run stopped early (the :class:`NewtonError` message, or an
             interrupt), if it did.
         tracked: the tracked post-processors' rows (empty without tracking).
+        resumed_from: the load step of the checkpoint the run was resumed from, or None.
+        interrupt: the ``KeyboardInterrupt`` (Ctrl-C, or SIGTERM where the caller maps it
+            to one) that stopped the run, or None.
     """
 
     problem: BiaxialProblem
@@ -82,6 +86,8 @@ class BiaxialResult:
     records: list[StepRecord] = field(default_factory=list)
     error: str | None = None
     tracked: pd.DataFrame = field(default_factory=pd.DataFrame)
+    resumed_from: int | None = None
+    interrupt: KeyboardInterrupt | None = None
 
     def row_nearest(self, axial_strain: float) -> int:
         """Row of ``steps`` (and of ``displacements``) whose axial strain [-] is nearest."""
@@ -140,6 +146,8 @@ def run_biaxial(
     observer: RunObserver | None = None,
     stress_tol: float = 0.0,
     tracking: Tracking | None = None,
+    checkpoint: RunCheckpoint | None = None,
+    resume: bool = False,
 ) -> BiaxialResult:
     """Drive ``material`` through a drained biaxial test in ``n_steps`` load steps.
 
@@ -153,6 +161,12 @@ def run_biaxial(
     sees every committed step as it comes and the result at the end, in both cases.
     ``on_step(solver, record, points)`` is called after every committed load step.
     ``tracking`` runs post-processors on chosen points' committed RVEs (``result.tracked``).
+
+    ``checkpoint`` saves every committed step and, every ``checkpoint.every`` steps, the
+    committed state of solver and material. ``resume`` continues from its last whole
+    checkpoint (the material is restored from it: it need not be allocated) and gives the
+    same steps, tables and final state as a run that never stopped; with no state saved yet
+    the run starts from the beginning. The observer sees the saved steps again first.
     """
     problem = build_biaxial(setup)
     if tracking is not None:
@@ -162,39 +176,62 @@ def run_biaxial(
     if stress_tol > 0:
         settings = replace(settings or NewtonSettings(),
                            atol=problem.force_tolerance(stress_tol))
+    saved: SavedRun | None = None
+    if resume and checkpoint is not None and checkpoint.has_state():
+        saved = checkpoint.load()
+        material.restore(saved.material_path)
     solver = NewtonSolver(problem.basis, material, problem.loading, settings)
+    if saved is not None:
+        solver.resume(saved.state)
     rows, tables, disps, tracked = [], [], [], []
     if observer is not None:
         observer.start(problem)
 
-    def collect(solver: NewtonSolver, record: StepRecord | None) -> None:
-        row, points = _rows(solver, problem, record)
+    def keep(row: dict[str, Any], points: pd.DataFrame, u: np.ndarray,
+             step_tracked: pd.DataFrame | None) -> None:
         rows.append(row)
         tables.append(points)
-        disps.append(solver.u.copy())
+        disps.append(u.copy())
+        if step_tracked is not None:
+            tracked.append(step_tracked)
+        if observer is not None:
+            observer.record(row, points, u, step_tracked)
+
+    def collect(solver: NewtonSolver, record: StepRecord | None) -> None:
+        row, points = _rows(solver, problem, record)
         step_tracked = None
         if tracking is not None and tracking.due(row["step"]):
             step_tracked = tracking.rows(material, row["step"], row["axial_strain"],
                                          setup.n_points)
-            tracked.append(step_tracked)
-        if observer is not None:
-            observer.record(row, points, solver.u, step_tracked)
+        keep(row, points, solver.u, step_tracked)
+        if checkpoint is not None:
+            checkpoint.save_step(row, points, solver.u, step_tracked)
+            if checkpoint.due(row["step"], n_steps):
+                checkpoint.save_state(row["step"], solver, material)
         if on_step is not None and record is not None:
             on_step(solver, record, points)
 
     error = None
+    interrupt = None
     try:
-        collect(solver, None)
+        if saved is None:
+            collect(solver, None)
+        else:
+            for step in saved.steps:
+                keep(step.row, step.points, step.u, step.tracked)
         solver.run(n_steps, on_step=collect, progress=progress,
-                   description=f"biaxial {setup.nx}x{setup.ny}")
+                   description=f"biaxial {setup.nx}x{setup.ny}",
+                   done=0 if saved is None else saved.step)
     except NewtonError as exc:
         error = str(exc)
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as exc:
         error = f"interrupted after load step {len(rows) - 1} of {n_steps}"
+        interrupt = exc
     result = BiaxialResult(
         problem=problem, steps=pd.DataFrame(rows), points=pd.concat(tables, ignore_index=True),
         displacements=np.array(disps), records=list(solver.records), error=error,
         tracked=pd.concat(tracked, ignore_index=True) if tracked else pd.DataFrame(),
+        resumed_from=None if saved is None else saved.step, interrupt=interrupt,
     )
     if observer is not None:
         observer.finish(result)

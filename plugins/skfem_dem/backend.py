@@ -348,5 +348,32 @@ class InProcessBackend:
         return data if rves is None else data.take(np.asarray(rves, dtype=int))
 
     def checkpoint(self, path: str | Path) -> None:
-        """Write the committed state (contact history included) to the RVE file ``path``."""
-        save_rve(path, self.committed_rves())
+        """Write the committed state (contact history included) to the RVE file ``path``,
+        with what reuse and ``continue`` carry between steps (each RVE's lag and committed
+        response) as further arrays ``backend_*``, so that :meth:`resume_from` continues
+        exactly."""
+        data = self.committed_rves()
+        extra = dict(data.extra)
+        extra["backend_lag"] = self.lag.copy()
+        if self._committed_response is not None:
+            for f in fields(self._committed_response):
+                extra[f"backend_response_{f.name}"] = np.asarray(
+                    getattr(self._committed_response, f.name))
+        save_rve(path, replace(data, extra=extra))
+
+    def resume_from(self, data: RVEData) -> None:
+        """Take the lag and committed response of a :meth:`checkpoint` file's ``data`` (its
+        RVE states are the batch's already)."""
+        if "backend_lag" in data.extra:
+            self.lag[:] = data.extra["backend_lag"]
+        names = [f.name for f in fields(Homogenized)]
+        if all(f"backend_response_{n}" in data.extra for n in names):
+            self._committed_response = Homogenized(
+                **{n: np.array(data.extra[f"backend_response_{n}"]) for n in names})
+        self._current = self._committed_response
+
+    @staticmethod
+    def without_backend_arrays(data: RVEData) -> RVEData:
+        """``data`` less the ``backend_*`` arrays of a checkpoint (the RVE states alone)."""
+        return replace(data, extra={k: v for k, v in data.extra.items()
+                                    if not k.startswith("backend_")})

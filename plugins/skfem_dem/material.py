@@ -201,7 +201,11 @@ class DEMMaterial:
         self._allocated().checkpoint(path)
 
     def restore(self, path: str | Path) -> None:
-        """Load committed RVE states written by :meth:`checkpoint`."""
+        """Load the committed state written by :meth:`checkpoint` (RVE states with contact
+        history, and what reuse and ``continue`` carry between steps)."""
         p = self.parameters
-        self.backend = self._backend(DEMBatch(load_rve(path), device=p.device, shards=p.shards))
+        data = load_rve(path)
+        states = InProcessBackend.without_backend_arrays(data)
+        self.backend = self._backend(DEMBatch(states, device=p.device, shards=p.shards))
+        self.backend.resume_from(data)
 
