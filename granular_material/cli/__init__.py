@@ -63,8 +63,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run the command line; returns the exit code (2 for bad input, 1 for a failed or stopped
-    run, 130/143 for Ctrl-C/SIGTERM before a command had anything to write)."""
+    """Run the command line; returns the exit code (2 for bad input, 1 for a failed run,
+    130/143 for a run stopped by Ctrl-C/SIGTERM)."""
     quiet_warp()  # keep stdout clean for --json
     parser = build_parser()
     args = parser.parse_args(argv)
@@ -73,8 +73,8 @@ def main(argv: list[str] | None = None) -> int:
             return int(args.func(args) or 0)
     except KeyboardInterrupt as exc:  # Ctrl-C or SIGTERM that the command did not catch
         what = "terminated (SIGTERM)" if interrupt_exit_code(exc) == 143 else "interrupted"
-        print(f"granular-material {args.command}: {what} before it had anything to write",
-              file=sys.stderr)
+        print(f"granular-material {args.command}: {what} before its outputs "
+              "were complete", file=sys.stderr)
         return interrupt_exit_code(exc)
     except (UsageError, ValueError, OSError) as exc:
         print(f"granular-material {args.command}: error: {exc}", file=sys.stderr)

@@ -21,6 +21,7 @@ from granular_material.cli.options import (
     add_progress,
     check_output_file,
     emit,
+    interrupt_exit_code,
     make_parents,
     positive,
     positive_int,
@@ -74,10 +75,15 @@ def _load_batch(args: argparse.Namespace) -> DEMBatchType:
     return DEMBatch(data, device=args.device, dtype=args.dtype)
 
 
-def _finish(args: argparse.Namespace, report: dict[str, Any], error: str | None) -> int:
-    """Emit ``report`` with its ``error``; exit code 1 (said on stderr) when there is one."""
+def _finish(args: argparse.Namespace, report: dict[str, Any], error: str | None,
+            interrupt: KeyboardInterrupt | None = None) -> int:
+    """Emit ``report`` with its ``error``; exit code 1 (said on stderr) when there is one,
+    130/143 when Ctrl-C/SIGTERM (``interrupt``) stopped the run after what it wrote."""
     report["error"] = error
     emit(args, report)
+    if interrupt is not None:
+        print(f"granular-material {args.command}: {error}", file=sys.stderr)
+        return interrupt_exit_code(interrupt)
     if error is not None:
         print(f"granular-material {args.command}: failed: {error}", file=sys.stderr)
         return 1
@@ -172,7 +178,11 @@ def _run_prepare(args: argparse.Namespace) -> int:
 # -- biaxial-dem ---------------------------------------------------------------------------
 def _run_biaxial(args: argparse.Namespace) -> int:
     from granular_material.procedures import biaxial_test
-    from granular_material.procedures.element_tests import biaxial_steps, lateral_stress_error
+    from granular_material.procedures.element_tests import (
+        BiaxialInterrupted,
+        biaxial_steps,
+        lateral_stress_error,
+    )
     from granular_material.results import plot_biaxial_curves, summarize_biaxial, write_csv
 
     check_output_file(args.out)
@@ -190,10 +200,14 @@ def _run_biaxial(args: argparse.Namespace) -> int:
             f"{args.max_dem_steps}; raise --max-dem-steps or --strain-per-step"
         )
     batch = _load_batch(args)
-    curve = biaxial_test(batch, axial_strain=args.axial_strain, confining=args.confining,
-                         strain_per_step=args.strain_per_step,
-                         record_every=args.record_every, progress=progress_enabled(args),
-                         max_steps=args.max_dem_steps)
+    interrupt = None
+    try:
+        curve = biaxial_test(batch, axial_strain=args.axial_strain, confining=args.confining,
+                             strain_per_step=args.strain_per_step,
+                             record_every=args.record_every, progress=progress_enabled(args),
+                             max_steps=args.max_dem_steps)
+    except BiaxialInterrupted as exc:  # keep and write the records made before it
+        curve, interrupt = exc.curve, exc
     summaries = [summarize_biaxial(g) for _, g in curve.groupby("rve")]
     if args.out:
         make_parents(args.out)
@@ -228,7 +242,10 @@ def _run_biaxial(args: argparse.Namespace) -> int:
     report["warnings"] = warnings
     if args.out:
         report["out"] = str(args.out)
-    return _finish(args, report, error)
+    if interrupt is not None:
+        error = (f"{interrupt}: the curve to axial strain "
+                 f"{curve['axial_strain'].max():.4g} is kept")
+    return _finish(args, report, error, interrupt)
 
 
 # -- dem-drive -----------------------------------------------------------------------------
@@ -295,21 +312,27 @@ def _run_drive(args: argparse.Namespace) -> int:
         }))
 
     record(0)
+    interrupt = None
     # the bar counts DEM steps (what takes the time), moved at the end of each increment
     with progress_bar(sum(plan), "dem-drive", progress_enabled(args)) as bar:
-        for inc in range(1, args.increments + 1):
-            step_grad = path_increment(grad, inc, args.increments)
-            done = drive_grad_u(batch, step_grad, max_strain_per_step=args.max_strain_per_step,
-                                max_steps=args.max_dem_steps)
-            steps += done
-            record(inc)
-            bar.update(done)
-            bar.set_postfix(increment=f"{inc}/{args.increments}")
+        try:
+            for inc in range(1, args.increments + 1):
+                step_grad = path_increment(grad, inc, args.increments)
+                done = drive_grad_u(batch, step_grad,
+                                    max_strain_per_step=args.max_strain_per_step,
+                                    max_steps=args.max_dem_steps)
+                steps += done
+                record(inc)
+                bar.update(done)
+                bar.set_postfix(increment=f"{inc}/{args.increments}")
+        except KeyboardInterrupt as exc:  # keep and write the increments finished before it
+            interrupt = exc
     table = pd.concat(rows, ignore_index=True)
     if args.out:
         make_parents(args.out)
         write_csv(table, args.out)
-    last = table[table["increment"] == args.increments]
+    finished = int(table["increment"].max())
+    last = table[table["increment"] == finished]
     report: dict[str, Any] = {
         "sxx": scalar_or_list(last["sxx"].to_numpy()),
         "syy": scalar_or_list(last["syy"].to_numpy()),
@@ -321,7 +344,12 @@ def _run_drive(args: argparse.Namespace) -> int:
     }
     if args.out:
         report["out"] = str(args.out)
-    return _finish(args, report, None)
+    error = None
+    if interrupt is not None:
+        error = (f"interrupted after increment {finished} of {args.increments}: the path to "
+                 "it is kept")
+    report["increments_completed"] = finished
+    return _finish(args, report, error, interrupt)
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:

@@ -79,9 +79,12 @@ def stop_signals_as_interrupt() -> Iterator[None]:
 
 
 def interrupt_exit_code(exc: KeyboardInterrupt) -> int:
-    """The shell's exit code of a command stopped by ``exc`` and not caught by it: 128 + the
-    signal number (130 for Ctrl-C, 143 for SIGTERM)."""
-    return 128 + (signal.SIGTERM if isinstance(exc, Terminated) else signal.SIGINT)
+    """The shell's exit code of a command stopped by ``exc``: 128 + the signal number (130 for
+    Ctrl-C, 143 for SIGTERM), looked up through interrupts raised ``from`` another."""
+    cause: BaseException | None = exc
+    while cause is not None and not isinstance(cause, Terminated):
+        cause = cause.__cause__
+    return 128 + (signal.SIGTERM if cause is not None else signal.SIGINT)
 
 
 def positive(text: str) -> float:

@@ -12,7 +12,19 @@ from granular_material.dem import DEMBatch
 from granular_material.procedures.progress import progress_bar
 from granular_material.procedures.servo import CONTROL_STRAIN, CONTROL_STRESS, servo_steps
 
-__all__ = ["biaxial_steps", "biaxial_test", "lateral_stress_error"]
+__all__ = ["BiaxialInterrupted", "biaxial_steps", "biaxial_test", "lateral_stress_error"]
+
+
+class BiaxialInterrupted(KeyboardInterrupt):
+    """Ctrl-C (or what the caller maps to it, e.g. SIGTERM) during :func:`biaxial_test`,
+    raised ``from`` that interrupt: ``curve`` holds the rows recorded before it (step 0 at
+    least), in the layout the test returns."""
+
+    def __init__(self, curve: pd.DataFrame, steps_done: int, steps_total: int) -> None:
+        super().__init__(f"interrupted after DEM step {steps_done} of {steps_total}")
+        self.curve = curve
+        self.steps_done = steps_done
+        self.steps_total = steps_total
 
 
 def biaxial_steps(axial_strain: float, strain_per_step: float) -> int:
@@ -62,6 +74,9 @@ def biaxial_test(
             :func:`lateral_stress_error`).
         max_steps: ``ValueError`` before any step when the test needs more DEM steps
             (:func:`biaxial_steps`); None: no cap.
+
+    Raises:
+        BiaxialInterrupted: on Ctrl-C after the first record, with the rows recorded so far.
 
     Returns:
         One row per record and RVE: ``rve``, ``step``, ``axial_strain`` (compression
@@ -118,6 +133,9 @@ def biaxial_test(
             bar.update(chunk)
             last = rows[-1]
             bar.set_postfix(q=f"{last['stress_ratio'].mean():.3f}")
+    except KeyboardInterrupt as exc:
+        recorded = int(rows[-1]["step"].iloc[0])
+        raise BiaxialInterrupted(pd.concat(rows, ignore_index=True), recorded, total) from exc
     finally:
         bar.close()
     return pd.concat(rows, ignore_index=True)
