@@ -54,10 +54,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
-    from granular_material.cli import dem, fem  # here, so quiet_warp imports light
+    from granular_material.cli import dem, fem, study  # here, so quiet_warp imports light
 
     dem.register(subparsers)
     fem.register(subparsers)
+    study.register(subparsers)
     _register_plugins(subparsers)
     return parser
 

@@ -1,0 +1,599 @@
+"""The speed/accuracy trade study: each knob a user can turn, measured against a
+high-fidelity reference run from the same RVEs, in one run on one machine.
+
+Three tests carry the knobs:
+
+- ``dem``: the drained biaxial test of pure-DEM RVEs (one per seed, batched): discs per RVE,
+  strain per DEM step, time-step safety factor, local damping, float32 against float64;
+- ``element``: the FEM × DEM single element (one RVE copied to its 4 Gauss points): Newton
+  tolerance, stress floor, tangent, predictor and relaxation, reuse of undisturbed RVEs;
+- ``specimen``: the biaxial specimen: the mesh.
+
+Every knob varies one setting with the others at the reference (:data:`REFERENCE`). A run's
+errors (:func:`~granular_material.results.compare.curve_errors`) are taken against the
+reference run of its test: seed by seed for the pure-DEM knobs (the same packings, so the
+knob's own effect), against the seeds' mean curve for the discs knob (each seed's own
+departure, the scatter a user of one RVE buys, is part of the error there), and against the
+finest mesh for the mesh knob. Runs with equal settings run once.
+
+Everything is written under the output folder as it goes: ``curves/`` (each run's curve),
+``trade.csv`` (one row per knob value, appended after each run; a restarted study skips the
+runs already in it), then ``pareto.png``, ``knob_<name>.png``, ``presets.json`` and
+``report.md``. The three recommended settings are chosen from the rows by a stated rule
+(:func:`recommend`) and then run and measured themselves.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import subprocess
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from granular_material.dem import DEMBatch, critical_timestep, load_rve, save_rve
+from granular_material.fem import (
+    BiaxialSetup,
+    create_material,
+    default_settings,
+    run_biaxial,
+)
+from granular_material.procedures import biaxial_test, prepare_packing, progress_bar
+from granular_material.procedures.element_tests import biaxial_steps
+from granular_material.results import band_summary
+from granular_material.results.compare import (
+    ERROR_COLUMNS,
+    curve_errors,
+    markdown_table,
+    mean_curve,
+)
+
+__all__ = ["PRESETS", "REFERENCE", "SCALES", "Knob", "StudyScale", "plan_runs", "recommend",
+           "run_trade_study"]
+
+
+# -- what is studied -------------------------------------------------------------------------
+@dataclass(frozen=True)
+class StudyScale:
+    """The sizes of one study (``--scale``).
+
+    Attributes:
+        name: smoke, cpu or gpu.
+        axial_strain: axial strain every test runs to [-].
+        confining: confining pressure p0 [Pa].
+        seeds: packings of every pure-DEM run (one RVE each).
+        discs: values of the discs-per-RVE knob; the largest is its reference.
+        base_discs: discs of the other pure-DEM runs.
+        strain_steps, safeties, dampings: values of those pure-DEM knobs [-].
+        element_discs: discs of the single element's RVE; element_steps: its load steps.
+        rtols, stress_floors (fractions of p0), reuse_tols [-], tangents, accelerations
+            ("predictor/relaxation"): values of the element knobs.
+        meshes: (nx, ny) of the mesh knob; the finest is its reference.
+        mesh_discs, mesh_steps: discs per RVE and load steps of the specimens.
+        records: records of each pure-DEM curve.
+    """
+
+    name: str
+    axial_strain: float
+    seeds: tuple[int, ...]
+    discs: tuple[int, ...]
+    base_discs: int
+    strain_steps: tuple[float, ...]
+    safeties: tuple[float, ...]
+    dampings: tuple[float, ...]
+    element_discs: int
+    element_steps: int
+    rtols: tuple[float, ...]
+    stress_floors: tuple[float, ...]
+    tangents: tuple[str, ...]
+    accelerations: tuple[str, ...]
+    reuse_tols: tuple[float, ...]
+    meshes: tuple[tuple[int, int], ...]
+    mesh_discs: int
+    mesh_steps: int
+    confining: float = 100.0e3
+    records: int = 100
+
+
+#: the reference settings: float64, 10⁻⁶ strain per DEM step (10⁻⁵ at smoke scale), the
+#: engine's default time step (0.3 of the critical one) and damping (0.1); Newton to
+#: rtol 10⁻³ with a stress floor of 0.001 p0, Kruyt–Rothenburg tangent, extrapolating
+#: predictor with Aitken relaxation, every RVE stepped (no reuse)
+REFERENCE: dict[str, Any] = {
+    "strain_per_step": 1.0e-6, "safety": 0.3, "damping": 0.1, "dtype": "float64",
+    "rtol": 1.0e-3, "stress_floor": 0.001, "tangent": "kruyt-rothenburg",
+    "acceleration": "extrapolate/aitken", "reuse_tol": 0.0,
+}
+
+SCALES: dict[str, StudyScale] = {
+    "smoke": StudyScale(
+        name="smoke", axial_strain=0.02, seeds=(1, 2), discs=(16, 36), base_discs=16,
+        strain_steps=(1.0e-5, 4.0e-5, 1.0e-4), safeties=(0.3, 0.8), dampings=(0.1, 0.3),
+        element_discs=16, element_steps=6, rtols=(1.0e-3, 1.0e-2), stress_floors=(0.001,),
+        tangents=("kruyt-rothenburg",), accelerations=("extrapolate/aitken",),
+        reuse_tols=(0.0, 1.0e-4), meshes=((1, 1), (1, 2)), mesh_discs=16, mesh_steps=4,
+        records=20,
+    ),
+    "cpu": StudyScale(
+        name="cpu", axial_strain=0.08, seeds=(1, 2, 3), discs=(100, 196, 400, 676, 900),
+        base_discs=400, strain_steps=(1.0e-6, 3.0e-6, 1.0e-5, 3.0e-5, 1.0e-4),
+        safeties=(0.1, 0.3, 0.6, 0.9), dampings=(0.05, 0.1, 0.2, 0.3), element_discs=100,
+        element_steps=40, rtols=(1.0e-3, 5.0e-3, 1.0e-2, 2.0e-2),
+        stress_floors=(0.001, 0.005, 0.02),
+        tangents=("kruyt-rothenburg", "perturbation", "secant"),
+        accelerations=("tangent/none", "extrapolate/none", "extrapolate/aitken"),
+        reuse_tols=(0.0, 1.0e-6, 1.0e-5, 1.0e-4), meshes=((2, 4), (5, 10)), mesh_discs=64,
+        mesh_steps=40,
+    ),
+    "gpu": StudyScale(
+        name="gpu", axial_strain=0.1, seeds=(1, 2, 3, 4, 5), discs=(100, 196, 400, 676, 900),
+        base_discs=400, strain_steps=(1.0e-6, 3.0e-6, 1.0e-5, 3.0e-5, 1.0e-4),
+        safeties=(0.1, 0.3, 0.6, 0.9), dampings=(0.05, 0.1, 0.2, 0.3), element_discs=400,
+        element_steps=100, rtols=(1.0e-3, 5.0e-3, 1.0e-2, 2.0e-2),
+        stress_floors=(0.001, 0.005, 0.02),
+        tangents=("kruyt-rothenburg", "perturbation", "secant"),
+        accelerations=("tangent/none", "extrapolate/none", "extrapolate/aitken"),
+        reuse_tols=(0.0, 1.0e-6, 1.0e-5, 1.0e-4), meshes=((2, 4), (5, 10), (10, 15)),
+        mesh_discs=400, mesh_steps=100,
+    ),
+}
+
+
+@dataclass(frozen=True)
+class Knob:
+    """One setting varied: its ``name`` (a key of the run settings), the ``test`` that
+    carries it, its ``values`` and the value of its reference run."""
+
+    name: str
+    test: str
+    values: tuple[Any, ...]
+    reference: Any
+
+
+def knobs(scale: StudyScale) -> list[Knob]:
+    """The knobs of a study, in the order of the report."""
+    ref = _reference(scale)
+    return [
+        Knob("discs", "dem", scale.discs, max(scale.discs)),
+        Knob("strain_per_step", "dem", scale.strain_steps, ref["strain_per_step"]),
+        Knob("safety", "dem", scale.safeties, ref["safety"]),
+        Knob("damping", "dem", scale.dampings, ref["damping"]),
+        Knob("dtype", "dem", ("float64", "float32"), "float64"),
+        Knob("rtol", "element", scale.rtols, ref["rtol"]),
+        Knob("stress_floor", "element", scale.stress_floors, ref["stress_floor"]),
+        Knob("tangent", "element", scale.tangents, ref["tangent"]),
+        Knob("acceleration", "element", scale.accelerations, ref["acceleration"]),
+        Knob("reuse_tol", "element", scale.reuse_tols, ref["reuse_tol"]),
+        Knob("mesh", "specimen", tuple(f"{nx}x{ny}" for nx, ny in scale.meshes),
+             "{}x{}".format(*max(scale.meshes, key=lambda m: m[0] * m[1]))),
+    ]
+
+
+def _reference(scale: StudyScale) -> dict[str, Any]:
+    """The reference settings at this scale (smoke runs 10⁻⁵ strain per DEM step)."""
+    ref = dict(REFERENCE)
+    ref["strain_per_step"] = min(scale.strain_steps)
+    return ref
+
+
+def _settings(scale: StudyScale, test: str, **change: Any) -> dict[str, Any]:
+    """The full settings of one run of ``test``: the reference with ``change``."""
+    values = {**_reference(scale), **change}
+    if test == "dem":
+        values.setdefault("discs", scale.base_discs)
+        return {k: values[k] for k in ("discs", "strain_per_step", "safety", "damping",
+                                       "dtype")} | {"test": "dem"}
+    common = {k: values[k] for k in ("rtol", "stress_floor", "tangent", "acceleration",
+                                     "reuse_tol")}
+    if test == "element":
+        return common | {"test": "element", "discs": values.get("discs", scale.element_discs)}
+    finest = max(scale.meshes, key=lambda m: m[0] * m[1])
+    return common | {"test": "specimen", "discs": scale.mesh_discs,
+                     "mesh": values.get("mesh", "{}x{}".format(*finest))}
+
+
+def run_key(settings: dict[str, Any]) -> str:
+    """A short stable name of a run's settings (its curve file and ``trade.csv`` key)."""
+    text = json.dumps(settings, sort_keys=True, default=str)
+    return f"{settings['test']}-{hashlib.sha1(text.encode()).hexdigest()[:10]}"
+
+
+@dataclass
+class PlannedRow:
+    """One row of ``trade.csv``: a knob's value, the run that measures it and its
+    reference run."""
+
+    knob: str
+    value: Any
+    settings: dict[str, Any]
+    reference: dict[str, Any]
+    per_seed: bool = True  # pure DEM: compare seed by seed (False: with the seeds' mean)
+
+
+def plan_runs(scale: StudyScale) -> list[PlannedRow]:
+    """The rows of the study, knob by knob."""
+    rows = []
+    for knob in knobs(scale):
+        reference = _settings(scale, knob.test, **{knob.name: knob.reference})
+        for value in knob.values:
+            rows.append(PlannedRow(knob.name, value,
+                                   _settings(scale, knob.test, **{knob.name: value}),
+                                   reference, per_seed=knob.name != "discs"))
+    return rows
+
+
+# -- running ---------------------------------------------------------------------------------
+@dataclass
+class RunResult:
+    """What one run measured: its curve and cost."""
+
+    curve: pd.DataFrame
+    wall_s: float
+    particle_steps: int
+    iterations: int = 0
+    error: str | None = None
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+class _Runner:
+    """Runs of one study: the RVE files it prepares once, and the runs themselves."""
+
+    def __init__(self, scale: StudyScale, out: Path, device: str) -> None:
+        self.scale, self.out, self.device = scale, out, device
+        self._warm: set[str] = set()
+        (out / "rves").mkdir(parents=True, exist_ok=True)
+
+    def packings(self, discs: int) -> Path:
+        """The seeds' packings of ``discs`` discs (prepared once, kept under ``rves/``)."""
+        path = self.out / "rves" / f"discs{discs}.npz"
+        if not path.exists():
+            batch = prepare_packing(n_disc=discs, n_rve=len(self.scale.seeds),
+                                    seed=self.scale.seeds[0], pressure=self.scale.confining,
+                                    device=self.device)
+            save_rve(path, batch.to_data())
+        return path
+
+    def single(self, discs: int) -> Path:
+        """The first seed's packing alone (the element's RVE)."""
+        path = self.out / "rves" / f"discs{discs}_seed{self.scale.seeds[0]}.npz"
+        if not path.exists():
+            save_rve(path, load_rve(self.packings(discs)).take([0]))
+        return path
+
+    def run(self, settings: dict[str, Any]) -> RunResult:
+        """One run; kernels are compiled beforehand (:meth:`_warm_up`), so that its wall
+        time is the run's own."""
+        self._warm_up(settings.get("dtype", "float64"))
+        return {"dem": self._dem, "element": self._element,
+                "specimen": self._specimen}[settings["test"]](settings)
+
+    def _warm_up(self, dtype: str) -> None:
+        """Compile (or load) the kernels of ``dtype`` for one and two CPU threads: a few
+        DEM steps of two small RVEs, and for float64 a two-step single element."""
+        if dtype in self._warm:
+            return
+        data = load_rve(self.packings(min(self.scale.discs)))
+        pair = data.take([0, 0]) if data.n_rve == 1 else data.take([0, 1])
+        biaxial_test(DEMBatch(pair, device=self.device, dtype=dtype, shards=2),
+                     axial_strain=1e-4, confining=self.scale.confining,
+                     strain_per_step=2e-5, record_every=5)
+        if dtype == "float64":
+            setup = BiaxialSetup(width=1.0, height=1.0, nx=1, ny=1,
+                                 confining=self.scale.confining, axial_strain=1e-3)
+            material = create_material("dem", rve=self.single(min(self.scale.discs)),
+                                       replicate=True, device=self.device)
+            material.allocate(setup.n_points)
+            run_biaxial(setup, material, 2, default_settings("dem"))
+        self._warm.add(dtype)
+
+    def _dem(self, s: dict[str, Any]) -> RunResult:
+        data = load_rve(self.packings(s["discs"]))
+        data = replace(data, meta=replace(data.meta, damping=float(s["damping"])))
+        dt = s["safety"] * min(critical_timestep(r, data.meta) for r in data.radius)
+        batch = DEMBatch(data, device=self.device, dtype=s["dtype"], timestep=dt)
+        total = biaxial_steps(self.scale.axial_strain, s["strain_per_step"])
+        started = time.perf_counter()
+        curve = biaxial_test(batch, axial_strain=self.scale.axial_strain,
+                             confining=self.scale.confining,
+                             strain_per_step=s["strain_per_step"],
+                             record_every=max(1, total // self.scale.records))
+        wall = time.perf_counter() - started
+        diameter = 2.0 * float(np.mean(data.radius))
+        rate = s["strain_per_step"] / dt  # axial strain rate [1/s]
+        inertial = rate * diameter * math.sqrt(data.meta.density / self.scale.confining)
+        return RunResult(curve, wall, total * data.n_rve * data.n_disc,
+                         extra={"inertial_number": inertial, "timestep_s": dt})
+
+    def _fem(self, s: dict[str, Any], setup: BiaxialSetup, steps: int,
+             rve: Path | None, replicate: bool) -> RunResult:
+        predictor, relaxation = s["acceleration"].split("/")
+        tangent_update = "secant" if s["tangent"] == "secant" else "none"
+        tangent = "perturbation" if s["tangent"] == "perturbation" else "kruyt-rothenburg"
+        material = create_material("dem", rve=rve, particles=s["discs"],
+                                   seed=self.scale.seeds[0], pressure=self.scale.confining,
+                                   replicate=replicate, device=self.device, tangent=tangent,
+                                   reuse_tol=s["reuse_tol"])
+        material.allocate(setup.n_points)
+        settings = default_settings("dem", rtol=s["rtol"], predictor=predictor,
+                                    relaxation=relaxation, tangent_update=tangent_update)
+        started = time.perf_counter()
+        result = run_biaxial(setup, material, steps, settings,
+                             stress_tol=s["stress_floor"] * self.scale.confining)
+        wall = time.perf_counter() - started
+        done = result.steps[result.steps["step"] > 0]
+        extra = {}
+        if setup.n_points > 4:
+            band = band_summary(result, [self.scale.axial_strain], 1.0)
+            extra["band_inclination_deg"] = band.get("shear_band_final", {}).get(
+                "inclination_deg", math.nan)
+        return RunResult(result.steps, wall, int(done["particle_steps"].sum()),
+                         int(done["iterations"].sum()), result.error, extra)
+
+    def _element(self, s: dict[str, Any]) -> RunResult:
+        setup = BiaxialSetup(width=1.0, height=1.0, nx=1, ny=1,
+                             confining=self.scale.confining,
+                             axial_strain=self.scale.axial_strain)
+        return self._fem(s, setup, self.scale.element_steps, self.single(s["discs"]), True)
+
+    def _specimen(self, s: dict[str, Any]) -> RunResult:
+        nx, ny = (int(v) for v in s["mesh"].split("x"))
+        setup = BiaxialSetup(nx=nx, ny=ny, confining=self.scale.confining,
+                             axial_strain=self.scale.axial_strain)
+        return self._fem(s, setup, self.scale.mesh_steps, None, False)
+
+
+def _commit() -> str:
+    """The git commit of the code that runs (``unknown`` outside a checkout)."""
+    try:
+        done = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True,
+                              text=True, cwd=Path(__file__).parent, timeout=10)
+    except (OSError, subprocess.SubprocessError):
+        return "unknown"
+    return done.stdout.strip() or "unknown"
+
+
+# -- measuring -------------------------------------------------------------------------------
+def _errors(row: PlannedRow, curve: pd.DataFrame, reference: pd.DataFrame) -> dict[str, float]:
+    """The row's errors: its curve against its reference's (see the module docstring)."""
+    if "rve" not in curve:
+        return curve_errors(curve, reference)
+    seeds = sorted(curve["rve"].unique())
+    mean_ref = mean_curve([g for _, g in reference.groupby("rve")])
+    per_seed = [curve_errors(curve[curve["rve"] == k],
+                             reference[reference["rve"] == k] if row.per_seed else mean_ref)
+                for k in seeds]
+    errors = {c: float(np.mean([abs(e[c]) for e in per_seed])) for c in ERROR_COLUMNS}
+    peaks = [curve[curve["rve"] == k]["stress_ratio"].max() for k in seeds]
+    errors["seed_scatter_pct"] = (100.0 * float(np.std(peaks, ddof=1) / np.mean(peaks))
+                                  if len(peaks) > 1 else math.nan)
+    return errors
+
+
+def _row(row: PlannedRow, result: RunResult, reference: pd.DataFrame, device: str,
+         commit: str) -> dict[str, Any]:
+    errors = _errors(row, result.curve, reference)
+    return {"knob": row.knob, "value": str(row.value), "test": row.settings["test"],
+            "run": run_key(row.settings), "reference_run": run_key(row.reference),
+            "is_reference": run_key(row.settings) == run_key(row.reference), **errors,
+            "wall_s": result.wall_s, "particle_steps": result.particle_steps,
+            "newton_iterations": result.iterations, **result.extra,
+            "error": result.error or "", "device": device, "commit": commit}
+
+
+def accuracy(rows: pd.DataFrame) -> pd.Series:
+    """The one error a row is judged by [%]: the larger of |peak σ1/σ3 error| and the RMS
+    σ1/σ3 difference (both relative to the reference's peak)."""
+    return np.maximum(rows["peak_error_pct"].abs(), rows["stress_ratio_rms_pct"])
+
+
+#: the three recommended settings: their error budget [%] for :func:`accuracy` (None: the
+#: reference settings themselves)
+PRESETS: dict[str, float | None] = {"quick": 5.0, "engineering": 2.0, "publication": None}
+
+#: the knobs a preset sets (the mesh, the test and the physics stay the user's)
+PRESET_KNOBS = ("discs", "strain_per_step", "dtype", "rtol", "stress_floor", "tangent",
+                "acceleration", "reuse_tol")
+
+
+def recommend(table: pd.DataFrame, scale: StudyScale) -> dict[str, dict[str, Any]]:
+    """The presets' values from the measured rows. Rule: for each knob of
+    :data:`PRESET_KNOBS`, the value with the least wall time among those whose
+    :func:`accuracy` is within the preset's budget (and that ran without error); the
+    reference value when none is, or for ``publication``."""
+    ref = _reference(scale) | {"discs": max(scale.discs)}
+    chosen: dict[str, dict[str, Any]] = {}
+    for name, budget in PRESETS.items():
+        values: dict[str, Any] = {}
+        for knob in knobs(scale):
+            if knob.name not in PRESET_KNOBS:
+                continue
+            values[knob.name] = ref[knob.name] if knob.name in ref else knob.reference
+            rows = table[(table["knob"] == knob.name) & (table["error"].fillna("") == "")]
+            if budget is None or rows.empty:
+                continue
+            fine = rows[accuracy(rows) <= budget]
+            if not fine.empty:
+                best = fine.sort_values("wall_s").iloc[0]["value"]
+                values[knob.name] = _typed(best, knob)
+        chosen[name] = values
+    return chosen
+
+
+def _typed(text: str, knob: Knob) -> Any:
+    """A ``trade.csv`` value back as the knob's own type."""
+    for value in knob.values:
+        if str(value) == str(text):
+            return value
+    raise ValueError(f"{text!r} is not a value of the knob {knob.name}")
+
+
+def _preset_rows(presets: dict[str, dict[str, Any]], scale: StudyScale) -> list[PlannedRow]:
+    """The presets measured: a pure-DEM run and a single-element run of each."""
+    rows = []
+    for name, values in presets.items():
+        dem = {k: values[k] for k in ("discs", "strain_per_step", "dtype")}
+        element = {k: values[k] for k in ("rtol", "stress_floor", "tangent", "acceleration",
+                                          "reuse_tol")}
+        rows.append(PlannedRow("preset", name, _settings(scale, "dem", **dem),
+                               _settings(scale, "dem", discs=max(scale.discs)),
+                               per_seed=False))
+        rows.append(PlannedRow("preset", name, _settings(scale, "element", **element),
+                               _settings(scale, "element")))
+    return rows
+
+
+# -- the study -------------------------------------------------------------------------------
+def _load_curve(out: Path, key: str) -> pd.DataFrame:
+    return pd.read_csv(out / "curves" / f"{key}.csv")
+
+
+def _measure(rows: list[PlannedRow], runner: _Runner, out: Path, device: str, commit: str,
+             progress: bool, log: Callable[[str], None]) -> None:
+    """Run what the rows need that is not done yet (a run is done once its curve is under
+    ``curves/``), and append each row to ``trade.csv`` as soon as its run and its
+    reference run are done; rows already in ``trade.csv`` are skipped."""
+    table_path = out / "trade.csv"
+    written: set[tuple[str, str, str]] = set()
+    if table_path.exists():
+        old = pd.read_csv(table_path, dtype={"value": str})
+        written = set(zip(old["knob"], old["value"], old["run"], strict=True))
+    pending = [r for r in rows if (r.knob, str(r.value), run_key(r.settings)) not in written]
+    needed: dict[str, dict[str, Any]] = {}
+    for row in pending:
+        needed.setdefault(run_key(row.reference), row.reference)
+        needed.setdefault(run_key(row.settings), row.settings)
+
+    def curve_path(key: str) -> Path:
+        return out / "curves" / f"{key}.csv"
+
+    with progress_bar(len(needed), f"trade study ({runner.scale.name})", progress,
+                      unit="run") as bar:
+        for key, settings in needed.items():
+            if not curve_path(key).exists():
+                bar.set_postfix_str(" ".join(f"{k}={v}" for k, v in settings.items()))
+                result = runner.run(settings)
+                meta = {"wall_s": result.wall_s, "particle_steps": result.particle_steps,
+                        "iterations": result.iterations, "error": result.error,
+                        **result.extra}
+                curve_path(key).parent.mkdir(parents=True, exist_ok=True)
+                curve_path(key).with_suffix(".json").write_text(json.dumps(meta))
+                result.curve.to_csv(curve_path(key), index=False)  # the run's commit point
+                log(f"{key}: {result.wall_s:.1f} s"
+                    + (f" ({result.error})" if result.error else ""))
+            bar.update(1)
+            ready = [r for r in pending if curve_path(run_key(r.settings)).exists()
+                     and curve_path(run_key(r.reference)).exists()]
+            if ready:
+                _append(table_path, [_row(r, _load_run(out, run_key(r.settings)),
+                                          _load_curve(out, run_key(r.reference)), device,
+                                          commit) for r in ready])
+                pending = [r for r in pending if r not in ready]
+
+
+def _load_run(out: Path, key: str) -> RunResult:
+    meta = json.loads((out / "curves" / f"{key}.json").read_text())
+    return RunResult(_load_curve(out, key), meta.pop("wall_s"), meta.pop("particle_steps"),
+                     meta.pop("iterations"), meta.pop("error"), meta)
+
+
+def _append(path: Path, rows: list[dict[str, Any]]) -> None:
+    """``rows`` added to the table at ``path``, which is replaced whole."""
+    frame = pd.DataFrame(rows)
+    if path.exists():
+        frame = pd.concat([pd.read_csv(path, dtype={"value": str}), frame], ignore_index=True)
+    part = path.with_name(path.name + ".part")
+    frame.to_csv(part, index=False)
+    part.replace(path)
+
+
+def run_trade_study(scale: str | StudyScale, out: str | Path, device: str = "cpu",
+                    progress: bool = False,
+                    log: Callable[[str], None] = lambda _: None) -> pd.DataFrame:
+    """Run (or finish) the study ``scale`` into ``out``; returns ``trade.csv`` as a table.
+
+    Writes ``trade.csv``, ``curves/``, ``rves/``, ``pareto.png``, ``knob_<name>.png``,
+    ``presets.json`` and ``report.md`` (see the module docstring).
+    """
+    from granular_material.results.trade_plots import plot_knob, plot_pareto
+
+    study = SCALES[scale] if isinstance(scale, str) else scale
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    runner = _Runner(study, out, device)
+    commit = _commit()
+    _measure(plan_runs(study), runner, out, device, commit, progress, log)
+    table = pd.read_csv(out / "trade.csv", dtype={"value": str})
+    presets = recommend(table[table["knob"] != "preset"], study)
+    _measure(_preset_rows(presets, study), runner, out, device, commit, progress, log)
+    table = pd.read_csv(out / "trade.csv", dtype={"value": str})
+    (out / "presets.json").write_text(json.dumps(presets, indent=2) + "\n")
+    plot_pareto(table, accuracy(table), out / "pareto.png")
+    for knob in knobs(study):
+        plot_knob(table[table["knob"] == knob.name], knob.name, out / f"knob_{knob.name}.png")
+    (out / "report.md").write_text(report(table, presets, study, device, commit))
+    return table
+
+
+def report(table: pd.DataFrame, presets: dict[str, dict[str, Any]], scale: StudyScale,
+           device: str, commit: str) -> str:
+    """``report.md``: the reference, a table per knob, the presets measured."""
+    ref = _reference(scale)
+    lines = [
+        f"# Speed against accuracy: trade study ({scale.name})", "",
+        f"Device {device}, commit {commit}. Drained biaxial tests to axial strain "
+        f"{scale.axial_strain:g} at p0 = {scale.confining:g} Pa; seeds "
+        f"{', '.join(map(str, scale.seeds))}.", "",
+        "Reference settings: " + ", ".join(f"{k} = {v}" for k, v in ref.items())
+        + f"; pure DEM: {scale.base_discs} discs (discs knob: {max(scale.discs)} discs, "
+        f"mean of the seeds); single element: {scale.element_discs} discs, "
+        f"{scale.element_steps} load steps; specimens: {scale.mesh_discs} discs, "
+        f"{scale.mesh_steps} load steps, reference mesh the finest.", "",
+        "Errors (%, relative to the reference's peak σ1/σ3): `peak` = |peak σ1/σ3 − "
+        "reference|, `rms` = RMS of the σ1/σ3 difference, `εv rms` relative to the "
+        "reference's largest |εv|; pure-DEM errors are means over the seeds of each seed "
+        "against the same seed at the reference (discs: against the seeds' mean curve at "
+        "the largest size). `accuracy` = max(peak, rms), the measure the presets use.", "",
+        "![Pareto](pareto.png)", "",
+    ]
+    columns = {"value": "value", "peak_error_pct": "peak %", "stress_ratio_rms_pct": "rms %",
+               "volumetric_strain_rms_pct": "εv rms %", "peak_strain_error_pct": "Δε peak %",
+               "seed_scatter_pct": "seed scatter %", "inertial_number": "I",
+               "band_inclination_deg": "band °", "wall_s": "wall s",
+               "particle_steps": "particle-steps", "newton_iterations": "iterations",
+               "error": "error"}
+    for knob in [*knobs(scale), Knob("preset", "", tuple(PRESETS), "publication")]:
+        rows = table[table["knob"] == knob.name]
+        if rows.empty:
+            continue
+        shown = rows.assign(accuracy=accuracy(rows))
+        keep = ["test", *[c for c in columns if c in shown and shown[c].notna().any()
+                          and (c != "error" or (shown[c].fillna("") != "").any())],
+                "accuracy"]
+        lines += [f"## {knob.name}" + (f" (reference {knob.reference})"
+                                       if knob.name != "preset" else ""), "",
+                  markdown_table(shown[keep].rename(columns=columns))]
+        if knob.name != "preset":
+            lines += [f"![{knob.name}](knob_{knob.name}.png)", ""]
+    lines += ["## Recommended settings", "",
+              "Rule: per knob, the fastest value whose accuracy is within the budget "
+              f"({', '.join(f'{k}: {v:g} %' for k, v in PRESETS.items() if v is not None)}); "
+              "publication is the reference. Each preset then ran itself (rows `preset` "
+              "above: pure DEM and single element).", ""]
+    preset_rows = []
+    for name, values in presets.items():
+        measured = table[(table["knob"] == "preset") & (table["value"] == name)]
+        cost = {t: measured[measured["test"] == t] for t in ("dem", "element")}
+        preset_rows.append({"preset": name, **{k: str(v) for k, v in values.items()},
+                            **{f"{t} accuracy %": float(accuracy(c).iloc[0]) if len(c)
+                               else math.nan for t, c in cost.items()},
+                            **{f"{t} wall s": float(c["wall_s"].iloc[0]) if len(c)
+                               else math.nan for t, c in cost.items()}})
+    lines.append(markdown_table(pd.DataFrame(preset_rows)))
+    return "\n".join(lines)

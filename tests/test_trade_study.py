@@ -1,0 +1,130 @@
+"""The trade study (issue 13) at smoke size: every knob value gets a measured row, errors
+shrink as the strain per DEM step shrinks, the presets are chosen by the stated rule and
+measured, and a restarted study redoes nothing."""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from granular_material.cli import main
+from granular_material.results.compare import curve_errors, mean_curve
+from granular_material.results.trade_plots import pareto_front
+from granular_material.studies import SCALES, plan_runs
+from granular_material.studies.trade import PRESETS, accuracy, knobs, recommend
+
+
+def _curve(peak: float = 2.0, scale_ev: float = 1.0) -> pd.DataFrame:
+    e = np.linspace(0.0, 0.05, 51)
+    ratio = 1.0 + (peak - 1.0) * np.sin(np.pi * e / 0.06)
+    return pd.DataFrame({"axial_strain": e, "stress_ratio": ratio,
+                         "volumetric_strain": scale_ev * (-e + 10 * e ** 2),
+                         "void_ratio": 0.2 + e})
+
+
+def test_curve_errors_measure_what_they_say():
+    ref = _curve()
+    zero = curve_errors(ref, ref)
+    assert all(v == 0 for v in zero.values())
+    higher = curve_errors(_curve(peak=2.2), ref)
+    assert higher["peak_error_pct"] == pytest.approx(10.0)
+    assert 0 < higher["stress_ratio_rms_pct"] < 10.0
+    assert higher["volumetric_strain_rms_pct"] == 0
+    # a curve on other strains is compared on the reference's interpolant
+    coarse = ref.iloc[::5].reset_index(drop=True)
+    assert abs(curve_errors(coarse, ref)["stress_ratio_rms_pct"]) < 1e-12
+    assert mean_curve([_curve(2.0), _curve(2.2)])["stress_ratio"].max() == pytest.approx(
+        _curve(2.1)["stress_ratio"].max())
+
+
+def test_pareto_front_keeps_the_undominated():
+    cost = np.array([1.0, 2.0, 3.0, 4.0, 2.5])
+    error = np.array([5.0, 3.0, 4.0, 1.0, 3.0])
+    assert pareto_front(cost, error).tolist() == [0, 1, 3]
+
+
+def test_plan_covers_every_knob_value_once():
+    scale = SCALES["cpu"]
+    rows = plan_runs(scale)
+    assert {(r.knob, str(r.value)) for r in rows} == {
+        (k.name, str(v)) for k in knobs(scale) for v in k.values}
+    assert len(rows) == sum(len(k.values) for k in knobs(scale))
+    for row in rows:  # one setting changed from the knob's reference
+        changed = {k for k in row.settings if row.settings[k] != row.reference[k]}
+        assert changed <= {row.knob}
+
+
+def test_recommend_takes_the_fastest_within_budget():
+    scale = SCALES["smoke"]
+    table = pd.DataFrame([
+        {"knob": "strain_per_step", "value": "1e-05", "peak_error_pct": 0.0,
+         "stress_ratio_rms_pct": 0.0, "wall_s": 10.0, "error": ""},
+        {"knob": "strain_per_step", "value": "4e-05", "peak_error_pct": -1.5,
+         "stress_ratio_rms_pct": 1.0, "wall_s": 3.0, "error": ""},
+        {"knob": "strain_per_step", "value": "0.0001", "peak_error_pct": 4.0,
+         "stress_ratio_rms_pct": 3.0, "wall_s": 1.0, "error": ""},
+    ])
+    chosen = recommend(table, scale)
+    assert chosen["quick"]["strain_per_step"] == 1e-4
+    assert chosen["engineering"]["strain_per_step"] == 4e-5
+    assert chosen["publication"]["strain_per_step"] == 1e-5
+    assert set(chosen) == set(PRESETS)
+
+
+@pytest.fixture(scope="module")
+def smoke_study(tmp_path_factory) -> tuple[Path, dict]:
+    out = tmp_path_factory.mktemp("trade") / "study"
+    code = main(["trade-study", "--scale", "smoke", "--out", str(out), "--device", "cpu",
+                 "--no-progress", "--json"])
+    assert code == 0
+    return out, json.loads((out / "presets.json").read_text())
+
+
+def test_smoke_study_writes_every_row_figure_and_section(smoke_study):
+    out, presets = smoke_study
+    table = pd.read_csv(out / "trade.csv", dtype={"value": str})
+    scale = SCALES["smoke"]
+    for knob in knobs(scale):
+        rows = table[table["knob"] == knob.name]
+        assert sorted(rows["value"]) == sorted(map(str, knob.values)), knob.name
+        assert (out / f"knob_{knob.name}.png").stat().st_size > 1000
+    assert (rows_ok := table[table["error"].fillna("") == ""])["wall_s"].gt(0).all()
+    assert rows_ok["particle_steps"].gt(0).all()
+    reference = table[table["is_reference"] & ~table["knob"].isin(["discs", "preset"])]
+    assert np.allclose(reference[["peak_error_pct", "stress_ratio_rms_pct"]], 0.0)
+    dem = table[table["test"] == "dem"]
+    assert dem["inertial_number"].gt(0).all() and dem["seed_scatter_pct"].notna().all()
+    assert set(presets) == set(PRESETS)
+    assert len(table[table["knob"] == "preset"]) == 2 * len(PRESETS)
+    report = (out / "report.md").read_text()
+    for heading in ("## strain_per_step", "## mesh", "## preset", "## Recommended settings"):
+        assert heading in report
+    assert (out / "pareto.png").stat().st_size > 1000
+
+
+def test_error_grows_with_the_strain_per_dem_step(smoke_study):
+    """The quasi-static criterion: coarser DEM steps, larger error (physics, not a
+    tolerance we chose)."""
+    out, _ = smoke_study
+    table = pd.read_csv(out / "trade.csv", dtype={"value": str})
+    rows = table[table["knob"] == "strain_per_step"].copy()
+    rows["step"] = rows["value"].astype(float)
+    rows = rows.sort_values("step")
+    assert np.all(np.diff(accuracy(rows).to_numpy()) > 0)
+    assert np.all(np.diff(rows["inertial_number"].to_numpy()) > 0)
+
+
+def test_restarted_study_runs_nothing_again(smoke_study, capsys):
+    out, _ = smoke_study
+    before = (out / "trade.csv").read_text()
+    code = main(["trade-study", "--scale", "smoke", "--out", str(out), "--device", "cpu",
+                 "--no-progress", "--json"])
+    captured = capsys.readouterr()
+    assert code == 0
+    assert not re.search(r"^(dem|element|specimen)-[0-9a-f]{10}: ", captured.err, re.M)
+    assert (out / "trade.csv").read_text() == before
