@@ -126,14 +126,22 @@ def _kind(action: argparse.Action) -> str:
 
 
 # -- where a key is written ------------------------------------------------------------------
-_BARE = r"[A-Za-z0-9_-]+"
-_PART = rf"(?:{_BARE}|\"[^\"]*\"|'[^']*')"
+_PART = r"(?:[A-Za-z0-9_-]+|\"(?:[^\"\\]|\\.)*\"|'[^']*')"
 _KEY_LINE = re.compile(rf"^\s*({_PART}(?:\s*\.\s*{_PART})*)\s*=")
-_HEADER_LINE = re.compile(rf"^\s*\[\s*({_PART}(?:\s*\.\s*{_PART})*)\s*\]")
+_HEADER_LINE = re.compile(rf"^\s*\[\[?\s*({_PART}(?:\s*\.\s*{_PART})*)\s*\]")
 
 
 def _parts(dotted: str) -> tuple[str, ...]:
-    return tuple(p.strip().strip("\"'") for p in re.findall(_PART, dotted))
+    """The keys of a dotted TOML key (quoted ones decoded as TOML decodes them)."""
+    parts = []
+    for part in re.findall(_PART, dotted):
+        if part[0] in "\"'":
+            try:
+                part = next(iter(tomllib.loads(f"{part} = 0")))
+            except tomllib.TOMLDecodeError:
+                part = part[1:-1]
+        parts.append(part)
+    return tuple(parts)
 
 
 def _line_of(text: str, path: tuple[str, ...]) -> int | None:
