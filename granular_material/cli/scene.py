@@ -35,7 +35,8 @@ if sys.version_info >= (3, 11):
 else:  # Python 3.10
     import tomli as tomllib
 
-__all__ = ["TESTS", "Scene", "command_parsers", "load_scene", "register", "scene_keys"]
+__all__ = ["TESTS", "Scene", "command_parsers", "load_scene", "register", "run_scene",
+           "scene_keys"]
 
 #: the commands a scene can run (its ``test``), each with the file its ``--out`` names inside
 #: the run folder; None: its ``--out`` is the run folder itself
