@@ -2,7 +2,8 @@
 
 The core commands are registered here directly: ``prepare``, ``biaxial-dem`` and
 ``dem-drive`` (:mod:`granular_material.cli.dem`), ``single-element`` and ``biaxial``
-(:mod:`granular_material.cli.fem`); their shared options are defined once in
+(:mod:`granular_material.cli.fem`), and ``run`` (:mod:`granular_material.cli.scene`: one of
+them described by a TOML scene file); their shared options are defined once in
 :mod:`granular_material.cli.options`. Plugins add sub-commands through the
 ``granular_material.commands`` entry-point group; each entry point is a
 ``register(subparsers)`` callable that adds its parsers and sets ``func`` (a callable
@@ -54,10 +55,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
-    from granular_material.cli import dem, fem, study  # here, so quiet_warp imports light
+    from granular_material.cli import dem, fem, scene, study  # here: quiet_warp imports light
 
     dem.register(subparsers)
     fem.register(subparsers)
+    scene.register(subparsers)
     study.register(subparsers)
     _register_plugins(subparsers)
     return parser

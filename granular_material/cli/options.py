@@ -10,7 +10,7 @@ import math
 import os
 import signal
 import sys
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -35,6 +35,7 @@ __all__ = [
     "positive",
     "positive_int",
     "progress_enabled",
+    "reports_to",
     "rve_file_shape",
     "scalar_or_list",
     "stop_signals_as_interrupt",
@@ -156,8 +157,26 @@ def scalar_or_list(values: np.ndarray) -> Any:
     return listed[0] if values.shape[0] == 1 else listed
 
 
+#: callables that are handed every report :func:`emit` makes (see :func:`reports_to`)
+_REPORT_SINKS: list[Callable[[dict[str, Any]], None]] = []
+
+
+@contextlib.contextmanager
+def reports_to(sink: Callable[[dict[str, Any]], None]) -> Iterator[None]:
+    """While the block runs, every report :func:`emit` makes is also handed to ``sink``, as
+    the dict the command reported (``granular-material run`` keeps it as summary.json)."""
+    _REPORT_SINKS.append(sink)
+    try:
+        yield
+    finally:
+        _REPORT_SINKS.remove(sink)
+
+
 def emit(args: argparse.Namespace, result: dict[str, Any]) -> None:
-    """Report ``result`` on stdout: JSON with ``--json``, else one aligned line per key."""
+    """Report ``result`` on stdout: JSON with ``--json``, else one aligned line per key (and
+    to the sinks of :func:`reports_to`)."""
+    for sink in tuple(_REPORT_SINKS):
+        sink(result)
     if args.json:
         json.dump(result, sys.stdout, indent=2, default=str)
         sys.stdout.write("\n")

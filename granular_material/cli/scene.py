@@ -1,0 +1,560 @@
+"""``granular-material run SCENE``: one run described by a TOML scene file.
+
+A scene names the command it runs (``test = "single-element"``) and sets that command's
+options under their command-line names, dashes included (``axial-strain = 0.02``; a
+positional argument by its name, ``rve = "rve.npz"``). The schema is not written down here:
+it is read from the command's own argparse parser, so every option of a command is a scene
+key, and its value is converted and checked by the parser's own ``type`` and ``choices``.
+Tables (``[loading]``, ``[newton]``, ...) only group keys; their names are free.
+
+The whole scene is checked before anything runs (a ``UsageError`` naming the key and its line:
+exit 2, nothing written). Then the command's own function runs with the namespace, so every
+check of the command applies as on the command line, into one folder per run: the scene
+copied in as ``scene.toml``, the command's tables, figures and fields, and ``summary.json``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import difflib
+import json
+import os
+import re
+import shlex
+import sys
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from granular_material.cli.options import UsageError, check_output_dir, reports_to
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # Python 3.10
+    import tomli as tomllib
+
+__all__ = ["TESTS", "Scene", "command_parsers", "load_scene", "register", "run_scene",
+           "scene_keys"]
+
+#: the commands a scene can run (its ``test``), each with the file its ``--out`` names inside
+#: the run folder; None: its ``--out`` is the run folder itself
+TESTS: dict[str, str | None] = {
+    "single-element": None,
+    "biaxial": None,
+    "biaxial-dem": "curve.csv",
+    "dem-drive": "path.csv",
+    "prepare": "rve.npz",
+}
+#: files a test writes beside its table when the scene names none, inside the run folder
+_DEFAULT_FILES: dict[str, dict[str, str]] = {"biaxial-dem": {"plot": "curve.png"}}
+#: path keys that name files the run writes: relative to the run folder (other path keys
+#: name files the run reads: relative to the scene's folder, and they must exist)
+_RUN_FOLDER_KEYS = frozenset({"plot"})
+#: options that are no scene keys, and what to do instead
+_NOT_KEYS = {
+    "resume": "a scene describes a run; continue a stopped one with "
+              "`granular-material run SCENE --resume` (same --out)",
+}
+_SCENE_COPY = "scene.toml"
+_SUMMARY = "summary.json"
+
+
+@dataclass
+class Scene:
+    """A checked scene: the command it runs, its parsed options and where it writes."""
+
+    path: Path                       #: the scene file
+    test: str                        #: the command (sub-command name)
+    namespace: argparse.Namespace    #: the options, as the command's parser would give them
+    run_dir: Path                    #: the run folder
+    argv: list[str] = field(default_factory=list)  #: the same run as a command line
+    lines: dict[str, int] = field(default_factory=dict)  #: key → its line in the file
+
+    def command_line(self) -> str:
+        """The equivalent ``granular-material`` command line."""
+        return shlex.join(["granular-material", self.test, *self.argv])
+
+
+# -- the schema, read from the parsers -------------------------------------------------------
+def command_parsers() -> dict[str, argparse.ArgumentParser]:
+    """The sub-command parsers of ``granular-material`` (plugins included), by name."""
+    from granular_material.cli import build_parser
+
+    for action in build_parser()._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            return dict(action.choices)
+    raise RuntimeError("granular-material has no sub-commands")
+
+
+def _key_name(action: argparse.Action) -> str:
+    """The scene key of an option: its first long option without the dashes (``--axial-strain``
+    → ``axial-strain``); of a positional argument, its name."""
+    for option in action.option_strings:
+        if option.startswith("--"):
+            return option[2:]
+    return action.dest
+
+
+def scene_keys(parser: argparse.ArgumentParser) -> dict[str, argparse.Action]:
+    """Every scene key of the command ``parser`` with its action (``help`` left out; the
+    options of :data:`_NOT_KEYS` included, they are refused with advice)."""
+    return {_key_name(a): a for a in parser._actions
+            if not isinstance(a, (argparse._HelpAction, argparse._VersionAction))}
+
+
+def _kind(action: argparse.Action) -> str:
+    """What TOML value an option takes: ``flag`` (a boolean), ``integer``, ``number``,
+    ``path`` or ``text`` (a string), found by probing the parser's own ``type``."""
+    if action.nargs == 0:
+        return "flag"
+    if action.type is None:
+        return "text"
+    try:
+        probe = action.type("1")
+    except (argparse.ArgumentTypeError, ValueError, TypeError):
+        return "text"
+    if isinstance(probe, bool):
+        return "text"
+    if isinstance(probe, int):
+        return "integer"
+    if isinstance(probe, float):
+        return "number"
+    if isinstance(probe, Path):
+        return "path"
+    return "text"
+
+
+# -- where a key is written ------------------------------------------------------------------
+_PART = r"(?:[A-Za-z0-9_-]+|\"(?:[^\"\\]|\\.)*\"|'[^']*')"
+_KEY_LINE = re.compile(rf"^\s*({_PART}(?:\s*\.\s*{_PART})*)\s*=")
+_HEADER_LINE = re.compile(rf"^\s*\[\[?\s*({_PART}(?:\s*\.\s*{_PART})*)\s*\]")
+
+
+def _parts(dotted: str) -> tuple[str, ...]:
+    """The keys of a dotted TOML key (quoted ones decoded as TOML decodes them)."""
+    parts = []
+    for part in re.findall(_PART, dotted):
+        if part[0] in "\"'":
+            try:
+                part = next(iter(tomllib.loads(f"{part} = 0")))
+            except tomllib.TOMLDecodeError:
+                part = part[1:-1]
+        parts.append(part)
+    return tuple(parts)
+
+
+def _line_of(text: str, path: tuple[str, ...]) -> int | None:
+    """The line (from 1) where the key ``path`` (table names, then the key) is set, or its
+    table's header when ``path`` names a table; None when it cannot be found."""
+    table: tuple[str, ...] = ()
+    for number, line in enumerate(text.splitlines(), start=1):
+        header = _HEADER_LINE.match(line)
+        if header:
+            table = _parts(header.group(1))
+            if table == path:
+                return number
+            continue
+        key = _KEY_LINE.match(line)
+        if key and table + _parts(key.group(1)) == path:
+            return number
+    return None
+
+
+class _Where:
+    """Messages about one scene file, each with the line of the key it names."""
+
+    def __init__(self, path: Path, text: str) -> None:
+        self.path, self.text = path, text
+
+    def error(self, key_path: tuple[str, ...], message: str) -> UsageError:
+        line = _line_of(self.text, key_path) if key_path else None
+        at = f"{self.path}, line {line}" if line else f"{self.path}"
+        return UsageError(f"{at}: {message}")
+
+
+# -- one value --------------------------------------------------------------------------------
+def _toml_repr(value: Any) -> str:
+    """``value`` as TOML writes it (for messages)."""
+    if isinstance(value, list):
+        return "[" + ", ".join(_toml_repr(v) for v in value) + "]"
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, str):
+        return json.dumps(value, ensure_ascii=False)
+    return repr(value)
+
+
+def _item_text(key: str, kind: str, action: argparse.Action, value: Any) -> str:
+    """One TOML item as the command-line text the parser converts (ValueError: wrong type)."""
+    if kind in ("integer", "number"):
+        wanted = "an integer" if kind == "integer" else "a number"
+        numeric = isinstance(value, int) or (kind == "number" and isinstance(value, float))
+        if isinstance(value, bool) or not numeric:
+            hint = (" (values are SI numbers, without unit names)" if isinstance(value, str)
+                    else "")
+            raise ValueError(f"'{key}' takes {wanted}, got {_toml_repr(value)}{hint}")
+        return repr(value)
+    if isinstance(value, str):
+        return value
+    if kind == "text" and action.type is None and isinstance(value, int) \
+            and not isinstance(value, bool):
+        return str(value)  # e.g. Gauss point ids of track
+    raise ValueError(f"'{key}' takes a string, got {_toml_repr(value)}")
+
+
+def _convert(key: str, kind: str, action: argparse.Action, value: Any) -> tuple[Any, list[str]]:
+    """A TOML value of the option ``action`` → (the parsed value, its command-line words);
+    ValueError (naming ``key``) where the parser would refuse it."""
+    nargs = action.nargs
+    if kind == "flag":
+        if not isinstance(value, bool):
+            raise ValueError(f"'{key}' is a switch: true or false, got {_toml_repr(value)}")
+        if isinstance(action, argparse.BooleanOptionalAction):
+            return value, [f"--{key}" if value else f"--no-{key}"]
+        return (action.const, [f"--{key}"]) if value else (action.default, [])
+    if nargs in (None, "?"):
+        if isinstance(value, (list, dict)):
+            raise ValueError(f"'{key}' takes one value, got {_toml_repr(value)}")
+        items = [value]
+    else:
+        items = value if isinstance(value, list) else [value]
+        if isinstance(nargs, int) and len(items) != nargs:
+            raise ValueError(f"'{key}' takes a list of {nargs} values, got {_toml_repr(value)}")
+        if not items:
+            raise ValueError(f"'{key}' takes at least one value, got []")
+    texts = [_item_text(key, kind, action, item) for item in items]
+    parsed = []
+    for text in texts:
+        try:
+            one = action.type(text) if action.type is not None else text
+        except (argparse.ArgumentTypeError, ValueError, TypeError) as exc:
+            raise ValueError(f"'{key}': {exc}") from None
+        if action.choices is not None and one not in action.choices:
+            raise ValueError(f"'{key}' must be one of {', '.join(map(str, action.choices))}; "
+                             f"got {_toml_repr(text)}")
+        parsed.append(one)
+    result = parsed[0] if nargs in (None, "?") else parsed
+    if not action.option_strings:  # a positional argument
+        return result, texts
+    if len(texts) == 1 and nargs in (None, "?") and texts[0].startswith("-"):
+        return result, [f"--{key}={texts[0]}"]
+    return result, [f"--{key}", *texts]
+
+
+def _help(action: argparse.Action) -> str:
+    text = " ".join((action.help or "").split()).replace("%%", "%")
+    return f" ({text})" if text else ""
+
+
+# -- the scene --------------------------------------------------------------------------------
+def _read(path: Path) -> tuple[str, dict[str, Any]]:
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise UsageError(f"scene {path} does not exist") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise UsageError(f"scene {path} cannot be read: {exc}") from None
+    try:
+        return text, tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        found = re.search(r"line (\d+)", str(exc))
+        shown = ""
+        if found:
+            lines = text.splitlines()
+            number = int(found.group(1))
+            if 1 <= number <= len(lines):
+                shown = f": {lines[number - 1].strip()}"
+        line = f", line {found.group(1)}" if found else ""
+        raise UsageError(f"{path}{line}: not valid TOML ({exc}){shown}") from None
+
+
+def _flatten(data: dict[str, Any], where: _Where) -> list[tuple[tuple[str, ...], Any]]:
+    """(key path, value) of every key; tables only group keys, one level deep."""
+    entries: list[tuple[tuple[str, ...], Any]] = []
+    for name, value in data.items():
+        if isinstance(value, list) and value and all(isinstance(v, dict) for v in value):
+            raise where.error((name,), f"[[{name}]]: a scene describes one run; write one "
+                                       "scene per run")
+        if not isinstance(value, dict):
+            entries.append(((name,), value))
+            continue
+        for key, item in value.items():
+            if isinstance(item, dict):
+                raise where.error((name, key), f"[{name}.{key}]: tables only group keys, "
+                                               "one level deep")
+            entries.append(((name, key), item))
+    return entries
+
+
+def _suggest(name: str, known: list[str]) -> str:
+    close = difflib.get_close_matches(name, known, n=3)
+    return f" (did you mean {' or '.join(repr(c) for c in close)}?)" if close else ""
+
+
+def _test_of(entries: list[tuple[tuple[str, ...], Any]], where: _Where,
+             parsers: Mapping[str, argparse.ArgumentParser]) -> str:
+    tests = [t for t in TESTS if t in parsers]
+    given = [(p, v) for p, v in entries if p[-1] == "test"]
+    if not given:
+        raise where.error((), f"missing key 'test': the command this scene runs, one of "
+                              f"{', '.join(tests)}")
+    if len(given) > 1:
+        raise where.error(given[1][0], "'test' is given twice")
+    path, value = given[0]
+    if not isinstance(value, str) or value not in tests:
+        hint = _suggest(value, tests) if isinstance(value, str) else ""
+        raise where.error(path, f"'test' must be one of {', '.join(tests)}; got "
+                                f"{_toml_repr(value)}{hint}")
+    return value
+
+
+def load_scene(path: Path, parsers: Mapping[str, argparse.ArgumentParser] | None = None,
+               out: Path | None = None, resume: bool = False) -> Scene:
+    """Read and check the scene file ``path`` (UsageError naming the key and its line);
+    ``out`` (the run folder) overrides the scene's ``out``; ``resume`` continues the run in
+    it from its checkpoint. Reads input files' existence only; writes nothing."""
+    path = Path(path)
+    parsers = command_parsers() if parsers is None else parsers
+    text, data = _read(path)
+    where = _Where(path, text)
+    entries = _flatten(data, where)
+    test = _test_of(entries, where, parsers)
+    parser = parsers[test]
+    keys = scene_keys(parser)
+    aliases = {a.dest: k for k, a in keys.items() if a.dest != k}
+
+    seen: dict[str, tuple[str, ...]] = {}
+    for key_path, _ in entries:
+        name = key_path[-1]
+        if name == "test":
+            continue
+        key = name if name in keys else aliases.get(name)
+        if key is None:
+            raise where.error(key_path, f"unknown key '{name}': not an option of {test}"
+                                        f"{_suggest(name, sorted(keys))}; its keys are the "
+                                        f"options of `granular-material {test} --help`")
+        if key in _NOT_KEYS:
+            raise where.error(key_path, f"'{name}' is not a scene key: {_NOT_KEYS[key]}")
+        if key in seen:
+            first = _line_of(text, seen[key])
+            raise where.error(key_path, f"'{key}' is given twice"
+                                        + (f" (first on line {first})" if first else ""))
+        seen[key] = key_path
+
+    folder = path.parent
+    given = dict(entries)
+    out_path = seen.get("out")
+    run_dir = _run_folder(where, out_path, keys["out"],
+                          None if out_path is None else given[out_path], folder, out)
+    values: dict[str, Any] = {}
+    options: list[str] = []
+    positional: list[str] = []
+    for key, key_path in seen.items():
+        if key == "out":
+            continue
+        action = keys[key]
+        kind = _kind(action)
+        try:
+            parsed, words = _convert(key, kind, action, given[key_path])
+        except ValueError as exc:
+            raise where.error(key_path, f"{exc}{_help(action)}") from None
+        if kind == "path":
+            if key in _RUN_FOLDER_KEYS:
+                parsed = run_dir / Path(parsed).expanduser()
+            else:
+                parsed = folder / Path(parsed).expanduser()
+                if not parsed.exists():
+                    raise where.error(key_path, f"'{key}': {parsed} does not exist (paths in a "
+                                                f"scene are relative to its folder)")
+            words = [words[0], str(parsed)] if action.option_strings else [_word(parsed)]
+        values[action.dest] = parsed
+        (options if action.option_strings else positional).extend(words)
+
+    for key, action in keys.items():
+        if action.required and action.dest not in values:
+            raise where.error((), f"missing key '{key}': {test} needs it{_help(action)}")
+    # files the run writes: inside the run folder, where the scene names none
+    for key, name in _DEFAULT_FILES.get(test, {}).items():
+        if keys[key].dest not in values:
+            values[keys[key].dest] = run_dir / name
+            options += [f"--{key}", str(run_dir / name)]
+    values["out"] = run_dir / TESTS[test] if TESTS[test] else run_dir
+    options += ["--out", str(values["out"])]
+    if resume:
+        if "resume" not in keys:
+            able = [t for t in TESTS if t in parsers and "resume" in scene_keys(parsers[t])]
+            raise UsageError(f"--resume: a {test} run keeps no checkpoint to continue from "
+                             f"(only {' and '.join(able)} do)")
+        values["resume"] = run_dir
+        options += ["--resume", str(run_dir)]
+
+    namespace = _defaults(parser)
+    for dest, value in values.items():
+        setattr(namespace, dest, value)
+    namespace.command = test
+    lines = {key: _line_of(text, key_path) for key, key_path in seen.items()}
+    return Scene(path=path, test=test, namespace=namespace, run_dir=run_dir,
+                 argv=positional + options,
+                 lines={key: line for key, line in lines.items() if line is not None})
+
+
+def _word(path: Path) -> str:
+    """A path as a positional command-line word (never read as an option)."""
+    text = str(path)
+    return "./" + text if text.startswith("-") else text
+
+
+def _run_folder(where: _Where, key_path: tuple[str, ...] | None, action: argparse.Action,
+                value: Any, folder: Path, out: Path | None) -> Path:
+    """The run folder: ``out`` (``run --out``), else the scene's ``out`` (relative to its
+    folder), else the scene's name in the current folder; checked to be writable."""
+    if key_path is not None:
+        try:
+            parsed, _ = _convert("out", "path", action, value)
+        except ValueError as exc:
+            raise where.error(key_path, f"{exc} (the run folder)") from None
+    if out is not None:
+        run_dir = Path(out).expanduser()
+        check_output_dir(run_dir, "--out")
+        return run_dir
+    if key_path is None:
+        run_dir = Path(where.path.stem)
+        check_output_dir(run_dir, "the run folder (the scene's name; set out or --out)")
+        return run_dir
+    run_dir = folder / Path(parsed).expanduser()
+    try:
+        check_output_dir(run_dir, "out")
+    except UsageError as exc:
+        raise where.error(key_path, f"{exc} (the run folder)") from None
+    return run_dir
+
+
+def _defaults(parser: argparse.ArgumentParser) -> argparse.Namespace:
+    """The namespace the command's parser gives when no option is given (as argparse makes
+    it: string defaults converted by the option's type, then ``set_defaults``)."""
+    namespace = argparse.Namespace()
+    for action in scene_keys(parser).values():
+        default = parser.get_default(action.dest)
+        if isinstance(default, str) and action.type is not None:
+            default = action.type(default)
+        setattr(namespace, action.dest, default)
+    namespace.func = parser.get_default("func")
+    return namespace
+
+
+# -- the run ----------------------------------------------------------------------------------
+def _listing(folder: Path) -> dict[str, tuple[int, int]]:
+    """Name → (size, modification time in ns) of what ``folder`` holds (empty: none)."""
+    if not folder.is_dir():
+        return {}
+    return {p.name: (p.stat().st_size, p.stat().st_mtime_ns) for p in folder.iterdir()}
+
+
+@contextlib.contextmanager
+def _scene_copied(scene: Scene) -> Iterator[None]:
+    """The run folder made and the scene copied into it for the block. Input the command
+    rejects (``ValueError``) before it wrote anything leaves neither behind (an earlier
+    run's copy comes back as it was)."""
+    made = []
+    folder = scene.run_dir
+    while not folder.exists() and folder.parent != folder:
+        made.append(folder)
+        folder = folder.parent
+    copy = scene.run_dir / _SCENE_COPY
+    before = copy.read_bytes() if copy.is_file() else None
+    held = _listing(scene.run_dir)
+    held.pop(_SCENE_COPY, None)
+    scene.run_dir.mkdir(parents=True, exist_ok=True)
+    copy.write_bytes(scene.path.read_bytes())
+    try:
+        yield
+    except ValueError:
+        now = _listing(scene.run_dir)
+        now.pop(_SCENE_COPY, None)
+        if now == held:  # rejected before it wrote anything
+            if before is not None:
+                copy.write_bytes(before)
+            else:
+                copy.unlink()
+            for path in made:  # deepest first
+                with contextlib.suppress(OSError):
+                    path.rmdir()
+        raise
+
+
+def _write_summary(folder: Path, report: dict[str, Any]) -> None:
+    """``report`` as ``folder/summary.json``, whole or not at all."""
+    path = folder / _SUMMARY
+    part = path.with_name(path.name + ".part")
+    part.write_text(json.dumps(report, indent=2, default=str) + "\n")
+    os.replace(part, path)
+
+
+def _located(scene: Scene, message: str) -> str:
+    """``message`` of the command, with the scene's line of the first option it names."""
+    for name in re.findall(r"--([A-Za-z][A-Za-z0-9_-]*)", message):
+        if name in scene.lines:
+            return f"{scene.path}, line {scene.lines[name]}: {message}"
+    return f"{scene.path}: {message}"
+
+
+def run_scene(scene: Scene) -> int:
+    """Run the checked ``scene`` into its run folder; returns the command's exit code."""
+    reports: list[dict[str, Any]] = []
+    namespace = scene.namespace
+    try:
+        with _scene_copied(scene), reports_to(reports.append):
+            code = int(namespace.func(namespace) or 0)
+    except ValueError as exc:  # the command's own checks: say where the scene set the option
+        raise UsageError(_located(scene, str(exc))) from exc
+    # the FEM commands write summary.json into their folder themselves; the DEM commands,
+    # whose --out is a file, report on stdout only: their report is kept here
+    if TESTS[scene.test] is not None and reports:
+        _write_summary(scene.run_dir, reports[-1])
+    return code
+
+
+def _run_command(parsers: Mapping[str, argparse.ArgumentParser], args: argparse.Namespace,
+                 ) -> int:
+    scene = load_scene(args.scene, parsers, out=args.out, resume=args.resume)
+    if args.check:
+        print(scene.command_line())
+        return 0
+    return run_scene(scene)
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add the ``run`` command (its scene tests are the commands registered beside it)."""
+    tests = ", ".join(f'"{t}"' for t in TESTS)
+    p = subparsers.add_parser(
+        "run", help="run the scene of a TOML file into one folder",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        description=f"""\
+Run one scene: a TOML file naming the command it runs (test = one of
+{tests})
+and that command's options under their command-line names, e.g.
+
+    test = "single-element"
+    particles = 64
+    axial-strain = 0.02   # SI values, no unit names
+    steps = 10
+    device = "cpu"
+
+The scene is checked whole before anything runs: an unknown key, a wrong type or
+a missing required key exits with code 2, naming the key and its line, and writes
+nothing. Paths in a scene are relative to its folder. The run folder (--out, else
+the scene's `out`, else the scene's name in the current folder) gets the scene as
+scene.toml, the command's tables, figures and fields, and summary.json.""",
+    )
+    p.add_argument("scene", type=Path, help="the scene file (.toml)")
+    p.add_argument("--out", type=Path, default=None, metavar="DIR",
+                   help="the run folder (overrides the scene's out)")
+    p.add_argument("--resume", action="store_true",
+                   help="continue the stopped or killed run in the run folder from its last "
+                        "checkpoint (single-element, biaxial)")
+    p.add_argument("--check", action="store_true",
+                   help="check the scene and print the same run as a command line; run "
+                        "nothing, write nothing")
+    p.set_defaults(func=lambda args: _run_command(subparsers.choices, args))
