@@ -30,6 +30,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from granular_material.results.compare import markdown_table
+
 #: the variants: name -> options of the FEM commands
 VARIANTS = {
     "exact": ["--drive", "restart", "--reuse-tol", "0"],
@@ -77,16 +79,6 @@ def _errors(run: dict, exact: dict) -> dict:
         "band_inclination_deg": band.get("inclination_deg", np.nan),
         "compared_steps": n - 1,
     }
-
-
-def _markdown(table: pd.DataFrame) -> str:
-    """The table as a Markdown table (4 significant digits)."""
-    def cell(value: object) -> str:
-        return f"{value:.4g}" if isinstance(value, float) else str(value)
-
-    lines = ["| " + " | ".join(table.columns) + " |", "|" + "---|" * len(table.columns)]
-    lines += ["| " + " | ".join(cell(v) for v in row) + " |" for row in table.itertuples(False)]
-    return "\n".join(lines) + "\n"
 
 
 def main(argv: list[str] | None = None) -> pd.DataFrame:
@@ -145,7 +137,7 @@ def main(argv: list[str] | None = None) -> pd.DataFrame:
     table["wall_ratio"] = base["wall_s"] / table["wall_s"]
     table["particle_steps_ratio"] = base["particle_steps"] / table["particle_steps"]
     table.to_csv(args.out / "stepping.csv", index=False)
-    (args.out / "stepping.md").write_text(_markdown(table.drop(columns=["options"])))
+    (args.out / "stepping.md").write_text(markdown_table(table.drop(columns=["options"])))
     print(table.drop(columns=["options"]).to_string(index=False))
     return table
 

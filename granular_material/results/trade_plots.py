@@ -28,8 +28,8 @@ def pareto_front(cost: np.ndarray, error: np.ndarray) -> np.ndarray:
 
 
 def plot_pareto(table: pd.DataFrame, error: pd.Series, path: str | Path) -> Path:
-    """Error [%] against wall time [s] of every row of ``trade.csv``, one marker per run
-    coloured by test, each test's Pareto front drawn."""
+    """``error`` [%] against wall time [s] of every row of ``trade.csv``, one marker per
+    run coloured by test, each test's Pareto front drawn."""
     plt = pyplot()
     fig, ax = plt.subplots(figsize=(7, 5), constrained_layout=True)
     shown = table.assign(accuracy=error.to_numpy())
@@ -48,7 +48,7 @@ def plot_pareto(table: pd.DataFrame, error: pd.Series, path: str | Path) -> Path
     ax.set_xscale("log")
     ax.set_yscale("log")
     ax.set_xlabel("wall time of the run [s]")
-    ax.set_ylabel("error: max(|peak σ1/σ3|, RMS σ1/σ3) [% of the reference peak]")
+    ax.set_ylabel("|peak σ1/σ3 error| [% of the reference peak]")
     ax.legend(title="test")
     fig.savefig(path, dpi=110)
     plt.close(fig)

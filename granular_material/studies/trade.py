@@ -38,7 +38,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from granular_material.dem import DEMBatch, critical_timestep, load_rve, save_rve
+from granular_material.dem import DEMBatch, RVEData, critical_timestep, load_rve, save_rve
 from granular_material.fem import (
     BiaxialSetup,
     create_material,
@@ -78,6 +78,8 @@ class StudyScale:
         meshes: (nx, ny) of the mesh knob; the finest is its reference.
         mesh_discs, mesh_steps: discs per RVE and load steps of the specimens.
         records: records of each pure-DEM curve.
+        mesh_replicate: the specimens' Gauss points share one RVE (smoke: a homogeneous
+            specimen that converges in a few iterations) instead of one packing each.
     """
 
     name: str
@@ -100,6 +102,7 @@ class StudyScale:
     mesh_steps: int
     confining: float = 100.0e3
     records: int = 100
+    mesh_replicate: bool = False
 
 
 #: the reference settings: float64, 10⁻⁶ strain per DEM step (10⁻⁵ at smoke scale), the
@@ -116,10 +119,10 @@ SCALES: dict[str, StudyScale] = {
     "smoke": StudyScale(
         name="smoke", axial_strain=0.02, seeds=(1, 2), discs=(16, 36), base_discs=16,
         strain_steps=(1.0e-5, 4.0e-5, 1.0e-4), safeties=(0.3, 0.8), dampings=(0.1, 0.3),
-        element_discs=16, element_steps=6, rtols=(1.0e-3, 1.0e-2), stress_floors=(0.001,),
+        element_discs=16, element_steps=4, rtols=(1.0e-3, 1.0e-2), stress_floors=(0.001,),
         tangents=("kruyt-rothenburg",), accelerations=("extrapolate/aitken",),
-        reuse_tols=(0.0, 1.0e-4), meshes=((1, 1), (1, 2)), mesh_discs=16, mesh_steps=4,
-        records=20,
+        reuse_tols=(0.0, 1.0e-4), meshes=((1, 1), (1, 2)), mesh_discs=16, mesh_steps=2,
+        records=20, mesh_replicate=True,
     ),
     "cpu": StudyScale(
         name="cpu", axial_strain=0.08, seeds=(1, 2, 3), discs=(100, 196, 400, 676, 900),
@@ -144,6 +147,11 @@ SCALES: dict[str, StudyScale] = {
         mesh_discs=400, mesh_steps=100,
     ),
 }
+
+
+#: the ``noise`` knob: disc positions moved by this fraction of their radius (random,
+#: seeded), the reference otherwise: how far round-off alone carries a chaotic run
+NOISE = 1.0e-9
 
 
 @dataclass(frozen=True)
@@ -173,6 +181,8 @@ def knobs(scale: StudyScale) -> list[Knob]:
         Knob("reuse_tol", "element", scale.reuse_tols, ref["reuse_tol"]),
         Knob("mesh", "specimen", tuple(f"{nx}x{ny}" for nx, ny in scale.meshes),
              "{}x{}".format(*max(scale.meshes, key=lambda m: m[0] * m[1]))),
+        Knob("noise", "dem", (NOISE,), 0.0),
+        Knob("noise", "element", (NOISE,), 0.0),
     ]
 
 
@@ -186,14 +196,16 @@ def _reference(scale: StudyScale) -> dict[str, Any]:
 def _settings(scale: StudyScale, test: str, **change: Any) -> dict[str, Any]:
     """The full settings of one run of ``test``: the reference with ``change``."""
     values = {**_reference(scale), **change}
+    noise = {"noise": values["noise"]} if values.get("noise") else {}
     if test == "dem":
         values.setdefault("discs", scale.base_discs)
         return {k: values[k] for k in ("discs", "strain_per_step", "safety", "damping",
-                                       "dtype")} | {"test": "dem"}
+                                       "dtype")} | {"test": "dem"} | noise
     common = {k: values[k] for k in ("rtol", "stress_floor", "tangent", "acceleration",
                                      "reuse_tol")}
     if test == "element":
-        return common | {"test": "element", "discs": values.get("discs", scale.element_discs)}
+        return common | {"test": "element",
+                         "discs": values.get("discs", scale.element_discs)} | noise
     finest = max(scale.meshes, key=lambda m: m[0] * m[1])
     return common | {"test": "specimen", "discs": scale.mesh_discs,
                      "mesh": values.get("mesh", "{}x{}".format(*finest))}
@@ -260,11 +272,13 @@ class _Runner:
             save_rve(path, batch.to_data())
         return path
 
-    def single(self, discs: int) -> Path:
-        """The first seed's packing alone (the element's RVE)."""
-        path = self.out / "rves" / f"discs{discs}_seed{self.scale.seeds[0]}.npz"
+    def single(self, discs: int, noise: float = 0.0) -> Path:
+        """The first seed's packing alone (the element's RVE), its discs moved by ``noise``
+        of their radius (see :func:`_jiggled`)."""
+        name = f"discs{discs}_seed{self.scale.seeds[0]}" + (f"_noise{noise:g}" if noise else "")
+        path = self.out / "rves" / f"{name}.npz"
         if not path.exists():
-            save_rve(path, load_rve(self.packings(discs)).take([0]))
+            save_rve(path, _jiggled(load_rve(self.packings(discs)).take([0]), noise))
         return path
 
     def run(self, settings: dict[str, Any]) -> RunResult:
@@ -294,7 +308,7 @@ class _Runner:
         self._warm.add(dtype)
 
     def _dem(self, s: dict[str, Any]) -> RunResult:
-        data = load_rve(self.packings(s["discs"]))
+        data = _jiggled(load_rve(self.packings(s["discs"])), s.get("noise", 0.0))
         data = replace(data, meta=replace(data.meta, damping=float(s["damping"])))
         dt = s["safety"] * min(critical_timestep(r, data.meta) for r in data.radius)
         batch = DEMBatch(data, device=self.device, dtype=s["dtype"], timestep=dt)
@@ -340,13 +354,26 @@ class _Runner:
         setup = BiaxialSetup(width=1.0, height=1.0, nx=1, ny=1,
                              confining=self.scale.confining,
                              axial_strain=self.scale.axial_strain)
-        return self._fem(s, setup, self.scale.element_steps, self.single(s["discs"]), True)
+        return self._fem(s, setup, self.scale.element_steps,
+                         self.single(s["discs"], s.get("noise", 0.0)), True)
 
     def _specimen(self, s: dict[str, Any]) -> RunResult:
         nx, ny = (int(v) for v in s["mesh"].split("x"))
         setup = BiaxialSetup(nx=nx, ny=ny, confining=self.scale.confining,
                              axial_strain=self.scale.axial_strain)
+        if self.scale.mesh_replicate:
+            return self._fem(s, setup, self.scale.mesh_steps, self.single(s["discs"]), True)
         return self._fem(s, setup, self.scale.mesh_steps, None, False)
+
+
+def _jiggled(data: RVEData, noise: float) -> RVEData:
+    """``data`` with every disc moved by ``noise`` × its radius in a random direction
+    (seed 0); ``data`` itself when ``noise`` is 0."""
+    if not noise:
+        return data
+    rng = np.random.default_rng(0)
+    step = noise * data.radius[..., None] * rng.standard_normal(data.position.shape)
+    return replace(data, position=data.position + step)
 
 
 def _commit() -> str:
@@ -388,14 +415,16 @@ def _row(row: PlannedRow, result: RunResult, reference: pd.DataFrame, device: st
 
 
 def accuracy(rows: pd.DataFrame) -> pd.Series:
-    """The one error a row is judged by [%]: the larger of |peak σ1/σ3 error| and the RMS
-    σ1/σ3 difference (both relative to the reference's peak)."""
-    return np.maximum(rows["peak_error_pct"].abs(), rows["stress_ratio_rms_pct"])
+    """The error a row is judged by [%]: |peak σ1/σ3 error| against the reference. The RMS
+    differences of whole curves are reported beside it but not used: past the peak, runs of
+    the same packing that differ by round-off already part by several per cent (DEM is
+    chaotic; the ``noise`` rows measure it)."""
+    return rows["peak_error_pct"].abs()
 
 
 #: the three recommended settings: their error budget [%] for :func:`accuracy` (None: the
 #: reference settings themselves)
-PRESETS: dict[str, float | None] = {"quick": 5.0, "engineering": 2.0, "publication": None}
+PRESETS: dict[str, float | None] = {"quick": 10.0, "engineering": 3.0, "publication": None}
 
 #: the knobs a preset sets (the mesh, the test and the physics stay the user's)
 PRESET_KNOBS = ("discs", "strain_per_step", "dtype", "rtol", "stress_floor", "tangent",
@@ -531,12 +560,17 @@ def run_trade_study(scale: str | StudyScale, out: str | Path, device: str = "cpu
     _measure(plan_runs(study), runner, out, device, commit, progress, log)
     table = pd.read_csv(out / "trade.csv", dtype={"value": str})
     presets = recommend(table[table["knob"] != "preset"], study)
-    _measure(_preset_rows(presets, study), runner, out, device, commit, progress, log)
+    preset_rows = _preset_rows(presets, study)
+    stale = (table["knob"] == "preset") & ~table["run"].isin(
+        {run_key(r.settings) for r in preset_rows})
+    if stale.any():  # presets of an earlier rule or earlier rows: measured anew
+        table[~stale].to_csv(out / "trade.csv", index=False)
+    _measure(preset_rows, runner, out, device, commit, progress, log)
     table = pd.read_csv(out / "trade.csv", dtype={"value": str})
     (out / "presets.json").write_text(json.dumps(presets, indent=2) + "\n")
     plot_pareto(table, accuracy(table), out / "pareto.png")
-    for knob in knobs(study):
-        plot_knob(table[table["knob"] == knob.name], knob.name, out / f"knob_{knob.name}.png")
+    for name in dict.fromkeys(k.name for k in knobs(study)):
+        plot_knob(table[table["knob"] == name], name, out / f"knob_{name}.png")
     (out / "report.md").write_text(report(table, presets, study, device, commit))
     return table
 
@@ -559,7 +593,10 @@ def report(table: pd.DataFrame, presets: dict[str, dict[str, Any]], scale: Study
         "reference|, `rms` = RMS of the σ1/σ3 difference, `εv rms` relative to the "
         "reference's largest |εv|; pure-DEM errors are means over the seeds of each seed "
         "against the same seed at the reference (discs: against the seeds' mean curve at "
-        "the largest size). `accuracy` = max(peak, rms), the measure the presets use.", "",
+        "the largest size). `accuracy` = |peak|, the measure the presets use; the `noise` rows "
+        f"(disc positions moved by {NOISE:g} of a radius, nothing else changed) show how far "
+        "round-off alone carries a run: RMS differences at that level are chaos, not the "
+        "knob.", "",
         "![Pareto](pareto.png)", "",
     ]
     columns = {"value": "value", "peak_error_pct": "peak %", "stress_ratio_rms_pct": "rms %",
@@ -568,7 +605,8 @@ def report(table: pd.DataFrame, presets: dict[str, dict[str, Any]], scale: Study
                "band_inclination_deg": "band °", "wall_s": "wall s",
                "particle_steps": "particle-steps", "newton_iterations": "iterations",
                "error": "error"}
-    for knob in [*knobs(scale), Knob("preset", "", tuple(PRESETS), "publication")]:
+    shown_knobs = {k.name: k for k in knobs(scale)}  # one section per name
+    for knob in [*shown_knobs.values(), Knob("preset", "", tuple(PRESETS), "publication")]:
         rows = table[table["knob"] == knob.name]
         if rows.empty:
             continue
