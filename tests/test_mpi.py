@@ -114,9 +114,10 @@ def _summary(run: subprocess.CompletedProcess[str]) -> dict:
     return {k: v for k, v in json.loads(run.stdout).items() if k not in SUMMARY_FREE}
 
 
-#: arrays of the RVE file that hold the discs' state and what the backend carries; the others
-#: are contact-list bookkeeping (when a list was rebuilt, stale slots), which follows how the
-#: RVEs are grouped into shards and never changes a result
+#: arrays of the RVE file that hold the discs' state and what the backend carries; of the
+#: others, the contact slots in use must agree too, while the rest is contact-list
+#: bookkeeping (when a list was last rebuilt, stale slots), which follows how the RVEs are
+#: grouped into shards and never changes a result
 STATE_KEYS = ("radius", "position", "cell", "velocity", "angular_velocity",
               "fractional_position", "contact_count")
 
@@ -128,6 +129,10 @@ def _assert_same_state(a: Path, b: Path, every_array: bool) -> None:
                                              if k in STATE_KEYS or k.startswith("backend_")]
         for key in keys:
             np.testing.assert_array_equal(x[key], y[key], err_msg=key)
+        slots = x["contact_partner"].shape[-1]
+        live = np.arange(slots) < x["contact_count"][..., None]
+        for key in ("contact_partner", "contact_shear_force"):
+            np.testing.assert_array_equal(x[key][live], y[key][live], err_msg=key)
 
 
 @pytest.fixture(scope="module")

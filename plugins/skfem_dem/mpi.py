@@ -501,7 +501,7 @@ def launch(main: Callable[[], int]) -> int:
         _LAUNCHED = False
         if world.size > 1:
             with _signals_held():
-                _send_command(world, _Command.STOP, int(code))
+                _send_command(world, _Command.STOP, int(code or 0))
 
 
 def exchange_time(n_points: int, repeats: int = 20) -> float:
