@@ -5,6 +5,8 @@ from __future__ import annotations
 import importlib.util
 from pathlib import Path
 
+import pytest
+
 BENCH = Path(__file__).resolve().parents[1] / "benchmarks" / "dem_throughput.py"
 
 
@@ -49,3 +51,26 @@ def test_stepping_benchmark_smoke(tmp_path):
     assert (table["particle_steps"] > 0).all() and (table["steps_completed"] == 2).all()
     assert table.loc[1, "particle_steps"] < table.loc[0, "particle_steps"]
     assert (tmp_path / "stepping.csv").exists() and (tmp_path / "stepping.md").exists()
+
+
+def test_mpi_scaling_benchmark_smoke(tmp_path):
+    """The MPI benchmark at smoke size: in process and 2 ranks, the same result, every
+    table; skipped without mpi4py and mpiexec."""
+    pytest.importorskip("mpi4py", reason="the MPI backend needs mpi4py: pip install "
+                                         "'granular-material[mpi]'")
+    path = BENCH.with_name("mpi_scaling.py")
+    spec = importlib.util.spec_from_file_location("mpi_scaling", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    if module._mpiexec() is None:
+        pytest.skip("no mpiexec: pip install 'granular-material[mpi]'")
+    tables = module.main(["--points", "2", "--particles", "30", "--strain", "1e-4",
+                          "--ranks", "2", "--repeats", "1", "--rounds", "1",
+                          "--out", str(tmp_path)])
+    evaluations = tables["evaluations"]
+    assert evaluations["variant"].tolist() == ["in-process, 2 shards", "mpi, 2 ranks"]
+    assert evaluations["same_result_as_in_process"].all()
+    assert (evaluations["evaluation_ms"] > 0).all()
+    assert 0 <= evaluations["communication_share_pct"].iloc[1] <= 100
+    assert set(tables["estimate"]["ranks"]) == {1, 2, 4, 8, 16, 32, 64}
+    assert (tmp_path / "mpi_scaling.md").exists() and (tmp_path / "mpi_scaling.json").exists()

@@ -9,7 +9,7 @@ import math
 import os
 import sys
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -42,6 +42,7 @@ from granular_material.fem import (
     create_material,
     default_settings,
     default_stress_tol,
+    load_material,
     run_biaxial,
 )
 from granular_material.results import (
@@ -165,7 +166,12 @@ def _common_arguments(parser: argparse.ArgumentParser) -> None:
     add_json(parser, "a summary")
     add_device(parser, "DEM device")
     parser.add_argument("--shards", type=int, default=None,
-                        help="CPU threads (shards) of the DEM batch (default: one per core)")
+                        help="CPU threads (shards) of the DEM batch, per rank with --backend "
+                             "mpi (default: one per core, shared by a node's ranks)")
+    parser.add_argument("--backend", choices=("inprocess", "mpi"), default="inprocess",
+                        help="dem: where the RVEs live: this process (default) or shards on "
+                             "the ranks of an MPI job (launch with mpiexec -n K; rank 0 runs "
+                             "the FEM and alone writes and prints; the same results)")
     parser.add_argument("--map-strain", type=float, nargs="+", default=[0.02],
                         help="axial strain(s) of the displacement/shear-strain maps and of the "
                              "shear-band measures (default 0.02)")
@@ -254,9 +260,10 @@ def _stress_tol(args: argparse.Namespace, material: str) -> float:
 
 
 #: options that may differ between a run and its resume: where it writes, how it reports, how
-#: often it saves, and the CPU threads (sharding never changes a result)
+#: often it saves, the CPU threads and the backend (neither sharding nor MPI ranks change a
+#: result)
 _RESUME_FREE = frozenset({"resume", "out", "progress", "json", "checkpoint_every", "shards",
-                          "func", "command"})
+                          "backend", "func", "command"})
 
 
 def _run_options(args: argparse.Namespace) -> dict[str, Any]:
@@ -406,9 +413,25 @@ def _run(args: argparse.Namespace, setup: BiaxialSetup, material: Material,
     return result, summary
 
 
+def _on_backend(args: argparse.Namespace,
+                command: Callable[[argparse.Namespace], int]) -> int:
+    """``command`` as the DEM material's ``--backend`` runs it: here, or with ``mpi`` on
+    rank 0 of the job while the other ranks serve its RVE shards (they write and print
+    nothing); this process's exit code."""
+    if args.backend == "inprocess":
+        return command(args)
+    return load_material("dem").launch(args.backend, lambda: command(args))
+
+
 def run_single_element(args: argparse.Namespace) -> int:
     """The ``single-element`` command; returns the exit code."""
+    return _on_backend(args, _single_element)
+
+
+def _single_element(args: argparse.Namespace) -> int:
     _check(args)
+    if args.material != "dem" and args.backend != "inprocess":
+        raise UsageError(f"--backend {args.backend} needs --material dem")
     setup = BiaxialSetup(width=1.0, height=1.0, nx=1, ny=1, confining=args.confining,
                          axial_strain=args.axial_strain)
     tracking = _tracking(args, setup.n_points)
@@ -423,7 +446,7 @@ def run_single_element(args: argparse.Namespace) -> int:
                                    replicate=_replicate(args), device=args.device,
                                    shards=args.shards, progress=progress,
                                    tangent=args.tangent, perturbation=args.perturbation,
-                                   **_dem_parameters(args))
+                                   backend=args.backend, **_dem_parameters(args))
     checkpoint, resuming = _open_checkpoint(args)
     with _checkpointed(args, checkpoint, resuming):
         if not resuming:
@@ -474,6 +497,10 @@ def _pure_dem(material: Any, args: argparse.Namespace, progress: bool) -> pd.Dat
 
 def run_biaxial_command(args: argparse.Namespace) -> int:
     """The ``biaxial`` command; returns the exit code."""
+    return _on_backend(args, _biaxial)
+
+
+def _biaxial(args: argparse.Namespace) -> int:
     _check(args)
     from granular_material.dem import resolve_device
 
@@ -493,7 +520,8 @@ def run_biaxial_command(args: argparse.Namespace) -> int:
     material = create_material("dem", rve=args.rve, particles=particles, seed=args.seed,
                                pressure=args.confining, device=device, shards=args.shards,
                                progress=progress, tangent=args.tangent,
-                               perturbation=args.perturbation, **_dem_parameters(args))
+                               perturbation=args.perturbation, backend=args.backend,
+                               **_dem_parameters(args))
     checkpoint, resuming = _open_checkpoint(args)
     with _checkpointed(args, checkpoint, resuming):
         if not resuming:

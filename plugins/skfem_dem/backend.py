@@ -3,8 +3,9 @@
 A backend owns the RVEs of a material (one per Gauss point, batch-first) and offers what
 the material needs: evaluate ∇u from the committed state, commit, revert, checkpoint.
 :class:`InProcessBackend` keeps the whole :class:`~granular_material.dem.DEMBatch` in this
-process (CPU shards or one CUDA device); a backend that spreads shards over MPI ranks
-would implement the same four calls.
+process (CPU shards or one CUDA device); :class:`~granular_material_skfem.mpi.MPIBackend`
+spreads contiguous shards of the RVEs over MPI ranks, each shard an :class:`InProcessBackend`
+of its own, behind the same calls.
 """
 
 from __future__ import annotations
@@ -85,6 +86,10 @@ class Evaluation:
             evaluation together.
         rve_evaluations: RVE paths run (an RVE stepped in a drive counts once per drive).
         particle_steps: disc-steps run, Σ over the stepped RVEs of their steps × discs.
+        drives: the cost (DEM steps, RVE paths, particle-steps) of each drive the evaluation
+            completed, in order (the totals above are their sums, DEM steps included).
+        complete: False when a drive blew up: the batch is then back in its committed state
+            and the response is NaN throughout.
     """
 
     homogenized: Homogenized
@@ -92,11 +97,19 @@ class Evaluation:
     dem_steps: int
     rve_evaluations: int = 0
     particle_steps: int = 0
+    drives: tuple[tuple[int, int, int], ...] = ()
+    complete: bool = True
 
 
 def _nan_like(h: Homogenized) -> Homogenized:
     return Homogenized(**{f.name: np.full_like(np.asarray(getattr(h, f.name), dtype=np.float64),
                                                np.nan) for f in fields(h)})
+
+
+def _totals(drives: list[tuple[int, int, int]]) -> tuple[int, int, int]:
+    """DEM steps, RVE paths and particle-steps of ``drives`` together."""
+    steps, paths, particles = (int(sum(d[k] for d in drives)) for k in range(3))
+    return steps, paths, particles
 
 
 class DEMBackend(Protocol):
@@ -261,7 +274,7 @@ class InProcessBackend:
         target = grad_u + self.lag + grad_u @ self.lag
         failed = ~finite
         moving = self._moving(target, failed)
-        total = np.zeros(3, dtype=np.int64)  # DEM steps, RVE paths, particle-steps
+        drives: list[tuple[int, int, int]] = []  # DEM steps, RVE paths, particle-steps
         perturbed: list[np.ndarray] = []
         cost: tuple[int, int, int] | None = (0, 0, 0)
         if self.tangent == "perturbation" and moving.any():
@@ -273,7 +286,7 @@ class InProcessBackend:
                 cost = self._drive(g, failed, moving)
                 if cost is None:  # the evaluation has failed: the remaining runs are wasted
                     break
-                total += cost
+                drives.append(cost)
                 sigma = np.full((self.n_rve, 2, 2), np.nan)
                 sigma[moving] = self.batch.homogenize(moving).stress
                 perturbed.append(sigma)
@@ -286,8 +299,9 @@ class InProcessBackend:
                 cost = self._drive(change, failed, moving, restart=False)
         if cost is None:
             h = self._current if self._current is not None else self.batch.homogenize()
-            return Evaluation(_nan_like(h), failed, *(int(c) for c in total))
-        total += cost
+            return Evaluation(_nan_like(h), failed, *_totals(drives), drives=tuple(drives),
+                              complete=False)
+        drives.append(cost)
         moved = moving & ~failed
         new = self._measure(moved)
         if perturbed:
@@ -301,7 +315,8 @@ class InProcessBackend:
         self._current = new
         self._target = target
         self._trial = True
-        return Evaluation(self._response(new, target), failed, *(int(c) for c in total))
+        return Evaluation(self._response(new, target), failed, *_totals(drives),
+                          drives=tuple(drives))
 
     def _response(self, current: Homogenized, target: np.ndarray) -> Homogenized:
         """What the RVEs answer for ``target``: their current response, reused RVEs'
@@ -347,11 +362,10 @@ class InProcessBackend:
             self.batch.restore(trial)
         return data if rves is None else data.take(np.asarray(rves, dtype=int))
 
-    def checkpoint(self, path: str | Path) -> None:
-        """Write the committed state (contact history included) to the RVE file ``path``,
-        with what reuse and ``continue`` carry between steps (each RVE's lag and committed
-        response) as further arrays ``backend_*``, so that :meth:`resume_from` continues
-        exactly."""
+    def checkpoint_data(self) -> RVEData:
+        """The committed state (contact history included) with what reuse and ``continue``
+        carry between steps (each RVE's lag and committed response) as further arrays
+        ``backend_*``: what :meth:`checkpoint` writes."""
         data = self.committed_rves()
         extra = dict(data.extra)
         extra["backend_lag"] = self.lag.copy()
@@ -359,7 +373,12 @@ class InProcessBackend:
             for f in fields(self._committed_response):
                 extra[f"backend_response_{f.name}"] = np.asarray(
                     getattr(self._committed_response, f.name))
-        save_rve(path, replace(data, extra=extra))
+        return replace(data, extra=extra)
+
+    def checkpoint(self, path: str | Path) -> None:
+        """Write :meth:`checkpoint_data` to the RVE file ``path``, so that
+        :meth:`resume_from` continues exactly."""
+        save_rve(path, self.checkpoint_data())
 
     def resume_from(self, data: RVEData) -> None:
         """Take the lag and committed response of a :meth:`checkpoint` file's ``data`` (its

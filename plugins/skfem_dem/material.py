@@ -10,8 +10,10 @@ D = (1/V) Σ_c (k_n n⊗d⊗n⊗d + k_t t⊗d⊗t⊗d) (Wu, Fu & Zhou 2025, eqs.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 from granular_material_skfem.backend import InProcessBackend, check_driving, check_reuse
@@ -20,7 +22,14 @@ from granular_material.dem import DEMBatch, RVEData, load_rve, resolve_device
 from granular_material.fem.material import MaterialResponse, PointStatus
 from granular_material.procedures.packing import min_discs, prepare_packing
 
-__all__ = ["DEMMaterial", "DEMMaterialParameters"]
+if TYPE_CHECKING:
+    from granular_material_skfem.mpi import MPIBackend
+
+__all__ = ["BACKENDS", "DEMMaterial", "DEMMaterialParameters", "in_process_backend"]
+
+#: who holds the RVEs: this process (``inprocess``), or contiguous shards of them on the ranks
+#: of an MPI job (``mpi``, :mod:`granular_material_skfem.mpi`)
+BACKENDS = ("inprocess", "mpi")
 
 
 @dataclass(frozen=True)
@@ -37,9 +46,10 @@ class DEMMaterialParameters:
         device: "cpu", "cuda" or None (CUDA when present).
         max_strain_per_step: largest strain per DEM step while driving ∇u [-].
         min_steps: fewest DEM steps per evaluation.
-        shards: CPU shards (threads) of the batch; None: the engine's default (one per
-            core). With 1, independent RVEs are also prepared one at a time (RVE p from the
-            random gas of seed + p, consolidated on its own).
+        shards: CPU shards (threads) of the batch, per rank with the ``mpi`` backend; None:
+            the engine's default (one per core; with ``mpi`` the cores of a node shared by
+            its ranks). With 1, independent RVEs are also prepared one at a time (RVE p from
+            the random gas of seed + p, consolidated on its own).
         tangent: "kruyt-rothenburg" (Wu et al. eq. 6) or "perturbation" (forward
             differences of the RVE response, four extra DEM runs per evaluation; see
             :class:`~granular_material_skfem.backend.InProcessBackend`).
@@ -53,6 +63,9 @@ class DEMMaterialParameters:
             (from the last trial state by the change of ∇u).
         max_dem_steps: cap on one RVE path's DEM steps per evaluation: a point whose path
             needs more is reported failed (Newton cuts back); None: no cap.
+        backend: "inprocess" (every RVE in this process) or "mpi" (contiguous shards on the
+            ranks of an MPI job, see :mod:`granular_material_skfem.mpi`; the same results
+            bit for bit).
     """
 
     rve: str | None = None
@@ -70,8 +83,12 @@ class DEMMaterialParameters:
     reuse_correction: str = "none"
     drive: str = "restart"
     max_dem_steps: int | None = None
+    backend: str = "inprocess"
 
     def __post_init__(self) -> None:
+        if self.backend not in BACKENDS:
+            raise ValueError(f"backend must be one of {', '.join(BACKENDS)}, "
+                             f"got {self.backend!r}")
         check_driving(self.tangent, self.perturbation, 1.0e-4, self.max_strain_per_step,
                       self.min_steps)
         check_reuse(self.reuse_tol, self.reuse_correction, self.drive, self.tangent)
@@ -92,8 +109,21 @@ class DEMMaterialParameters:
             resolve_device(self.device)  # the engine's one device check
 
 
+def in_process_backend(data: RVEData, parameters: DEMMaterialParameters,
+                       device: str | None, shards: int | None) -> InProcessBackend:
+    """The RVEs ``data`` in one :class:`DEMBatch` on ``device`` with ``shards`` CPU threads,
+    driven as ``parameters`` say."""
+    p = parameters
+    return InProcessBackend(DEMBatch(data, device=device, shards=shards),
+                            p.max_strain_per_step, p.min_steps, tangent=p.tangent,
+                            perturbation=p.perturbation, reuse_tol=p.reuse_tol,
+                            reuse_correction=p.reuse_correction, drive=p.drive,
+                            max_steps=p.max_dem_steps)
+
+
 class DEMMaterial:
-    """The DEM material: owns one RVE batch, one RVE per Gauss point (batch-first)."""
+    """The DEM material: owns one RVE batch, one RVE per Gauss point (batch-first), held in
+    this process or, with ``backend="mpi"``, in shards on the ranks of an MPI job."""
 
     def __init__(self, rve: str | Path | None = None, particles: int = 400, seed: int = 1,
                  pressure: float = 100.0e3, replicate: bool = False,
@@ -102,21 +132,35 @@ class DEMMaterial:
                  progress: bool = False, tangent: str = "kruyt-rothenburg",
                  perturbation: float = 0.1, reuse_tol: float = 0.0,
                  reuse_correction: str = "none", drive: str = "restart",
-                 max_dem_steps: int | None = None) -> None:
+                 max_dem_steps: int | None = None, backend: str = "inprocess") -> None:
         self.parameters = DEMMaterialParameters(
             None if rve is None else str(rve), particles, seed, pressure, replicate, device,
             max_strain_per_step, min_steps, shards, tangent, perturbation, reuse_tol,
-            reuse_correction, drive, max_dem_steps,
+            reuse_correction, drive, max_dem_steps, backend,
         )
         self.progress = progress
-        self.backend: InProcessBackend | None = None
+        self.backend: InProcessBackend | MPIBackend | None = None
+
+    @staticmethod
+    def launch(backend: str, main: Callable[[], int]) -> int:
+        """Run a program whose DEM materials use ``backend``; returns this process's exit
+        code. In process that is ``main()``; with ``"mpi"`` rank 0 runs ``main`` and every
+        other rank serves its RVE shard to rank 0 until ``main`` has ended, however it ends
+        (see :func:`granular_material_skfem.mpi.launch`)."""
+        if backend not in BACKENDS:
+            raise ValueError(f"backend must be one of {', '.join(BACKENDS)}, got {backend!r}")
+        if backend == "inprocess":
+            return main()
+        from granular_material_skfem.mpi import launch
+
+        return launch(main)
 
     @property
     def n_points(self) -> int:
         """Number of Gauss points (RVEs) allocated."""
         return 0 if self.backend is None else self.backend.n_rve
 
-    def _allocated(self) -> InProcessBackend:
+    def _allocated(self) -> InProcessBackend | MPIBackend:
         if self.backend is None:
             raise RuntimeError("allocate() the DEM material first")
         return self.backend
@@ -126,12 +170,19 @@ class DEMMaterial:
         (contact history included)."""
         return self._allocated().committed_rves(points)
 
-    def _backend(self, batch: DEMBatch) -> InProcessBackend:
+    def _backend(self, data: RVEData, resume: bool = False) -> InProcessBackend | MPIBackend:
+        """The backend of the chosen kind holding ``data`` (a checkpoint's, with its
+        ``backend_*`` arrays, when ``resume``)."""
         p = self.parameters
-        return InProcessBackend(batch, p.max_strain_per_step, p.min_steps, tangent=p.tangent,
-                                perturbation=p.perturbation, reuse_tol=p.reuse_tol,
-                                reuse_correction=p.reuse_correction, drive=p.drive,
-                                max_steps=p.max_dem_steps)
+        if p.backend == "mpi":
+            from granular_material_skfem.mpi import MPIBackend
+
+            return MPIBackend(data, p, resume=resume)
+        states = InProcessBackend.without_backend_arrays(data) if resume else data
+        backend = in_process_backend(states, p, p.device, p.shards)
+        if resume:
+            backend.resume_from(data)
+        return backend
 
     def allocate(self, n_points: int) -> None:
         """Load or prepare ``n_points`` RVEs in their consolidated state."""
@@ -153,7 +204,7 @@ class DEMMaterial:
             data = RVEData.concatenate([self._prepare(1, p.seed + k) for k in range(n_points)])
         else:
             data = self._prepare(n_points, p.seed)
-        self.backend = self._backend(DEMBatch(data, device=p.device, shards=p.shards))
+        self.backend = self._backend(data)
 
     def _prepare(self, n_rve: int, seed: int) -> RVEData:
         p = self.parameters
@@ -197,15 +248,13 @@ class DEMMaterial:
             self.backend.revert()
 
     def checkpoint(self, path: str | Path) -> None:
-        """Write the committed RVE states (an RVE file, B = n_points) to ``path``."""
+        """Write the committed RVE states (an RVE file, B = n_points) to ``path``; with the
+        ``mpi`` backend rank 0 gathers the shards and writes the one file, which either
+        backend, on any number of ranks, restores."""
         self._allocated().checkpoint(path)
 
     def restore(self, path: str | Path) -> None:
         """Load the committed state written by :meth:`checkpoint` (RVE states with contact
         history, and what reuse and ``continue`` carry between steps)."""
-        p = self.parameters
-        data = load_rve(path)
-        states = InProcessBackend.without_backend_arrays(data)
-        self.backend = self._backend(DEMBatch(states, device=p.device, shards=p.shards))
-        self.backend.resume_from(data)
+        self.backend = self._backend(load_rve(path), resume=True)
 
