@@ -25,6 +25,7 @@ from granular_material.cli.options import (
     cleanup_on_rejection,
     emit,
     interrupt_exit_code,
+    positive,
     positive_int,
     progress_enabled,
     rve_file_shape,
@@ -123,6 +124,9 @@ def _dem_arguments(parser: argparse.ArgumentParser) -> None:
                    help="restart: each iteration drives an RVE from its committed state along "
                         "the whole step (Guo & Zhao, default); continue: from its last trial "
                         "state by the change of grad u (fewer DEM steps, path-dependent)")
+    g.add_argument("--max-strain-per-step", type=positive, default=1e-5, metavar="STRAIN",
+                   help="largest strain of one DEM step while an RVE is driven along grad u "
+                        "(the quasi-static criterion; see the trade study; default 1e-5)")
     g.add_argument("--max-dem-steps", type=int, default=10**6,
                    help="cap on the DEM steps of one RVE's path in one Newton iteration: an "
                         "iterate that needs more is an error naming the point (default 1e6, "
@@ -141,7 +145,8 @@ def _dem_arguments(parser: argparse.ArgumentParser) -> None:
 def _dem_parameters(args: argparse.Namespace) -> dict[str, Any]:
     """The DEM material's keywords of the reuse and stepping options."""
     return {"reuse_tol": args.reuse_tol, "reuse_correction": args.reuse_correction,
-            "drive": args.drive, "max_dem_steps": args.max_dem_steps}
+            "drive": args.drive, "max_dem_steps": args.max_dem_steps,
+            "max_strain_per_step": args.max_strain_per_step}
 
 
 def _tracking(args: argparse.Namespace, n_points: int) -> Tracking | None:
