@@ -59,15 +59,15 @@ def test_plan_covers_every_knob_value_once():
         assert changed <= {row.knob}
 
 
-def test_recommend_takes_the_fastest_within_budget():
+def test_recommend_takes_the_cheapest_within_budget():
     scale = SCALES["smoke"]
     table = pd.DataFrame([
         {"knob": "strain_per_step", "value": "1e-05", "peak_error_pct": 0.0,
-         "stress_ratio_rms_pct": 0.0, "wall_s": 10.0, "error": ""},
+         "stress_ratio_rms_pct": 0.0, "wall_s": 10.0, "particle_steps": 100, "error": ""},
         {"knob": "strain_per_step", "value": "4e-05", "peak_error_pct": -2.5,
-         "stress_ratio_rms_pct": 1.0, "wall_s": 3.0, "error": ""},
+         "stress_ratio_rms_pct": 1.0, "wall_s": 3.0, "particle_steps": 40, "error": ""},
         {"knob": "strain_per_step", "value": "0.0001", "peak_error_pct": 8.0,
-         "stress_ratio_rms_pct": 3.0, "wall_s": 1.0, "error": ""},
+         "stress_ratio_rms_pct": 3.0, "wall_s": 1.0, "particle_steps": 10, "error": ""},
     ])
     chosen = recommend(table, scale)
     assert chosen["quick"]["strain_per_step"] == 1e-4

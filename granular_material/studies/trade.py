@@ -434,9 +434,10 @@ PRESET_KNOBS = ("discs", "strain_per_step", "rtol", "stress_floor", "tangent",
 
 def recommend(table: pd.DataFrame, scale: StudyScale) -> dict[str, dict[str, Any]]:
     """The presets' values from the measured rows. Rule: for each knob of
-    :data:`PRESET_KNOBS`, the value with the least wall time among those whose
-    :func:`accuracy` is within the preset's budget (and that ran without error); the
-    reference value when none is, or for ``publication``."""
+    :data:`PRESET_KNOBS`, the value with the fewest DEM particle-steps (the cost that does not
+    depend on the machine's load; wall time on a shared machine does) among those that ran
+    without error and whose :func:`accuracy` is within the preset's budget, the reference
+    value on a tie; the reference value when none is within, and for ``publication``."""
     ref = _reference(scale) | {"discs": max(scale.discs)}
     chosen: dict[str, dict[str, Any]] = {}
     for name, budget in PRESETS.items():
@@ -444,13 +445,14 @@ def recommend(table: pd.DataFrame, scale: StudyScale) -> dict[str, dict[str, Any
         for knob in knobs(scale):
             if knob.name not in PRESET_KNOBS:
                 continue
-            values[knob.name] = ref[knob.name] if knob.name in ref else knob.reference
+            values[knob.name] = ref[knob.name]
             rows = table[(table["knob"] == knob.name) & (table["error"].fillna("") == "")]
             if budget is None or rows.empty:
                 continue
             fine = rows[accuracy(rows) <= budget]
+            fine = fine.assign(not_reference=fine["value"] != str(ref[knob.name]))
             if not fine.empty:
-                best = fine.sort_values("wall_s").iloc[0]["value"]
+                best = fine.sort_values(["particle_steps", "not_reference"]).iloc[0]["value"]
                 values[knob.name] = _typed(best, knob)
         chosen[name] = values
     return chosen
@@ -621,7 +623,8 @@ def report(table: pd.DataFrame, presets: dict[str, dict[str, Any]], scale: Study
         if knob.name != "preset":
             lines += [f"![{knob.name}](knob_{knob.name}.png)", ""]
     lines += ["## Recommended settings", "",
-              "Rule: per knob, the fastest value whose accuracy is within the budget "
+              "Rule: per knob, the value with the fewest DEM particle-steps whose accuracy is "
+              "within the budget (the reference on a tie) "
               f"({', '.join(f'{k}: {v:g} %' for k, v in PRESETS.items() if v is not None)}); "
               "publication is the reference. Each preset then ran itself (rows `preset` "
               "above: pure DEM and single element).", ""]
