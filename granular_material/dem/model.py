@@ -18,6 +18,7 @@ __all__ = [
     "DeviceConstants",
     "Model",
     "build_model",
+    "cell_heights",
     "critical_timestep",
     "disc_mass",
     "float_type",
@@ -159,15 +160,22 @@ class Model:
         return replace(self, meta=meta, constants=replace(self.constants, friction=friction))
 
 
+def cell_heights(cell: np.ndarray) -> np.ndarray:
+    """The smaller perpendicular height [m] of each cell (…, 2, 2) (columns = cell vectors):
+    det H over the longer column's length. The engine stops an RVE whose contact cut-off is
+    not below half of it (minimum images would no longer be unique)."""
+    with np.errstate(all="ignore"):
+        area = np.linalg.det(cell)
+        lengths = np.linalg.norm(cell, axis=-2)  # |column 0|, |column 1|
+        return np.minimum(area / lengths[..., 1], area / lengths[..., 0])
+
+
 def _check_cell_heights(data: RVEData) -> None:
     """``RVEFileError`` where a cell is narrower than twice the contact cut-off 2·r_max + skin
     (the engine would stop at its first step: minimum images would no longer be unique)."""
     skin = SKIN_FRACTION * 2.0 * float(np.mean(data.radius))
     cutoff = 2.0 * float(np.max(data.radius)) + skin
-    with np.errstate(all="ignore"):
-        area = np.linalg.det(data.cell)
-        lengths = np.linalg.norm(data.cell, axis=1)  # |column 0|, |column 1|
-        heights = np.minimum(area / lengths[:, 1], area / lengths[:, 0])
+    heights = cell_heights(data.cell)
     narrow = ~(cutoff < 0.5 * heights)  # NaN included
     if narrow.any():
         rve = int(np.argmax(narrow))
