@@ -8,7 +8,7 @@ from dataclasses import replace
 import numpy as np
 
 from granular_material.dem import DEMBatch, RVEData, RVEMeta
-from granular_material.dem.model import SKIN_FRACTION
+from granular_material.dem.model import FLOAT32_MAX_RESOLUTION, SKIN_FRACTION
 from granular_material.procedures.servo import consolidate
 
 __all__ = ["MAX_OVERLAP", "MIN_OVERLAP", "max_pressure", "min_discs", "min_pressure",
@@ -78,7 +78,7 @@ def max_pressure(meta: RVEMeta, radius_range: tuple[float, float] = DEFAULT_RADI
 
 
 def _check_limits(n_disc: int, pressure: float, meta: RVEMeta,
-                  radius_range: tuple[float, float]) -> None:
+                  radius_range: tuple[float, float], dtype: str = "float64") -> None:
     """``ValueError`` naming the limit when the packing cannot be prepared."""
     r_min, r_max = radius_range
     if not (0 < r_min <= r_max and math.isfinite(r_max)):
@@ -110,6 +110,19 @@ def _check_limits(n_disc: int, pressure: float, meta: RVEMeta,
             f"the packing (24–400-disc ones stopped after 400 000 steps): at least "
             f"{lowest:.4g} Pa with these stiffnesses, or a softer kn"
         )
+    if dtype == "float32":
+        mean_square = (r_min**2 + r_min * r_max + r_max**2) / 3.0
+        side = math.sqrt(n_disc * math.pi * mean_square / DENSE_SOLID_FRACTION)
+        overlap = pressure * meta.thickness * (r_min + r_max) / kn
+        share = 2.0**-24 * side / overlap
+        if share > FLOAT32_MAX_RESOLUTION:
+            raise ValueError(
+                f"dtype float32 cannot resolve contacts overlapping about {overlap:.3g} m "
+                f"(pressure = {pressure:g} Pa) in a cell about {side:.3g} m across "
+                f"(n_disc = {n_disc}): float32 positions are {2.0**-24 * side:.3g} m apart, "
+                f"{share:.2%} of the overlap (at most {FLOAT32_MAX_RESOLUTION:.1%}); use "
+                f"float64, a higher pressure or fewer discs"
+            )
 
 
 def _place_discs(radius: np.ndarray, side: float, rng: np.random.Generator) -> np.ndarray:
@@ -196,11 +209,13 @@ def prepare_packing(
     frictionless consolidation reaches cannot be held (the caller compares the void ratio).
 
     ``ValueError`` before any work when ``n_disc`` is below :func:`min_discs`, ``pressure``
-    outside [:func:`min_pressure`, :func:`max_pressure`].
+    outside [:func:`min_pressure`, :func:`max_pressure`], or, with ``dtype="float32"``, the
+    consolidated cell would be too large for float32 to resolve the estimated overlaps
+    (:data:`~granular_material.dem.model.FLOAT32_MAX_RESOLUTION`).
     """
     meta = meta or RVEMeta()
     meta.validate()
-    _check_limits(n_disc, pressure, meta, radius_range)
+    _check_limits(n_disc, pressure, meta, radius_range, dtype)
     gas = random_gas(n_disc, n_rve, seed, radius_range, meta=replace(meta, friction_angle=0.0))
     batch = DEMBatch(gas, device=device, dtype=dtype, shards=shards)
     if target_void_ratio is not None:
