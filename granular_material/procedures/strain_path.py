@@ -11,6 +11,7 @@ import math
 import numpy as np
 
 from granular_material.dem import DEMBatch, DEMInstabilityError
+from granular_material.dem.loading import expm_2x2
 from granular_material.dem.model import cell_heights
 
 __all__ = [
@@ -43,27 +44,13 @@ class CellTooThinError(DEMInstabilityError, ValueError):
         RuntimeError.__init__(self, message)
 
 
-def _exp_2x2(m: np.ndarray) -> np.ndarray:
-    """exp of every 2×2 matrix of ``m`` (…, 2, 2), in closed form (m = h·I + T with T
-    traceless, T² = k·I: exp m = e^h (cosh √k · I + sinh √k / √k · T), cos/sin for k < 0)."""
-    half_trace = 0.5 * (m[..., 0, 0] + m[..., 1, 1])
-    t = m - half_trace[..., None, None] * np.eye(2)
-    k = t[..., 0, 0] ** 2 + t[..., 0, 1] * t[..., 1, 0]
-    r = np.sqrt(np.abs(k))
-    with np.errstate(all="ignore"):
-        even = np.where(k >= 0, np.cosh(r), np.cos(r))
-        odd = np.where(r > 0, np.where(k >= 0, np.sinh(r), np.sin(r)) / r, 1.0)
-    return np.exp(half_trace)[..., None, None] * (even[..., None, None] * np.eye(2)
-                                                   + odd[..., None, None] * t)
-
-
 def _check_path_heights(batch: DEMBatch, log_f: np.ndarray, active: np.ndarray) -> None:
     """``CellTooThinError`` naming the RVEs whose cell H(s) = exp(s·log F)·H, s in (0, 1]
     (the path :func:`drive_grad_u` takes), gets a perpendicular height [m] not above twice
     the contact cut-off (checked at :data:`PATH_CHECKS` points and at the end)."""
     cell = batch.cell()
     s = np.arange(1, PATH_CHECKS + 1) / PATH_CHECKS
-    maps = _exp_2x2(s[:, None, None, None] * log_f[None])  # (S, B, 2, 2)
+    maps = expm_2x2(s[:, None, None, None] * log_f[None])  # (S, B, 2, 2)
     heights = cell_heights(maps @ cell[None])  # (S, B)
     limit = 2.0 * batch.cutoff
     thin = ~(heights > limit[None]) & active[None]  # NaN included
