@@ -73,5 +73,7 @@ def test_rigid_rotation_of_a_frictionless_packing_rotates_its_stress(frictionles
     # without friction the tangential force is capped at 0 whatever the slip rate: this held
     # before the fix too, to rounding
     back, still, p0 = _rotated_and_still(frictionless, theta, rate=1e-4)
-    # rounding, amplified by the dynamics: 1e-10 … 1e-7 measured
-    assert np.linalg.norm(back - still) / p0 < 1e-6
+    # rounding, amplified by the dynamics of a frictionless packing (neutral modes): over
+    # 0.7π–0.91π at 1e-4 and 1.01e-4 a step, 4e-9 … 2.6e-5 measured, with scipy's expm/logm
+    # for the cell's step as with the closed forms (whose rounding differs: 3.9e-6 at 0.9π)
+    assert np.linalg.norm(back - still) / p0 < 1e-4

@@ -141,6 +141,12 @@ class DEMBatch:
         """Time step of every RVE [s], shape (B,), float64."""
         return np.concatenate([s.model.timestep for s in self.shards])
 
+    @property
+    def cutoff(self) -> np.ndarray:
+        """Contact cut-off 2·r_max + skin [m] of every RVE, shape (B,) (its shard's): the
+        engine stops an RVE whose cell's perpendicular height falls to twice it."""
+        return np.concatenate([np.full(s.model.n_rve, s.model.cutoff) for s in self.shards])
+
     def set_friction(self, friction_angle: float) -> None:
         """Set the interparticle friction angle [rad] of every RVE; the tangential history
         and the loading are kept."""

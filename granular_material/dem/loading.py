@@ -10,12 +10,29 @@ from dataclasses import dataclass
 
 import numpy as np
 import warp as wp
-from scipy.linalg import expm
 
 from granular_material.dem.kernel_common import CONTROL_STRAIN, CONTROL_STRESS
 from granular_material.dem.model import Model
 
-__all__ = ["CONTROL_STRAIN", "CONTROL_STRESS", "LoadingControl", "ServoSettings"]
+__all__ = ["CONTROL_STRAIN", "CONTROL_STRESS", "LoadingControl", "ServoSettings", "expm_2x2"]
+
+
+def expm_2x2(m: np.ndarray) -> np.ndarray:
+    """exp of every 2×2 matrix of ``m`` (…, 2, 2), in closed form: with m = h·I + T, T
+    traceless and T² = k·I, exp m = e^h (cosh √k · I + sinh √k / √k · T) (cos and sin of
+    √−k for k < 0). exp 0 = I exactly. scipy's ``expm`` took 0.05–3.5 ms a matrix here (its
+    BLAS threads): 10 000 RVEs spent 35 s in one ``set_affine``.
+    """
+    m = np.asarray(m, dtype=np.float64)
+    half_trace = 0.5 * (m[..., 0, 0] + m[..., 1, 1])
+    t = m - half_trace[..., None, None] * np.eye(2)
+    k = t[..., 0, 0] ** 2 + t[..., 0, 1] * t[..., 1, 0]
+    r = np.sqrt(np.abs(k))
+    with np.errstate(all="ignore"):  # r = 0: the branch not taken divides by zero
+        even = np.where(k >= 0, np.cosh(r), np.cos(r))
+        odd = np.where(r > 0, np.where(k >= 0, np.sinh(r), np.sin(r)) / r, 1.0)
+    return np.exp(half_trace)[..., None, None] * (even[..., None, None] * np.eye(2)
+                                                   + odd[..., None, None] * t)
 
 
 @dataclass(frozen=True)
@@ -74,9 +91,9 @@ class LoadingControl:
 
     def set_affine(self, velocity_gradient: np.ndarray) -> None:
         """Prescribe the velocity gradient L [1/s] of every RVE, shape (B, 2, 2); the cell
-        advances exactly as ``H ← expm(L·dt)·H`` each step. The servo is switched off."""
+        advances exactly as ``H ← exp(L·dt)·H`` each step. The servo is switched off."""
         lg = np.asarray(velocity_gradient, dtype=np.float64)
-        maps = expm(lg * self._timestep[:, None, None])  # batched over the RVEs
+        maps = expm_2x2(lg * self._timestep[:, None, None])
         self.velocity_gradient.assign(lg)
         self.step_map.assign(maps)
         self.servo = None

@@ -7,6 +7,7 @@ from granular_material.procedures.packing import prepare_packing, random_gas
 from granular_material.procedures.progress import progress_bar
 from granular_material.procedures.servo import consolidate, servo_steps
 from granular_material.procedures.strain_path import (
+    CellTooThinError,
     drive_grad_u,
     has_real_logarithm,
     over_step_cap,
@@ -15,6 +16,7 @@ from granular_material.procedures.strain_path import (
 )
 
 __all__ = [
+    "CellTooThinError",
     "biaxial_test",
     "consolidate",
     "drive_grad_u",

@@ -8,11 +8,12 @@ from dataclasses import replace
 import numpy as np
 
 from granular_material.dem import DEMBatch, RVEData, RVEMeta
-from granular_material.dem.model import SKIN_FRACTION
+from granular_material.dem.model import FLOAT32_MAX_RESOLUTION, SKIN_FRACTION
 from granular_material.procedures.servo import consolidate
 
-__all__ = ["MAX_OVERLAP", "max_pressure", "min_discs", "prepare_packing", "random_gas",
-           "smallest_normal_stiffness"]
+__all__ = ["MAX_OVERLAP", "MIN_OVERLAP", "max_pressure", "min_discs", "min_pressure",
+           "prepare_packing", "random_gas", "smallest_normal_stiffness",
+           "typical_normal_stiffness"]
 
 DEFAULT_RADIUS_RANGE = (3.0e-3, 7.0e-3)  # Wu et al. (2025) Table 1; Guo & Zhao rMean 5 mm ± 40 %
 
@@ -22,6 +23,13 @@ DENSE_SOLID_FRACTION = 0.9
 #: largest estimated contact overlap δ/r = 2·p·t/kn a packing is consolidated to
 #: (:func:`max_pressure`): the void ratio falls to zero, and the RVE is invalid, near 0.2
 MAX_OVERLAP = 0.1
+#: smallest estimated overlap δ/r = 2·p·t/kn (of a disc of the mean radius) a packing is
+#: consolidated to (:func:`min_pressure`). Closer to the jamming point the frictionless servo
+#: does not settle the packing: measured here (constant law, 3 seeds each), 24 and 64 discs
+#: failed at 3e-6 for one seed in three, 400 discs at 1e-5 for all three (each after the
+#: 400 000 steps of ``consolidate``); 400 discs passed at 3e-5 (3 of 3) and 5e-5 (8 of 8,
+#: 10–31 s), 1000 discs at 5e-5 (2 of 2, 103–154 s)
+MIN_OVERLAP = 5.0e-5
 
 
 def min_discs(radius_range: tuple[float, float] = DEFAULT_RADIUS_RANGE) -> int:
@@ -44,6 +52,23 @@ def smallest_normal_stiffness(meta: RVEMeta, radius_range: tuple[float, float]) 
     return float(stiffness["kn"])
 
 
+def typical_normal_stiffness(meta: RVEMeta, radius_range: tuple[float, float]) -> float:
+    """The normal stiffness [N/m] of two discs of the mean radius r̄: kn (constant law), or
+    E·r̄ (FrictMat)."""
+    stiffness = meta.stiffness
+    if stiffness.get("law") == "frictmat":
+        return float(stiffness["young"]) * 0.5 * (radius_range[0] + radius_range[1])
+    return float(stiffness["kn"])
+
+
+def min_pressure(meta: RVEMeta, radius_range: tuple[float, float] = DEFAULT_RADIUS_RANGE,
+                 ) -> float:
+    """Lowest consolidation pressure [Pa] of the contact law of ``meta``: the estimated
+    overlap 2·p·t/kn of a mean disc at least :data:`MIN_OVERLAP` of its radius (750 Pa for
+    kn = 3e6 N/m, t = 0.1 m; 2.5 MPa for kn = 1e10 N/m)."""
+    return MIN_OVERLAP * typical_normal_stiffness(meta, radius_range) / (2.0 * meta.thickness)
+
+
 def max_pressure(meta: RVEMeta, radius_range: tuple[float, float] = DEFAULT_RADIUS_RANGE,
                  ) -> float:
     """Highest consolidation pressure [Pa] of the linear contact law of ``meta``: a disc of
@@ -53,7 +78,7 @@ def max_pressure(meta: RVEMeta, radius_range: tuple[float, float] = DEFAULT_RADI
 
 
 def _check_limits(n_disc: int, pressure: float, meta: RVEMeta,
-                  radius_range: tuple[float, float]) -> None:
+                  radius_range: tuple[float, float], dtype: str = "float64") -> None:
     """``ValueError`` naming the limit when the packing cannot be prepared."""
     r_min, r_max = radius_range
     if not (0 < r_min <= r_max and math.isfinite(r_max)):
@@ -75,6 +100,29 @@ def _check_limits(n_disc: int, pressure: float, meta: RVEMeta,
             f" of the radius (2·p·t/kn); the linear contact law holds to "
             f"{MAX_OVERLAP:.0%}: at most {highest:.4g} Pa with these stiffnesses"
         )
+    lowest = min_pressure(meta, radius_range)
+    kn = typical_normal_stiffness(meta, radius_range)
+    if pressure < lowest:
+        raise ValueError(
+            f"pressure = {pressure:g} Pa overlaps the contacts by only about "
+            f"{2 * pressure * meta.thickness / kn:.2g} of the radius (2·p·t/kn with kn = "
+            f"{kn:.4g} N/m); below {MIN_OVERLAP:g} the consolidation servo does not settle "
+            f"the packing (24–400-disc ones stopped after 400 000 steps): at least "
+            f"{lowest:.4g} Pa with these stiffnesses, or a softer kn"
+        )
+    if dtype == "float32":
+        mean_square = (r_min**2 + r_min * r_max + r_max**2) / 3.0
+        side = math.sqrt(n_disc * math.pi * mean_square / DENSE_SOLID_FRACTION)
+        overlap = pressure * meta.thickness * (r_min + r_max) / kn
+        share = 2.0**-24 * side / overlap
+        if share > FLOAT32_MAX_RESOLUTION:
+            raise ValueError(
+                f"dtype float32 cannot resolve contacts overlapping about {overlap:.3g} m "
+                f"(pressure = {pressure:g} Pa) in a cell about {side:.3g} m across "
+                f"(n_disc = {n_disc}): float32 positions are {2.0**-24 * side:.3g} m apart, "
+                f"{share:.2%} of the overlap (at most {FLOAT32_MAX_RESOLUTION:.1%}); use "
+                f"float64, a higher pressure or fewer discs"
+            )
 
 
 def _place_discs(radius: np.ndarray, side: float, rng: np.random.Generator) -> np.ndarray:
@@ -160,12 +208,14 @@ def prepare_packing(
     little below e0 (reported by :meth:`DEMBatch.homogenize`). A target below what
     frictionless consolidation reaches cannot be held (the caller compares the void ratio).
 
-    ``ValueError`` before any work when ``n_disc`` is below :func:`min_discs` or ``pressure``
-    above :func:`max_pressure`.
+    ``ValueError`` before any work when ``n_disc`` is below :func:`min_discs`, ``pressure``
+    outside [:func:`min_pressure`, :func:`max_pressure`], or, with ``dtype="float32"``, the
+    consolidated cell would be too large for float32 to resolve the estimated overlaps
+    (:data:`~granular_material.dem.model.FLOAT32_MAX_RESOLUTION`).
     """
     meta = meta or RVEMeta()
     meta.validate()
-    _check_limits(n_disc, pressure, meta, radius_range)
+    _check_limits(n_disc, pressure, meta, radius_range, dtype)
     gas = random_gas(n_disc, n_rve, seed, radius_range, meta=replace(meta, friction_angle=0.0))
     batch = DEMBatch(gas, device=device, dtype=dtype, shards=shards)
     if target_void_ratio is not None:
