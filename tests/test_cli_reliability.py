@@ -182,6 +182,8 @@ def test_prepare_limits_are_checked_before_work(capsys):
     assert code == 2 and "at least 12 discs" in err and "--particles 8" in err
     code, _, err = _run(capsys, "prepare", "--pressure", "1e7", "--device", "cpu")
     assert code == 2 and "--pressure 1e+07" in err and "1.5e+06" in err
+    code, _, err = _run(capsys, "prepare", "--pressure", "100", "--device", "cpu")
+    assert code == 2 and "--pressure 100 Pa is too low" in err and "at least 750 Pa" in err
     with pytest.raises(ValueError, match="at least 12"):
         prepare_packing(n_disc=11, device="cpu")
 

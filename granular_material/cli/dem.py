@@ -104,6 +104,7 @@ def _run_prepare(args: argparse.Namespace) -> int:
         MAX_OVERLAP,
         max_pressure,
         min_discs,
+        min_pressure,
         smallest_normal_stiffness,
     )
 
@@ -126,6 +127,16 @@ def _run_prepare(args: argparse.Namespace) -> int:
             f"{args.radius_max:g} m the consolidated cell must stay wider than twice the "
             f"contact cut-off (2·r_max + skin; the engine sees one periodic image of each "
             f"pair), which takes at least {fewest} discs"
+        )
+    lowest = min_pressure(meta, radius_range)
+    if args.pressure < lowest:
+        overlap = 2 * args.pressure * args.thickness / smallest_normal_stiffness(meta,
+                                                                                radius_range)
+        raise UsageError(
+            f"--pressure {args.pressure:g} Pa is too low for these stiffnesses: the contacts "
+            f"would overlap by about {overlap:.2g} of their radius, below which the "
+            f"consolidation servo does not settle a packing; at least {lowest:.4g} Pa (or a "
+            "softer --kn / --young)"
         )
     highest = max_pressure(meta, radius_range)
     if args.pressure > highest:
