@@ -375,12 +375,19 @@ class _Runner:
 
 def _jiggled(data: RVEData, noise: float) -> RVEData:
     """``data`` with every disc moved by ``noise`` × its radius in a random direction
-    (seed 0); ``data`` itself when ``noise`` is 0."""
+    (seed 0), its fractional positions (which the engine resumes from) moved alike;
+    ``data`` itself when ``noise`` is 0."""
     if not noise:
         return data
     rng = np.random.default_rng(0)
     step = noise * data.radius[..., None] * rng.standard_normal(data.position.shape)
-    return replace(data, position=data.position + step)
+    if "fractional_position" not in data.extra:
+        return replace(data, position=data.position + step)
+    frac = data.extra["fractional_position"] + np.einsum("bij,bnj->bni",
+                                                         np.linalg.inv(data.cell), step)
+    frac -= np.floor(frac)
+    return replace(data, position=np.einsum("bij,bnj->bni", data.cell, frac),
+                   extra={**data.extra, "fractional_position": frac})
 
 
 def _commit() -> str:
@@ -542,6 +549,19 @@ def _load_run(out: Path, key: str) -> RunResult:
                      meta.pop("iterations"), meta.pop("error"), meta)
 
 
+def _drop_rows(path: Path, stale: Callable[[pd.DataFrame], pd.Series]) -> None:
+    """Rows of the table at ``path`` that ``stale`` marks removed (rows of an earlier plan
+    or rule: a study run again with other sizes or presets keeps only its own)."""
+    if not path.exists():
+        return
+    table = pd.read_csv(path, dtype={"value": str})
+    marked = stale(table)
+    if marked.any():
+        part = path.with_name(path.name + ".part")
+        table[~marked].to_csv(part, index=False)
+        part.replace(path)
+
+
 def _append(path: Path, rows: list[dict[str, Any]]) -> None:
     """``rows`` added to the table at ``path``, which is replaced whole."""
     frame = pd.DataFrame(rows)
@@ -567,14 +587,16 @@ def run_trade_study(scale: str | StudyScale, out: str | Path, device: str = "cpu
     out.mkdir(parents=True, exist_ok=True)
     runner = _Runner(study, out, device)
     commit = _commit()
-    _measure(plan_runs(study), runner, out, device, commit, progress, log)
+    planned = plan_runs(study)
+    _drop_rows(out / "trade.csv", lambda t: (t["knob"] != "preset") & ~pd.Series(
+        list(zip(t["knob"], t["value"], t["run"], strict=True)), index=t.index).isin(
+        {(r.knob, str(r.value), run_key(r.settings)) for r in planned}))
+    _measure(planned, runner, out, device, commit, progress, log)
     table = pd.read_csv(out / "trade.csv", dtype={"value": str})
     presets = recommend(table[table["knob"] != "preset"], study)
     preset_rows = _preset_rows(presets, study)
-    stale = (table["knob"] == "preset") & ~table["run"].isin(
-        {run_key(r.settings) for r in preset_rows})
-    if stale.any():  # presets of an earlier rule or earlier rows: measured anew
-        table[~stale].to_csv(out / "trade.csv", index=False)
+    _drop_rows(out / "trade.csv", lambda t: (t["knob"] == "preset") & ~t["run"].isin(
+        {run_key(r.settings) for r in preset_rows}))
     _measure(preset_rows, runner, out, device, commit, progress, log)
     table = pd.read_csv(out / "trade.csv", dtype={"value": str})
     (out / "presets.json").write_text(json.dumps(presets, indent=2) + "\n")
