@@ -128,3 +128,31 @@ def test_restarted_study_runs_nothing_again(smoke_study, capsys):
     assert code == 0
     assert not re.search(r"^(dem|element|specimen)-[0-9a-f]{10}: ", captured.err, re.M)
     assert (out / "trade.csv").read_text() == before
+
+
+# -- the presets the commands take -----------------------------------------------------------
+def test_command_presets_are_the_committed_study_s():
+    from granular_material.fem.presets import PRESETS_FILE
+
+    committed = Path(__file__).parents[1] / "docs" / "trade-study" / "presets.json"
+    assert json.loads(PRESETS_FILE.read_text()) == json.loads(committed.read_text())
+    assert set(json.loads(committed.read_text())) == set(PRESETS)
+
+
+def test_preset_sets_the_options_left_at_their_defaults(tmp_path, capsys):
+    from granular_material.cli import build_parser
+    from granular_material.cli.fem import _apply_preset
+    from granular_material.fem.presets import load_presets
+
+    quick = load_presets()["quick"]
+    args = build_parser().parse_args(["single-element", "--preset", "quick",
+                                      "--rtol", "0.02"])
+    _apply_preset(args)
+    assert args.rtol == 0.02  # given: kept
+    assert args.particles == quick.discs
+    assert args.max_strain_per_step == quick.strain_per_step
+    assert args.reuse_tol == quick.reuse_tol
+    assert args.stress_tol == pytest.approx(quick.stress_floor * args.confining)
+    code = main(["single-element", "--material", "linear-elastic", "--preset", "quick",
+                 "--steps", "2"])
+    assert code == 2 and "--material dem" in capsys.readouterr().err

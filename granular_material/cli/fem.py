@@ -46,6 +46,7 @@ from granular_material.fem import (
     load_material,
     run_biaxial,
 )
+from granular_material.fem.presets import load_presets
 from granular_material.results import (
     BiaxialWriter,
     band_summary,
@@ -59,6 +60,10 @@ __all__ = ["register", "run_biaxial_command", "run_single_element"]
 
 #: the Newton settings of the commands (fem.default_settings), shown as the option defaults
 _NEWTON = default_settings("dem")
+#: the DEM material's default strain per DEM step [-]
+DEFAULT_STRAIN_PER_STEP = 1e-5
+#: single-element's default discs per prepared RVE
+DEFAULT_PARTICLES = 400
 
 #: reduced CPU scale of the biaxial specimen: elements (nx, ny) and discs per RVE; 5 × 10 is
 #: the coarsest mesh on which a band showed (50 steps to 10 %: about 23 min on 2 CPU cores)
@@ -124,7 +129,8 @@ def _dem_arguments(parser: argparse.ArgumentParser) -> None:
                    help="restart: each iteration drives an RVE from its committed state along "
                         "the whole step (Guo & Zhao, default); continue: from its last trial "
                         "state by the change of grad u (fewer DEM steps, path-dependent)")
-    g.add_argument("--max-strain-per-step", type=positive, default=1e-5, metavar="STRAIN",
+    g.add_argument("--max-strain-per-step", type=positive, default=DEFAULT_STRAIN_PER_STEP,
+                   metavar="STRAIN",
                    help="largest strain of one DEM step while an RVE is driven along grad u "
                         "(the quasi-static criterion; see the trade study; default 1e-5)")
     g.add_argument("--max-dem-steps", type=int, default=10**6,
@@ -180,6 +186,11 @@ def _common_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--map-strain", type=float, nargs="+", default=[0.02],
                         help="axial strain(s) of the displacement/shear-strain maps and of the "
                              "shear-band measures (default 0.02)")
+    parser.add_argument("--preset", choices=tuple(load_presets()), default=None,
+                        help="settings the trade study recommends (docs/trade-study): discs "
+                             "per RVE, strain per DEM step, Newton stress floor, tangent, "
+                             "predictor and relaxation, reuse; an option given beside it (not "
+                             "at its default) wins")
     g = parser.add_argument_group("checkpoints (with --out)")
     g.add_argument("--checkpoint-every", type=positive_int, default=1, metavar="N",
                    help="save the committed state (RVEs with contact history, displacement, "
@@ -208,8 +219,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--nu", type=float, default=0.3, help="linear-elastic: Poisson's ratio")
     p.add_argument("--rve", type=Path, default=None,
                    help="dem: RVE file (one RVE, replicated to the 4 points, or four)")
-    p.add_argument("--particles", type=int, default=400,
-                   help="dem: discs per prepared RVE (default 400)")
+    p.add_argument("--particles", type=int, default=DEFAULT_PARTICLES,
+                   help=f"dem: discs per prepared RVE (default {DEFAULT_PARTICLES})")
     p.add_argument("--seed", type=int, default=1, help="dem: seed of the prepared RVE")
     p.add_argument("--independent", action="store_true",
                    help="dem: four independent RVEs (seeds seed..seed+3) instead of one "
@@ -338,7 +349,36 @@ def _checkpointed(args: argparse.Namespace, checkpoint: RunCheckpoint | None,
             raise
 
 
+def _apply_preset(args: argparse.Namespace) -> None:
+    """``--preset NAME``: its values for every option it sets that is at its default."""
+    if args.preset is None:
+        return
+    if getattr(args, "material", "dem") != "dem":
+        raise UsageError(f"--preset {args.preset} sets DEM and Newton settings; it needs "
+                         "--material dem")
+    preset = load_presets()[args.preset]
+    predictor, relaxation = preset.acceleration.split("/")
+    secant = preset.tangent == "secant"
+    values = {  # option: (its default, the preset's value)
+        "rtol": (_NEWTON.rtol, preset.rtol),
+        "stress_tol": (None, preset.stress_floor * args.confining),
+        "tangent": ("kruyt-rothenburg", "kruyt-rothenburg" if secant else preset.tangent),
+        "tangent_update": (_NEWTON.tangent_update, "secant" if secant else "none"),
+        "predictor": (_NEWTON.predictor, predictor),
+        "relaxation": (_NEWTON.relaxation, relaxation),
+        "reuse_tol": (DEM_REUSE_TOL, preset.reuse_tol),
+        "max_strain_per_step": (DEFAULT_STRAIN_PER_STEP, preset.strain_per_step),
+    }
+    if args.rve is None:  # the discs of a given file are the file's
+        values["particles"] = (DEFAULT_PARTICLES if args.command == "single-element" else None,
+                               preset.discs)
+    for dest, (default, value) in values.items():
+        if getattr(args, dest) == default:
+            setattr(args, dest, value)
+
+
 def _check(args: argparse.Namespace) -> None:
+    _apply_preset(args)
     _check_resume(args)
     if args.steps < 1:
         raise ValueError(f"--steps must be >= 1, got {args.steps}")
@@ -411,6 +451,7 @@ def _run(args: argparse.Namespace, setup: BiaxialSetup, material: Material,
                              checkpoint=checkpoint, resume=resuming)
     summary = run_summary(result, time.perf_counter() - t0)
     summary["resumed_from_step"] = result.resumed_from
+    summary["preset"] = args.preset
     if tracking is not None:
         summary["tracked_rows"] = len(result.tracked)
         summary["tracking_time_s"] = (float(result.tracked["seconds"].sum())

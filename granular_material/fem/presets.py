@@ -1,0 +1,54 @@
+"""Named settings of the FEM × DEM commands, chosen by the trade study from measurements.
+
+``presets.json`` beside this module is the ``presets.json`` of the committed CPU trade study
+(``docs/trade-study/``, whose ``report.md`` gives each preset's measured error and cost); a
+test keeps the two the same. ``quick``, ``engineering`` and ``publication`` differ in the
+discs per RVE, the strain per DEM step, the Newton stress floor, the tangent, predictor and
+relaxation and the reuse of undisturbed RVEs: the knobs the study found to trade speed for
+accuracy (see :func:`granular_material.studies.trade.recommend` for the rule).
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from functools import cache
+from pathlib import Path
+
+__all__ = ["PRESETS_FILE", "Preset", "load_presets"]
+
+PRESETS_FILE = Path(__file__).with_name("presets.json")
+
+
+@dataclass(frozen=True)
+class Preset:
+    """One named setting.
+
+    Attributes:
+        name: quick, engineering or publication.
+        discs: discs per prepared RVE.
+        strain_per_step: largest strain of one DEM step [-].
+        rtol: Newton's relative residual tolerance.
+        stress_floor: Newton's absolute stress tolerance as a fraction of the confining
+            pressure [-].
+        tangent: kruyt-rothenburg, perturbation or secant (Kruyt–Rothenburg with Broyden
+            updates).
+        acceleration: "predictor/relaxation", e.g. "extrapolate/aitken".
+        reuse_tol: reuse tolerance of undisturbed RVEs [-].
+    """
+
+    name: str
+    discs: int
+    strain_per_step: float
+    rtol: float
+    stress_floor: float
+    tangent: str
+    acceleration: str
+    reuse_tol: float
+
+
+@cache
+def load_presets() -> dict[str, Preset]:
+    """The presets of :data:`PRESETS_FILE`, by name."""
+    saved = json.loads(PRESETS_FILE.read_text())
+    return {name: Preset(name=name, **values) for name, values in saved.items()}
