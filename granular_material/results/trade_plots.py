@@ -29,18 +29,24 @@ def pareto_front(cost: np.ndarray, error: np.ndarray) -> np.ndarray:
 
 def plot_pareto(table: pd.DataFrame, error: pd.Series, path: str | Path) -> Path:
     """``error`` [%] against wall time [s] of every row of ``trade.csv``, one marker per
-    run coloured by test, each test's Pareto front drawn."""
+    run coloured by test (x: a run that stopped short, left out of the front), each test's
+    Pareto front drawn; errors below 10⁻³ % (the reference itself) are drawn at 10⁻³."""
     plt = pyplot()
     fig, ax = plt.subplots(figsize=(7, 5), constrained_layout=True)
     shown = table.assign(accuracy=error.to_numpy())
     shown = shown[np.isfinite(shown["accuracy"]) & (shown["wall_s"] > 0)]
+    failed = shown["error"].fillna("").astype(str) != "" if "error" in shown else False
     for test, group in shown.groupby("test"):
         colour = _COLOURS.get(str(test), "k")
-        ax.scatter(group["wall_s"], group["accuracy"].clip(lower=1e-3), s=22, color=colour,
+        ran = group[~failed[group.index]] if "error" in shown else group
+        stopped = group[failed[group.index]] if "error" in shown else group.iloc[:0]
+        ax.scatter(ran["wall_s"], ran["accuracy"].clip(lower=1e-3), s=22, color=colour,
                    label=str(test))
-        front = pareto_front(group["wall_s"].to_numpy(), group["accuracy"].to_numpy())
-        ax.plot(group["wall_s"].to_numpy()[front],
-                group["accuracy"].clip(lower=1e-3).to_numpy()[front], color=colour, lw=1)
+        ax.scatter(stopped["wall_s"], stopped["accuracy"].clip(lower=1e-3), s=30,
+                   color=colour, marker="x")
+        front = pareto_front(ran["wall_s"].to_numpy(), ran["accuracy"].to_numpy())
+        ax.plot(ran["wall_s"].to_numpy()[front],
+                ran["accuracy"].clip(lower=1e-3).to_numpy()[front], color=colour, lw=1)
         for _, row in group.iterrows():
             ax.annotate(f"{row['knob']}={row['value']}", (row["wall_s"],
                         max(row["accuracy"], 1e-3)), fontsize=6, alpha=0.7,

@@ -613,7 +613,8 @@ def report(table: pd.DataFrame, presets: dict[str, dict[str, Any]], scale: Study
     ref = _reference(scale)
     lines = [
         f"# Speed against accuracy: trade study ({scale.name})", "",
-        f"Device {device}, commit {commit}. Drained biaxial tests to axial strain "
+        f"Device {device}; report written at commit {commit} (the commit each row was "
+        "measured at is its `commit` in trade.csv). Drained biaxial tests to axial strain "
         f"{scale.axial_strain:g} at p0 = {scale.confining:g} Pa; seeds "
         f"{', '.join(map(str, scale.seeds))}.", "",
         "Reference settings: " + ", ".join(f"{k} = {v}" for k, v in ref.items())
