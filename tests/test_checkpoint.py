@@ -231,18 +231,24 @@ def _wait_for(path: Path, process: subprocess.Popen, timeout: float = 300) -> No
         time.sleep(0.02)
 
 
-def test_sigterm_keeps_the_work_and_resumes(rve64, reference_run, tmp_path):
+@pytest.mark.skipif(os.name != "posix", reason="POSIX signals")
+@pytest.mark.parametrize(("stop", "code"), [(signal.SIGTERM, 143), (signal.SIGINT, 130)])
+def test_a_stopped_run_keeps_its_work_and_resumes(stop, code, rve64, reference_run,
+                                                  tmp_path):
+    """SIGTERM (a scheduler's stop) and SIGINT (Ctrl-C): the shell's exit code, the tables,
+    figures and summary of the steps done, the --resume line, no traceback; the resumed run
+    is the reference."""
     out = tmp_path / "run"
     process = subprocess.Popen(_command(rve64, "--out", out), stdout=subprocess.PIPE,
                                stderr=subprocess.PIPE, text=True)
     _wait_for(out / "checkpoint" / "steps" / "step_00007.npz", process)
-    process.send_signal(signal.SIGTERM)
+    process.send_signal(stop)
     stdout, stderr = process.communicate(timeout=300)
-    assert process.returncode == 143, stderr
+    assert process.returncode == code, stderr
     summary = json.loads((out / "summary.json").read_text())
     assert summary["error"].startswith("interrupted after load step")
     assert json.loads(stdout) == summary
-    assert f"--resume {out}" in stderr
+    assert f"--resume {out}" in stderr and "Traceback" not in stderr
     assert (out / "stress_strain.png").is_file()  # the figures of the steps done
     assert len(pd.read_csv(out / "steps.csv")) == summary["steps_completed"] + 1
     done = subprocess.run(_command(rve64, "--resume", out), capture_output=True, text=True,
@@ -284,16 +290,3 @@ def test_sigkill_at_random_moments_resumes_to_the_same_run(rve64, reference_run,
     print(f"{kills} SIGKILLs ({kills_before_a_save} before the first save) in {chains} "
           "chains")
     assert kills_before_a_save < kills, "no kill came after the first saved step"
-
-
-@pytest.mark.skipif(os.name != "posix", reason="POSIX signals")
-def test_sigint_stops_with_code_130(rve64, tmp_path):
-    """SIGINT (Ctrl-C) stops the run like SIGTERM, with the shell's code 130."""
-    out = tmp_path / "run"
-    process = subprocess.Popen(_command(rve64, "--out", out), stdout=subprocess.PIPE,
-                               stderr=subprocess.PIPE, text=True)
-    _wait_for(out / "checkpoint" / "steps" / "step_00003.npz", process)
-    process.send_signal(signal.SIGINT)
-    _, stderr = process.communicate(timeout=300)
-    assert process.returncode == 130, stderr
-    assert "Traceback" not in stderr and f"--resume {out}" in stderr

@@ -128,10 +128,11 @@ def _run_prepare(args: argparse.Namespace) -> int:
             f"contact cut-off (2·r_max + skin; the engine sees one periodic image of each "
             f"pair), which takes at least {fewest} discs"
         )
+    # the estimated overlap of a contact as a share of the radius, 2·p·t/kn
+    overlap = 2 * args.pressure * args.thickness / smallest_normal_stiffness(meta,
+                                                                            radius_range)
     lowest = min_pressure(meta, radius_range)
     if args.pressure < lowest:
-        overlap = 2 * args.pressure * args.thickness / smallest_normal_stiffness(meta,
-                                                                                radius_range)
         raise UsageError(
             f"--pressure {args.pressure:g} Pa is too low for these stiffnesses: the contacts "
             f"would overlap by about {overlap:.2g} of their radius, below which the "
@@ -140,8 +141,6 @@ def _run_prepare(args: argparse.Namespace) -> int:
         )
     highest = max_pressure(meta, radius_range)
     if args.pressure > highest:
-        overlap = 2 * args.pressure * args.thickness / smallest_normal_stiffness(meta,
-                                                                                radius_range)
         raise UsageError(
             f"--pressure {args.pressure:g} Pa would press the discs about {overlap:.0%} of "
             f"their radius into each other (2·p·thickness/kn); the linear contact law holds "
