@@ -52,7 +52,7 @@ from typing import Any
 
 import numpy as np
 from granular_material_skfem.backend import Evaluation, InProcessBackend
-from granular_material_skfem.material import DEMMaterialParameters, in_process_backend
+from granular_material_skfem.parameters import DEMMaterialParameters, in_process_backend
 
 from granular_material.dem import Homogenized, RVEData, resolve_device, save_rve
 
