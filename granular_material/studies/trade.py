@@ -47,7 +47,7 @@ from granular_material.fem import (
 )
 from granular_material.procedures import biaxial_test, prepare_packing, progress_bar
 from granular_material.procedures.element_tests import biaxial_steps
-from granular_material.results import band_summary
+from granular_material.results import band_summary, write_csv
 from granular_material.results.compare import (
     ERROR_COLUMNS,
     curve_errors,
@@ -526,7 +526,7 @@ def _measure(rows: list[PlannedRow], runner: _Runner, out: Path, device: str, co
                         **result.extra}
                 curve_path(key).parent.mkdir(parents=True, exist_ok=True)
                 curve_path(key).with_suffix(".json").write_text(json.dumps(meta))
-                result.curve.to_csv(curve_path(key), index=False)  # the run's commit point
+                write_csv(result.curve, curve_path(key))  # whole or not at all: the commit point
                 log(f"{key}: {result.wall_s:.1f} s"
                     + (f" ({result.error})" if result.error else ""))
             bar.update(1)
@@ -553,9 +553,7 @@ def _drop_rows(path: Path, stale: Callable[[pd.DataFrame], pd.Series]) -> None:
     table = pd.read_csv(path, dtype={"value": str})
     marked = stale(table)
     if marked.any():
-        part = path.with_name(path.name + ".part")
-        table[~marked].to_csv(part, index=False)
-        part.replace(path)
+        write_csv(table[~marked], path)
 
 
 def _append(path: Path, rows: list[dict[str, Any]]) -> None:
@@ -563,9 +561,7 @@ def _append(path: Path, rows: list[dict[str, Any]]) -> None:
     frame = pd.DataFrame(rows)
     if path.exists():
         frame = pd.concat([pd.read_csv(path, dtype={"value": str}), frame], ignore_index=True)
-    part = path.with_name(path.name + ".part")
-    frame.to_csv(part, index=False)
-    part.replace(path)
+    write_csv(frame, path)
 
 
 def run_trade_study(scale: str | StudyScale, out: str | Path, device: str = "cpu",
