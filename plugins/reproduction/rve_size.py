@@ -1,0 +1,177 @@
+"""Figs. 3–5 of Wu et al. (2025): how large an RVE must be.
+
+RVEs of side² discs (10² … 30²) × seeds are compacted to e0 and consolidated at p0, the
+multifractal spectrum of each one's pore space is taken (q–D_q, α–f(α)), and α0/D0 is
+followed against the number of discs (:func:`settle_size` says from which size on it no
+longer moves); the drained biaxial tests of a few sizes say the same from the stress–strain
+side (:func:`size_responses`). Everything is cached under the part's folder as it is made.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+from granular_material_pore_fractal.postprocess import analyse_rve
+
+from granular_material.dem import DEMBatch, load_rve, save_rve
+from granular_material.procedures import biaxial_test, prepare_packing, progress_bar
+from granular_material.results import write_csv
+from granular_material.results.peaks import find_peak
+
+from .scales import ReproductionScale
+
+__all__ = ["packings", "settle_size", "size_responses", "size_spectra", "size_tests"]
+
+
+def packings(scale: ReproductionScale, side: int, folder: Path, device: str) -> Path:
+    """The seeds' packings of side² discs, compacted to e0 and consolidated at p0; an RVE
+    file of one RVE per seed (RVE b: seed ``seeds[0] + b``), prepared once."""
+    path = folder / "rves" / f"discs{side * side}.npz"
+    if not path.exists():
+        seeds = scale.seeds
+        if list(seeds) != list(range(seeds[0], seeds[0] + len(seeds))):
+            raise ValueError(f"seeds must be consecutive, got {seeds}")
+        batch = prepare_packing(n_disc=side * side, n_rve=len(seeds), seed=seeds[0],
+                                pressure=scale.pressure, target_void_ratio=scale.void_ratio,
+                                device=device)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        save_rve(path, batch.to_data())
+    return path
+
+
+def size_spectra(scale: ReproductionScale, folder: Path, device: str,
+                 progress: bool = False) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """The spectra of every RVE of Figs. 3–4 (``spectra.csv``: discs, seed, q, Dq, alpha,
+    f) and their indices (``indices.csv``: discs, seed, void_ratio, D0, alpha0,
+    alpha0_over_D0, min_r2, dq_decreasing (D_q never rises with q), pixel_size [m],
+    image_size [px]); read back when written."""
+    spectra_path, indices_path = folder / "spectra.csv", folder / "indices.csv"
+    if spectra_path.exists() and indices_path.exists():
+        return pd.read_csv(spectra_path), pd.read_csv(indices_path)
+    spectra, indices = [], []
+    with progress_bar(len(scale.size_sides), "RVE sizes: packings and spectra", progress,
+                      unit="size") as bar:
+        for side in scale.size_sides:
+            data = load_rve(packings(scale, side, folder, device))
+            void = DEMBatch(data, device=device).homogenize().void_ratio
+            for b, seed in enumerate(scale.seeds):
+                image, spectrum = analyse_rve(data, b)
+                discs = side * side
+                spectra.append(pd.DataFrame({"discs": discs, "seed": seed, "q": spectrum.q,
+                                             "Dq": spectrum.Dq, "alpha": spectrum.alpha,
+                                             "f": spectrum.f}))
+                indices.append({"discs": discs, "seed": seed, "void_ratio": float(void[b]),
+                                "D0": float(spectrum.D0), "alpha0": float(spectrum.alpha0),
+                                "alpha0_over_D0": float(spectrum.alpha0_over_D0),
+                                "min_r2": float(np.min(spectrum.r2)),
+                                "dq_decreasing": bool(np.all(np.diff(spectrum.Dq) <= 1e-9)),
+                                "pixel_size": image.pixel_size, "image_size": image.n_pixels})
+            bar.update(1)
+    write_csv(pd.concat(spectra, ignore_index=True), spectra_path)
+    write_csv(pd.DataFrame(indices), indices_path)
+    return pd.read_csv(spectra_path), pd.read_csv(indices_path)
+
+
+def _stats(table: pd.DataFrame, column: str) -> pd.DataFrame:
+    """Mean, seed standard deviation and standard error of ``column`` per number of discs."""
+    grouped = table.groupby("discs")[column]
+    stats = pd.DataFrame({"mean": grouped.mean(), "std": grouped.std(ddof=1),
+                          "n": grouped.count()})
+    stats["se"] = stats["std"] / np.sqrt(stats["n"])
+    stats["scatter_pct"] = 100.0 * stats["std"] / stats["mean"].abs()
+    return stats
+
+
+def settle_size(indices: pd.DataFrame, column: str = "alpha0_over_D0") -> dict[str, float]:
+    """From which size on ``column`` has settled, by the rule: the smallest number of discs
+    n such that at every size m ≥ n the seeds' mean lies within two standard errors
+    (√(SE_m² + SE_max²)) of the largest size's mean. Returns that size, the seed scatter
+    (standard deviation over the seeds, and as % of the mean) there and at every size, and
+    how far the means move above and below it."""
+    stats = _stats(indices, column)
+    sizes = list(stats.index)
+    largest = stats.loc[sizes[-1]]
+
+    def agrees(m: int) -> bool:
+        band = 2.0 * math.hypot(stats.loc[m, "se"], largest["se"])
+        return abs(stats.loc[m, "mean"] - largest["mean"]) <= band
+
+    settled = sizes[-1]
+    for n in sizes:
+        if all(agrees(m) for m in sizes if m >= n):
+            settled = n
+            break
+    above = stats.loc[[m for m in sizes if m >= settled], "mean"]
+    below = stats.loc[[m for m in sizes if m < settled], "mean"]
+    return {
+        "settle_discs": int(settled),
+        "scatter_at_settle": float(stats.loc[settled, "std"]),
+        "scatter_pct_at_settle": float(stats.loc[settled, "scatter_pct"]),
+        "scatter_pct_smallest": float(stats.loc[sizes[0], "scatter_pct"]),
+        "scatter_pct_largest": float(largest["scatter_pct"]),
+        "range_above": float(above.max() - above.min()),
+        "range_below": float(below.max() - below.min()) if len(below) > 1 else math.nan,
+        "mean_largest": float(largest["mean"]),
+    }
+
+
+def size_tests(scale: ReproductionScale, folder: Path, device: str,
+               progress: bool = False) -> pd.DataFrame:
+    """Fig. 5: the drained biaxial test of every seed's RVE of each size of
+    ``biaxial_sides``, confined at p0 (``curves.csv``: discs, seed and the rows of
+    :func:`~granular_material.procedures.biaxial_test`); each size's curves are written as
+    soon as they are done, and read back on a rerun."""
+    curves = []
+    with progress_bar(len(scale.biaxial_sides), "RVE sizes: biaxial tests", progress,
+                      unit="size") as bar:
+        for side in scale.biaxial_sides:
+            path = folder / "curves" / f"discs{side * side}.csv"
+            if not path.exists():
+                data = load_rve(packings(scale, side, folder, device))
+                steps = scale.dem_axial_strain / scale.dem_strain_per_step
+                curve = biaxial_test(DEMBatch(data, device=device),
+                                     axial_strain=scale.dem_axial_strain,
+                                     confining=scale.pressure,
+                                     strain_per_step=scale.dem_strain_per_step,
+                                     record_every=max(1, round(steps / 200)))
+                curve.insert(0, "seed", [scale.seeds[int(r)] for r in curve["rve"]])
+                curve.insert(0, "discs", side * side)
+                path.parent.mkdir(parents=True, exist_ok=True)
+                write_csv(curve, path)
+            curves.append(pd.read_csv(path))
+            bar.update(1)
+    return pd.concat(curves, ignore_index=True)
+
+
+def size_responses(curves: pd.DataFrame) -> pd.DataFrame:
+    """Per size and seed: peak σ1/σ3, the axial strain at it, σ1/σ3 and εv at the last
+    strain (the residual state)."""
+    rows = []
+    for (discs, seed), curve in curves.groupby(["discs", "seed"]):
+        strain = curve["axial_strain"].to_numpy()
+        ratio = curve["stress_ratio"].to_numpy()
+        peak, peak_ratio = find_peak(strain, ratio)
+        rows.append({"discs": int(discs), "seed": int(seed), "peak_stress_ratio": peak_ratio,
+                     "strain_at_peak": float(strain[peak]),
+                     "final_stress_ratio": float(ratio[-1]),
+                     "final_volumetric_strain": float(curve["volumetric_strain"].iloc[-1])})
+    return pd.DataFrame(rows)
+
+
+def response_agreement(responses: pd.DataFrame, discs: int,
+                       column: str = "peak_stress_ratio") -> dict[str, float]:
+    """How far the seeds' mean ``column`` at ``discs`` lies from that of every larger size
+    pooled, against two standard errors of the difference (the seed scatter's share)."""
+    at = responses[responses["discs"] == discs][column]
+    larger = responses[responses["discs"] > discs][column]
+    if at.empty or len(larger) < 2:
+        return {"difference_pct": math.nan, "two_se_pct": math.nan, "agrees": False}
+    base = float(larger.mean())
+    two_se = 2.0 * math.hypot(at.std(ddof=1) / math.sqrt(len(at)),
+                              larger.std(ddof=1) / math.sqrt(len(larger)))
+    return {"difference_pct": 100.0 * (float(at.mean()) / base - 1.0),
+            "two_se_pct": 100.0 * two_se / base,
+            "agrees": bool(abs(float(at.mean()) - base) <= two_se)}

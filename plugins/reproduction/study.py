@@ -1,0 +1,258 @@
+"""The reproduction, part by part, resumable.
+
+Each part (:data:`PARTS`) writes its tables and figures into its own folder under the
+output folder and, last, its ``result.json``: a part with a ``result.json`` is done, and a
+rerun skips it (``--redo PART`` runs it again). Inside a part, what is expensive is cached
+as soon as it is made (packings, spectra, each size's curves, the FEM runs' checkpoints),
+so an interrupted part restarts where it stopped. ``report.md`` is written from the
+``result.json`` files of the parts done.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import shutil
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+
+from granular_material.cli.options import Terminated
+from granular_material.dem import load_rve, save_rve
+
+from . import coupling, plots, rve_size, speedup
+from .report import write_report
+from .scales import SCALES, ReproductionScale
+
+__all__ = ["PARTS", "run_reproduction"]
+
+#: the parts, in order: name → the figures of the paper it reproduces
+PARTS = {
+    "rve-size": "Figs. 3–4",
+    "size-biaxial": "Fig. 5",
+    "element": "Fig. 6",
+    "specimen": "Figs. 7–10",
+    "speedup": "Fig. 11",
+}
+
+Log = Callable[[str], None]
+
+
+def _json_ready(value: Any) -> Any:
+    """``value`` with NaN and infinities as None and NumPy scalars as Python ones."""
+    if isinstance(value, dict):
+        return {str(k): _json_ready(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_json_ready(v) for v in value]
+    if hasattr(value, "item"):
+        value = value.item()
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
+def _part_rve_size(scale: ReproductionScale, folder: Path, device: str,
+                   progress: bool) -> dict[str, Any]:
+    spectra, indices = rve_size.size_spectra(scale, folder, device, progress)
+    settle = rve_size.settle_size(indices)
+    per_size = indices.groupby("discs").agg(
+        ratio_mean=("alpha0_over_D0", "mean"), ratio_std=("alpha0_over_D0", "std"),
+        D0_mean=("D0", "mean"), alpha0_mean=("alpha0", "mean"),
+        void_ratio_mean=("void_ratio", "mean"), min_r2=("min_r2", "min"),
+        image_px=("image_size", "first"), rves=("seed", "count"),
+        dq_decreasing_count=("dq_decreasing", "sum")).reset_index()
+    per_size["ratio_scatter_pct"] = 100 * per_size["ratio_std"] / per_size["ratio_mean"]
+    plots.plot_spectra(spectra, scale.biaxial_sides, folder / "fig3_spectra.png")
+    plots.plot_ratio_by_size(indices, settle["settle_discs"], folder / "fig4_ratio.png")
+    return {"settle": settle, "per_size": per_size.to_dict("records"),
+            "rves": len(indices), "dq_decreasing": int(indices["dq_decreasing"].sum()),
+            "void_ratio_range": [float(indices["void_ratio"].min()),
+                                                       float(indices["void_ratio"].max())]}
+
+
+def _part_size_biaxial(scale: ReproductionScale, folder: Path, device: str,
+                       progress: bool, root: Path) -> dict[str, Any]:
+    curves = rve_size.size_tests(scale, root / "rve-size", device, progress)
+    responses = rve_size.size_responses(curves)
+    pd.DataFrame(responses).to_csv(folder / "responses.csv", index=False)
+    stats = responses.groupby("discs").agg(
+        peak_mean=("peak_stress_ratio", "mean"), peak_std=("peak_stress_ratio", "std"),
+        final_mean=("final_stress_ratio", "mean"), final_std=("final_stress_ratio", "std"),
+        ev_final_mean=("final_volumetric_strain", "mean")).reset_index()
+    agreement = {int(d): {"peak": rve_size.response_agreement(responses, int(d)),
+                          "final": rve_size.response_agreement(responses, int(d),
+                                                               "final_stress_ratio")}
+                 for d in stats["discs"][:-1]}
+    plots.plot_size_curves(curves, folder / "fig5_curves.png")
+    return {"per_size": stats.to_dict("records"), "agreement": agreement}
+
+
+def _rve_file(scale: ReproductionScale, root: Path, discs: int, device: str) -> Path:
+    side = math.isqrt(discs)
+    if side * side != discs or side not in scale.size_sides:
+        raise ValueError(f"{discs} discs is not a size of the RVE-size part")
+    return rve_size.packings(scale, side, root / "rve-size", device)
+
+
+def _fem_status(code: int, summary: dict[str, Any], what: str) -> str | None:
+    """The run's error to report (Newton stopped: exit 1), or ``FEMRunError``."""
+    if code == 0:
+        return None
+    if code == 1 and summary.get("error"):
+        return str(summary["error"])
+    if code == 143:
+        raise Terminated(f"the {what} run was terminated")
+    if code == 130:
+        raise KeyboardInterrupt(f"the {what} run was interrupted")
+    raise coupling.FEMRunError(f"the {what} run exited with code {code}; see its run.log")
+
+
+def _part_element(scale: ReproductionScale, folder: Path, device: str, progress: bool,
+                  root: Path) -> dict[str, Any]:
+    rve = folder / "rve.npz"
+    if not rve.exists():
+        save_rve(rve, load_rve(_rve_file(scale, root, scale.element_discs, device)).take([0]))
+    code = coupling.run_element(scale, rve, folder, device)
+    steps, summary = coupling.read_run(folder / "run")
+    error = _fem_status(code, summary, "single-element")
+    dem = pd.read_csv(folder / "run" / "pure_dem.csv")
+    comparison = coupling.compare_with_dem(steps, dem)
+    seeds = pd.read_csv(root / "size-biaxial" / "responses.csv") \
+        if (root / "size-biaxial" / "responses.csv").exists() else None
+    scatter = math.nan
+    if seeds is not None and (seeds["discs"] == scale.element_discs).any():
+        peaks = seeds[seeds["discs"] == scale.element_discs]["peak_stress_ratio"]
+        scatter = 100.0 * float(peaks.std(ddof=1) / peaks.mean())
+    plots.plot_coupled(steps[steps["step"] >= 0], dem, "single element (4 Gauss points)",
+                       folder / "fig6_element.png")
+    return {"comparison": comparison, "seed_scatter_pct": scatter,
+            "fem": coupling.softening_and_dilation(steps),
+            "dem": coupling.softening_and_dilation(dem[dem["rve"] == 0]),
+            "error": error, "wall_time_s": summary.get("wall_time_s"),
+            "newton_iterations_mean": summary.get("newton_iterations_mean"),
+            "final_axial_strain": summary.get("final_axial_strain")}
+
+
+def _part_specimen(scale: ReproductionScale, folder: Path, device: str, progress: bool,
+                   root: Path) -> dict[str, Any]:
+    rves = coupling.specimen_rves(scale, folder, device)
+    code = coupling.run_specimen(scale, rves, folder, device)
+    run = folder / "run"
+    steps, summary = coupling.read_run(run)
+    error = _fem_status(code, summary, "biaxial")
+    points = pd.read_csv(run / "points.csv")
+    tracked = pd.read_csv(run / "tracked.csv")
+    dem = coupling.dem_reference(scale, rves, folder, device)
+    comparison = coupling.compare_with_dem(steps, dem)
+    band = coupling.band_at(points, scale.map_strain, scale.specimen_elements)
+    last = int(tracked["step"].max())
+    chosen = coupling.choose_points(points, last)
+    histories = coupling.point_histories(points, tracked, chosen)
+    histories.to_csv(folder / "chosen_rves.csv", index=False)
+    fits = coupling.fractal_fits(histories)
+    fits.to_csv(folder / "fits.csv", index=False)
+    differ = {index: {"inside_vs_outside": coupling.slopes_differ(fits, index, "inside",
+                                                                  "outside"),
+                      "inside_vs_edge": coupling.slopes_differ(fits, index, "inside", "edge")}
+              for index in ("D0", "alpha0")}
+    plots.plot_coupled(steps, dem, f"specimen {scale.specimen_elements[0]} × "
+                       f"{scale.specimen_elements[1]} elements", folder / "fig7_specimen.png")
+    if (run / "maps.png").exists():
+        shutil.copyfile(run / "maps.png", folder / "fig8_maps.png")
+    plots.plot_histories(histories, folder / "fig9_histories.png")
+    plots.plot_fits(histories, fits, folder / "fig10_fits.png")
+    return {"comparison": comparison, "band": band, "chosen": chosen,
+            "chosen_at_step": last,
+            "chosen_at_strain": float(points[points["step"] == last]["axial_strain"].iloc[0]),
+            "fits": fits.to_dict("records"), "slopes": differ, "error": error,
+            "final_axial_strain": summary.get("final_axial_strain"),
+            "steps_completed": summary.get("steps_completed"),
+            "wall_time_s": summary.get("wall_time_s"),
+            "newton_iterations_mean": summary.get("newton_iterations_mean"),
+            "gauss_points": int(points["point"].nunique()),
+            "fractal_seconds": float(tracked["seconds"].sum())}
+
+
+def _part_speedup(scale: ReproductionScale, folder: Path, device: str, progress: bool,
+                  root: Path) -> dict[str, Any]:
+    files = {side: rve_size.packings(scale, side, root / "rve-size", device)
+             for side in scale.speedup_sides}
+    table_path = folder / "speedup.csv"
+    if table_path.exists():
+        table = pd.read_csv(table_path)
+    else:
+        table = speedup.speedup_table(scale, files, device, progress)
+        table.to_csv(table_path, index=False)
+    yade_side = 20 if 20 in scale.size_sides else max(scale.speedup_sides)
+    yade_file = rve_size.packings(scale, yade_side, root / "rve-size", device)
+    one = yade_file.parent / f"discs{yade_side ** 2}_seed{scale.seeds[0]}.npz"
+    if not one.exists():
+        save_rve(one, load_rve(yade_file).take([0]))
+    yade = speedup.yade_rate(one, scale.yade_steps)
+    plots.plot_speedup(table, folder / "fig11_speedup.png")
+    best = table.loc[table["speed_up"].idxmax()]
+    at_yade = table[table["discs"] == yade_side ** 2]
+    return {"best": best.to_dict(), "largest_batch": table.groupby("discs")["speed_up"].last()
+            .to_dict(), "yade_particle_steps_per_s": yade, "yade_discs": yade_side ** 2,
+            "ours_batched_best_rate": float(at_yade["particle_steps_per_s"].max())
+            if len(at_yade) else None,
+            "ours_serial_rate": float(at_yade["serial_particle_steps_per_s"].iloc[0])
+            if len(at_yade) else None,
+            "table": table.to_dict("records")}
+
+
+_RUNNERS = {"rve-size": lambda s, f, d, p, r: _part_rve_size(s, f, d, p),
+            "size-biaxial": _part_size_biaxial, "element": _part_element,
+            "specimen": _part_specimen, "speedup": _part_speedup}
+
+
+def run_reproduction(scale: str | ReproductionScale, out: str | Path, device: str = "cpu",
+                     progress: bool = False, redo: tuple[str, ...] = (),
+                     log: Log = lambda _: None) -> dict[str, dict[str, Any]]:
+    """Run (or finish) the reproduction at ``scale`` into ``out``: every part not done yet
+    (and those of ``redo`` again), then ``report.md``. Returns each part's result."""
+    study = SCALES[scale] if isinstance(scale, str) else scale
+    root = Path(out)
+    root.mkdir(parents=True, exist_ok=True)
+    unknown = set(redo) - set(PARTS)
+    if unknown:
+        raise ValueError(f"unknown part(s) {sorted(unknown)}; the parts are {list(PARTS)}")
+    _check_scale(root, study)
+    results: dict[str, dict[str, Any]] = {}
+    for name, figures in PARTS.items():
+        folder = root / name
+        done = folder / "result.json"
+        if name in redo and done.exists():
+            done.unlink()
+        if done.exists():
+            log(f"{name} ({figures}): done before, skipped")
+        else:
+            folder.mkdir(parents=True, exist_ok=True)
+            log(f"{name} ({figures}): running")
+            started = time.perf_counter()
+            result = _RUNNERS[name](study, folder, device, progress, root)
+            result["part_wall_s"] = time.perf_counter() - started
+            result["device"] = device
+            text = json.dumps(_json_ready(result), indent=1)
+            done.with_suffix(".part").write_text(text)
+            done.with_suffix(".part").replace(done)  # the part's commit point
+            log(f"{name}: done in {result['part_wall_s']:.0f} s")
+        results[name] = json.loads(done.read_text())
+    write_report(study, results, root)
+    return results
+
+
+def _check_scale(root: Path, scale: ReproductionScale) -> None:
+    """Refuse to mix two scales in one folder (``scale.json`` records the first)."""
+    record = root / "scale.json"
+    mine = {"scale": scale.name}
+    if record.exists():
+        saved = json.loads(record.read_text())
+        if saved != mine:
+            raise ValueError(f"{root} holds a reproduction at scale {saved.get('scale')!r}; "
+                             f"use another --out for scale {scale.name!r}")
+    else:
+        record.write_text(json.dumps(mine) + "\n")
