@@ -46,6 +46,7 @@ TESTS: dict[str, str | None] = {
     "biaxial-dem": "curve.csv",
     "dem-drive": "path.csv",
     "prepare": "rve.npz",
+    "rve-size-study": None,  # the reproduction plugin's
 }
 #: files a test writes beside its table when the scene names none, inside the run folder
 _DEFAULT_FILES: dict[str, dict[str, str]] = {"biaxial-dem": {"plot": "curve.png"}}

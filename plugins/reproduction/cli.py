@@ -4,17 +4,21 @@
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 import time
 from pathlib import Path
 
 from granular_material.cli.options import (
+    UsageError,
     add_device,
     add_json,
     add_progress,
     check_output_dir,
     emit,
     interrupt_exit_code,
+    positive,
+    positive_int,
     progress_enabled,
 )
 
@@ -45,10 +49,12 @@ def run(args: argparse.Namespace) -> int:
               f"{args.out}`", file=sys.stderr)
         return interrupt_exit_code(exc)
     table = headline(SCALES[args.scale], results)
-    emit(args, {"scale": args.scale, "device": device,
-                "verdicts": {f"Fig. {row.figure}": row.verdict for row in table.itertuples()},
-                "wall_time_s": time.perf_counter() - started,
-                "report": str(Path(args.out) / "report.md")})
+    summary = {"scale": args.scale, "device": device,
+               "verdicts": {f"Fig. {row.figure}": row.verdict for row in table.itertuples()},
+               "wall_time_s": time.perf_counter() - started,
+               "report": str(Path(args.out) / "report.md")}
+    _write_summary(args.out, summary)
+    emit(args, summary)
     return 0
 
 
@@ -79,3 +85,92 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     add_progress(p)
     add_json(p, "the verdicts")
     p.set_defaults(func=run)
+
+
+def run_size_study(args: argparse.Namespace) -> int:
+    """The RVE-size study alone (Figs. 3–5 of the reproduction) at the sizes given."""
+    from dataclasses import replace
+
+    from granular_material.dem import resolve_device
+
+    from .report import headline
+    from .study import run_reproduction
+
+    check_output_dir(args.out)
+    if len(args.seeds) < 2 or sorted(set(args.seeds)) != list(
+            range(min(args.seeds), min(args.seeds) + len(args.seeds))):
+        raise UsageError(f"--seeds must be two or more consecutive seeds, got {args.seeds}")
+    biaxial = tuple(args.biaxial_discs or args.discs)
+    missing = set(biaxial) - set(args.discs)
+    if missing:
+        raise UsageError(f"--biaxial-discs {sorted(missing)} are not among --discs")
+    if len(set(args.discs)) < 2:
+        raise UsageError("--discs needs at least two sizes")
+    device = resolve_device(args.device)
+    scale = replace(SCALES["cpu"], name="rve-size-study", sizes=tuple(sorted(set(args.discs))),
+                    seeds=tuple(sorted(args.seeds)), biaxial_sizes=tuple(sorted(set(biaxial))),
+                    dem_axial_strain=args.axial_strain,
+                    dem_strain_per_step=args.strain_per_step,
+                    void_ratio=args.target_void_ratio, pressure=args.pressure,
+                    element_discs=min(args.discs), speedup_sizes=(min(args.discs),))
+    started = time.perf_counter()
+    try:
+        results = run_reproduction(scale, args.out, device=device,
+                                   progress=progress_enabled(args),
+                                   log=lambda line: print(line, file=sys.stderr),
+                                   parts=("rve-size", "size-biaxial"))
+    except KeyboardInterrupt as exc:
+        print("granular-material rve-size-study: stopped; what is done is kept: run the same "
+              "command again to continue", file=sys.stderr)
+        return interrupt_exit_code(exc)
+    settle = results["rve-size"]["settle"]
+    summary = {"settle_discs": settle["settle_discs"],
+               **{k: v for k, v in settle.items() if k.startswith("within_")},
+               "verdicts": {f"Fig. {row.figure}": row.verdict
+                            for row in headline(scale, results).itertuples()},
+               "wall_time_s": time.perf_counter() - started,
+               "report": str(Path(args.out) / "report.md")}
+    _write_summary(args.out, summary)
+    emit(args, summary)
+    return 0
+
+
+def _write_summary(out: Path, summary: dict) -> None:
+    """``out/summary.json``: what the command printed."""
+    (Path(out) / "summary.json").write_text(json.dumps(summary, indent=2, default=str) + "\n")
+
+
+def register_size_study(subparsers: argparse._SubParsersAction) -> None:
+    """Add the ``rve-size-study`` command."""
+    p = subparsers.add_parser(
+        "rve-size-study", help="how many discs an RVE needs: pore spectra and biaxial tests "
+                               "by size",
+        description="RVEs of each size in --discs × --seeds, compacted to "
+                    "--target-void-ratio and consolidated at --pressure (the material of Wu "
+                    "et al.'s Table 1); the multifractal spectrum of each one's pore space "
+                    "and α0/D0 against size, with the size from which it settles; the drained "
+                    "biaxial test of each RVE of --biaxial-discs. Writes report.md and the "
+                    "tables and figures under OUT/rve-size and OUT/size-biaxial (the first "
+                    "two parts of `reproduce wu2025`). A rerun continues where it stopped.",
+    )
+    p.add_argument("--discs", type=positive_int, nargs="+",
+                   default=[side * side for side in range(10, 31, 2)],
+                   help="RVE sizes [discs] (default 10², 12², …, 30²)")
+    p.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3, 4, 5],
+                   help="consecutive seeds, one packing each per size (default 1 2 3 4 5)")
+    p.add_argument("--biaxial-discs", type=positive_int, nargs="+", default=None,
+                   help="sizes whose RVEs get a drained biaxial test (default: every size)")
+    p.add_argument("--target-void-ratio", type=positive, default=0.18,
+                   help="void ratio the random gas is compacted to (default 0.18, Wu et al.)")
+    p.add_argument("--pressure", type=positive, default=100.0e3,
+                   help="consolidation and confining pressure [Pa] (default 100e3)")
+    p.add_argument("--axial-strain", type=positive, default=0.1,
+                   help="final axial strain of the biaxial tests (default 0.1)")
+    p.add_argument("--strain-per-step", type=positive, default=1.0e-5,
+                   help="axial strain per DEM step of the biaxial tests (default 1e-5)")
+    p.add_argument("--out", type=Path, default=Path("rve-size-study"),
+                   help="output folder (default ./rve-size-study)")
+    add_device(p, "DEM device")
+    add_progress(p)
+    add_json(p, "the settling sizes and verdicts")
+    p.set_defaults(func=run_size_study)

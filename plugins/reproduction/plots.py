@@ -20,13 +20,13 @@ def _save(fig, path: Path) -> Path:
     return path
 
 
-def plot_spectra(spectra: pd.DataFrame, sides: tuple[int, ...], path: Path) -> Path:
-    """Fig. 3: q–D_q and α–f(α), the seeds' mean, for the sizes of ``sides``."""
+def plot_spectra(spectra: pd.DataFrame, sizes: tuple[int, ...], path: Path) -> Path:
+    """Fig. 3: q–D_q and α–f(α), the seeds' mean, for the RVE sizes ``sizes`` [discs]."""
     plt = pyplot()
     fig, (left, right) = plt.subplots(1, 2, figsize=(9, 3.8), constrained_layout=True)
-    for side in sides:
-        mean = spectra[spectra["discs"] == side * side].groupby("q").mean(numeric_only=True)
-        label = f"{side}² discs"
+    for discs in sizes:
+        mean = spectra[spectra["discs"] == discs].groupby("q").mean(numeric_only=True)
+        label = f"{discs} discs"
         left.plot(mean.index, mean["Dq"], marker=".", label=label)
         right.plot(mean["alpha"], mean["f"], marker=".", label=label)
     left.set(xlabel="q", ylabel="$D_q$", title="generalised dimensions")

@@ -1,6 +1,6 @@
 """Figs. 3–5 of Wu et al. (2025): how large an RVE must be.
 
-RVEs of side² discs (10² … 30²) × seeds are compacted to e0 and consolidated at p0, the
+RVEs of 10², 12², …, 30² discs × seeds are compacted to e0 and consolidated at p0, the
 multifractal spectrum of each one's pore space is taken (q–D_q, α–f(α)), and α0/D0 is
 followed against the number of discs (:func:`settle_size` says from which size on it no
 longer moves); the drained biaxial tests of a few sizes say the same from the stress–strain
@@ -23,18 +23,23 @@ from granular_material.results.peaks import find_peak
 
 from .scales import ReproductionScale
 
-__all__ = ["packings", "settle_size", "size_responses", "size_spectra", "size_tests"]
+#: tolerances [%] of the practical settling sizes :func:`settle_size` reports beside the
+#: statistical one
+SETTLE_TOLERANCES_PCT = (2.0, 1.0, 0.5)
+
+__all__ = ["SETTLE_TOLERANCES_PCT", "packings", "response_agreement", "settle_size",
+           "size_responses", "size_spectra", "size_tests"]
 
 
-def packings(scale: ReproductionScale, side: int, folder: Path, device: str) -> Path:
-    """The seeds' packings of side² discs, compacted to e0 and consolidated at p0; an RVE
-    file of one RVE per seed (RVE b: seed ``seeds[0] + b``), prepared once."""
-    path = folder / "rves" / f"discs{side * side}.npz"
+def packings(scale: ReproductionScale, discs: int, folder: Path, device: str) -> Path:
+    """The seeds' packings of ``discs`` discs, compacted to e0 and consolidated at p0; an
+    RVE file of one RVE per seed (RVE b: seed ``seeds[0] + b``), prepared once."""
+    path = folder / "rves" / f"discs{discs}.npz"
     if not path.exists():
         seeds = scale.seeds
         if list(seeds) != list(range(seeds[0], seeds[0] + len(seeds))):
             raise ValueError(f"seeds must be consecutive, got {seeds}")
-        batch = prepare_packing(n_disc=side * side, n_rve=len(seeds), seed=seeds[0],
+        batch = prepare_packing(n_disc=discs, n_rve=len(seeds), seed=seeds[0],
                                 pressure=scale.pressure, target_void_ratio=scale.void_ratio,
                                 device=device)
         path.parent.mkdir(parents=True, exist_ok=True)
@@ -42,24 +47,31 @@ def packings(scale: ReproductionScale, side: int, folder: Path, device: str) -> 
     return path
 
 
+#: the columns of ``indices.csv``
+INDEX_COLUMNS = ("discs", "seed", "void_ratio", "D0", "alpha0", "alpha0_over_D0", "min_r2",
+                 "r2_q0", "dq_decreasing", "pixel_size", "image_size")
+
+
 def size_spectra(scale: ReproductionScale, folder: Path, device: str,
                  progress: bool = False) -> tuple[pd.DataFrame, pd.DataFrame]:
     """The spectra of every RVE of Figs. 3–4 (``spectra.csv``: discs, seed, q, Dq, alpha,
     f) and their indices (``indices.csv``: discs, seed, void_ratio, D0, alpha0,
-    alpha0_over_D0, min_r2, dq_decreasing (D_q never rises with q), pixel_size [m],
+    alpha0_over_D0, min_r2 (the smallest R² of its fits), r2_q0 (the smallest R² of the
+    fits at q = 0, which give D0 and α0), dq_decreasing (D_q never rises with q), pixel_size [m],
     image_size [px]); read back when written."""
     spectra_path, indices_path = folder / "spectra.csv", folder / "indices.csv"
     if spectra_path.exists() and indices_path.exists():
-        return pd.read_csv(spectra_path), pd.read_csv(indices_path)
+        indices = pd.read_csv(indices_path)
+        if set(INDEX_COLUMNS) <= set(indices.columns):  # else: of an older version, redone
+            return pd.read_csv(spectra_path), indices
     spectra, indices = [], []
-    with progress_bar(len(scale.size_sides), "RVE sizes: packings and spectra", progress,
+    with progress_bar(len(scale.sizes), "RVE sizes: packings and spectra", progress,
                       unit="size") as bar:
-        for side in scale.size_sides:
-            data = load_rve(packings(scale, side, folder, device))
+        for discs in scale.sizes:
+            data = load_rve(packings(scale, discs, folder, device))
             void = DEMBatch(data, device=device).homogenize().void_ratio
             for b, seed in enumerate(scale.seeds):
                 image, spectrum = analyse_rve(data, b)
-                discs = side * side
                 spectra.append(pd.DataFrame({"discs": discs, "seed": seed, "q": spectrum.q,
                                              "Dq": spectrum.Dq, "alpha": spectrum.alpha,
                                              "f": spectrum.f}))
@@ -67,6 +79,7 @@ def size_spectra(scale: ReproductionScale, folder: Path, device: str,
                                 "D0": float(spectrum.D0), "alpha0": float(spectrum.alpha0),
                                 "alpha0_over_D0": float(spectrum.alpha0_over_D0),
                                 "min_r2": float(np.min(spectrum.r2)),
+                                "r2_q0": float(spectrum.r2[np.argmin(np.abs(spectrum.q))]),
                                 "dq_decreasing": bool(np.all(np.diff(spectrum.Dq) <= 1e-9)),
                                 "pixel_size": image.pixel_size, "image_size": image.n_pixels})
             bar.update(1)
@@ -90,7 +103,9 @@ def settle_size(indices: pd.DataFrame, column: str = "alpha0_over_D0") -> dict[s
     n such that at every size m ≥ n the seeds' mean lies within two standard errors
     (√(SE_m² + SE_max²)) of the largest size's mean. Returns that size, the seed scatter
     (standard deviation over the seeds, and as % of the mean) there and at every size, and
-    how far the means move above and below it."""
+    how far the means move above and below it; and, for each tolerance of
+    :data:`SETTLE_TOLERANCES_PCT`, the smallest size from which every mean lies within it of
+    the largest size's mean (``within_<t>pct_from``)."""
     stats = _stats(indices, column)
     sizes = list(stats.index)
     largest = stats.loc[sizes[-1]]
@@ -104,6 +119,15 @@ def settle_size(indices: pd.DataFrame, column: str = "alpha0_over_D0") -> dict[s
         if all(agrees(m) for m in sizes if m >= n):
             settled = n
             break
+    def within(tolerance: float) -> int:
+        """The smallest size from which every mean is within ``tolerance`` (relative) of
+        the largest size's."""
+        for n in sizes:
+            if all(abs(stats.loc[m, "mean"] / largest["mean"] - 1.0) <= tolerance
+                   for m in sizes if m >= n):
+                return int(n)
+        return int(sizes[-1])
+
     above = stats.loc[[m for m in sizes if m >= settled], "mean"]
     below = stats.loc[[m for m in sizes if m < settled], "mean"]
     return {
@@ -115,22 +139,23 @@ def settle_size(indices: pd.DataFrame, column: str = "alpha0_over_D0") -> dict[s
         "range_above": float(above.max() - above.min()),
         "range_below": float(below.max() - below.min()) if len(below) > 1 else math.nan,
         "mean_largest": float(largest["mean"]),
+        **{f"within_{pct:g}pct_from": within(pct / 100.0) for pct in SETTLE_TOLERANCES_PCT},
     }
 
 
 def size_tests(scale: ReproductionScale, folder: Path, device: str,
                progress: bool = False) -> pd.DataFrame:
     """Fig. 5: the drained biaxial test of every seed's RVE of each size of
-    ``biaxial_sides``, confined at p0 (``curves.csv``: discs, seed and the rows of
+    ``biaxial_sizes``, confined at p0 (``curves.csv``: discs, seed and the rows of
     :func:`~granular_material.procedures.biaxial_test`); each size's curves are written as
     soon as they are done, and read back on a rerun."""
     curves = []
-    with progress_bar(len(scale.biaxial_sides), "RVE sizes: biaxial tests", progress,
+    with progress_bar(len(scale.biaxial_sizes), "RVE sizes: biaxial tests", progress,
                       unit="size") as bar:
-        for side in scale.biaxial_sides:
-            path = folder / "curves" / f"discs{side * side}.csv"
+        for discs in scale.biaxial_sizes:
+            path = folder / "curves" / f"discs{discs}.csv"
             if not path.exists():
-                data = load_rve(packings(scale, side, folder, device))
+                data = load_rve(packings(scale, discs, folder, device))
                 steps = scale.dem_axial_strain / scale.dem_strain_per_step
                 curve = biaxial_test(DEMBatch(data, device=device),
                                      axial_strain=scale.dem_axial_strain,
@@ -138,7 +163,7 @@ def size_tests(scale: ReproductionScale, folder: Path, device: str,
                                      strain_per_step=scale.dem_strain_per_step,
                                      record_every=max(1, round(steps / 200)))
                 curve.insert(0, "seed", [scale.seeds[int(r)] for r in curve["rve"]])
-                curve.insert(0, "discs", side * side)
+                curve.insert(0, "discs", discs)
                 path.parent.mkdir(parents=True, exist_ok=True)
                 write_csv(curve, path)
             curves.append(pd.read_csv(path))

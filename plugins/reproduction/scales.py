@@ -19,11 +19,11 @@ class ReproductionScale:
 
     Attributes:
         name: smoke, cpu or paper.
-        size_sides: RVE sizes of Figs. 3–4 as discs per side (discs = side²).
+        sizes: RVE sizes of Figs. 3–4 [discs] (Wu et al.: 10², 12², …, 30²).
         seeds: packings of each size (Wu et al.: 5).
         void_ratio: e0 the random gas is compacted to before consolidation [-].
         pressure: consolidation pressure p0 and confining pressure [Pa].
-        biaxial_sides: sizes of Fig. 5 (a subset of ``size_sides``).
+        biaxial_sizes: sizes of Fig. 5 [discs] (a subset of ``sizes``).
         dem_axial_strain: axial strain of the pure-DEM biaxial tests [-].
         dem_strain_per_step: axial strain per DEM step of the pure-DEM tests [-].
         element_discs: discs of the single element's RVE (Fig. 6).
@@ -34,7 +34,7 @@ class ReproductionScale:
         fem_axial_strain: final axial strain of the FEM × DEM runs [-].
         map_strain: axial strain of the maps and shear-band measures (Wu et al.: 2 %).
         track_every: load steps between pore-fractal analyses of every Gauss point's RVE.
-        speedup_sides: RVE sizes of Fig. 11 (discs per side).
+        speedup_sizes: RVE sizes of Fig. 11 [discs] (a subset of ``sizes``).
         speedup_batches: numbers of RVEs of Fig. 11.
         speedup_steps: DEM steps timed per case (the paper times 10⁴; fewer are scaled).
         yade_steps: DEM steps of the YADE rate (0: not measured).
@@ -42,9 +42,9 @@ class ReproductionScale:
     """
 
     name: str
-    size_sides: tuple[int, ...]
+    sizes: tuple[int, ...]
     seeds: tuple[int, ...]
-    biaxial_sides: tuple[int, ...]
+    biaxial_sizes: tuple[int, ...]
     dem_axial_strain: float
     dem_strain_per_step: float
     element_discs: int
@@ -55,7 +55,7 @@ class ReproductionScale:
     fem_axial_strain: float
     map_strain: float
     track_every: int
-    speedup_sides: tuple[int, ...]
+    speedup_sizes: tuple[int, ...]
     speedup_batches: tuple[int, ...]
     speedup_steps: int
     yade_steps: int
@@ -64,26 +64,30 @@ class ReproductionScale:
     pressure: float = 100.0e3
 
     def __post_init__(self) -> None:
-        if not set(self.biaxial_sides) <= set(self.size_sides):
-            raise ValueError("biaxial_sides must be sizes of size_sides (the same RVEs)")
+        for name in ("biaxial_sizes", "speedup_sizes"):
+            if not set(getattr(self, name)) <= set(self.sizes):
+                raise ValueError(f"{name} must be among the sizes {self.sizes} (the same "
+                                 "RVEs)")
+        if self.element_discs not in self.sizes:
+            raise ValueError(f"element_discs must be among the sizes {self.sizes}")
         if len(self.seeds) < 2:
             raise ValueError("a reproduction needs at least two seeds (a scatter)")
 
 
 SCALES: dict[str, ReproductionScale] = {
     "smoke": ReproductionScale(
-        name="smoke", size_sides=(4, 5, 6), seeds=(1, 2), biaxial_sides=(4, 6),
+        name="smoke", sizes=(16, 25, 36), seeds=(1, 2), biaxial_sizes=(16, 36),
         dem_axial_strain=0.02, dem_strain_per_step=1.0e-4, element_discs=16,
         element_steps=3, specimen_elements=(1, 2), specimen_discs=16, specimen_steps=3,
-        fem_axial_strain=0.015, map_strain=0.01, track_every=1, speedup_sides=(4,),
+        fem_axial_strain=0.015, map_strain=0.01, track_every=1, speedup_sizes=(16,),
         speedup_batches=(1, 4), speedup_steps=200, yade_steps=0, repeats=1,
     ),
     "cpu": ReproductionScale(
-        name="cpu", size_sides=(10, 12, 14, 16, 18, 20, 22, 24, 26, 28, 30),
-        seeds=(1, 2, 3, 4, 5), biaxial_sides=(10, 16, 20, 26, 30), dem_axial_strain=0.1,
+        name="cpu", sizes=tuple(side * side for side in range(10, 31, 2)),
+        seeds=(1, 2, 3, 4, 5), biaxial_sizes=(100, 256, 400, 676, 900), dem_axial_strain=0.1,
         dem_strain_per_step=1.0e-5, element_discs=400, element_steps=50,
         specimen_elements=(5, 10), specimen_discs=100, specimen_steps=50,
-        fem_axial_strain=0.05, map_strain=0.02, track_every=5, speedup_sides=(10, 20, 30),
+        fem_axial_strain=0.05, map_strain=0.02, track_every=5, speedup_sizes=(100, 400, 900),
         speedup_batches=(1, 2, 4, 8, 16, 32, 64), speedup_steps=500, yade_steps=2000,
     ),
 }

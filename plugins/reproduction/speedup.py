@@ -47,10 +47,10 @@ def speedup_table(scale: ReproductionScale, rve_files: dict[int, Path], device: 
     """One row per RVE size and B: discs, rves, batched and serial seconds for 10⁴ steps,
     speed_up, batched particle-steps/s, device, steps timed."""
     rows = []
-    cases = len(scale.speedup_sides) * (len(scale.speedup_batches) + 1)
+    cases = len(scale.speedup_sizes) * (len(scale.speedup_batches) + 1)
     with progress_bar(cases, "speed-up", progress, unit="case") as bar:
-        for side in scale.speedup_sides:
-            one = load_rve(rve_files[side]).take([0])
+        for discs in scale.speedup_sizes:
+            one = load_rve(rve_files[discs]).take([0])
             serial = statistics.median(step_time(one, scale.speedup_steps, device, shards=1)
                                        for _ in range(scale.repeats))
             bar.update(1)
@@ -58,12 +58,12 @@ def speedup_table(scale: ReproductionScale, rve_files: dict[int, Path], device: 
                 batched = statistics.median(
                     step_time(one.replicate(n_rve), scale.speedup_steps, device)
                     for _ in range(scale.repeats))
-                rows.append({"discs": side * side, "rves": n_rve,
+                rows.append({"discs": discs, "rves": n_rve,
                              "batched_s": batched * PAPER_STEPS,
                              "serial_s": serial * n_rve * PAPER_STEPS,
                              "speed_up": serial * n_rve / batched,
-                             "particle_steps_per_s": n_rve * side * side / batched,
-                             "serial_particle_steps_per_s": side * side / serial,
+                             "particle_steps_per_s": n_rve * discs / batched,
+                             "serial_particle_steps_per_s": discs / serial,
                              "steps_timed": scale.speedup_steps, "device": device})
                 bar.update(1)
     return pd.DataFrame(rows)

@@ -15,6 +15,7 @@ import math
 import shutil
 import time
 from collections.abc import Callable
+from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
@@ -37,6 +38,10 @@ PARTS = {
     "specimen": "Figs. 7–10",
     "speedup": "Fig. 11",
 }
+
+#: what a part's result.json holds; a part whose result.json has another is redone (from its
+#: cached packings, curves and FEM checkpoints), so a report never mixes two layouts
+RESULT_VERSION = 2
 
 Log = Callable[[str], None]
 
@@ -62,10 +67,11 @@ def _part_rve_size(scale: ReproductionScale, folder: Path, device: str,
         ratio_mean=("alpha0_over_D0", "mean"), ratio_std=("alpha0_over_D0", "std"),
         D0_mean=("D0", "mean"), alpha0_mean=("alpha0", "mean"),
         void_ratio_mean=("void_ratio", "mean"), min_r2=("min_r2", "min"),
+        r2_q0=("r2_q0", "min"),
         image_px=("image_size", "first"), rves=("seed", "count"),
         dq_decreasing_count=("dq_decreasing", "sum")).reset_index()
     per_size["ratio_scatter_pct"] = 100 * per_size["ratio_std"] / per_size["ratio_mean"]
-    plots.plot_spectra(spectra, scale.biaxial_sides, folder / "fig3_spectra.png")
+    plots.plot_spectra(spectra, scale.biaxial_sizes, folder / "fig3_spectra.png")
     plots.plot_ratio_by_size(indices, settle["settle_discs"], folder / "fig4_ratio.png")
     return {"settle": settle, "per_size": per_size.to_dict("records"),
             "rves": len(indices), "dq_decreasing": int(indices["dq_decreasing"].sum()),
@@ -91,10 +97,8 @@ def _part_size_biaxial(scale: ReproductionScale, folder: Path, device: str,
 
 
 def _rve_file(scale: ReproductionScale, root: Path, discs: int, device: str) -> Path:
-    side = math.isqrt(discs)
-    if side * side != discs or side not in scale.size_sides:
-        raise ValueError(f"{discs} discs is not a size of the RVE-size part")
-    return rve_size.packings(scale, side, root / "rve-size", device)
+    """The RVE-size part's packings of ``discs`` discs (one of its sizes)."""
+    return rve_size.packings(scale, discs, root / "rve-size", device)
 
 
 def _fem_status(code: int, summary: dict[str, Any], what: str) -> str | None:
@@ -178,25 +182,25 @@ def _part_specimen(scale: ReproductionScale, folder: Path, device: str, progress
 
 def _part_speedup(scale: ReproductionScale, folder: Path, device: str, progress: bool,
                   root: Path) -> dict[str, Any]:
-    files = {side: rve_size.packings(scale, side, root / "rve-size", device)
-             for side in scale.speedup_sides}
+    files = {discs: rve_size.packings(scale, discs, root / "rve-size", device)
+             for discs in scale.speedup_sizes}
     table_path = folder / "speedup.csv"
     if table_path.exists():
         table = pd.read_csv(table_path)
     else:
         table = speedup.speedup_table(scale, files, device, progress)
         table.to_csv(table_path, index=False)
-    yade_side = 20 if 20 in scale.size_sides else max(scale.speedup_sides)
-    yade_file = rve_size.packings(scale, yade_side, root / "rve-size", device)
-    one = yade_file.parent / f"discs{yade_side ** 2}_seed{scale.seeds[0]}.npz"
+    yade_discs = 400 if 400 in scale.sizes else max(scale.speedup_sizes)
+    yade_file = rve_size.packings(scale, yade_discs, root / "rve-size", device)
+    one = yade_file.parent / f"discs{yade_discs}_seed{scale.seeds[0]}.npz"
     if not one.exists():
         save_rve(one, load_rve(yade_file).take([0]))
     yade = speedup.yade_rate(one, scale.yade_steps)
     plots.plot_speedup(table, folder / "fig11_speedup.png")
     best = table.loc[table["speed_up"].idxmax()]
-    at_yade = table[table["discs"] == yade_side ** 2]
+    at_yade = table[table["discs"] == yade_discs]
     return {"best": best.to_dict(), "largest_batch": table.groupby("discs")["speed_up"].last()
-            .to_dict(), "yade_particle_steps_per_s": yade, "yade_discs": yade_side ** 2,
+            .to_dict(), "yade_particle_steps_per_s": yade, "yade_discs": yade_discs,
             "ours_batched_best_rate": float(at_yade["particle_steps_per_s"].max())
             if len(at_yade) else None,
             "ours_serial_rate": float(at_yade["serial_particle_steps_per_s"].iloc[0])
@@ -211,21 +215,29 @@ _RUNNERS = {"rve-size": lambda s, f, d, p, r: _part_rve_size(s, f, d, p),
 
 def run_reproduction(scale: str | ReproductionScale, out: str | Path, device: str = "cpu",
                      progress: bool = False, redo: tuple[str, ...] = (),
-                     log: Log = lambda _: None) -> dict[str, dict[str, Any]]:
-    """Run (or finish) the reproduction at ``scale`` into ``out``: every part not done yet
-    (and those of ``redo`` again), then ``report.md``. Returns each part's result."""
+                     log: Log = lambda _: None,
+                     parts: tuple[str, ...] = tuple(PARTS)) -> dict[str, dict[str, Any]]:
+    """Run (or finish) the reproduction at ``scale`` into ``out``: every part of ``parts``
+    not done yet (and those of ``redo`` again), then ``report.md``. Returns each part's
+    result."""
     study = SCALES[scale] if isinstance(scale, str) else scale
     root = Path(out)
     root.mkdir(parents=True, exist_ok=True)
-    unknown = set(redo) - set(PARTS)
+    unknown = (set(redo) | set(parts)) - set(PARTS)
     if unknown:
         raise ValueError(f"unknown part(s) {sorted(unknown)}; the parts are {list(PARTS)}")
     _check_scale(root, study)
     results: dict[str, dict[str, Any]] = {}
     for name, figures in PARTS.items():
+        if name not in parts:
+            continue
         folder = root / name
         done = folder / "result.json"
         if name in redo and done.exists():
+            done.unlink()
+        if done.exists() and json.loads(done.read_text()).get("version") != RESULT_VERSION:
+            log(f"{name} ({figures}): done by an older version of this code, redone from "
+                "its cached runs")
             done.unlink()
         if done.exists():
             log(f"{name} ({figures}): done before, skipped")
@@ -236,6 +248,7 @@ def run_reproduction(scale: str | ReproductionScale, out: str | Path, device: st
             result = _RUNNERS[name](study, folder, device, progress, root)
             result["part_wall_s"] = time.perf_counter() - started
             result["device"] = device
+            result["version"] = RESULT_VERSION
             text = json.dumps(_json_ready(result), indent=1)
             done.with_suffix(".part").write_text(text)
             done.with_suffix(".part").replace(done)  # the part's commit point
@@ -248,11 +261,15 @@ def run_reproduction(scale: str | ReproductionScale, out: str | Path, device: st
 def _check_scale(root: Path, scale: ReproductionScale) -> None:
     """Refuse to mix two scales in one folder (``scale.json`` records the first)."""
     record = root / "scale.json"
-    mine = {"scale": scale.name}
+    mine = {"scale": scale.name} if scale.name in SCALES else {"scale": scale.name,
+                                                                 "sizes": asdict(scale)}
+    mine = json.loads(json.dumps(mine))  # as read back: tuples become lists
     if record.exists():
         saved = json.loads(record.read_text())
         if saved != mine:
-            raise ValueError(f"{root} holds a reproduction at scale {saved.get('scale')!r}; "
-                             f"use another --out for scale {scale.name!r}")
+            what = ("other sizes" if saved.get("scale") == scale.name
+                    else f"scale {saved.get('scale')!r}")
+            raise ValueError(f"{root} holds a study at {what}; use another --out for this "
+                             "one")
     else:
         record.write_text(json.dumps(mine) + "\n")
