@@ -11,7 +11,7 @@ import sys
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import pandas as pd
 
@@ -21,14 +21,17 @@ from granular_material.cli.options import (
     add_json,
     add_out,
     add_progress,
+    add_rve_material_options,
     check_output_dir,
     cleanup_on_rejection,
     emit,
     interrupt_exit_code,
+    packing_parameters,
     positive,
     positive_int,
     progress_enabled,
     rve_file_shape,
+    rve_material_given,
 )
 from granular_material.fem import (
     DEM_REUSE_TOL,
@@ -55,6 +58,9 @@ from granular_material.results import (
     write_csv,
     write_outputs,
 )
+
+if TYPE_CHECKING:
+    from granular_material.procedures.packing import PackingParameters
 
 __all__ = ["register", "run_biaxial_command", "run_single_element"]
 
@@ -148,6 +154,50 @@ def _dem_arguments(parser: argparse.ArgumentParser) -> None:
                         "pore-fractal)")
 
 
+def _rve_material_arguments(parser: argparse.ArgumentParser) -> None:
+    g = parser.add_argument_group(
+        "RVE material: of the RVEs the run prepares, each consolidated to --confining (the "
+        "options of `granular-material prepare`; not with --rve, whose file carries its own)")
+    add_rve_material_options(g)
+
+
+def _packing(args: argparse.Namespace, particles: int) -> PackingParameters | None:
+    """The material and packing of the RVEs the run prepares, checked before any work as
+    ``prepare`` checks them (their pressure is --confining); None where it prepares none
+    (an --rve file, or --material linear-elastic), and then no RVE material option may be
+    given (UsageError naming it)."""
+    material = getattr(args, "material", "dem")
+    if args.rve is None and material == "dem":
+        return packing_parameters(args, particles, args.confining, "--confining")
+    given = rve_material_given(args)
+    if given:
+        why = (f"--rve {args.rve} carries its own material (made by prepare)"
+               if material == "dem" else f"--material {material} has no RVEs")
+        raise UsageError(f"{', '.join(given)}: the material of prepared RVEs; {why}")
+    return None
+
+
+def _rve_material(args: argparse.Namespace, packing: PackingParameters | None,
+                  ) -> dict[str, Any] | None:
+    """The material of the run's RVEs for its summary: the prepared ones' (``packing``) or
+    the ``--rve`` file's (its meta, its radii); None without RVEs. SI units, angles in rad."""
+    if getattr(args, "material", "dem") != "dem":
+        return None
+    if packing is None:
+        from granular_material.dem import load_rve
+
+        data = load_rve(args.rve)
+        meta, source, target = data.meta, str(args.rve), None
+        radii = (float(data.radius.min()), float(data.radius.max()))
+    else:
+        meta, source, target = packing.meta, "prepared", packing.target_void_ratio
+        radii = packing.radius_range
+    return {"source": source, "radius_min": radii[0], "radius_max": radii[1],
+            "target_void_ratio": target, "stiffness": dict(meta.stiffness),
+            "friction_angle": meta.friction_angle, "damping": meta.damping,
+            "density": meta.density, "thickness": meta.thickness}
+
+
 def _dem_parameters(args: argparse.Namespace) -> dict[str, Any]:
     """The DEM material's keywords of the reuse and stepping options."""
     return {"reuse_tol": args.reuse_tol, "reuse_correction": args.reuse_correction,
@@ -230,6 +280,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     _common_arguments(p)
     _newton_arguments(p)
     _dem_arguments(p)
+    _rve_material_arguments(p)
     p.set_defaults(func=run_single_element)
 
     b = subparsers.add_parser(
@@ -258,6 +309,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     _common_arguments(b)
     _newton_arguments(b)
     _dem_arguments(b)
+    _rve_material_arguments(b)
     b.set_defaults(func=run_biaxial_command)
 
 
@@ -481,6 +533,7 @@ def _single_element(args: argparse.Namespace) -> int:
     setup = BiaxialSetup(width=1.0, height=1.0, nx=1, ny=1, confining=args.confining,
                          axial_strain=args.axial_strain)
     tracking = _tracking(args, setup.n_points)
+    packing = _packing(args, args.particles)
     progress = progress_enabled(args)
     material: Material
     if args.material == "linear-elastic":
@@ -492,7 +545,8 @@ def _single_element(args: argparse.Namespace) -> int:
                                    replicate=_replicate(args), device=args.device,
                                    shards=args.shards, progress=progress,
                                    tangent=args.tangent, perturbation=args.perturbation,
-                                   backend=args.backend, **_dem_parameters(args))
+                                   backend=args.backend, packing=packing,
+                                   **_dem_parameters(args))
     checkpoint, resuming = _open_checkpoint(args)
     with _checkpointed(args, checkpoint, resuming):
         if not resuming:
@@ -507,6 +561,7 @@ def _single_element(args: argparse.Namespace) -> int:
                                 reference["stress_ratio"].to_numpy())
         summary["dem_peak_stress_ratio"] = ratio
         summary["dem_axial_strain_at_peak"] = float(reference["axial_strain"].iloc[peak])
+    summary["rve_material"] = _rve_material(args, packing)
     if args.out is not None:
         write_outputs(result, args.out, map_strain=args.map_strain, reference=reference)
         if reference is not None:
@@ -562,12 +617,13 @@ def _biaxial(args: argparse.Namespace) -> int:
                          confining=args.confining, axial_strain=args.axial_strain,
                          platens=args.platens)
     tracking = _tracking(args, setup.n_points)
+    packing = _packing(args, particles)
     progress = progress_enabled(args)
     material = create_material("dem", rve=args.rve, particles=particles, seed=args.seed,
                                pressure=args.confining, device=device, shards=args.shards,
                                progress=progress, tangent=args.tangent,
                                perturbation=args.perturbation, backend=args.backend,
-                               **_dem_parameters(args))
+                               packing=packing, **_dem_parameters(args))
     checkpoint, resuming = _open_checkpoint(args)
     with _checkpointed(args, checkpoint, resuming):
         if not resuming:
@@ -575,7 +631,8 @@ def _biaxial(args: argparse.Namespace) -> int:
         result, summary = _run(args, setup, material, "dem", tracking, checkpoint, resuming)
     summary.update(scale=_scale_name(scale, (nx, ny), particles), elements=[nx, ny],
                    gauss_points=setup.n_points,
-                   particles=particles, device=device)
+                   particles=particles, device=device,
+                   rve_material=_rve_material(args, packing))
     summary.update(band_summary(result, args.map_strain, summary["peak_stress_ratio"]))
     if args.out is not None:
         write_outputs(result, args.out, map_strain=args.map_strain)
