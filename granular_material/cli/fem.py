@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING, Any
 import pandas as pd
 
 from granular_material.cli.options import (
+    RVE_MATERIAL_DEFAULTS,
     UsageError,
     add_device,
     add_json,
@@ -171,9 +172,10 @@ def _packing(args: argparse.Namespace, particles: int) -> PackingParameters | No
         return packing_parameters(args, particles, args.confining, "--confining")
     given = rve_material_given(args)
     if given:
-        why = (f"--rve {args.rve} carries its own material (made by prepare)"
-               if material == "dem" else f"--material {material} has no RVEs")
-        raise UsageError(f"{', '.join(given)}: the material of prepared RVEs; {why}")
+        why = (f"--rve {args.rve} carries its own (give them to `granular-material prepare` "
+               "instead)" if material == "dem" else f"--material {material} has no RVEs")
+        raise UsageError(f"{', '.join(given)} set{'s' if len(given) == 1 else ''} the "
+                         f"material of the RVEs a run prepares, but {why}")
     return None
 
 
@@ -362,6 +364,9 @@ def _check_resume(args: argparse.Namespace) -> None:
         raise UsageError(f"--resume {args.resume} is a {saved['command']} run, not "
                          f"{args.command}")
     saved.pop("command", None)
+    # a checkpoint of a version without the RVE material options prepared the defaults
+    for dest, default in RVE_MATERIAL_DEFAULTS.items():
+        saved.setdefault(dest, default)
     differ = [f"--{k.replace('_', '-')} {given.get(k)!r} (the run had {saved.get(k)!r})"
               for k in sorted(set(saved) | set(given)) if saved.get(k) != given.get(k)]
     if differ:
