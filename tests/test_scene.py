@@ -19,6 +19,7 @@ from hypothesis import strategies as st
 from granular_material.cli import main
 from granular_material.cli.scene import _NOT_KEYS, TESTS, command_parsers, load_scene, scene_keys
 from granular_material.dem import load_rve
+from granular_material.procedures.packing import VOID_RATIO_TOLERANCE
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -288,7 +289,7 @@ def test_scene_sets_the_material_of_the_rves_it_prepares(tmp_path, capsys):
     path.write_text('test = "single-element"\nparticles = 24\nsteps = 1\n'
                     'axial-strain = 0.001\ndevice = "cpu"\njson = true\n[material]\n'
                     'friction-angle = 0.3\ndamping = 0.2\nradius-min = 4e-3\n'
-                    'radius-max = 6e-3\n')
+                    'radius-max = 6e-3\ntarget-void-ratio = 0.21\n')
     out = tmp_path / "run"
     assert main(["run", str(path), "--out", str(out)]) == 0
     report = json.loads(capsys.readouterr().out)
@@ -302,6 +303,10 @@ def test_scene_sets_the_material_of_the_rves_it_prepares(tmp_path, capsys):
     rves = load_rve(saved)
     assert rves.n_rve == 4 and (rves.meta.friction_angle, rves.meta.damping) == (0.3, 0.2)
     assert 4e-3 <= rves.radius.min() and rves.radius.max() <= 6e-3
+    # compacted frictionless to e0 = 0.21, then consolidated with friction: a little below it
+    # (0.207 measured; straight to 100 kPa the same discs end at 0.194)
+    initial = pd.read_csv(out / "points.csv").query("step == 0")["void_ratio"]
+    assert ((0.2 < initial) & (initial <= 0.21 + VOID_RATIO_TOLERANCE)).all()
     path.write_text(path.read_text().replace("friction-angle = 0.3", "friction-angle = 0.35"))
     assert main(["run", str(path), "--out", str(out), "--resume"]) == 2
     err = capsys.readouterr().err

@@ -137,6 +137,8 @@ class DEMMaterial:
             missed = np.flatnonzero(void_ratio > target + VOID_RATIO_TOLERANCE)
             if missed.size:
                 shown = ", ".join(f"seed {seed + i}: {void_ratio[i]:.4g}" for i in missed[:5])
+                if missed.size > 5:
+                    shown += f" and {missed.size - 5} more"
                 raise RuntimeError(
                     f"target void ratio {target:g} not reached under the pressure "
                     f"{p.pressure:g} Pa: void ratio of the RVEs of {shown} (frictionless "
