@@ -157,8 +157,9 @@ def _dem_arguments(parser: argparse.ArgumentParser) -> None:
 
 def _rve_material_arguments(parser: argparse.ArgumentParser) -> None:
     g = parser.add_argument_group(
-        "RVE material: of the RVEs the run prepares, each consolidated to --confining (the "
-        "options of `granular-material prepare`; not with --rve, whose file carries its own)")
+        "RVE material", "dem: the material of the RVEs the run prepares, each consolidated to "
+        "--confining: the options of `granular-material prepare` (not with --rve, whose file "
+        "carries its own; refused there)")
     add_rve_material_options(g)
 
 
@@ -222,7 +223,8 @@ def _common_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--axial-strain", type=float, default=0.1,
                         help="final axial strain, compression positive (default 0.1)")
     parser.add_argument("--confining", type=float, default=100e3,
-                        help="lateral confining pressure [Pa], compression positive "
+                        help="lateral confining pressure [Pa], compression positive; also "
+                             "the consolidation pressure of the RVEs a dem run prepares "
                              "(default 100e3)")
     parser.add_argument("--steps", type=int, default=100, help="load steps (default 100)")
     add_out(parser, "output folder: steps.csv, points.csv, fields.xdmf, summary.json, figures")
@@ -262,8 +264,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="one Q4 element (4 Gauss points) in a drained biaxial test",
         description="One Q4 element with 2x2 Gauss points: sides under the confining "
                     "traction, bottom on rollers with one node pinned, top compressed by a "
-                    "prescribed displacement. Stresses tension positive in tables; plots "
-                    "compression positive.",
+                    "prescribed displacement; dem: an --rve file, or RVEs prepared at "
+                    "--confining of the RVE material options. Stresses tension positive in "
+                    "tables; plots compression positive.",
     )
     p.add_argument("--material", choices=("dem", "linear-elastic"), default="dem",
                    help="material at the Gauss points (default dem)")
@@ -290,7 +293,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="biaxial specimen (50 mm x 100 mm) of DEM Gauss points",
         description="Drained biaxial test of a plane-strain specimen (smooth or rough "
                     "platens), one independently prepared DEM RVE per Gauss point (seed, "
-                    "seed+1, ...). "
+                    "seed+1, ...; at --confining, of the RVE material options) or an --rve "
+                    "file. "
                     "--scale full is Wu et al.'s 10x15 elements with 400-disc RVEs; "
                     "--scale reduced (5x10 elements, 64 discs) runs on a CPU.",
     )
