@@ -51,6 +51,15 @@ def test_bad_input_is_a_value_error(capsys):
                  "--no-progress"]) == 2
 
 
+def test_unreached_target_void_ratio_stops_the_run(tmp_path, capsys):
+    """RVEs prepared with --target-void-ratio below what frictionless compaction reaches at
+    --confining (24 discs: about 0.17 at 100 kPa) stop the run with code 1 naming it."""
+    code = main(["single-element", "--particles", "24", "--target-void-ratio", "0.05",
+                 "--steps", "1", "--device", "cpu", "--no-progress"])
+    err = capsys.readouterr().err
+    assert code == 1 and "target void ratio 0.05 not reached" in err and "seed 1: 0.1" in err
+
+
 def test_biaxial_command_reduced_scale(tmp_path, capsys):
     code = main(["biaxial", "--elements", "1", "2", "--particles", "40", "--axial-strain",
                  "0.004", "--steps", "2", "--device", "cpu", "--map-strain", "0.002", "0.004",

@@ -213,6 +213,26 @@ def test_single_element_on_ranks_is_the_in_process_run(ranks, rve_files, single_
 
 
 @needs_mpi
+def test_prepared_rves_of_a_material_on_two_ranks_are_the_in_process_ones(tmp_path):
+    """The RVE material options reach the RVEs the run prepares under MPI too: the same
+    tables as in process, and the checkpoint's RVEs carry the friction and damping given."""
+    argv = ["single-element", "--particles", "24", "--independent", "--steps", "1",
+            "--axial-strain", "0.001", "--device", "cpu", "--no-progress", "--json",
+            "--friction-angle", "0.3", "--damping", "0.2", "--radius-min", "4e-3"]
+    runs = {}
+    for ranks in (None, 2):
+        out = tmp_path / f"ranks{ranks}"
+        run = _run([*argv, "--out", str(out)], ranks)
+        assert run.returncode == 0, run.stderr
+        runs[ranks] = _summary(run)
+    assert runs[2] == runs[None] and runs[2]["rve_material"]["friction_angle"] == 0.3
+    _assert_same_tables(tmp_path / "ranks2", tmp_path / "ranksNone")
+    rves = load_rve(tmp_path / "ranks2" / "checkpoint" / "material_00001.npz")
+    assert (rves.meta.friction_angle, rves.meta.damping) == (0.3, 0.2)
+    assert rves.radius.min() >= 4e-3
+
+
+@needs_mpi
 def test_biaxial_on_two_ranks_is_the_in_process_run(rve_files, biaxial_reference, tmp_path):
     reference, summary = biaxial_reference
     out = tmp_path / "mpi"

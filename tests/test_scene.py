@@ -18,6 +18,8 @@ from hypothesis import strategies as st
 
 from granular_material.cli import main
 from granular_material.cli.scene import _NOT_KEYS, TESTS, command_parsers, load_scene, scene_keys
+from granular_material.dem import load_rve
+from granular_material.procedures.packing import VOID_RATIO_TOLERANCE
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -148,6 +150,18 @@ def test_dest_names_are_keys_too(parsers, tmp_path):
     # checked by the command itself, after the scene: the line of the option it names
     ('test = "single-element"\nmaterial = "linear-elastic"\nsteps = 0\ndevice = "cpu"\n',
      ["line 3", "--steps must be >= 1"]),
+    # the RVE material: prepare's own checks (the FEM commands' --confining is its pressure),
+    # and refused beside an RVE file, which carries its own material
+    ('test = "single-element"\nconfining = 10\ndevice = "cpu"\n',
+     ["line 2", "--confining 10 Pa is too low", "at least 750 Pa"]),
+    ('test = "biaxial"\ndevice = "cpu"\n[material]\nfriction-angle = 1.6\n',
+     ["line 4", "--friction-angle must lie in [0, pi/2)"]),
+    (f'test = "single-element"\nrve = "{RVE64}"\ndevice = "cpu"\n[material]\ndamping = 0.2\n',
+     ["line 5", "--damping sets the material of the RVEs a run prepares", "--rve"]),
+    (f'test = "biaxial"\ndevice = "cpu"\nfriction-angle = 0.3\nrve = "{RVE64}"\n',
+     ["line 3", "--friction-angle sets the material", f"--rve {RVE64} carries its own"]),
+    ('test = "single-element"\nmaterial = "linear-elastic"\nradius-max = 5e-3\n',
+     ["line 3", "--radius-max sets the material", "linear-elastic has no RVEs"]),
 ])
 def test_bad_scene_exits_2_naming_key_and_line_and_writes_nothing(text, expected, tmp_path,
                                                                    capsys):
@@ -265,6 +279,38 @@ def test_resume_continues_in_the_run_folder(tmp_path, capsys):
     prepare = EXAMPLES / "prepare.toml"
     assert main(["run", str(prepare), "--resume", "--out", str(tmp_path / "p")]) == 2
     assert "keeps no checkpoint" in capsys.readouterr().err
+
+
+def test_scene_sets_the_material_of_the_rves_it_prepares(tmp_path, capsys):
+    """The RVE material keys of a FEM scene reach the RVEs it prepares (the checkpoint's RVE
+    file carries them, summary.json records them); a resume with another friction is
+    refused, naming the key's line."""
+    path = tmp_path / "m.toml"
+    path.write_text('test = "single-element"\nparticles = 24\nsteps = 1\n'
+                    'axial-strain = 0.001\ndevice = "cpu"\njson = true\n[material]\n'
+                    'friction-angle = 0.3\ndamping = 0.2\nradius-min = 4e-3\n'
+                    'radius-max = 6e-3\ntarget-void-ratio = 0.21\n')
+    out = tmp_path / "run"
+    assert main(["run", str(path), "--out", str(out)]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["error"] is None
+    material = json.loads((out / "summary.json").read_text())["rve_material"]
+    assert material == report["rve_material"]
+    assert (material["friction_angle"], material["damping"]) == (0.3, 0.2)
+    assert (material["radius_min"], material["radius_max"]) == (4e-3, 6e-3)
+    assert material["source"] == "prepared" and material["stiffness"]["kn"] == 3e6
+    [saved] = (out / "checkpoint").glob("material_*.npz")
+    rves = load_rve(saved)
+    assert rves.n_rve == 4 and (rves.meta.friction_angle, rves.meta.damping) == (0.3, 0.2)
+    assert 4e-3 <= rves.radius.min() and rves.radius.max() <= 6e-3
+    # compacted frictionless to e0 = 0.21, then consolidated with friction: a little below it
+    # (0.207 measured; straight to 100 kPa the same discs end at 0.194)
+    initial = pd.read_csv(out / "points.csv").query("step == 0")["void_ratio"]
+    assert ((0.2 < initial) & (initial <= 0.21 + VOID_RATIO_TOLERANCE)).all()
+    path.write_text(path.read_text().replace("friction-angle = 0.3", "friction-angle = 0.35"))
+    assert main(["run", str(path), "--out", str(out), "--resume"]) == 2
+    err = capsys.readouterr().err
+    assert "line 8: --resume" in err and "--friction-angle 0.35 (the run had 0.3)" in err
 
 
 def test_readme_scene_checks(parsers, tmp_path):

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from granular_material_skfem import DEMMaterial
 
-from granular_material.dem import DEMBatch, DEMInstabilityError, load_rve
+from granular_material.dem import DEMBatch, DEMInstabilityError, RVEFileError, RVEMeta, load_rve
 from granular_material.fem import (
     BiaxialSetup,
     NewtonSettings,
@@ -18,7 +18,7 @@ from granular_material.fem import (
     create_material,
     run_biaxial,
 )
-from granular_material.procedures import biaxial_test, drive_grad_u
+from granular_material.procedures import PackingParameters, biaxial_test, drive_grad_u
 from granular_material.results import summarize_biaxial
 
 GRAD = np.array([
@@ -34,6 +34,21 @@ def material(small_rve_path) -> DEMMaterial:
     m = create_material("dem", rve=small_rve_path, device="cpu")
     m.allocate(4)
     return m
+
+
+def test_packing_parameters_are_checked_where_built():
+    """The RVE material the material prepares is checked when its parameters are built:
+    radii, target void ratio, the meta, and the fewest discs for the radii given."""
+    with pytest.raises(ValueError, match="radius_range"):
+        PackingParameters(radius_range=(5e-3, 3e-3))
+    with pytest.raises(ValueError, match="target_void_ratio"):
+        PackingParameters(target_void_ratio=0.0)
+    with pytest.raises(RVEFileError, match=r"meta\.damping"):
+        PackingParameters(meta=RVEMeta(damping=1.0))
+    wide = PackingParameters(radius_range=(3e-3, 2e-2))
+    DEMMaterial(particles=12)  # the fewest for 3-7 mm radii
+    with pytest.raises(ValueError, match="particles must be an integer >= "):
+        DEMMaterial(particles=12, packing=wide)
 
 
 def test_entry_point_builds_the_dem_material(material):

@@ -19,10 +19,12 @@ from granular_material.cli.options import (
     add_max_dem_steps,
     add_out,
     add_progress,
+    add_rve_material_options,
     check_output_file,
     emit,
     interrupt_exit_code,
     make_parents,
+    packing_parameters,
     positive,
     positive_int,
     progress_enabled,
@@ -35,9 +37,6 @@ if TYPE_CHECKING:
 
 __all__ = ["register"]
 
-#: how far above --target-void-ratio a packing may end and only be warned about: the
-#: compaction stops within 2e-3 of it (checked every 10 steps)
-VOID_RATIO_TOLERANCE = 0.005
 #: |σxx/(−confining) − 1| of biaxial-dem: above SERVO_WARN at some record a warning; above
 #: SERVO_FAIL over half the records (the median) the servo did not hold it: exit 1
 SERVO_WARN = 0.02
@@ -98,59 +97,16 @@ def _rve_list(indices: np.ndarray, values: np.ndarray, fmt: str) -> str:
 
 # -- prepare -------------------------------------------------------------------------------
 def _run_prepare(args: argparse.Namespace) -> int:
-    from granular_material.dem import RVEMeta, save_rve
+    from granular_material.dem import save_rve
     from granular_material.procedures import prepare_packing
-    from granular_material.procedures.packing import (
-        MAX_OVERLAP,
-        max_pressure,
-        min_discs,
-        min_pressure,
-        smallest_normal_stiffness,
-    )
+    from granular_material.procedures.packing import VOID_RATIO_TOLERANCE
 
     check_output_file(args.out)
-    if args.radius_min > args.radius_max:
-        raise ValueError(f"--radius-min {args.radius_min} exceeds --radius-max {args.radius_max}")
-    if args.law == "constant":
-        stiffness = {"law": "constant", "kn": args.kn, "kt": args.kt}
-    else:
-        stiffness = {"law": "frictmat", "young": args.young, "kt_over_kn": args.kt_over_kn}
-    meta = RVEMeta(thickness=args.thickness, density=args.density,
-                   friction_angle=args.friction_angle, damping=args.damping,
-                   stiffness=stiffness, seed=args.seed)
-    meta.validate()
-    radius_range = (args.radius_min, args.radius_max)
-    fewest = min_discs(radius_range)
-    if args.particles < fewest:
-        raise UsageError(
-            f"--particles {args.particles} is too few: with radii {args.radius_min:g}–"
-            f"{args.radius_max:g} m the consolidated cell must stay wider than twice the "
-            f"contact cut-off (2·r_max + skin; the engine sees one periodic image of each "
-            f"pair), which takes at least {fewest} discs"
-        )
-    # the estimated overlap of a contact as a share of the radius, 2·p·t/kn
-    overlap = 2 * args.pressure * args.thickness / smallest_normal_stiffness(meta,
-                                                                            radius_range)
-    lowest = min_pressure(meta, radius_range)
-    if args.pressure < lowest:
-        raise UsageError(
-            f"--pressure {args.pressure:g} Pa is too low for these stiffnesses: the contacts "
-            f"would overlap by about {overlap:.2g} of their radius, below which the "
-            f"consolidation servo does not settle a packing; at least {lowest:.4g} Pa (or a "
-            "softer --kn / --young)"
-        )
-    highest = max_pressure(meta, radius_range)
-    if args.pressure > highest:
-        raise UsageError(
-            f"--pressure {args.pressure:g} Pa would press the discs about {overlap:.0%} of "
-            f"their radius into each other (2·p·thickness/kn); the linear contact law holds "
-            f"to {MAX_OVERLAP:.0%} (the void space is gone near 20%): at most "
-            f"{highest:.4g} Pa with these stiffnesses (or stiffer --kn / --young)"
-        )
+    packing = packing_parameters(args, args.particles, args.pressure)
     batch = prepare_packing(
         n_disc=args.particles, n_rve=args.batch, seed=args.seed, pressure=args.pressure,
-        meta=meta, target_void_ratio=args.target_void_ratio,
-        radius_range=radius_range, device=args.device, dtype=args.dtype,
+        meta=packing.meta, target_void_ratio=packing.target_void_ratio,
+        radius_range=packing.radius_range, device=args.device, dtype=args.dtype,
         progress=progress_enabled(args),
     )
     h = batch.homogenize()
@@ -381,21 +337,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "so contacts overlap under 10 %% of the radius)")
     p.add_argument("--batch", type=positive_int, default=1, help="number of RVEs B (1)")
     add_out(p, "RVE file (rve.npz)", default=Path("rve.npz"))
-    p.add_argument("--target-void-ratio", type=positive, default=None,
-                   help="first compress the gas to this 2D void ratio (Wu et al.: 0.18)")
-    p.add_argument("--radius-min", type=positive, default=3e-3, help="[m] (3e-3)")
-    p.add_argument("--radius-max", type=positive, default=7e-3, help="[m] (7e-3)")
-    p.add_argument("--law", choices=["constant", "frictmat"], default="constant",
-                   help="contact stiffness law (constant: Wu et al. Table 1)")
-    p.add_argument("--kn", type=positive, default=3e6, help="normal stiffness [N/m] (3e6)")
-    p.add_argument("--kt", type=positive, default=2.4e6, help="tangential stiffness [N/m]")
-    p.add_argument("--young", type=positive, default=6e8,
-                   help="FrictMat Young's modulus [Pa] for --law frictmat (6e8)")
-    p.add_argument("--kt-over-kn", type=positive, default=0.8, help="FrictMat kt/kn (0.8)")
-    p.add_argument("--friction-angle", type=float, default=0.5, help="[rad] (0.5)")
-    p.add_argument("--damping", type=float, default=0.1, help="local damping (0.1)")
-    p.add_argument("--density", type=positive, default=2650.0, help="[kg/m³] (2650)")
-    p.add_argument("--thickness", type=positive, default=0.1, help="disc thickness [m] (0.1)")
+    add_rve_material_options(p)
     _add_run_options(p)
     p.set_defaults(func=_run_prepare)
 

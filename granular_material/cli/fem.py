@@ -11,24 +11,28 @@ import sys
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import pandas as pd
 
 from granular_material.cli.options import (
+    RVE_MATERIAL_DEFAULTS,
     UsageError,
     add_device,
     add_json,
     add_out,
     add_progress,
+    add_rve_material_options,
     check_output_dir,
     cleanup_on_rejection,
     emit,
     interrupt_exit_code,
+    packing_parameters,
     positive,
     positive_int,
     progress_enabled,
     rve_file_shape,
+    rve_material_given,
 )
 from granular_material.fem import (
     DEM_REUSE_TOL,
@@ -55,6 +59,9 @@ from granular_material.results import (
     write_csv,
     write_outputs,
 )
+
+if TYPE_CHECKING:
+    from granular_material.procedures.packing import PackingParameters
 
 __all__ = ["register", "run_biaxial_command", "run_single_element"]
 
@@ -148,6 +155,52 @@ def _dem_arguments(parser: argparse.ArgumentParser) -> None:
                         "pore-fractal)")
 
 
+def _rve_material_arguments(parser: argparse.ArgumentParser) -> None:
+    g = parser.add_argument_group(
+        "RVE material", "dem: the material of the RVEs the run prepares, each consolidated to "
+        "--confining: the options of `granular-material prepare` (not with --rve, whose file "
+        "carries its own; refused there)")
+    add_rve_material_options(g)
+
+
+def _packing(args: argparse.Namespace, particles: int) -> PackingParameters | None:
+    """The material and packing of the RVEs the run prepares, checked before any work as
+    ``prepare`` checks them (their pressure is --confining); None where it prepares none
+    (an --rve file, or --material linear-elastic), and then no RVE material option may be
+    given (UsageError naming it)."""
+    material = getattr(args, "material", "dem")
+    if args.rve is None and material == "dem":
+        return packing_parameters(args, particles, args.confining, "--confining")
+    given = rve_material_given(args)
+    if given:
+        why = (f"--rve {args.rve} carries its own (give them to `granular-material prepare` "
+               "instead)" if material == "dem" else f"--material {material} has no RVEs")
+        raise UsageError(f"{', '.join(given)} set{'s' if len(given) == 1 else ''} the "
+                         f"material of the RVEs a run prepares, but {why}")
+    return None
+
+
+def _rve_material(args: argparse.Namespace, packing: PackingParameters | None,
+                  ) -> dict[str, Any] | None:
+    """The material of the run's RVEs for its summary: the prepared ones' (``packing``) or
+    the ``--rve`` file's (its meta, its radii); None without RVEs. SI units, angles in rad."""
+    if getattr(args, "material", "dem") != "dem":
+        return None
+    if packing is None:
+        from granular_material.dem import load_rve
+
+        data = load_rve(args.rve)
+        meta, source, target = data.meta, str(args.rve), None
+        radii = (float(data.radius.min()), float(data.radius.max()))
+    else:
+        meta, source, target = packing.meta, "prepared", packing.target_void_ratio
+        radii = packing.radius_range
+    return {"source": source, "radius_min": radii[0], "radius_max": radii[1],
+            "target_void_ratio": target, "stiffness": dict(meta.stiffness),
+            "friction_angle": meta.friction_angle, "damping": meta.damping,
+            "density": meta.density, "thickness": meta.thickness}
+
+
 def _dem_parameters(args: argparse.Namespace) -> dict[str, Any]:
     """The DEM material's keywords of the reuse and stepping options."""
     return {"reuse_tol": args.reuse_tol, "reuse_correction": args.reuse_correction,
@@ -170,7 +223,8 @@ def _common_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--axial-strain", type=float, default=0.1,
                         help="final axial strain, compression positive (default 0.1)")
     parser.add_argument("--confining", type=float, default=100e3,
-                        help="lateral confining pressure [Pa], compression positive "
+                        help="lateral confining pressure [Pa], compression positive; also "
+                             "the consolidation pressure of the RVEs a dem run prepares "
                              "(default 100e3)")
     parser.add_argument("--steps", type=int, default=100, help="load steps (default 100)")
     add_out(parser, "output folder: steps.csv, points.csv, fields.xdmf, summary.json, figures")
@@ -210,8 +264,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="one Q4 element (4 Gauss points) in a drained biaxial test",
         description="One Q4 element with 2x2 Gauss points: sides under the confining "
                     "traction, bottom on rollers with one node pinned, top compressed by a "
-                    "prescribed displacement. Stresses tension positive in tables; plots "
-                    "compression positive.",
+                    "prescribed displacement; dem: an --rve file, or RVEs prepared at "
+                    "--confining of the RVE material options. Stresses tension positive in "
+                    "tables; plots compression positive.",
     )
     p.add_argument("--material", choices=("dem", "linear-elastic"), default="dem",
                    help="material at the Gauss points (default dem)")
@@ -230,6 +285,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     _common_arguments(p)
     _newton_arguments(p)
     _dem_arguments(p)
+    _rve_material_arguments(p)
     p.set_defaults(func=run_single_element)
 
     b = subparsers.add_parser(
@@ -237,7 +293,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="biaxial specimen (50 mm x 100 mm) of DEM Gauss points",
         description="Drained biaxial test of a plane-strain specimen (smooth or rough "
                     "platens), one independently prepared DEM RVE per Gauss point (seed, "
-                    "seed+1, ...). "
+                    "seed+1, ...; at --confining, of the RVE material options) or an --rve "
+                    "file. "
                     "--scale full is Wu et al.'s 10x15 elements with 400-disc RVEs; "
                     "--scale reduced (5x10 elements, 64 discs) runs on a CPU.",
     )
@@ -258,6 +315,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     _common_arguments(b)
     _newton_arguments(b)
     _dem_arguments(b)
+    _rve_material_arguments(b)
     b.set_defaults(func=run_biaxial_command)
 
 
@@ -310,6 +368,9 @@ def _check_resume(args: argparse.Namespace) -> None:
         raise UsageError(f"--resume {args.resume} is a {saved['command']} run, not "
                          f"{args.command}")
     saved.pop("command", None)
+    # a checkpoint of a version without the RVE material options prepared the defaults
+    for dest, default in RVE_MATERIAL_DEFAULTS.items():
+        saved.setdefault(dest, default)
     differ = [f"--{k.replace('_', '-')} {given.get(k)!r} (the run had {saved.get(k)!r})"
               for k in sorted(set(saved) | set(given)) if saved.get(k) != given.get(k)]
     if differ:
@@ -481,6 +542,7 @@ def _single_element(args: argparse.Namespace) -> int:
     setup = BiaxialSetup(width=1.0, height=1.0, nx=1, ny=1, confining=args.confining,
                          axial_strain=args.axial_strain)
     tracking = _tracking(args, setup.n_points)
+    packing = _packing(args, args.particles)
     progress = progress_enabled(args)
     material: Material
     if args.material == "linear-elastic":
@@ -492,7 +554,8 @@ def _single_element(args: argparse.Namespace) -> int:
                                    replicate=_replicate(args), device=args.device,
                                    shards=args.shards, progress=progress,
                                    tangent=args.tangent, perturbation=args.perturbation,
-                                   backend=args.backend, **_dem_parameters(args))
+                                   backend=args.backend, packing=packing,
+                                   **_dem_parameters(args))
     checkpoint, resuming = _open_checkpoint(args)
     with _checkpointed(args, checkpoint, resuming):
         if not resuming:
@@ -507,6 +570,7 @@ def _single_element(args: argparse.Namespace) -> int:
                                 reference["stress_ratio"].to_numpy())
         summary["dem_peak_stress_ratio"] = ratio
         summary["dem_axial_strain_at_peak"] = float(reference["axial_strain"].iloc[peak])
+    summary["rve_material"] = _rve_material(args, packing)
     if args.out is not None:
         write_outputs(result, args.out, map_strain=args.map_strain, reference=reference)
         if reference is not None:
@@ -562,12 +626,13 @@ def _biaxial(args: argparse.Namespace) -> int:
                          confining=args.confining, axial_strain=args.axial_strain,
                          platens=args.platens)
     tracking = _tracking(args, setup.n_points)
+    packing = _packing(args, particles)
     progress = progress_enabled(args)
     material = create_material("dem", rve=args.rve, particles=particles, seed=args.seed,
                                pressure=args.confining, device=device, shards=args.shards,
                                progress=progress, tangent=args.tangent,
                                perturbation=args.perturbation, backend=args.backend,
-                               **_dem_parameters(args))
+                               packing=packing, **_dem_parameters(args))
     checkpoint, resuming = _open_checkpoint(args)
     with _checkpointed(args, checkpoint, resuming):
         if not resuming:
@@ -575,7 +640,8 @@ def _biaxial(args: argparse.Namespace) -> int:
         result, summary = _run(args, setup, material, "dem", tracking, checkpoint, resuming)
     summary.update(scale=_scale_name(scale, (nx, ny), particles), elements=[nx, ny],
                    gauss_points=setup.n_points,
-                   particles=particles, device=device)
+                   particles=particles, device=device,
+                   rve_material=_rve_material(args, packing))
     summary.update(band_summary(result, args.map_strain, summary["peak_stress_ratio"]))
     if args.out is not None:
         write_outputs(result, args.out, map_strain=args.map_strain)

@@ -8,16 +8,21 @@ import contextlib
 import json
 import math
 import os
+import re
 import signal
 import sys
 from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+if TYPE_CHECKING:
+    from granular_material.procedures.packing import PackingParameters
+
 __all__ = [
     "DEFAULT_MAX_DEM_STEPS",
+    "RVE_MATERIAL_DEFAULTS",
     "Terminated",
     "UsageError",
     "add_device",
@@ -26,17 +31,20 @@ __all__ = [
     "add_max_dem_steps",
     "add_out",
     "add_progress",
+    "add_rve_material_options",
     "check_output_dir",
     "check_output_file",
     "cleanup_on_rejection",
     "emit",
     "interrupt_exit_code",
     "make_parents",
+    "packing_parameters",
     "positive",
     "positive_int",
     "progress_enabled",
     "reports_to",
     "rve_file_shape",
+    "rve_material_given",
     "scalar_or_list",
     "stop_signals_as_interrupt",
     "warn",
@@ -143,6 +151,122 @@ def add_max_dem_steps(parser: argparse.ArgumentParser, what: str) -> None:
     parser.add_argument("--max-dem-steps", type=positive_int, default=DEFAULT_MAX_DEM_STEPS,
                         help=f"the most DEM steps {what} may take; a run needing more is "
                              f"refused before it starts (default {DEFAULT_MAX_DEM_STEPS:.0e})")
+
+
+#: the options of :func:`add_rve_material_options`, by ``dest``, with their defaults (those of
+#: ``RVEMeta`` and of the packing: Wu et al. 2025, Table 1)
+RVE_MATERIAL_DEFAULTS: dict[str, Any] = {
+    "target_void_ratio": None, "radius_min": 3e-3, "radius_max": 7e-3, "law": "constant",
+    "kn": 3e6, "kt": 2.4e6, "young": 6e8, "kt_over_kn": 0.8, "friction_angle": 0.5,
+    "damping": 0.1, "density": 2650.0, "thickness": 0.1,
+}
+
+
+def add_rve_material_options(parser: argparse.ArgumentParser | argparse._ArgumentGroup,
+                             ) -> None:
+    """The material of prepared RVEs and how they are packed (e0, radii, contact law,
+    friction, damping, density, thickness): ``prepare`` and the FEM commands take the same;
+    :func:`packing_parameters` turns them into :class:`PackingParameters`."""
+    d = RVE_MATERIAL_DEFAULTS
+    parser.add_argument("--target-void-ratio", type=positive, default=d["target_void_ratio"],
+                        help="first compress the gas to this 2D void ratio (Wu et al.: 0.18)")
+    parser.add_argument("--radius-min", type=positive, default=d["radius_min"],
+                        help="[m] (3e-3)")
+    parser.add_argument("--radius-max", type=positive, default=d["radius_max"],
+                        help="[m] (7e-3)")
+    parser.add_argument("--law", choices=["constant", "frictmat"], default=d["law"],
+                        help="contact stiffness law (constant: Wu et al. Table 1)")
+    parser.add_argument("--kn", type=positive, default=d["kn"],
+                        help="normal stiffness [N/m] (3e6)")
+    parser.add_argument("--kt", type=positive, default=d["kt"],
+                        help="tangential stiffness [N/m]")
+    parser.add_argument("--young", type=positive, default=d["young"],
+                        help="FrictMat Young's modulus [Pa] for --law frictmat (6e8)")
+    parser.add_argument("--kt-over-kn", type=positive, default=d["kt_over_kn"],
+                        help="FrictMat kt/kn (0.8)")
+    parser.add_argument("--friction-angle", type=float, default=d["friction_angle"],
+                        help="[rad] (0.5)")
+    parser.add_argument("--damping", type=float, default=d["damping"],
+                        help="local damping (0.1)")
+    parser.add_argument("--density", type=positive, default=d["density"],
+                        help="[kg/m³] (2650)")
+    parser.add_argument("--thickness", type=positive, default=d["thickness"],
+                        help="disc thickness [m] (0.1)")
+
+
+def rve_material_given(args: argparse.Namespace) -> list[str]:
+    """The options of :func:`add_rve_material_options` that ``args`` sets to other than their
+    defaults, as ``--names``."""
+    return [f"--{dest.replace('_', '-')}" for dest, default in RVE_MATERIAL_DEFAULTS.items()
+            if getattr(args, dest) != default]
+
+
+def _option_named(message: str) -> str:
+    """A message of ``RVEMeta.validate`` with its field named as the option that sets it
+    (``meta.friction_angle`` → ``--friction-angle``, ``meta.stiffness.kn`` → ``--kn``)."""
+    return re.sub(r"meta\.(?:stiffness\.)?([a-z_]+)",
+                  lambda m: "--" + m.group(1).replace("_", "-"), message)
+
+
+def packing_parameters(args: argparse.Namespace, particles: int, pressure: float,
+                       pressure_option: str = "--pressure") -> PackingParameters:
+    """The options of :func:`add_rve_material_options` in ``args`` as the parameters of a
+    packing of ``particles`` discs consolidated to ``pressure`` [Pa] (set by
+    ``pressure_option``), checked before any work: ``UsageError`` naming the option when the
+    radii, the contact law, the discs or the pressure cannot make a packing."""
+    from granular_material.dem import RVEMeta
+    from granular_material.procedures.packing import (
+        MAX_OVERLAP,
+        PackingParameters,
+        max_pressure,
+        min_discs,
+        min_pressure,
+        smallest_normal_stiffness,
+    )
+
+    if args.radius_min > args.radius_max:
+        raise UsageError(f"--radius-min {args.radius_min} exceeds --radius-max "
+                         f"{args.radius_max}")
+    if args.law == "constant":
+        stiffness = {"law": "constant", "kn": args.kn, "kt": args.kt}
+    else:
+        stiffness = {"law": "frictmat", "young": args.young, "kt_over_kn": args.kt_over_kn}
+    meta = RVEMeta(thickness=args.thickness, density=args.density,
+                   friction_angle=args.friction_angle, damping=args.damping,
+                   stiffness=stiffness, seed=getattr(args, "seed", None))
+    try:
+        meta.validate()
+    except ValueError as exc:
+        raise UsageError(_option_named(str(exc))) from None
+    radius_range = (args.radius_min, args.radius_max)
+    fewest = min_discs(radius_range)
+    if particles < fewest:
+        raise UsageError(
+            f"--particles {particles} is too few: with radii {args.radius_min:g}–"
+            f"{args.radius_max:g} m the consolidated cell must stay wider than twice the "
+            f"contact cut-off (2·r_max + skin; the engine sees one periodic image of each "
+            f"pair), which takes at least {fewest} discs"
+        )
+    # the estimated overlap of a contact as a share of the radius, 2·p·t/kn
+    overlap = 2 * pressure * args.thickness / smallest_normal_stiffness(meta, radius_range)
+    lowest = min_pressure(meta, radius_range)
+    if pressure < lowest:
+        raise UsageError(
+            f"{pressure_option} {pressure:g} Pa is too low for these stiffnesses: the "
+            f"contacts would overlap by about {overlap:.2g} of their radius, below which the "
+            f"consolidation servo does not settle a packing; at least {lowest:.4g} Pa (or a "
+            "softer --kn / --young)"
+        )
+    highest = max_pressure(meta, radius_range)
+    if pressure > highest:
+        raise UsageError(
+            f"{pressure_option} {pressure:g} Pa would press the discs about {overlap:.0%} of "
+            f"their radius into each other (2·p·thickness/kn); the linear contact law holds "
+            f"to {MAX_OVERLAP:.0%} (the void space is gone near 20%): at most "
+            f"{highest:.4g} Pa with these stiffnesses (or stiffer --kn / --young)"
+        )
+    return PackingParameters(meta=meta, radius_range=radius_range,
+                             target_void_ratio=args.target_void_ratio)
 
 
 def progress_enabled(args: argparse.Namespace) -> bool:

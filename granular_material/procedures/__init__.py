@@ -3,7 +3,7 @@ element tests (each takes a :class:`~granular_material.dem.DEMBatch` and treats 
 independently), and :func:`progress_bar`, the one progress bar every layer uses."""
 
 from granular_material.procedures.element_tests import biaxial_test
-from granular_material.procedures.packing import prepare_packing, random_gas
+from granular_material.procedures.packing import PackingParameters, prepare_packing, random_gas
 from granular_material.procedures.progress import progress_bar
 from granular_material.procedures.servo import consolidate, servo_steps
 from granular_material.procedures.strain_path import (
@@ -17,6 +17,7 @@ from granular_material.procedures.strain_path import (
 
 __all__ = [
     "CellTooThinError",
+    "PackingParameters",
     "biaxial_test",
     "consolidate",
     "drive_grad_u",

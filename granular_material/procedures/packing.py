@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from dataclasses import replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -11,9 +11,9 @@ from granular_material.dem import DEMBatch, RVEData, RVEMeta
 from granular_material.dem.model import FLOAT32_MAX_RESOLUTION, SKIN_FRACTION
 from granular_material.procedures.servo import consolidate
 
-__all__ = ["MAX_OVERLAP", "MIN_OVERLAP", "max_pressure", "min_discs", "min_pressure",
-           "prepare_packing", "random_gas", "smallest_normal_stiffness",
-           "typical_normal_stiffness"]
+__all__ = ["MAX_OVERLAP", "MIN_OVERLAP", "VOID_RATIO_TOLERANCE", "PackingParameters",
+           "max_pressure", "min_discs", "min_pressure", "prepare_packing", "random_gas",
+           "smallest_normal_stiffness", "typical_normal_stiffness"]
 
 DEFAULT_RADIUS_RANGE = (3.0e-3, 7.0e-3)  # Wu et al. (2025) Table 1; Guo & Zhao rMean 5 mm ± 40 %
 
@@ -30,6 +30,37 @@ MAX_OVERLAP = 0.1
 #: 400 000 steps of ``consolidate``); 400 discs passed at 3e-5 (3 of 3) and 5e-5 (8 of 8,
 #: 10–31 s), 1000 discs at 5e-5 (2 of 2, 103–154 s)
 MIN_OVERLAP = 5.0e-5
+#: how far above ``target_void_ratio`` a prepared packing may end and still be taken (with a
+#: warning by ``prepare``): the compaction stops within 2e-3 of it (checked every 10 steps)
+VOID_RATIO_TOLERANCE = 0.005
+
+
+@dataclass(frozen=True)
+class PackingParameters:
+    """The material of prepared RVEs and how their discs are drawn and packed (everything of
+    :func:`prepare_packing` but the discs, seed and pressure).
+
+    Attributes:
+        meta: contact law, friction, damping, density and thickness the RVEs are made of
+            (its ``seed`` is set to the packing's own).
+        radius_range: (r_min, r_max) [m] of the uniform disc radii, 0 < r_min <= r_max.
+        target_void_ratio: 2D void ratio e0 the frictionless gas is first compacted to
+            (Wu et al.: 0.18), > 0; None: compacted straight to the pressure.
+    """
+
+    meta: RVEMeta = field(default_factory=RVEMeta)
+    radius_range: tuple[float, float] = DEFAULT_RADIUS_RANGE
+    target_void_ratio: float | None = None
+
+    def __post_init__(self) -> None:
+        self.meta.validate()
+        r_min, r_max = self.radius_range
+        if not (0 < r_min <= r_max and math.isfinite(r_max)):
+            raise ValueError(f"radius_range must satisfy 0 < r_min <= r_max [m], got "
+                             f"{self.radius_range!r}")
+        e0 = self.target_void_ratio
+        if e0 is not None and not (math.isfinite(e0) and e0 > 0):
+            raise ValueError(f"target_void_ratio must be a positive number or None, got {e0!r}")
 
 
 def min_discs(radius_range: tuple[float, float] = DEFAULT_RADIUS_RANGE) -> int:

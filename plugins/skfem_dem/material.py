@@ -23,7 +23,11 @@ from granular_material_skfem.parameters import (
 
 from granular_material.dem import RVEData, load_rve
 from granular_material.fem.material import MaterialResponse, PointStatus
-from granular_material.procedures.packing import prepare_packing
+from granular_material.procedures.packing import (
+    VOID_RATIO_TOLERANCE,
+    PackingParameters,
+    prepare_packing,
+)
 
 if TYPE_CHECKING:
     from granular_material_skfem.mpi import MPIBackend
@@ -41,11 +45,13 @@ class DEMMaterial:
                  progress: bool = False, tangent: str = "kruyt-rothenburg",
                  perturbation: float = 0.1, reuse_tol: float = 0.0,
                  reuse_correction: str = "none", drive: str = "restart",
-                 max_dem_steps: int | None = None, backend: str = "inprocess") -> None:
+                 max_dem_steps: int | None = None, backend: str = "inprocess",
+                 packing: PackingParameters | None = None) -> None:
         self.parameters = DEMMaterialParameters(
             None if rve is None else str(rve), particles, seed, pressure, replicate, device,
             max_strain_per_step, min_steps, shards, tangent, perturbation, reuse_tol,
             reuse_correction, drive, max_dem_steps, backend,
+            PackingParameters() if packing is None else packing,
         )
         self.progress = progress
         self.backend: InProcessBackend | MPIBackend | None = None
@@ -116,9 +122,28 @@ class DEMMaterial:
         self.backend = self._backend(data)
 
     def _prepare(self, n_rve: int, seed: int) -> RVEData:
+        """``n_rve`` packings of the parameters' material (seeds seed, seed + 1, …);
+        ``RuntimeError`` naming the RVEs whose void ratio ends more than
+        ``VOID_RATIO_TOLERANCE`` above the packing's ``target_void_ratio``."""
         p = self.parameters
+        packing = p.packing
         batch = prepare_packing(n_disc=p.particles, n_rve=n_rve, seed=seed, pressure=p.pressure,
-                                device=p.device, progress=self.progress)
+                                meta=packing.meta, target_void_ratio=packing.target_void_ratio,
+                                radius_range=packing.radius_range, device=p.device,
+                                progress=self.progress)
+        target = packing.target_void_ratio
+        if target is not None:
+            void_ratio = batch.homogenize().void_ratio
+            missed = np.flatnonzero(void_ratio > target + VOID_RATIO_TOLERANCE)
+            if missed.size:
+                shown = ", ".join(f"seed {seed + i}: {void_ratio[i]:.4g}" for i in missed[:5])
+                if missed.size > 5:
+                    shown += f" and {missed.size - 5} more"
+                raise RuntimeError(
+                    f"target void ratio {target:g} not reached under the pressure "
+                    f"{p.pressure:g} Pa: void ratio of the RVEs of {shown} (frictionless "
+                    "compaction reached the pressure first; a denser packing needs a higher "
+                    "pressure)")
         return batch.to_data()
 
     def evaluate(self, grad_u: np.ndarray) -> MaterialResponse:

@@ -4,12 +4,12 @@ and one in-process batch built from them: what both the material and its MPI wor
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from granular_material_skfem.backend import InProcessBackend, check_driving, check_reuse
 
 from granular_material.dem import DEMBatch, RVEData, resolve_device
-from granular_material.procedures.packing import min_discs
+from granular_material.procedures.packing import PackingParameters, min_discs
 
 __all__ = ["BACKENDS", "DEMMaterialParameters", "in_process_backend"]
 
@@ -52,6 +52,9 @@ class DEMMaterialParameters:
         backend: "inprocess" (every RVE in this process) or "mpi" (contiguous shards on the
             ranks of an MPI job, see :mod:`granular_material_skfem.mpi`; the same results
             bit for bit).
+        packing: the material of prepared RVEs (contact law, friction, damping, density,
+            thickness) and how they are packed (radii, target void ratio e0); ignored with
+            ``rve`` (the file carries its own material). Default: Wu et al.'s Table 1.
     """
 
     rve: str | None = None
@@ -70,6 +73,7 @@ class DEMMaterialParameters:
     drive: str = "restart"
     max_dem_steps: int | None = None
     backend: str = "inprocess"
+    packing: PackingParameters = field(default_factory=PackingParameters)
 
     def __post_init__(self) -> None:
         if self.backend not in BACKENDS:
@@ -84,7 +88,9 @@ class DEMMaterialParameters:
                              f"got {self.max_dem_steps!r}")
         if self.shards is not None and (int(self.shards) != self.shards or self.shards < 1):
             raise ValueError(f"shards must be an integer >= 1 or None, got {self.shards!r}")
-        fewest = min_discs()
+        if not isinstance(self.packing, PackingParameters):
+            raise ValueError(f"packing must be PackingParameters, got {self.packing!r}")
+        fewest = min_discs(self.packing.radius_range)
         if int(self.particles) != self.particles or self.particles < fewest:
             raise ValueError(f"particles must be an integer >= {fewest} (the periodic cell must "
                              f"stay wider than twice the contact cut-off), got "
