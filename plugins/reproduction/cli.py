@@ -80,7 +80,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--out", type=Path, default=Path("reproduction"),
                    help="output folder (default ./reproduction)")
     p.add_argument("--redo", nargs="+", default=[], choices=tuple(PARTS), metavar="PART",
-                   help=f"run these parts again: {', '.join(PARTS)}")
+                   help=f"run these parts again ({', '.join(PARTS)}), from their cached "
+                        "packings, curves and FEM runs; speedup is timed again")
     add_device(p, "DEM device")
     add_progress(p)
     add_json(p, "the verdicts")

@@ -146,6 +146,17 @@ def softening_and_dilation(curve: pd.DataFrame) -> dict[str, float]:
             "dilation_after_minimum": float(ev[-1] - np.nanmin(ev))}
 
 
+def post_peak_roughness(curve: pd.DataFrame) -> float:
+    """How jagged σ1/σ3 is after its peak [% of the peak]: the RMS of its second differences
+    from one load step to the next (0 for a straight or smoothly curved line at this
+    sampling); NaN with fewer than three points after the peak."""
+    ratio = curve["stress_ratio"].to_numpy()
+    after = ratio[int(np.nanargmax(ratio)):]
+    if after.size < 3:
+        return math.nan
+    return 100.0 * float(np.sqrt(np.mean(np.diff(after, 2) ** 2))) / float(after[0])
+
+
 # -- Figs. 8–10: the band and three RVEs ------------------------------------------------------
 def _element_grid(points: pd.DataFrame, elements: tuple[int, int]) -> pd.Series:
     """Each element's (column, row) in the mesh, from its Gauss points' centre."""

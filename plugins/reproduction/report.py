@@ -112,9 +112,12 @@ def headline(scale: ReproductionScale, results: Results) -> pd.DataFrame:
         rows.append({
             "figure": "8", "claim": "a through-going shear band at 2 %, no imperfection",
             "ours": f"{'through-going' if band['through_going'] else 'not through-going'} "
-                    f"at {_num(100 * band['axial_strain'])} %, inclination "
+                    f"at {_num(100 * band['axial_strain'])} % (inclination "
                     f"{_num(band['inclination_deg'])}°, localisation "
-                    f"{_num(band['localization'])}",
+                    f"{_num(band['localization'])}); "
+                    f"{'through-going' if r['band_last']['through_going'] else 'not yet'} at "
+                    f"{_num(100 * r['band_last']['axial_strain'])} % (localisation "
+                    f"{_num(r['band_last']['localization'])})",
             "verdict": _verdict(band["through_going"])})
         signs = [_fit(results, role, index)["slope"] < 0 for role in r["chosen"]
                  for index in ("D0", "alpha0")]
@@ -305,7 +308,10 @@ def _section_specimen(r: dict[str, Any]) -> list[str]:
         f"the specimen's own first packings, whose peaks scatter by "
         f"{_num(c['dem_peak_scatter_pct'])} %; RMS over the curve "
         f"{_num(c['stress_ratio_rms_pct'])} %. Agreement: |peak difference| within that "
-        "scatter.", "", "![Fig. 7](specimen/fig7_specimen.png)", "",
+        "scatter. Past the peak, the RMS of σ1/σ3's second differences between load steps "
+        f"is {_num(r['post_peak_roughness_pct']['specimen'])} % of the peak for the specimen "
+        f"and {_num(r['post_peak_roughness_pct']['element'])} % for the single element.",
+        "", "![Fig. 7](specimen/fig7_specimen.png)", "",
         "## Fig. 8: the shear band", "",
         "**Claim.** At 2 % axial strain the shear strain shows a through-going band, without "
         "any imperfection.", "",
@@ -313,7 +319,13 @@ def _section_specimen(r: dict[str, Any]) -> list[str]:
         f"largest shear strain form a band inclined {_num(band['inclination_deg'])}° to the "
         f"x axis, elongation {_num(band['elongation'])}, mean γ inside / outside "
         f"{_num(band['localization'])}; through-going: **{band['through_going']}** (its "
-        f"elements touch: {', '.join(band['sides']) or 'no side'}). Rule: the band's "
+        f"elements touch: {', '.join(band['sides']) or 'no side'}). At the last step "
+        f"({_num(100 * r['band_last']['axial_strain'])} %): inclination "
+        f"{_num(r['band_last']['inclination_deg'])}°, elongation "
+        f"{_num(r['band_last']['elongation'])}, localisation "
+        f"{_num(r['band_last']['localization'])}, through-going: "
+        f"{r['band_last']['through_going']} ({', '.join(r['band_last']['sides'])}). "
+        "Rule: the band's "
         "elements, joined through edges or corners, connect the two sides or the two "
         "platens, or a platen to a side while spanning half the width and height. No "
         "imperfection: every point has its own random packing.", "",

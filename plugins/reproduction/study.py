@@ -2,7 +2,8 @@
 
 Each part (:data:`PARTS`) writes its tables and figures into its own folder under the
 output folder and, last, its ``result.json``: a part with a ``result.json`` is done, and a
-rerun skips it (``--redo PART`` runs it again). Inside a part, what is expensive is cached
+rerun skips it (``--redo PART`` runs it again from its caches, and times the speed-up
+again). Inside a part, what is expensive is cached
 as soon as it is made (packings, spectra, each size's curves, the FEM runs' checkpoints),
 so an interrupted part restarts where it stopped. ``report.md`` is written from the
 ``result.json`` files of the parts done.
@@ -41,7 +42,11 @@ PARTS = {
 
 #: what a part's result.json holds; a part whose result.json has another is redone (from its
 #: cached packings, curves and FEM checkpoints), so a report never mixes two layouts
-RESULT_VERSION = 2
+RESULT_VERSION = 3
+
+#: files a ``--redo`` of a part removes besides its result.json: measurements a rerun is
+#: meant to take again (timings), not the caches of runs that would come out the same
+_REDO_REMOVES = {"speedup": ("speedup.csv",)}
 
 Log = Callable[[str], None]
 
@@ -152,6 +157,8 @@ def _part_specimen(scale: ReproductionScale, folder: Path, device: str, progress
     dem = coupling.dem_reference(scale, rves, folder, device)
     comparison = coupling.compare_with_dem(steps, dem)
     band = coupling.band_at(points, scale.map_strain, scale.specimen_elements)
+    band_last = coupling.band_at(points, float(points["axial_strain"].max()),
+                                 scale.specimen_elements)
     last = int(tracked["step"].max())
     chosen = coupling.choose_points(points, last)
     histories = coupling.point_histories(points, tracked, chosen)
@@ -162,16 +169,21 @@ def _part_specimen(scale: ReproductionScale, folder: Path, device: str, progress
                                                                   "outside"),
                       "inside_vs_edge": coupling.slopes_differ(fits, index, "inside", "edge")}
               for index in ("D0", "alpha0")}
+    element_steps = root / "element" / "run" / "steps.csv"
+    roughness = {"specimen": coupling.post_peak_roughness(steps),
+                 "element": coupling.post_peak_roughness(pd.read_csv(element_steps))
+                 if element_steps.exists() else math.nan}
     plots.plot_coupled(steps, dem, f"specimen {scale.specimen_elements[0]} × "
                        f"{scale.specimen_elements[1]} elements", folder / "fig7_specimen.png")
     if (run / "maps.png").exists():
         shutil.copyfile(run / "maps.png", folder / "fig8_maps.png")
     plots.plot_histories(histories, folder / "fig9_histories.png")
     plots.plot_fits(histories, fits, folder / "fig10_fits.png")
-    return {"comparison": comparison, "band": band, "chosen": chosen,
+    return {"comparison": comparison, "band": band, "band_last": band_last, "chosen": chosen,
             "chosen_at_step": last,
             "chosen_at_strain": float(points[points["step"] == last]["axial_strain"].iloc[0]),
             "fits": fits.to_dict("records"), "slopes": differ, "error": error,
+            "post_peak_roughness_pct": roughness,
             "final_axial_strain": summary.get("final_axial_strain"),
             "steps_completed": summary.get("steps_completed"),
             "wall_time_s": summary.get("wall_time_s"),
@@ -233,8 +245,9 @@ def run_reproduction(scale: str | ReproductionScale, out: str | Path, device: st
             continue
         folder = root / name
         done = folder / "result.json"
-        if name in redo and done.exists():
-            done.unlink()
+        if name in redo:
+            for file in (done, *(folder / f for f in _REDO_REMOVES.get(name, ()))):
+                file.unlink(missing_ok=True)
         if done.exists() and json.loads(done.read_text()).get("version") != RESULT_VERSION:
             log(f"{name} ({figures}): done by an older version of this code, redone from "
                 "its cached runs")
