@@ -19,8 +19,10 @@ Quadrature (``gauss``: Gauss–Legendre points per direction, ``gauss × gauss``
 the default is 2 × 2 for quad4 (full) and quad8 (*reduced*: the serendipity element's full
 rule is 3 × 3; 2 × 2 is what Guo & Zhao's FEM×DEM biaxial uses, one RVE per point, at the
 price of one spurious zero-energy (hourglass) mode per element, see the README) and 3 × 3
-for quad9 (full). Gauss point ``p = element · gauss² + q``, ``q = i · gauss + j`` with i the
-point's index along x (ξ) and j along y (η), each from the lower coordinate up.
+for quad9 (full). Elements are numbered up the columns (element ``e = ix · ny + iy``, ix
+along x, iy along y); Gauss point ``p = e · gauss² + q``, ``q = i · gauss + j`` with i the
+point's index along y and j along x, each from the lower coordinate up (the mesh's elements
+run their corners clockwise from the lower left, so the reference ξ lies along y).
 """
 
 from __future__ import annotations
@@ -164,6 +166,22 @@ class BiaxialProblem:
         h = math.sqrt(s.width * s.height / (s.nx * s.ny))
         n_free = self.basis.N - self.loading.dirichlet_dofs.size
         return float(stress * h * math.sqrt(n_free))
+
+    def nodes(self) -> tuple[np.ndarray, np.ndarray, str, np.ndarray]:
+        """Every node of the mesh, midside and centre nodes included, for output.
+
+        Returns (coordinates [m] (k, 2), connectivity (nelems, 4 | 8 | 9) in the VTK/meshio
+        order: corners, then the midsides of edges 01, 12, 23, 30, then the centre; the
+        meshio cell type "quad" | "quad8" | "quad9"; the (u_x, u_y) degrees of freedom of
+        every node, shape (2, k)).
+        """
+        basis = self.basis
+        if basis.facet_dofs.size == 0 and basis.interior_dofs.size == 0:
+            return basis.mesh.p.T, basis.mesh.t.T, "quad", basis.nodal_dofs
+        scalar = Basis(basis.mesh, ELEMENTS[self.setup.element](), quadrature=basis.quadrature)
+        k = np.arange(scalar.N)
+        kind = {8: "quad8", 9: "quad9"}[scalar.element_dofs.shape[0]]
+        return scalar.doflocs.T, scalar.element_dofs.T, kind, np.vstack([2 * k, 2 * k + 1])
 
     def axial_stress(self, reaction: np.ndarray) -> float:
         """Axial stress from the platen reaction [Pa], compression positive (σ = −ΣR_y / W)."""
