@@ -132,9 +132,9 @@ def add_element(parser: argparse.ArgumentParser) -> None:
                         "One RVE per Gauss point")
     g.add_argument("--quadrature", type=positive_int, default=None, metavar="N",
                    help="Gauss points per direction of every element, 1 to 10 (N x N points, "
-                        "one RVE each), overriding the element's default (quad4 2, quad8 2, quad9 3); "
-                        "fewer than the default under-integrates (quad4 with 1: two hourglass "
-                        "modes per element)")
+                        "one RVE each), overriding the element's default (quad4 2, quad8 2, "
+                        "quad9 3); fewer than the default under-integrates (quad4 with 1: "
+                        "two hourglass modes per element)")
 
 
 def add_convergence(group: Any, default: str = "force", rtol: float = 0.005) -> None:
