@@ -7,9 +7,15 @@ outputs of a small DEM run and its checkpoint, and ``--convergence displacement`
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import math
+import os
+import shutil
+import subprocess
+import sys
 from dataclasses import asdict
+from pathlib import Path
 
 import meshio
 import numpy as np
@@ -392,3 +398,33 @@ def test_scene_with_quad8_runs(tmp_path, capsys):
     path.write_text(path.read_text().replace('"quad8"', '"quad9"'))
     assert main(["run", str(path), "--resume"]) == 2
     assert "--element" in capsys.readouterr().err
+
+
+# -- the MPI backend -------------------------------------------------------------------------
+def _mpiexec() -> str | None:
+    if importlib.util.find_spec("mpi4py") is None:
+        return None
+    beside = Path(sys.executable).parent / "mpiexec"
+    return str(beside) if beside.is_file() else shutil.which("mpiexec")
+
+
+@pytest.mark.skipif(_mpiexec() is None, reason="the MPI backend needs mpi4py and mpiexec")
+def test_quad9_biaxial_on_two_ranks_is_the_in_process_run(tmp_path):
+    """18 Gauss points (3 x 3 per element) shared by two ranks: the tables of two in-process
+    shards, tracked points included."""
+    argv = ["biaxial", "--element", "quad9", "--elements", "1", "2", "--particles", "16",
+            "--steps", "2", "--axial-strain", "0.002", "--device", "cpu", "--no-progress",
+            "--json", "--track", "0", "17", "--convergence", "displacement", "--rtol", "1e-2"]
+    command = [sys.executable, "-m", "granular_material.cli", *argv]
+    env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1",
+               OMPI_MCA_rmaps_base_oversubscribe="1")
+    runs = {"inprocess": [*command, "--shards", "2", "--out", str(tmp_path / "inprocess")],
+            "mpi": [_mpiexec(), "-n", "2", *command, "--backend", "mpi", "--shards", "1",
+                    "--out", str(tmp_path / "mpi")]}
+    for run in runs.values():
+        done = subprocess.run(run, capture_output=True, text=True, env=env, timeout=300)
+        assert done.returncode == 0, done.stderr[-3000:]
+    for table in ("steps.csv", "points.csv", "tracked.csv"):
+        a, b = (_without_clock(pd.read_csv(tmp_path / k / table)) for k in runs)
+        pd.testing.assert_frame_equal(a, b, check_exact=True, obj=table)
+    assert len(pd.read_csv(tmp_path / "mpi" / "points.csv")) == 3 * 18
