@@ -21,7 +21,7 @@ import meshio
 import numpy as np
 import pandas as pd
 import pytest
-from skfem import Basis, MeshQuad, condense, solve
+from skfem import Basis, MeshQuad, MeshTri, condense, solve
 
 from granular_material.cli import main
 from granular_material.fem import (
@@ -36,7 +36,7 @@ from granular_material.fem import (
     to_points,
 )
 from granular_material.fem.forms import gauss_points_grad, internal_force, stiffness
-from granular_material.fem.problems import DEFAULT_GAUSS, ELEMENTS, element_of
+from granular_material.fem.problems import DEFAULT_GAUSS, ELEMENTS, TRIANGLES, element_of
 
 ELEMENT_NAMES = tuple(ELEMENTS)
 E, NU, P = 60e6, 0.3, 100e3
@@ -76,6 +76,25 @@ def test_gauss_points_number_and_coordinates(element, gauss):
     assert problem.weights.shape == (setup.n_points,)
 
 
+@pytest.mark.parametrize(("element", "gauss", "per_element"),
+                         [("tri3", None, 1), ("tri6", None, 3), ("tri6", 6, 6), ("tri3", 3, 3)])
+def test_triangles_gauss_points(element, gauss, per_element):
+    setup = BiaxialSetup(width=2.0, height=4.0, nx=1, ny=2, element=element, gauss=gauss)
+    assert setup.points_per_element == per_element and setup.n_elements == 4
+    assert setup.n_points == 4 * per_element
+    problem = build_biaxial(setup)
+    assert problem.basis.nelems == 4 and problem.weights.shape == (setup.n_points,)
+    np.testing.assert_allclose(problem.weights.sum(), 8.0, rtol=1e-14)
+    xy = to_points(np.asarray(problem.basis.global_coordinates()))
+    # every point lies inside its own triangle
+    mesh = problem.basis.mesh
+    for p, (x, y) in enumerate(xy):
+        corners = mesh.p[:, mesh.t[:, p // per_element]].T
+        a, b, c = corners
+        lam = np.linalg.solve(np.column_stack([b - a, c - a]), np.array([x, y]) - a)
+        assert lam.min() > 0 and lam.sum() < 1
+
+
 def test_points_table_numbers_the_points_of_every_element():
     setup = BiaxialSetup(nx=2, ny=1, element="quad9", axial_strain=0.01)
     material = _elastic()
@@ -86,8 +105,10 @@ def test_points_table_numbers_the_points_of_every_element():
 
 
 def test_bad_element_and_quadrature_are_rejected():
-    with pytest.raises(ValueError, match="element must be one of quad4, quad8, quad9"):
-        BiaxialSetup(element="tri3")
+    with pytest.raises(ValueError, match="element must be one of quad4, quad8, quad9, tri3"):
+        BiaxialSetup(element="tri10")
+    with pytest.raises(ValueError, match="gauss of a triangle must be one of 1, 3, 6, 7, 12"):
+        BiaxialSetup(element="tri6", gauss=4)
     with pytest.raises(ValueError, match="gauss must be an integer"):
         BiaxialSetup(gauss=0)
     with pytest.raises(SystemExit):
@@ -99,7 +120,7 @@ def test_bad_element_and_quadrature_are_rejected():
 def test_platens_hold_every_node_and_traction_is_consistent(element):
     setup = BiaxialSetup(width=1.0, height=2.0, nx=2, ny=3, element=element, platens="rough")
     problem = build_biaxial(setup)
-    per_edge = 1 if element == "quad4" else 2  # nodes on an element edge, less one corner
+    per_edge = 1 if element in ("quad4", "tri3") else 2  # nodes on an edge, less a corner
     nodes_across = per_edge * setup.nx + 1
     assert problem.top_dofs.size == nodes_across
     # rough: u_y and u_x of every platen node, top and bottom
@@ -112,7 +133,7 @@ def test_platens_hold_every_node_and_traction_is_consistent(element):
     on_left = np.sort(locations[1, left])
     forces = f[left][np.argsort(locations[1, left])]
     h = setup.height / setup.ny
-    if element == "quad4":
+    if element in ("quad4", "tri3"):
         expected = np.full(on_left.size, P * h)
         expected[[0, -1]] /= 2
     else:  # a quadratic edge: (1/6, 2/3, 1/6) p h
@@ -153,17 +174,24 @@ def test_biaxial_patch_test_reproduces_homogeneous_strain(element, platens):
 
 
 @pytest.mark.parametrize(("element", "gauss"), [("quad4", 2), ("quad8", 2), ("quad8", 3),
-                                                ("quad9", 3), ("quad9", 2)])
+                                                ("quad9", 3), ("quad9", 2), ("tri3", 1),
+                                                ("tri6", 3)])
 def test_patch_test_on_distorted_elements(element, gauss):
     """The classic patch test: a linear field prescribed on the boundary of a patch of
     irregular elements is reproduced inside, strain exact at every Gauss point."""
-    mesh = MeshQuad.init_tensor(np.linspace(0, 1, 4), np.linspace(0, 1, 4))
+    kind = MeshTri if element in TRIANGLES else MeshQuad
+    mesh = kind.init_tensor(np.linspace(0, 1, 4), np.linspace(0, 1, 4))
     p = mesh.p.copy()
     inner = (p[0] > 0) & (p[0] < 1) & (p[1] > 0) & (p[1] < 1)
     rng = np.random.default_rng(3)
     p[:, inner] += rng.uniform(-0.1, 0.1, size=(2, int(inner.sum())))
-    mesh = MeshQuad(p, mesh.t)
-    basis = Basis(mesh, element_of(element), intorder=2 * gauss - 1)
+    mesh = kind(p, mesh.t)
+    if element == "tri3":  # the centroid
+        basis = Basis(mesh, element_of(element), quadrature=(np.full((2, 1), 1 / 3),
+                                                             np.full(1, 0.5)))
+    else:
+        basis = Basis(mesh, element_of(element),
+                      intorder=2 if element in TRIANGLES else 2 * gauss - 1)
     material = _elastic(0.0)
     n = basis.nelems * basis.X.shape[-1]
     material.allocate(n)
@@ -207,6 +235,8 @@ def _zero_modes(element: str, gauss: int, nx: int = 1, ny: int = 1,
     ("quad8", 2, 4, 3),   # one spurious mode, non-communicable: gone in a mesh
     ("quad9", 3, 3, 3),   # full
     ("quad9", 2, 6, 6),   # three spurious modes, communicable: they stay in a mesh
+    ("tri3", 1, 3, 3),    # full
+    ("tri6", 3, 3, 3),    # full
 ])
 def test_zero_energy_modes(element, gauss, single, mesh):
     """Free stiffness: 3 rigid-body modes, plus the spurious ones of reduced integration."""
@@ -239,6 +269,8 @@ def test_mesh_convergence_of_rough_platens():
         assert err[0] > err[1] > err[2], (el, err)
     assert errors["quad8"][2] < errors["quad4"][2] / 2
     assert errors["quad9"][2] < errors["quad4"][2] / 2
+    assert errors["tri6"][2] < errors["tri3"][2] / 2
+    assert errors["quad4"][2] < errors["tri3"][2]
 
 
 # -- Newton convergence by displacement -----------------------------------------------------

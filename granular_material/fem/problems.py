@@ -23,6 +23,12 @@ for quad9 (full). Elements are numbered up the columns (element ``e = ix · ny +
 along x, iy along y); Gauss point ``p = e · gauss² + q``, ``q = i · gauss + j`` with i the
 point's index along y and j along x, each from the lower coordinate up (the mesh's elements
 run their corners clockwise from the lower left, so the reference ξ lies along y).
+
+Triangles: ``tri3`` (linear, 3 nodes, 1 point at the centroid: exact) and ``tri6``
+(quadratic, 3 corner + 3 midside nodes, 3 points: exact for a constant tangent), each
+rectangle of the grid cut into two (scikit-fem's ``MeshTri.init_tensor``). For them
+``gauss`` is the number of points per triangle, one of 1, 3, 6, 7, 12 (scikit-fem's rules of
+degree 1, 2, 4, 5, 6), numbered as scikit-fem's rule numbers them.
 """
 
 from __future__ import annotations
@@ -36,23 +42,31 @@ from skfem import (
     ElementQuad1,
     ElementQuad2,
     ElementQuadS2,
+    ElementTriP1,
+    ElementTriP2,
     ElementVector,
     FacetBasis,
     LinearForm,
     MeshQuad,
+    MeshTri,
 )
 
 from granular_material.fem.layout import to_points
 from granular_material.fem.loading import Loading
 
-__all__ = ["DEFAULT_GAUSS", "ELEMENTS", "BiaxialProblem", "BiaxialSetup", "build_biaxial",
-           "element_of"]
+__all__ = ["DEFAULT_GAUSS", "ELEMENTS", "TRIANGLES", "TRIANGLE_RULES", "BiaxialProblem",
+           "BiaxialSetup", "build_biaxial", "element_of"]
 
 #: the elements a problem may be meshed with: name → scikit-fem element (scalar)
-ELEMENTS = {"quad4": ElementQuad1, "quad8": ElementQuadS2, "quad9": ElementQuad2}
-#: Gauss points per direction of each element by default: full integration for quad4 and
-#: quad9, reduced (2 × 2, Guo & Zhao) for quad8
-DEFAULT_GAUSS = {"quad4": 2, "quad8": 2, "quad9": 3}
+ELEMENTS = {"quad4": ElementQuad1, "quad8": ElementQuadS2, "quad9": ElementQuad2,
+            "tri3": ElementTriP1, "tri6": ElementTriP2}
+#: the triangles among them
+TRIANGLES = frozenset({"tri3", "tri6"})
+#: Gauss points of each element by default, per direction (quadrilaterals) or per triangle:
+#: full integration for quad4, quad9, tri3 and tri6, reduced (2 × 2, Guo & Zhao) for quad8
+DEFAULT_GAUSS = {"quad4": 2, "quad8": 2, "quad9": 3, "tri3": 1, "tri6": 3}
+#: the triangle rules: points per triangle → scikit-fem intorder (1: the centroid, by hand)
+TRIANGLE_RULES = {1: 1, 3: 2, 6: 4, 7: 5, 12: 6}
 
 
 def element_of(name: str) -> ElementVector:
@@ -75,9 +89,9 @@ class BiaxialSetup:
         axial_strain: final axial strain, compression positive, in (0, 0.5].
         platens: "smooth" (platen nodes slide freely, one bottom node pinned) or "rough"
             (u_x = 0 on every platen node).
-        element: "quad4", "quad8" or "quad9" (:data:`ELEMENTS`).
-        gauss: Gauss points per direction of every element, 1 to 10, or None for the
-            element's default (:data:`DEFAULT_GAUSS`: 2, 2, 3).
+        element: "quad4", "quad8", "quad9", "tri3" or "tri6" (:data:`ELEMENTS`).
+        gauss: Gauss points per direction of every quadrilateral, 1 to 10, or per triangle
+            (1, 3, 6, 7, 12), or None for the element's default (:data:`DEFAULT_GAUSS`).
     """
 
     width: float = 0.05
@@ -94,8 +108,13 @@ class BiaxialSetup:
         if self.element not in ELEMENTS:
             raise ValueError(f"element must be one of {', '.join(ELEMENTS)}, "
                              f"got {self.element!r}")
-        if self.gauss is not None and (int(self.gauss) != self.gauss
-                                       or not 1 <= self.gauss <= 10):
+        if self.element in TRIANGLES:
+            if self.gauss is not None and self.gauss not in TRIANGLE_RULES:
+                raise ValueError(f"gauss of a triangle must be one of "
+                                 f"{', '.join(map(str, TRIANGLE_RULES))} (points per "
+                                 f"triangle), got {self.gauss!r}")
+        elif self.gauss is not None and (int(self.gauss) != self.gauss
+                                         or not 1 <= self.gauss <= 10):
             raise ValueError(f"gauss must be an integer in [1, 10] (points per direction), "
                              f"got {self.gauss!r}")
         if self.platens not in ("smooth", "rough"):
@@ -115,25 +134,35 @@ class BiaxialSetup:
 
     @property
     def gauss_per_direction(self) -> int:
-        """Gauss points per direction of each element (``gauss`` or the element's default)."""
+        """Gauss points per direction of each quadrilateral, or per triangle (``gauss`` or
+        the element's default)."""
         return DEFAULT_GAUSS[self.element] if self.gauss is None else int(self.gauss)
 
     @property
     def points_per_element(self) -> int:
-        """Gauss points of one element (gauss × gauss)."""
-        return self.gauss_per_direction ** 2
+        """Gauss points of one element (gauss × gauss, or gauss for a triangle)."""
+        n = self.gauss_per_direction
+        return n if self.element in TRIANGLES else n ** 2
+
+    @property
+    def n_elements(self) -> int:
+        """Elements of the mesh (nx · ny, twice as many triangles)."""
+        return self.nx * self.ny * (2 if self.element in TRIANGLES else 1)
 
     @property
     def intorder(self) -> int:
         """scikit-fem's ``intorder`` of the rule: the polynomial degree 2·gauss − 1 that
         gauss × gauss Gauss–Legendre points integrate exactly (scikit-fem takes 2 × 2 points
-        for any intorder <= 3: one point per direction is built by hand)."""
+        for any intorder <= 3: one point per direction is built by hand); for a triangle
+        the degree of its rule (:data:`TRIANGLE_RULES`)."""
+        if self.element in TRIANGLES:
+            return TRIANGLE_RULES[self.gauss_per_direction]
         return 2 * self.gauss_per_direction - 1
 
     @property
     def n_points(self) -> int:
-        """Gauss points of the mesh (gauss × gauss per element)."""
-        return self.points_per_element * self.nx * self.ny
+        """Gauss points of the mesh (gauss × gauss per quadrilateral, gauss per triangle)."""
+        return self.points_per_element * self.n_elements
 
 
 @dataclass(frozen=True)
@@ -170,17 +199,19 @@ class BiaxialProblem:
     def nodes(self) -> tuple[np.ndarray, np.ndarray, str, np.ndarray]:
         """Every node of the mesh, midside and centre nodes included, for output.
 
-        Returns (coordinates [m] (k, 2), connectivity (nelems, 4 | 8 | 9) in the VTK/meshio
-        order: corners, then the midsides of edges 01, 12, 23, 30, then the centre; the
-        meshio cell type "quad" | "quad8" | "quad9"; the (u_x, u_y) degrees of freedom of
-        every node, shape (2, k)).
+        Returns (coordinates [m] (k, 2), connectivity (nelems, 3 | 4 | 6 | 8 | 9) in the
+        VTK/meshio order: corners, then the midsides of edges 01, 12, 23 (20 for a triangle),
+        30, then the centre; the meshio cell type "quad" | "quad8" | "quad9" | "triangle" |
+        "triangle6"; the (u_x, u_y) degrees of freedom of every node, shape (2, k)).
         """
         basis = self.basis
+        triangle = self.setup.element in TRIANGLES
         if basis.facet_dofs.size == 0 and basis.interior_dofs.size == 0:
-            return basis.mesh.p.T, basis.mesh.t.T, "quad", basis.nodal_dofs
+            return (basis.mesh.p.T, basis.mesh.t.T, "triangle" if triangle else "quad",
+                    basis.nodal_dofs)
         scalar = Basis(basis.mesh, ELEMENTS[self.setup.element](), quadrature=basis.quadrature)
         k = np.arange(scalar.N)
-        kind = {8: "quad8", 9: "quad9"}[scalar.element_dofs.shape[0]]
+        kind = {6: "triangle6", 8: "quad8", 9: "quad9"}[scalar.element_dofs.shape[0]]
         return scalar.doflocs.T, scalar.element_dofs.T, kind, np.vstack([2 * k, 2 * k + 1])
 
     def axial_stress(self, reaction: np.ndarray) -> float:
@@ -200,10 +231,12 @@ def build_biaxial(setup: BiaxialSetup) -> BiaxialProblem:
     """Mesh, basis, boundary conditions and loads of a drained biaxial test."""
     xs = np.linspace(0.0, setup.width, setup.nx + 1)
     ys = np.linspace(0.0, setup.height, setup.ny + 1)
-    mesh = MeshQuad.init_tensor(xs, ys)
-    if setup.gauss_per_direction == 1:  # scikit-fem's intorder gives 2 × 2 at the least
+    triangle = setup.element in TRIANGLES
+    mesh = (MeshTri if triangle else MeshQuad).init_tensor(xs, ys)
+    if setup.gauss_per_direction == 1:  # scikit-fem's least rules have 2 × 2 or 3 points
+        centre, weight = (1 / 3, 0.5) if triangle else (0.5, 1.0)
         basis = Basis(mesh, element_of(setup.element),
-                      quadrature=(np.full((2, 1), 0.5), np.ones(1)))
+                      quadrature=(np.full((2, 1), centre), np.full(1, weight)))
     else:
         basis = Basis(mesh, element_of(setup.element), intorder=setup.intorder)
     if basis.X.shape[-1] != setup.points_per_element:

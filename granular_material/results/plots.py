@@ -115,6 +115,12 @@ def plot_maps(result: BiaxialResult, axial_strain: float, path: str | Path) -> P
     if kind == "quad":
         triangles = np.vstack([cells[:, [0, 1, 2]], cells[:, [0, 2, 3]]])
         element = np.concatenate([np.arange(cells.shape[0])] * 2)
+    elif kind == "triangle":
+        triangles, element = cells, np.arange(cells.shape[0])
+    elif kind == "triangle6":  # four triangles through the midside nodes
+        triangles = np.vstack([cells[:, [0, 3, 5]], cells[:, [3, 1, 4]], cells[:, [5, 4, 2]],
+                               cells[:, [3, 4, 5]]])
+        element = np.tile(np.arange(cells.shape[0]), 4)
     else:  # midside (and centre) nodes: each element as triangles fanned from its centre
         triangles, element = _fan(cells)
         if kind == "quad8":  # no centre node: add one, at the mean of the corners
