@@ -341,7 +341,8 @@ def test_dem_biaxial_quad8_outputs(tmp_path, capsys):
     assert code == 0
     summary = json.loads(capsys.readouterr().out)
     assert summary["element"] == "quad8" and summary["gauss_points"] == 8
-    assert summary["gauss_per_direction"] == 2 and summary["error"] is None
+    assert summary["points_per_element"] == 4 and summary["error"] is None
+    assert summary["convergence"] == "displacement"
     points = pd.read_csv(out / "points.csv")
     assert len(points) == 3 * 8
     assert points.groupby("step")["point"].apply(list).tolist() == [list(range(8))] * 3
@@ -460,3 +461,23 @@ def test_quad9_biaxial_on_two_ranks_is_the_in_process_run(tmp_path):
         a, b = (_without_clock(pd.read_csv(tmp_path / k / table)) for k in runs)
         pd.testing.assert_frame_equal(a, b, check_exact=True, obj=table)
     assert len(pd.read_csv(tmp_path / "mpi" / "points.csv")) == 3 * 18
+
+
+def test_a_checkpoint_from_before_the_element_options_resumes(tmp_path, capsys):
+    """Options written before --element, --quadrature and --convergence existed resume with
+    them at their defaults (and not with others)."""
+    out = tmp_path / "le"
+    argv = ["single-element", "--material", "linear-elastic", "--steps", "3",
+            "--axial-strain", "0.01", "--map-strain", "0.01", "--json"]
+    assert main([*argv, "--out", str(out)]) == 0
+    first = json.loads(capsys.readouterr().out)
+    options = out / "checkpoint" / "options.json"
+    saved = json.loads(options.read_text())
+    for key in ("element", "quadrature", "convergence"):
+        saved.pop(key)
+    options.write_text(json.dumps(saved))
+    assert main([*argv, "--resume", str(out)]) == 0
+    again = json.loads(capsys.readouterr().out)
+    assert again["resumed_from_step"] == 3 and again["syy"] == first["syy"]
+    assert main([*argv, "--element", "quad8", "--resume", str(out)]) == 2
+    assert "--element 'quad8' (the run had 'quad4')" in capsys.readouterr().err

@@ -466,6 +466,8 @@ def _run(args: argparse.Namespace, setup: BiaxialSetup, material: Material,
     summary = run_summary(result, time.perf_counter() - t0)
     summary["resumed_from_step"] = result.resumed_from
     summary["preset"] = args.preset
+    summary.update(element=setup.element, points_per_element=setup.points_per_element,
+                   convergence=args.convergence)
     if tracking is not None:
         summary["tracked_rows"] = len(result.tracked)
         summary["tracking_time_s"] = (float(result.tracked["seconds"].sum())
@@ -590,8 +592,7 @@ def _biaxial(args: argparse.Namespace) -> int:
             material.allocate(setup.n_points)
         result, summary = _run(args, setup, material, "dem", tracking, checkpoint, resuming)
     summary.update(scale=_scale_name(scale, (nx, ny), particles), elements=[nx, ny],
-                   gauss_points=setup.n_points, element=setup.element,
-                   gauss_per_direction=setup.gauss_per_direction,
+                   gauss_points=setup.n_points,
                    particles=particles, device=device)
     summary.update(band_summary(result, args.map_strain, summary["peak_stress_ratio"]))
     if args.out is not None:
