@@ -346,7 +346,6 @@ _RESUME_FREE = frozenset({"resume", "out", "progress", "json", "checkpoint_every
                           "backend", "func", "command"})
 
 
-#: options added after checkpoints were first written, with the value an older run had
 #: options added after checkpoints were first written, with the value older runs had (the
 #: RVE material options: RVE_MATERIAL_DEFAULTS)
 _ADDED_OPTIONS = {"element": "quad4", "quadrature": None, "convergence": "force"}

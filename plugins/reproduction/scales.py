@@ -97,6 +97,6 @@ SCALES: dict[str, ReproductionScale] = {
 SCALES["paper"] = replace(
     SCALES["cpu"], name="paper", dem_strain_per_step=1.0e-6, element_steps=100,
     specimen_elements=(10, 15), specimen_discs=400, specimen_steps=100,
-    fem_axial_strain=0.1, track_every=2,
+    fem_axial_strain=0.1, track_every=4,
     speedup_batches=(1, 4, 16, 64, 256, 1024, 4096), speedup_steps=10_000, yade_steps=5000,
 )
