@@ -248,9 +248,12 @@ def run_reproduction(scale: str | ReproductionScale, out: str | Path, device: st
         if name in redo:
             for file in (done, *(folder / f for f in _REDO_REMOVES.get(name, ()))):
                 file.unlink(missing_ok=True)
+        carried: dict[str, Any] = {}
         if done.exists() and json.loads(done.read_text()).get("version") != RESULT_VERSION:
             log(f"{name} ({figures}): done by an older version of this code, redone from "
                 "its cached runs")
+            old = json.loads(done.read_text())
+            carried["computed_wall_s"] = old.get("computed_wall_s", old.get("part_wall_s"))
             done.unlink()
         if done.exists():
             log(f"{name} ({figures}): done before, skipped")
@@ -260,6 +263,7 @@ def run_reproduction(scale: str | ReproductionScale, out: str | Path, device: st
             started = time.perf_counter()
             result = _RUNNERS[name](study, folder, device, progress, root)
             result["part_wall_s"] = time.perf_counter() - started
+            result["computed_wall_s"] = carried.get("computed_wall_s") or result["part_wall_s"]
             result["device"] = device
             result["version"] = RESULT_VERSION
             text = json.dumps(_json_ready(result), indent=1)
