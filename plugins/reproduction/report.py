@@ -192,14 +192,16 @@ def _dq_verdict(r: dict[str, Any]) -> bool | str:
 
 def _rising_dq(r: dict[str, Any]) -> str:
     """Where D_q does not decrease, which sizes and why (the finest box of one pixel)."""
-    rising = [row for row in r["per_size"] if row["dq_decreasing_count"] < row["rves"]]
-    if not rising:
+    rows = pd.DataFrame(r["per_size"])
+    if (rows["dq_decreasing_count"] == rows["rves"]).all():
         return ""
-    sizes = ", ".join(f"{int(row['discs'])} ({int(row['image_px'])} px)" for row in rising)
-    return (f"; it rises somewhere in q at the sizes {sizes}. An image of 256 px has boxes "
-            "of one pixel at k = 8: the measure is uniform over the pore pixels there, so "
-            "the fitted D_q rises with q; from 512 px on the finest box holds several pixels "
-            "and D_q falls as in the paper")
+    by_image = rows.groupby("image_px")[["dq_decreasing_count", "rves"]].sum()
+    counts = "; ".join(f"{int(px)} px images: {int(row['dq_decreasing_count'])} of "
+                       f"{int(row['rves'])}" for px, row in by_image.iterrows())
+    return (f" (by image size: {counts}). An image of 256 px has boxes of one pixel at "
+            "k = 8, where the measure is uniform over the pore pixels, so the fitted D_q "
+            "rises with q; with more pixels the finest box holds several and D_q falls as "
+            "in the paper")
 
 
 def _resolution_note(r: dict[str, Any]) -> list[str]:
