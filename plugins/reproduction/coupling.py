@@ -21,9 +21,9 @@ import numpy as np
 import pandas as pd
 from scipy import ndimage, stats
 
-from granular_material.dem import load_rve, save_rve
-from granular_material.procedures import prepare_packing
-from granular_material.results import shear_band
+from granular_material.dem import DEMBatch, load_rve, save_rve
+from granular_material.procedures import biaxial_test, prepare_packing
+from granular_material.results import shear_band, write_csv
 from granular_material.results.compare import curve_errors, mean_curve
 
 from .scales import ReproductionScale
@@ -108,10 +108,6 @@ def dem_reference(scale: ReproductionScale, rves: Path, folder: Path,
                   device: str) -> pd.DataFrame:
     """Pure-DEM drained biaxial tests of the first len(seeds) RVEs of ``rves`` (the
     specimen's own packings), to the FEM runs' final strain; cached as ``pure_dem.csv``."""
-    from granular_material.dem import DEMBatch
-    from granular_material.procedures import biaxial_test
-    from granular_material.results import write_csv
-
     path = folder / "pure_dem.csv"
     if not path.exists():
         data = load_rve(rves).take(list(range(len(scale.seeds))))

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from matplotlib.figure import Figure
 
 from granular_material.results.plots import pyplot
 
@@ -14,7 +15,8 @@ __all__ = ["plot_coupled", "plot_fits", "plot_histories", "plot_ratio_by_size",
            "plot_size_curves", "plot_spectra", "plot_speedup"]
 
 
-def _save(fig, path: Path) -> Path:
+def _save(fig: Figure, path: Path) -> Path:
+    """``fig`` written to ``path`` (PNG) and closed."""
     fig.savefig(path, dpi=110)
     pyplot().close(fig)
     return path

@@ -88,7 +88,7 @@ def _part_size_biaxial(scale: ReproductionScale, folder: Path, device: str,
                        progress: bool, root: Path) -> dict[str, Any]:
     curves = rve_size.size_tests(scale, root / "rve-size", device, progress)
     responses = rve_size.size_responses(curves)
-    pd.DataFrame(responses).to_csv(folder / "responses.csv", index=False)
+    responses.to_csv(folder / "responses.csv", index=False)
     stats = responses.groupby("discs").agg(
         peak_mean=("peak_stress_ratio", "mean"), peak_std=("peak_stress_ratio", "std"),
         final_mean=("final_stress_ratio", "mean"), final_std=("final_stress_ratio", "std"),
