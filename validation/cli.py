@@ -48,11 +48,12 @@ def run_validation(names: list[str], out: str | Path, device: str | None = None,
 def _run(args: argparse.Namespace) -> int:
     from granular_material_validation import report
     from granular_material_validation.engine_runner import EngineError
+    from granular_material_validation.guo_zhao_runner import EscriptNotFoundError
     from granular_material_validation.yade_runner import YadeError, YadeNotFoundError
 
     try:
         entries = run_validation(args.cases, args.out, args.device, args.seeds)
-    except (YadeNotFoundError, YadeError, EngineError) as exc:
+    except (YadeNotFoundError, YadeError, EngineError, EscriptNotFoundError) as exc:
         print(f"granular-material validate-yade: error: {exc}", file=sys.stderr)
         return 3
     if args.json:
