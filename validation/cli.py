@@ -28,7 +28,7 @@ def run_validation(names: list[str], out: str | Path, device: str | None = None,
     if unknown:
         raise ValueError(f"unknown case(s) {unknown}; known: {sorted(cases.CASES)}")
     yade = yade_runner.find_yade()
-    out = Path(out)
+    out = Path(out).resolve()
     start = time.perf_counter()
     chosen = [cases.CASES[n] for n in names]
     if seeds:

@@ -156,7 +156,7 @@ def _read_results(work: Path, job: dict[str, Any], log_text: str) -> pd.DataFram
         stress = np.asarray(row["stress"], dtype=np.float64).reshape(-1, 2, 2)
         mean = np.asarray(row["mean_stress"], dtype=np.float64)
         out.append({
-            "step": row["step"], "axial_strain": -float(surf[k, 0]),
+            "step": row["step"], "axial_strain": abs(float(surf[k, 0])),
             "platen_stress": -float(surf[k, 1]) / float(surf[k, 2]),
             "sxx": mean[0, 0], "syy": mean[1, 1], "sxy": 0.5 * (mean[0, 1] + mean[1, 0]),
             "volumetric_strain": row["area"] / area0 - 1.0,

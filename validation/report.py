@@ -7,7 +7,7 @@ import math
 from pathlib import Path
 from typing import Any
 
-from granular_material_validation import metrics
+from granular_material_validation import femxdem_report, metrics
 
 from granular_material.results import pyplot
 
@@ -171,6 +171,9 @@ def write_report(entries: list[dict[str, Any]], out: str | Path,
     lines += ["", "## Figures", "", *_table(entries), ""]
     for e in entries:
         name = e["case"]["name"]
+        if e["case"]["kind"] == "femxdem":
+            lines += femxdem_report.section_lines(e, out)
+            continue
         plot = plot_case(e, out / "plots" / f"{name}.png")
         lines += [f"### {name}", "", e["case"]["description"], "",
                   f"![{name}]({plot.relative_to(out).as_posix()})", ""]
