@@ -277,8 +277,8 @@ def shear_stress_figures(yade: pd.DataFrame, fem: pd.DataFrame) -> dict[str, flo
     """
     c = metrics.compare_curves(yade, fem)
     x = yade["axial_strain"].to_numpy(dtype=np.float64)
-    pre = (x <= c.strain_at_peak_ref) & (x > 0)
-    fem_pre = (fem["axial_strain"] <= c.strain_at_peak_ref) & (fem["axial_strain"] > 0)
+    pre = (x <= c.strain_at_peak_argmax_ref) & (x > 0)
+    fem_pre = (fem["axial_strain"] <= c.strain_at_peak_argmax_ref) & (fem["axial_strain"] > 0)
     normal = max(float(np.abs(np.interp(x[pre], fem["axial_strain"], fem[col])
                               - yade.loc[pre, col]).max()) for col in ("sxx", "syy"))
     return {"max_abs_sxy_yade": float(yade.loc[pre, "sxy"].abs().max()),
@@ -354,7 +354,8 @@ def summarise_case(case: Case, runs: list[SeedRun]) -> dict[str, Any]:
         peaks = np.array([r.comparison.peak_ratio_ref for r in runs])
         entry["yade_seed_spread"] = {
             "peak_ratio_mean": float(peaks.mean()), "peak_ratio_std": float(peaks.std(ddof=1)),
-            "strain_at_peak": [r.comparison.strain_at_peak_ref for r in runs]}
+            "strain_at_peak": [r.comparison.strain_at_peak_ref for r in runs],
+            "strain_at_peak_argmax": [r.comparison.strain_at_peak_argmax_ref for r in runs]}
     if all(r.baseline is not None for r in runs):
         base_checks, base_ensemble, base_seeds = case_checks(case, refs,
                                                              [r.baseline for r in runs])

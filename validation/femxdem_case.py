@@ -154,7 +154,7 @@ def run_femxdem_seed(case: Any, seed: int, rve: Path, prep: dict[str, Any], work
         strain_per_step=PERTURBATION * per_step, confining=case.pressure)
     ref_cmp = metrics.compare_curves(theirs, theirs)
     peak_step = int(theirs.loc[np.argmin(np.abs(theirs["axial_strain"]
-                                                - ref_cmp.strain_at_peak_ref)), "step"])
+                                                - ref_cmp.strain_at_peak_argmax_ref)), "step"])
     chosen = sorted({max(1, case.steps // 3), max(1, 2 * case.steps // 3), case.steps})
     cost = {"guo-zhao": cost_figures(theirs, points, case.particles, peak_step,
                                      tsum["wall_s"], tsum["processes"], theirs=True)}
