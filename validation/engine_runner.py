@@ -8,6 +8,7 @@ measured the same way as YADE's: the whole process, start-up included.
 from __future__ import annotations
 
 import json
+import resource
 import subprocess
 import sys
 import time
@@ -45,8 +46,15 @@ def engine_available() -> bool:
     return True
 
 
+def _children_cpu_s() -> float:
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime
+
+
 def _run(args: list[str], timeout: float) -> tuple[dict[str, Any], float]:
+    """Run our command line; its JSON (with ``cpu_s``: the process's CPU time) and wall [s]."""
     cmd = [sys.executable, "-m", "granular_material.cli", *args, "--json"]
+    cpu0 = _children_cpu_s()
     start = time.perf_counter()
     try:
         proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, check=False,
@@ -63,6 +71,8 @@ def _run(args: list[str], timeout: float) -> tuple[dict[str, Any], float]:
     except json.JSONDecodeError as exc:
         raise EngineError(f"granular-material {args[0]} printed no JSON: {exc}\n"
                           f"{proc.stdout[-2000:]}") from None
+    if isinstance(result, dict):
+        result["cpu_s"] = _children_cpu_s() - cpu0
     return result, wall
 
 

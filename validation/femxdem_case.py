@@ -91,9 +91,10 @@ def field_comparison(theirs: pd.DataFrame, ours: pd.DataFrame, step: int) -> dic
 
 
 def cost_figures(curve: pd.DataFrame, points: int, particles: int, peak_step: int,
-                 wall_s: float, threads: int, theirs: bool) -> dict[str, Any]:
+                 wall_s: float, threads: int, theirs: bool,
+                 cpu_s: float | None = None) -> dict[str, Any]:
     """Newton iterations and DEM steps a load step (before and after ``peak_step``, all),
-    wall time [s] and core-seconds of one run (``threads`` cores)."""
+    wall time [s], core-seconds (wall × ``threads``) and CPU time [s] of one run."""
     rows = curve[curve["step"] > 0]
     if theirs:
         dem = rows["dem_steps"].to_numpy(dtype=np.float64) / points
@@ -110,7 +111,7 @@ def cost_figures(curve: pd.DataFrame, points: int, particles: int, peak_step: in
             "dem_steps_per_point_post_peak": mean(dem[~pre]),
             "dem_steps_per_point_all": mean(dem), "load_steps": len(rows),
             "wall_s": float(wall_s), "threads": int(threads),
-            "core_s": float(wall_s) * int(threads)}
+            "core_s": float(wall_s) * int(threads), "cpu_s": cpu_s}
 
 
 def _our_threads(summary: dict[str, Any]) -> int:
@@ -157,7 +158,8 @@ def run_femxdem_seed(case: Any, seed: int, rve: Path, prep: dict[str, Any], work
                                                 - ref_cmp.strain_at_peak_argmax_ref)), "step"])
     chosen = sorted({max(1, case.steps // 3), max(1, 2 * case.steps // 3), case.steps})
     cost = {"guo-zhao": cost_figures(theirs, points, case.particles, peak_step,
-                                     tsum["wall_s"], tsum["processes"], theirs=True)}
+                                     tsum["wall_s"], tsum["processes"], theirs=True,
+                                     cpu_s=tsum.get("cpu_s"))}
     cost["guo-zhao"]["stepping_s"] = tsum["stepping_s"]
     comparisons, fields = {}, {}
     strains = [s for s in (0.01, 0.02, 0.03, 0.05, 0.07) if s <= case.axial_strain + 1e-12]
@@ -166,10 +168,13 @@ def run_femxdem_seed(case: Any, seed: int, rve: Path, prep: dict[str, Any], work
     for name, (curve, pts, summary) in runs.items():
         comparisons[name] = metrics.compare_curves(theirs, curve).to_dict()
         cost[name] = cost_figures(curve, points, case.particles, peak_step,
-                                  summary["wall_s"], _our_threads(summary), theirs=False)
+                                  summary["wall_s"], _our_threads(summary), theirs=False,
+                                  cpu_s=summary.get("cpu_s"))
         cost[name]["stepping_s"] = float(summary.get("wall_time_s") or float("nan"))
         cost[name]["speedup_wall"] = tsum["wall_s"] / summary["wall_s"]
         cost[name]["speedup_per_core"] = cost["guo-zhao"]["core_s"] / cost[name]["core_s"]
+        if cost["guo-zhao"]["cpu_s"] and cost[name]["cpu_s"]:
+            cost[name]["speedup_cpu"] = cost["guo-zhao"]["cpu_s"] / cost[name]["cpu_s"]
         fields[name] = [field_comparison(their_fields, pts, k) for k in chosen]
         ratios[name] = [_ratio_at(curve, s) for s in strains]
     extra = {"packing": prep, "judged": judged, "comparisons": comparisons,

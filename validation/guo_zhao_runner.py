@@ -20,6 +20,7 @@ import gzip
 import json
 import os
 import re
+import resource
 import shutil
 import subprocess
 import time
@@ -192,6 +193,13 @@ def gauss_fields(work: str | Path) -> pd.DataFrame:
     return pd.concat(frames, ignore_index=True)
 
 
+def _children_cpu_s() -> float:
+    """CPU seconds (user + system) of the finished child processes of this one, with
+    theirs (a process's pool workers are counted once it has waited for them)."""
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime
+
+
 def guo_zhao_biaxial(rve: str | Path, workdir: str | Path, elements: tuple[int, int] = (2, 4),
                      steps: int = 30, strain_per_step: float = 1e-3, confining: float = 1e5,
                      width: float = 0.05, height: float = 0.1, processes: int = 2,
@@ -207,7 +215,8 @@ def guo_zhao_biaxial(rve: str | Path, workdir: str | Path, elements: tuple[int, 
     ``stress_ratio`` = platen_stress/confining, the volume-average ``sxx``, ``syy``, ``sxy``
     [Pa, tension positive], ``volumetric_strain`` = A/A0 − 1, mean ``void_ratio``, Newton
     ``iterations`` (their count), DEM ``evaluations`` and ``dem_steps`` (all points),
-    ``wall_time`` [s]) and a summary (``wall_s``: the whole yade process; ``patches``).
+    ``wall_time`` [s]) and a summary (``wall_s``: the whole yade process, ``cpu_s``: its CPU
+    time with its pool's; ``patches``).
     """
     if (width, height) != (0.05, 0.1):
         raise ValueError(f"their example's specimen is 0.05 m × 0.1 m, got {width} × {height}")
@@ -239,6 +248,7 @@ def guo_zhao_biaxial(rve: str | Path, workdir: str | Path, elements: tuple[int, 
                p for p in (str(escript_dir / "lib"), os.environ.get("LD_LIBRARY_PATH", ""))
                if p)}
     log = work / "biaxialSmooth.log"
+    cpu0 = _children_cpu_s()
     start = time.perf_counter()
     with open(log, "w") as fh:
         try:
@@ -249,6 +259,7 @@ def guo_zhao_biaxial(rve: str | Path, workdir: str | Path, elements: tuple[int, 
             raise YadeError(f"Guo & Zhao's biaxialSmooth.py timed out after {timeout:g} s; "
                             f"log {log}") from None
     wall = time.perf_counter() - start
+    cpu = _children_cpu_s() - cpu0
     text = log.read_text(errors="replace")
     if proc.returncode != 0 or "Traceback (most recent call last)" in text:
         tail = "\n".join(text.splitlines()[-25:])
@@ -258,7 +269,7 @@ def guo_zhao_biaxial(rve: str | Path, workdir: str | Path, elements: tuple[int, 
     if len(curve) != steps + 1:
         raise YadeError(f"Guo & Zhao's run in {work} recorded {len(curve) - 1} of {steps} "
                         "load steps")
-    summary = {"job": job, "wall_s": wall, "processes": int(processes),
+    summary = {"job": job, "wall_s": wall, "cpu_s": cpu, "processes": int(processes),
                "stepping_s": float(curve["wall_time"].sum()),
                "newton_iterations_mean": float(curve["iterations"].iloc[1:].mean()),
                "dem_steps": int(curve["dem_steps"].sum()),
