@@ -99,7 +99,7 @@ def test_femxdem_smoke_case_through_the_command_line(tmp_path: Path) -> None:
     (entry,) = json.loads((tmp_path / "results.json").read_text())["cases"]
     seed = entry["per_seed"][0]
     report = (tmp_path / "report.md").read_text()
-    assert "### gz-femxdem-smoke" in report and "speed-up wall / per core" in report
+    assert "### gz-femxdem-smoke" in report and "speed-up wall / per core / CPU" in report
     assert (tmp_path / "plots" / "gz-femxdem-smoke_seed1.png").stat().st_size > 10_000
     cost = seed["cost"]
     assert cost["guo-zhao"]["load_steps"] == 2 and cost["guo-zhao"]["iterations_all"] >= 1
