@@ -17,7 +17,9 @@ import pandas as pd
 
 from granular_material.cli.options import (
     UsageError,
+    add_convergence,
     add_device,
+    add_element,
     add_json,
     add_out,
     add_progress,
@@ -89,6 +91,7 @@ def _newton_arguments(parser: argparse.ArgumentParser) -> None:
                         f"(default {_NEWTON.max_iterations})")
     g.add_argument("--max-cutbacks", type=int, default=_NEWTON.max_cutbacks,
                    help=f"how often an increment may be halved (default {_NEWTON.max_cutbacks})")
+    add_convergence(g, _NEWTON.convergence, _NEWTON.rtol)
     g.add_argument("--predictor", choices=("tangent", "extrapolate"), default=_NEWTON.predictor,
                    help="first guess of a step: committed-tangent solve or the last increment "
                         f"scaled (default {_NEWTON.predictor})")
@@ -167,6 +170,7 @@ def _tracking(args: argparse.Namespace, n_points: int) -> Tracking | None:
 
 
 def _common_arguments(parser: argparse.ArgumentParser) -> None:
+    add_element(parser)
     parser.add_argument("--axial-strain", type=float, default=0.1,
                         help="final axial strain, compression positive (default 0.1)")
     parser.add_argument("--confining", type=float, default=100e3,
@@ -207,8 +211,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the ``single-element`` and ``biaxial`` commands."""
     p = subparsers.add_parser(
         "single-element",
-        help="one Q4 element (4 Gauss points) in a drained biaxial test",
-        description="One Q4 element with 2x2 Gauss points: sides under the confining "
+        help="one element (Q4, 4 Gauss points, unless --element) in a drained biaxial test",
+        description="One element (Q4 with 2x2 Gauss points unless --element/--quadrature "
+                    "say otherwise): sides under the confining "
                     "traction, bottom on rollers with one node pinned, top compressed by a "
                     "prescribed displacement. Stresses tension positive in tables; plots "
                     "compression positive.",
@@ -266,7 +271,8 @@ def _settings(args: argparse.Namespace, material: str) -> NewtonSettings:
                             max_iterations=args.max_iterations, max_cutbacks=args.max_cutbacks,
                             predictor=args.predictor, relaxation=args.relaxation,
                             tangent_update=args.tangent_update,
-                            secant_min_change=args.secant_min_change)
+                            secant_min_change=args.secant_min_change,
+                            convergence=args.convergence)
 
 
 def _stress_tol(args: argparse.Namespace, material: str) -> float:
@@ -280,6 +286,10 @@ def _stress_tol(args: argparse.Namespace, material: str) -> float:
 #: result)
 _RESUME_FREE = frozenset({"resume", "out", "progress", "json", "checkpoint_every", "shards",
                           "backend", "func", "command"})
+
+
+#: options added after checkpoints were first written, with the value an older run had
+_ADDED_OPTIONS = {"element": "quad4", "quadrature": None, "convergence": "force"}
 
 
 def _run_options(args: argparse.Namespace) -> dict[str, Any]:
@@ -310,6 +320,8 @@ def _check_resume(args: argparse.Namespace) -> None:
         raise UsageError(f"--resume {args.resume} is a {saved['command']} run, not "
                          f"{args.command}")
     saved.pop("command", None)
+    for key, default in _ADDED_OPTIONS.items():  # a checkpoint from before these options
+        saved.setdefault(key, default)
     differ = [f"--{k.replace('_', '-')} {given.get(k)!r} (the run had {saved.get(k)!r})"
               for k in sorted(set(saved) | set(given)) if saved.get(k) != given.get(k)]
     if differ:
@@ -390,19 +402,21 @@ def _check(args: argparse.Namespace) -> None:
         raise FileNotFoundError(f"--rve {args.rve} does not exist")
 
 
-def _replicate(args: argparse.Namespace) -> bool:
-    """single-element, dem: whether one RVE is replicated to the 4 Gauss points (else four
-    are used: --independent, or the four of an --rve file); checked before any work."""
+def _replicate(args: argparse.Namespace, n_points: int = 4) -> bool:
+    """single-element, dem: whether one RVE is replicated to the ``n_points`` Gauss points
+    (else one per point is used: --independent, or those of an --rve file); checked before
+    any work."""
     if args.rve is None:
         return not args.independent
     n_rve, _ = rve_file_shape(args.rve)
-    if n_rve == 4:
+    if n_rve == n_points:
         return False
     if n_rve != 1:
         raise UsageError(f"--rve {args.rve} holds {n_rve} RVEs; single-element takes 1 "
-                         "(replicated to the 4 Gauss points) or 4 (one per point)")
+                         f"(replicated to the {n_points} Gauss points) or {n_points} (one per "
+                         "point)")
     if args.independent:
-        raise UsageError(f"--independent needs four RVEs, --rve {args.rve} holds 1")
+        raise UsageError(f"--independent needs {n_points} RVEs, --rve {args.rve} holds 1")
     return True
 
 
@@ -479,7 +493,8 @@ def _single_element(args: argparse.Namespace) -> int:
     if args.material != "dem" and args.backend != "inprocess":
         raise UsageError(f"--backend {args.backend} needs --material dem")
     setup = BiaxialSetup(width=1.0, height=1.0, nx=1, ny=1, confining=args.confining,
-                         axial_strain=args.axial_strain)
+                         axial_strain=args.axial_strain, element=args.element,
+                         gauss=args.quadrature)
     tracking = _tracking(args, setup.n_points)
     progress = progress_enabled(args)
     material: Material
@@ -489,7 +504,8 @@ def _single_element(args: argparse.Namespace) -> int:
     else:
         material = create_material("dem", rve=args.rve, particles=args.particles,
                                    seed=args.seed, pressure=args.confining,
-                                   replicate=_replicate(args), device=args.device,
+                                   replicate=_replicate(args, setup.n_points),
+                                   device=args.device,
                                    shards=args.shards, progress=progress,
                                    tangent=args.tangent, perturbation=args.perturbation,
                                    backend=args.backend, **_dem_parameters(args))
@@ -560,7 +576,7 @@ def _biaxial(args: argparse.Namespace) -> int:
         particles = rve_file_shape(args.rve)[1]
     setup = BiaxialSetup(width=args.width, height=args.height, nx=nx, ny=ny,
                          confining=args.confining, axial_strain=args.axial_strain,
-                         platens=args.platens)
+                         platens=args.platens, element=args.element, gauss=args.quadrature)
     tracking = _tracking(args, setup.n_points)
     progress = progress_enabled(args)
     material = create_material("dem", rve=args.rve, particles=particles, seed=args.seed,
@@ -574,7 +590,8 @@ def _biaxial(args: argparse.Namespace) -> int:
             material.allocate(setup.n_points)
         result, summary = _run(args, setup, material, "dem", tracking, checkpoint, resuming)
     summary.update(scale=_scale_name(scale, (nx, ny), particles), elements=[nx, ny],
-                   gauss_points=setup.n_points,
+                   gauss_points=setup.n_points, element=setup.element,
+                   gauss_per_direction=setup.gauss_per_direction,
                    particles=particles, device=device)
     summary.update(band_summary(result, args.map_strain, summary["peak_stress_ratio"]))
     if args.out is not None:

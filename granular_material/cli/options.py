@@ -20,8 +20,10 @@ __all__ = [
     "DEFAULT_MAX_DEM_STEPS",
     "Terminated",
     "UsageError",
+    "add_convergence",
     "add_device",
     "add_dtype",
+    "add_element",
     "add_json",
     "add_max_dem_steps",
     "add_out",
@@ -114,6 +116,40 @@ def add_device(parser: argparse.ArgumentParser, what: str = "warp device") -> No
     """``--device cpu|cuda`` (default None: CUDA when present, else CPU)."""
     parser.add_argument("--device", choices=["cpu", "cuda"], default=None,
                         help=f"{what} (default: CUDA when present, else CPU)")
+
+
+def add_element(parser: argparse.ArgumentParser) -> None:
+    """``--element`` and ``--quadrature`` of the FEM commands (a group of their own)."""
+    g = parser.add_argument_group("finite elements")
+    g.add_argument("--element", choices=("quad4", "quad8", "quad9"), default="quad4",
+                   help="quad4: bilinear, 4 nodes, 2x2 Gauss points (full; default); quad8: "
+                        "serendipity, 8 nodes (midside nodes), 2x2 Gauss points: REDUCED "
+                        "integration (full is 3x3), as in Guo & Zhao's FEMxDEM biaxial: "
+                        "4 RVEs per element instead of 9, at the risk of one spurious zero-"
+                        "energy (hourglass) mode per element, which does not spread through "
+                        "a mesh of more than one element but may show as a checkerboard in a "
+                        "softening band; quad9: biquadratic Lagrange, 9 nodes, 3x3 (full). "
+                        "One RVE per Gauss point")
+    g.add_argument("--quadrature", type=int, default=None, metavar="N",
+                   choices=range(1, 11),
+                   help="Gauss points per direction of every element (N x N points, one RVE "
+                        "each), overriding the element's default (quad4 2, quad8 2, quad9 3); "
+                        "fewer than the default under-integrates (quad4 with 1: two hourglass "
+                        "modes per element)")
+
+
+def add_convergence(group: Any, default: str = "force", rtol: float = 0.005) -> None:
+    """``--convergence`` of the FEM commands' Newton solver, in ``group``."""
+    group.add_argument("--convergence", choices=("force", "displacement"), default=default,
+                       help="Newton convergence test. force (default): ||R||/||R0|| <= "
+                            "--rtol, or ||R|| below the --stress-tol floor; displacement "
+                            "(Guo & Zhao): ||du||/||Du|| <= --rtol, du the Newton correction "
+                            "of the iteration, Du the increment of the load step so far, L2 "
+                            "norms over the specimen; the material is evaluated once more "
+                            "after the accepted correction (at least 2 evaluations per "
+                            "increment) and --stress-tol is not used (Guo & Zhao: --rtol "
+                            f"0.01; default --rtol {rtol:g} either way). steps.csv records "
+                            "which test accepted each step (converged_by)")
 
 
 def add_dtype(parser: argparse.ArgumentParser) -> None:

@@ -8,6 +8,17 @@ R = ∫ Bᵀσ dV − f_ext is compared with the step's load, ‖R‖₂ / ‖R�
 (h) otherwise the tangent of the current iterate gives the correction. A step that does not
 converge is reverted (the material returns to its committed state) and retried with half the
 increment, down to a limit.
+
+The convergence test is a choice (:attr:`NewtonSettings.convergence`):
+
+- ``force`` (default, above): ‖R‖₂ ≤ rtol·‖R₀‖₂ on the free degrees of freedom, or
+  ‖R‖₂ ≤ atol (the commands set atol from a stress floor, ``--stress-tol``);
+- ``displacement`` (Guo & Zhao's FEM×DEM code): ‖δu‖ ≤ rtol·‖Δu‖, δu the Newton correction
+  of the iteration and Δu the increment of the load step so far (δu included), both in the
+  L² norm over the specimen (‖v‖² = ∫ v·v dV, as escript's ``util.L2`` that Guo & Zhao
+  use). As in their code, the material is evaluated once more at the corrected
+  displacement and that evaluation is the converged state: the test judges the correction,
+  not the residual left after it, and takes at least two evaluations per increment.
 """
 
 from __future__ import annotations
@@ -18,7 +29,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
-from skfem import Basis, condense, solve
+from skfem import Basis, BilinearForm, condense, solve
 
 from granular_material.fem.acceleration import AitkenRelaxation, SecantTangent
 from granular_material.fem.forms import gauss_points_grad, internal_force, stiffness
@@ -34,6 +45,9 @@ __all__ = [
     "NewtonSolver",
     "StepRecord",
 ]
+
+#: the Newton convergence tests (NewtonSettings.convergence)
+CONVERGENCE_TESTS = ("force", "displacement")
 
 
 @dataclass(frozen=True)
@@ -68,6 +82,9 @@ class NewtonSettings:
             secant tangent. Smaller changes carry mostly DEM noise: on 64-disc RVEs past the
             peak, 1e-6 let the updates learn the noise and Newton stalled; 1e-4 (default)
             updates mostly on the first iterate of an increment.
+        convergence: "force" (‖R‖/‖R₀‖ ≤ rtol or ‖R‖ ≤ atol, default) or "displacement"
+            (Guo & Zhao: ‖δu‖_L2 / ‖Δu‖_L2 ≤ rtol, see the module docstring; atol is not
+            used, the stall test, when on, applies to the displacement ratios).
     """
 
     rtol: float = 0.005
@@ -81,8 +98,12 @@ class NewtonSettings:
     relaxation: str = "none"
     tangent_update: str = "none"
     secant_min_change: float = 1e-4
+    convergence: str = "force"
 
     def __post_init__(self) -> None:
+        if self.convergence not in CONVERGENCE_TESTS:
+            raise ValueError(f"convergence must be one of {', '.join(CONVERGENCE_TESTS)}, "
+                             f"got {self.convergence!r}")
         if self.predictor not in ("tangent", "extrapolate"):
             raise ValueError(
                 f"predictor must be 'tangent' or 'extrapolate', got {self.predictor!r}"
@@ -131,6 +152,11 @@ class StepRecord:
         stalled: increments accepted on a stalled residual (``NewtonSettings.stall_rtol``).
         residual_history: ‖R‖₂ / ‖R₀‖₂ of every iteration, one list per attempt.
         wall_time: seconds spent on the step.
+        converged_by: the test that accepted each converged increment of the step:
+            "force" (‖R‖/‖R₀‖ ≤ rtol), "force-atol" (‖R‖ ≤ atol, the stress floor),
+            "displacement" (‖δu‖/‖Δu‖ ≤ rtol) or "stall" (a stalled ratio, see stall_rtol).
+        correction_history: ‖δu‖_L2 / ‖Δu‖_L2 of every Newton correction, one list per
+            attempt (recorded whatever the test; the predictor is not a correction).
     """
 
     step: int
@@ -143,6 +169,8 @@ class StepRecord:
     stalled: int = 0
     residual_history: list[list[float]] = field(default_factory=list)
     wall_time: float = 0.0
+    converged_by: list[str] = field(default_factory=list)
+    correction_history: list[list[float]] = field(default_factory=list)
 
 
 @dataclass
@@ -188,6 +216,13 @@ class _Attempt:
     cost: np.ndarray  # DEM steps, RVE paths, particle-steps
     reason: str
     stalled: bool = False
+    by: str = ""
+    corrections: list[float] = field(default_factory=list)
+
+
+@BilinearForm
+def _mass(u, v, _):
+    return u[0] * v[0] + u[1] * v[1]
 
 
 def _stalled(history: list[float], settings: NewtonSettings) -> bool:
@@ -237,6 +272,16 @@ class NewtonSolver:
                 f"material fails in its initial state at points {self.response.failed_points()}"
             )
         self.f_int = internal_force(basis, self.response.stress)
+        self._mass_matrix = None
+
+    def l2_norm(self, v: np.ndarray) -> float:
+        """‖v‖_L2 = (∫ v·v dV)^½ [m · m] of a nodal displacement field ``v`` (ndofs,), with a
+        rule exact for the element (the Newton rule may be reduced)."""
+        if self._mass_matrix is None:
+            order = max(int(getattr(self.basis.elem, "maxdeg", 2)), 1)
+            exact = Basis(self.basis.mesh, self.basis.elem, intorder=2 * order)
+            self._mass_matrix = _mass.assemble(exact)
+        return math.sqrt(max(float(v @ (self._mass_matrix @ v)), 0.0))
 
     def committed_state(self) -> CommittedState:
         """The solver's committed state (copies), to checkpoint a run."""
@@ -285,6 +330,8 @@ class NewtonSolver:
         history: list[float] = []
         cost = np.zeros(3, dtype=np.int64)
         aitken = AitkenRelaxation() if s.relaxation == "aitken" else None
+        corrections: list[float] = []
+        by_displacement = s.convergence == "displacement"
         secant = None
         if s.tangent_update == "secant":
             stress = self.response.stress
@@ -303,20 +350,41 @@ class NewtonSolver:
             residual = f_int - f_ext
             r = float(np.linalg.norm(residual[interior]))
             history.append(r / r0 if r0 > 0 else r)
-            if r <= s.atol or (r0 > 0 and r <= s.rtol * r0):
-                return _Attempt(True, du, response, f_int, history, it, cost, "")
-            if _stalled(history, s):
-                return _Attempt(True, du, response, f_int, history, it, cost, "", stalled=True)
+
+            def done(by: str, stalled: bool = False) -> _Attempt:
+                return _Attempt(True, du, response, f_int, history, it, cost, "",
+                                stalled=stalled, by=by, corrections=corrections)
+
+            if by_displacement:
+                if corrections and corrections[-1] <= s.rtol:
+                    return done("displacement")
+                if _stalled(corrections, s):
+                    return done("stall", stalled=True)
+            else:
+                if r0 > 0 and r <= s.rtol * r0:
+                    return done("force")
+                if r <= s.atol:
+                    return done("force-atol")
+                if _stalled(history, s):
+                    return done("stall", stalled=True)
             if not math.isfinite(r) or (r0 > 0 and r > s.divergence * r0):
-                return _Attempt(False, du, None, None, history, it, cost, "diverged")
+                return _Attempt(False, du, None, None, history, it, cost, "diverged",
+                                corrections=corrections)
+            if it == s.max_iterations:
+                break
             tangent = (response.tangent if secant is None
                        else secant.update(grad_u, response.stress))
             K = stiffness(self.basis, tangent)
             A, b, x, interior = condense(K, -residual, D=D)
             correction = solve(A, b, x, interior)
+            previous = du
             du = du + correction if aitken is None else aitken.update(du, correction)
+            step_norm = self.l2_norm(du)
+            change = self.l2_norm(du - previous)
+            corrections.append(change / step_norm if step_norm > 0 else 0.0)
         return _Attempt(False, du, None, None, history, s.max_iterations, cost,
-                        f"not converged in {s.max_iterations} iterations")
+                        f"not converged in {s.max_iterations} iterations",
+                        corrections=corrections)
 
     def step(self, target: float, step: int) -> StepRecord:
         """Advance the committed state to load factor ``target``, cutting back as needed.
@@ -337,7 +405,9 @@ class NewtonSolver:
             record.rve_evaluations += int(attempt.cost[1])
             record.particle_steps += int(attempt.cost[2])
             record.residual_history.append(attempt.history)
+            record.correction_history.append(attempt.corrections)
             if attempt.converged:
+                record.converged_by.append(attempt.by)
                 self.material.commit()
                 self.u = self.u + attempt.du
                 self.response, self.f_int = attempt.response, attempt.f_int

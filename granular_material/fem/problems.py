@@ -6,6 +6,23 @@ nodes stay at u_y = 0, the sides carry the confining traction t = −p·n (tensi
 n the outward normal). Smooth platens (default): the platen nodes slide freely, but for one
 bottom node pinned (u_x = 0, the one nearest x = width/2). Rough platens: no platen node
 moves sideways (u_x = 0 on top and bottom).
+
+Elements (:data:`ELEMENTS`): ``quad4`` (bilinear, 4 nodes, default), ``quad8`` (serendipity,
+4 corner + 4 midside nodes: scikit-fem's ``ElementQuadS2``) and ``quad9`` (biquadratic
+Lagrange, 8 + 1 centre node: ``ElementQuad2``), on the same rectangular grid of straight-
+sided elements. "Nodes" above means every node an element has, midside and centre nodes
+included: the platen conditions hold the midside nodes of the platens too, and the
+confining traction is integrated over the side facets with the element's own shape
+functions (consistent nodal forces: p·L·(1/6, 2/3, 1/6) on a quadratic edge of length L).
+
+Quadrature (``gauss``: Gauss–Legendre points per direction, ``gauss × gauss`` per element):
+the default is 2 × 2 for quad4 (full) and quad8 (*reduced*: the serendipity element's full
+rule is 3 × 3; 2 × 2 is what Guo & Zhao's FEM×DEM biaxial uses, one RVE per point, at the
+price of one spurious zero-energy (hourglass) mode per element, see the README) and 3 × 3
+for quad9 (full). Elements are numbered up the columns (element ``e = ix · ny + iy``, ix
+along x, iy along y); Gauss point ``p = e · gauss² + q``, ``q = i · gauss + j`` with i the
+point's index along y and j along x, each from the lower coordinate up (the mesh's elements
+run their corners clockwise from the lower left, so the reference ξ lies along y).
 """
 
 from __future__ import annotations
@@ -14,12 +31,35 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from skfem import Basis, ElementQuad1, ElementVector, FacetBasis, LinearForm, MeshQuad
+from skfem import (
+    Basis,
+    ElementQuad1,
+    ElementQuad2,
+    ElementQuadS2,
+    ElementVector,
+    FacetBasis,
+    LinearForm,
+    MeshQuad,
+)
 
 from granular_material.fem.layout import to_points
 from granular_material.fem.loading import Loading
 
-__all__ = ["BiaxialProblem", "BiaxialSetup", "build_biaxial"]
+__all__ = ["DEFAULT_GAUSS", "ELEMENTS", "BiaxialProblem", "BiaxialSetup", "build_biaxial",
+           "element_of"]
+
+#: the elements a problem may be meshed with: name → scikit-fem element (scalar)
+ELEMENTS = {"quad4": ElementQuad1, "quad8": ElementQuadS2, "quad9": ElementQuad2}
+#: Gauss points per direction of each element by default: full integration for quad4 and
+#: quad9, reduced (2 × 2, Guo & Zhao) for quad8
+DEFAULT_GAUSS = {"quad4": 2, "quad8": 2, "quad9": 3}
+
+
+def element_of(name: str) -> ElementVector:
+    """The vector (u_x, u_y) scikit-fem element of the element named ``name``."""
+    if name not in ELEMENTS:
+        raise ValueError(f"element must be one of {', '.join(ELEMENTS)}, got {name!r}")
+    return ElementVector(ELEMENTS[name]())
 
 
 @dataclass(frozen=True)
@@ -35,6 +75,9 @@ class BiaxialSetup:
         axial_strain: final axial strain, compression positive, in (0, 0.5].
         platens: "smooth" (platen nodes slide freely, one bottom node pinned) or "rough"
             (u_x = 0 on every platen node).
+        element: "quad4", "quad8" or "quad9" (:data:`ELEMENTS`).
+        gauss: Gauss points per direction of every element, 1 to 10, or None for the
+            element's default (:data:`DEFAULT_GAUSS`: 2, 2, 3).
     """
 
     width: float = 0.05
@@ -44,8 +87,17 @@ class BiaxialSetup:
     confining: float = 100.0e3
     axial_strain: float = 0.10
     platens: str = "smooth"
+    element: str = "quad4"
+    gauss: int | None = None
 
     def __post_init__(self) -> None:
+        if self.element not in ELEMENTS:
+            raise ValueError(f"element must be one of {', '.join(ELEMENTS)}, "
+                             f"got {self.element!r}")
+        if self.gauss is not None and (int(self.gauss) != self.gauss
+                                       or not 1 <= self.gauss <= 10):
+            raise ValueError(f"gauss must be an integer in [1, 10] (points per direction), "
+                             f"got {self.gauss!r}")
         if self.platens not in ("smooth", "rough"):
             raise ValueError(f"platens must be 'smooth' or 'rough', got {self.platens!r}")
         for name in ("width", "height"):
@@ -62,9 +114,26 @@ class BiaxialSetup:
             raise ValueError(f"axial_strain must lie in (0, 0.5], got {self.axial_strain!r}")
 
     @property
+    def gauss_per_direction(self) -> int:
+        """Gauss points per direction of each element (``gauss`` or the element's default)."""
+        return DEFAULT_GAUSS[self.element] if self.gauss is None else int(self.gauss)
+
+    @property
+    def points_per_element(self) -> int:
+        """Gauss points of one element (gauss × gauss)."""
+        return self.gauss_per_direction ** 2
+
+    @property
+    def intorder(self) -> int:
+        """scikit-fem's ``intorder`` of the rule: the polynomial degree 2·gauss − 1 that
+        gauss × gauss Gauss–Legendre points integrate exactly (scikit-fem takes 2 × 2 points
+        for any intorder <= 3: one point per direction is built by hand)."""
+        return 2 * self.gauss_per_direction - 1
+
+    @property
     def n_points(self) -> int:
-        """Gauss points of the mesh (2×2 per element)."""
-        return 4 * self.nx * self.ny
+        """Gauss points of the mesh (gauss × gauss per element)."""
+        return self.points_per_element * self.nx * self.ny
 
 
 @dataclass(frozen=True)
@@ -73,9 +142,10 @@ class BiaxialProblem:
 
     Attributes:
         setup: the geometry and loading it was built from.
-        basis: vector Q1 basis with 2×2 Gauss quadrature (``intorder=2``).
+        basis: vector basis of the element, with the setup's Gauss quadrature.
         loading: prescribed displacements and forces against the load factor.
-        top_dofs: u_y degrees of freedom of the top platen, shape (nx + 1,).
+        top_dofs: u_y degrees of freedom of the top platen (every node on it, midside
+            nodes included), ascending.
         weights: integration weight (area [m²]) of every Gauss point, shape (n,).
     """
 
@@ -97,9 +167,33 @@ class BiaxialProblem:
         n_free = self.basis.N - self.loading.dirichlet_dofs.size
         return float(stress * h * math.sqrt(n_free))
 
+    def nodes(self) -> tuple[np.ndarray, np.ndarray, str, np.ndarray]:
+        """Every node of the mesh, midside and centre nodes included, for output.
+
+        Returns (coordinates [m] (k, 2), connectivity (nelems, 4 | 8 | 9) in the VTK/meshio
+        order: corners, then the midsides of edges 01, 12, 23, 30, then the centre; the
+        meshio cell type "quad" | "quad8" | "quad9"; the (u_x, u_y) degrees of freedom of
+        every node, shape (2, k)).
+        """
+        basis = self.basis
+        if basis.facet_dofs.size == 0 and basis.interior_dofs.size == 0:
+            return basis.mesh.p.T, basis.mesh.t.T, "quad", basis.nodal_dofs
+        scalar = Basis(basis.mesh, ELEMENTS[self.setup.element](), quadrature=basis.quadrature)
+        k = np.arange(scalar.N)
+        kind = {8: "quad8", 9: "quad9"}[scalar.element_dofs.shape[0]]
+        return scalar.doflocs.T, scalar.element_dofs.T, kind, np.vstack([2 * k, 2 * k + 1])
+
     def axial_stress(self, reaction: np.ndarray) -> float:
         """Axial stress from the platen reaction [Pa], compression positive (σ = −ΣR_y / W)."""
         return float(-reaction[self.top_dofs].sum() / self.setup.width)
+
+
+def _component_dofs(basis: Basis, component: int) -> tuple[np.ndarray, np.ndarray]:
+    """The degrees of freedom of displacement ``component`` (0: u_x, 1: u_y) at every node
+    of the basis (corner, midside, centre), ascending, and their locations (2, k)."""
+    parts = [basis.nodal_dofs, basis.facet_dofs, basis.interior_dofs]
+    dofs = np.sort(np.concatenate([d[component] for d in parts if d.size]))
+    return dofs, basis.doflocs[:, dofs]
 
 
 def build_biaxial(setup: BiaxialSetup) -> BiaxialProblem:
@@ -107,22 +201,32 @@ def build_biaxial(setup: BiaxialSetup) -> BiaxialProblem:
     xs = np.linspace(0.0, setup.width, setup.nx + 1)
     ys = np.linspace(0.0, setup.height, setup.ny + 1)
     mesh = MeshQuad.init_tensor(xs, ys)
-    basis = Basis(mesh, ElementVector(ElementQuad1()), intorder=2)
-    x, y = mesh.p
+    if setup.gauss_per_direction == 1:  # scikit-fem's intorder gives 2 × 2 at the least
+        basis = Basis(mesh, element_of(setup.element),
+                      quadrature=(np.full((2, 1), 0.5), np.ones(1)))
+    else:
+        basis = Basis(mesh, element_of(setup.element), intorder=setup.intorder)
+    if basis.X.shape[-1] != setup.points_per_element:
+        raise RuntimeError(f"intorder {setup.intorder} gave {basis.X.shape[-1]} points per "
+                           f"element, not {setup.points_per_element}")
     tol = 1e-9 * max(setup.width, setup.height)
-    bottom = np.flatnonzero(np.abs(y) < tol)
-    top = np.flatnonzero(np.abs(y - setup.height) < tol)
-    ux, uy = basis.nodal_dofs
+    ux, (x, _) = _component_dofs(basis, 0)
+    uy, (_, y) = _component_dofs(basis, 1)
+    bottom = np.abs(y) < tol
+    top = np.abs(y - setup.height) < tol
     if setup.platens == "rough":
         held = np.concatenate([ux[bottom], ux[top]])
     else:
-        held = ux[[bottom[np.argmin(np.abs(x[bottom] - setup.width / 2))]]]
+        x_bottom = x[bottom]
+        held = ux[bottom][[np.argmin(np.abs(x_bottom - setup.width / 2))]]
     dofs = np.concatenate([uy[bottom], held, uy[top]])
-    end = np.concatenate([np.zeros(bottom.size + held.size),
-                          np.full(top.size, -setup.axial_strain * setup.height)])
+    end = np.concatenate([np.zeros(int(bottom.sum()) + held.size),
+                          np.full(int(top.sum()), -setup.axial_strain * setup.height)])
     sides = mesh.facets_satisfying(
         lambda p: (np.abs(p[0]) < tol) | (np.abs(p[0] - setup.width) < tol)
     )
+    # the traction is constant on a side: 2 Gauss points per facet integrate it exactly
+    # against linear and quadratic shape functions (consistent nodal forces)
     facet_basis = FacetBasis(mesh, basis.elem, facets=sides, intorder=2)
     traction = confining_traction.assemble(facet_basis, p=setup.confining)
     loading = Loading(

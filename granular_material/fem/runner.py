@@ -10,10 +10,14 @@ Tables (tension positive unless the column says otherwise):
     the material has none), iterations, dem_steps (DEM steps run: each evaluation's longest
     RVE path, summed), rve_evaluations (RVE paths run), particle_steps (DEM disc-steps run),
     cutbacks, stalled (increments accepted on a stalled residual), wall_time [s],
-    residual_history (JSON list of lists of ‖R‖/‖R₀‖).
+    residual_history (JSON list of lists of ‖R‖/‖R₀‖), converged_by (the test that accepted
+    each increment of the step, joined by "+": force, force-atol, displacement or stall; empty
+    for step 0), correction_history (JSON list of lists of ‖δu‖_L2/‖Δu‖_L2, one per
+    Newton correction).
 
 ``points`` — one row per load step and Gauss point:
-    step, axial_strain, point, element, x, y [m], sxx, syy, sxy [Pa], exx, eyy, exy,
+    step, axial_strain, point (``element · nqp + q``), element, x, y [m] (the Gauss point's
+    coordinates; nqp = gauss² points per element, see :mod:`granular_material.fem.problems`), sxx, syy, sxy [Pa], exx, eyy, exy,
     volumetric_strain (tr ε), shear_strain (γ = √((ε_xx − ε_yy)² + (2ε_xy)²)), plus the
     material's own fields (void_ratio, coordination, ...).
 
@@ -120,6 +124,8 @@ def _rows(solver: NewtonSolver, problem: BiaxialProblem, record: StepRecord | No
         "stalled": record.stalled if record else 0,
         "wall_time": record.wall_time if record else 0.0,
         "residual_history": json.dumps(record.residual_history if record else []),
+        "converged_by": "+".join(record.converged_by) if record else "",
+        "correction_history": json.dumps(record.correction_history if record else []),
     }
     xy = to_points(np.asarray(problem.basis.global_coordinates()))
     n = stress.shape[0]

@@ -66,6 +66,8 @@ class FieldWriter:
     """XDMF time series (XML data, no HDF5 needed) of the mesh with per-step fields.
 
     A context manager: ``with FieldWriter(path, problem) as fields: fields.write(...)``.
+    Cells: quad, quad8 or quad9, with every node of the element (midside and centre nodes
+    of quad8 and quad9 included, see :meth:`BiaxialProblem.nodes`).
     Point data: ``displacement`` [m] (nnodes, 3). Cell data: element means of the
     Gauss-point columns named in ``_CELL_FIELDS`` that the table holds. Time = axial strain.
     """
@@ -75,17 +77,18 @@ class FieldWriter:
         self.problem = problem
         self._stack = ExitStack()
         self._writer: Any = None
+        self._dofs: np.ndarray | None = None
 
     def __enter__(self) -> FieldWriter:
         import meshio
 
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        mesh = self.problem.basis.mesh
+        xy, cells, kind, self._dofs = self.problem.nodes()
         self._writer = self._stack.enter_context(
             meshio.xdmf.TimeSeriesWriter(str(self.path), data_format="XML")
         )
-        points = np.column_stack([mesh.p.T, np.zeros(mesh.p.shape[1])])
-        self._writer.write_points_cells(points, [("quad", mesh.t.T.astype(np.int64))])
+        points = np.column_stack([xy, np.zeros(xy.shape[0])])
+        self._writer.write_points_cells(points, [(kind, cells.astype(np.int64))])
         return self
 
     def __exit__(self, *exc: object) -> None:
@@ -93,8 +96,7 @@ class FieldWriter:
 
     def write(self, time: float, u: np.ndarray, points: pd.DataFrame) -> None:
         """Append one step: nodal displacement ``u`` (ndofs,) and the Gauss-point table."""
-        nodal = self.problem.basis.nodal_dofs
-        ux, uy = u[nodal[0]], u[nodal[1]]
+        ux, uy = u[self._dofs[0]], u[self._dofs[1]]
         disp = np.column_stack([ux, uy, np.zeros_like(ux)])
         means = points.groupby("element").mean(numeric_only=True)
         cell_data = {k: [means[k].to_numpy(dtype=float)] for k in _CELL_FIELDS if k in means}
