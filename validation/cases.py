@@ -64,6 +64,8 @@ class Case:
             compression positive).
         steps: single element and femxdem: Newton load steps to ``axial_strain``.
         elements: femxdem: elements across and along the specimen (nx, ny).
+        time_limit: femxdem: wall-time limit of each run of Guo & Zhao's code [s]; a run
+            stopped there keeps (and reports) the load steps it has done.
         grad_u: drive: total ∇u as (Gxx, Gxy, Gyx, Gyy).
         increments: drive: number of equal increments K.
         tangent_at: drive: increments at which both tangents are compared.
@@ -82,6 +84,7 @@ class Case:
     increments: int = 1
     tangent_at: tuple[int, ...] = ()
     elements: tuple[int, int] = (2, 4)
+    time_limit: float = 7200.0
     description: str = ""
 
     def __post_init__(self) -> None:
@@ -118,11 +121,12 @@ CASES: dict[str, Case] = {c.name: c for c in (
                      "our FEM × DEM single element (one Q4, 2×2 Gauss points, 100 Newton "
                      "load steps) to 10 % at σxx = 100 kPa"),
     Case("gz-femxdem", "femxdem", "yade", seeds=(1,), axial_strain=0.03, steps=30,
-         elements=(2, 4),
+         elements=(2, 4), time_limit=1800.0,
          description="Guo & Zhao's own FEM × DEM code (YADE's FEMxDEM on esys-escript, "
                      "their biaxialSmooth example) against ours: 2 × 4 elements, 32 Gauss "
                      "points each holding their seed-1 RVE, smooth platens, 0.1 % axial "
-                     "strain a load step to 3 %, σ3 = 100 kPa"),
+                     "strain a load step to 3 % (each run of theirs stopped after 30 min "
+                     "with the steps it has done), σ3 = 100 kPa"),
     Case("gz-femxdem-smoke", "femxdem", "yade", seeds=(1,), axial_strain=0.002, steps=2,
          elements=(1, 2),
          description="gz-femxdem at smoke size: 1 × 2 elements, two load steps of 0.1 %"),

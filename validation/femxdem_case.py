@@ -141,7 +141,7 @@ def run_femxdem_seed(case: Any, seed: int, rve: Path, prep: dict[str, Any], work
     elements = tuple(case.elements)
     theirs, tsum = guo_zhao_runner.guo_zhao_biaxial(
         rve, work / "guo_zhao", elements=elements, steps=case.steps, strain_per_step=per_step,
-        confining=case.pressure)
+        confining=case.pressure, timeout=case.time_limit)
     their_fields = guo_zhao_runner.gauss_fields(work / "guo_zhao")
     points = int(their_fields["point"].nunique())
     runs: dict[str, tuple[pd.DataFrame, pd.DataFrame, dict[str, Any]]] = {}
@@ -152,11 +152,13 @@ def run_femxdem_seed(case: Any, seed: int, rve: Path, prep: dict[str, Any], work
     judged = "ours-as-gz" if "ours-as-gz" in runs else "ours-defaults"
     slower, bsum = guo_zhao_runner.guo_zhao_biaxial(
         rve, work / "guo_zhao_perturbed", elements=elements, steps=case.steps,
-        strain_per_step=PERTURBATION * per_step, confining=case.pressure)
+        strain_per_step=PERTURBATION * per_step, confining=case.pressure,
+        timeout=case.time_limit)
     ref_cmp = metrics.compare_curves(theirs, theirs)
     peak_step = int(theirs.loc[np.argmin(np.abs(theirs["axial_strain"]
                                                 - ref_cmp.strain_at_peak_argmax_ref)), "step"])
-    chosen = sorted({max(1, case.steps // 3), max(1, 2 * case.steps // 3), case.steps})
+    done = int(tsum["steps_done"])
+    chosen = sorted({max(1, done // 3), max(1, 2 * done // 3), done})
     cost = {"guo-zhao": cost_figures(theirs, points, case.particles, peak_step,
                                      tsum["wall_s"], tsum["processes"], theirs=True,
                                      cpu_s=tsum.get("cpu_s"))}
@@ -184,7 +186,9 @@ def run_femxdem_seed(case: Any, seed: int, rve: Path, prep: dict[str, Any], work
              "fields": fields, "cost": cost, "ratios_at": {"strains": strains, **ratios},
              "points": points, "elements": list(elements), "strain_per_step": per_step,
              "guo_zhao_patches": tsum["patches"], "guo_zhao_rve_state": tsum["rve_state"],
-             "baseline_wall_s": bsum["wall_s"]}
+             "baseline_wall_s": bsum["wall_s"], "steps": case.steps,
+             "guo_zhao_steps_done": done, "guo_zhao_perturbed_steps_done": bsum["steps_done"],
+             "time_limit_s": case.time_limit}
     curve, _, summary = runs[judged]
     for name, (c, _, _) in runs.items():
         c.to_csv(work / f"{name}_curve.csv", index=False)

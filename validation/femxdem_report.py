@@ -169,6 +169,14 @@ def section_lines(e: dict[str, Any], out: Path) -> list[str]:
               "Their code ran as shipped in Debian's yade 2023.02a except for these patches "
               "(applied at run time to copies in the work folder): "
               + "; ".join(seed["guo_zhao_patches"]) + ".", ""]
+    if seed["guo_zhao_steps_done"] < seed["steps"] or (
+            seed["guo_zhao_perturbed_steps_done"] < seed["steps"]):
+        lines.append(f"- **their runs were stopped at the time limit** "
+                     f"({seed['time_limit_s']:.0f} s each): Guo & Zhao "
+                     f"{seed['guo_zhao_steps_done']} of {seed['steps']} load steps, the chaos "
+                     f"baseline {seed['guo_zhao_perturbed_steps_done']}; the curves are "
+                     "compared on the strain range both reached, the cost figures are those "
+                     "of the steps done")
     st = seed["guo_zhao_rve_state"]
     lines.append(f"- their RVE state as loaded (0.yade.gz): σxx, σyy = "
                  f"{-st['stress'][0] / 1e3:.2f}, {-st['stress'][1] / 1e3:.2f} kPa, "

@@ -22,6 +22,7 @@ import os
 import re
 import resource
 import shutil
+import signal
 import subprocess
 import time
 from pathlib import Path
@@ -39,7 +40,8 @@ from granular_material_validation.yade_runner import (
 )
 
 __all__ = ["EXAMPLE_PATCHES", "MODULE_PATCHES", "EscriptNotFoundError", "find_escript",
-           "find_femxdem", "guo_zhao_available", "guo_zhao_biaxial", "patch_example"]
+           "find_femxdem", "finish_run", "gauss_fields", "group_cpu_s", "guo_zhao_available",
+           "guo_zhao_biaxial", "patch_example"]
 
 #: (what, original text, replacement) applied to the example; {name} fields are the job's
 EXAMPLE_PATCHES: tuple[tuple[str, str, str], ...] = (
@@ -58,7 +60,7 @@ EXAMPLE_PATCHES: tuple[tuple[str, str, str], ...] = (
      "disp = Vector(0., Solution(mydomain))",
      "gz_probe.start(prob, mydomain)\ndisp = Vector(0., Solution(mydomain))"),
     ("probe: state after each load step",
-     "\tvolume_strain = trace(strain)", "\tgz_probe.record(t, prob, vR)\n"
+     "\tvolume_strain = trace(strain)", "\tgz_probe.record(t, prob, vR, forceTop[1], lengthTop)\n"
      "\tvolume_strain = trace(strain)"),
 )
 #: (file of their module, original text, replacement, expected count): Python 3 only
@@ -142,12 +144,13 @@ def _prepare_folder(work: Path, job: dict[str, Any]) -> None:
     (work / "biaxialSmooth.py").write_text(patch_example(raw, **job))
 
 
-def _read_results(work: Path, job: dict[str, Any], log_text: str) -> pd.DataFrame:
-    """One row per load step (step 0 included) from their outputs and the probe."""
-    surf = np.loadtxt(work / "result" / "biaxial_surf.dat", comments="#", ndmin=2)
-    rows = [json.loads(line) for line in (work / "gz_probe.jsonl").read_text().splitlines()]
+def _read_results(work: Path, job: dict[str, Any], log_text: str,
+                  height: float = 0.1) -> pd.DataFrame:
+    """One row per load step done (step 0 included) from the probe and their log."""
+    rows = [json.loads(line) for line in (work / "gz_probe.jsonl").read_text().splitlines()
+            if line.endswith("}")]
     iterations = [0] + [int(m.group(1)) for m in _CONVERGED.finditer(log_text)]
-    n = min(len(surf), len(rows), len(iterations))
+    n = min(len(rows), len(iterations))
     if n < 2:
         raise YadeError(f"Guo & Zhao's run in {work} finished no load step")
     area0 = rows[0]["area"]
@@ -157,8 +160,9 @@ def _read_results(work: Path, job: dict[str, Any], log_text: str) -> pd.DataFram
         stress = np.asarray(row["stress"], dtype=np.float64).reshape(-1, 2, 2)
         mean = np.asarray(row["mean_stress"], dtype=np.float64)
         out.append({
-            "step": row["step"], "axial_strain": abs(float(surf[k, 0])),
-            "platen_stress": -float(surf[k, 1]) / float(surf[k, 2]),
+            "step": row["step"], "axial_strain": row["step"] * abs(job["vel"]) / height,
+            "platen_stress": (-row["force_top"] / row["length_top"] if "force_top" in row
+                              else float("nan")),
             "sxx": mean[0, 0], "syy": mean[1, 1], "sxy": 0.5 * (mean[0, 1] + mean[1, 0]),
             "volumetric_strain": row["area"] / area0 - 1.0,
             "void_ratio": float(np.mean(row["void_ratio"])),
@@ -209,14 +213,17 @@ def guo_zhao_biaxial(rve: str | Path, workdir: str | Path, elements: tuple[int, 
     ``elements`` (nx, ny) 8-node quadrilaterals on their 50 mm × 100 mm specimen (``width``
     and ``height`` must be theirs), ``steps`` load steps of ``strain_per_step`` axial strain
     (compression positive) at ``confining`` [Pa] (a magnitude), their multiprocessing pool
-    of ``processes``. A finished run in ``workdir`` with the same job is read back, not
-    rerun. Returns one row per load step (step 0 included: ``axial_strain``,
+    of ``processes``. A run longer than ``timeout`` [s] is stopped and keeps the load
+    steps it has done (``steps_done``, ``timed_out`` in the summary). A run in ``workdir``
+    with the same job is read back, not rerun. Returns one row per load step (step 0
+    included: ``axial_strain``,
     ``platen_stress`` (their top force over the top width, compression positive),
     ``stress_ratio`` = platen_stress/confining, the volume-average ``sxx``, ``syy``, ``sxy``
     [Pa, tension positive], ``volumetric_strain`` = A/A0 − 1, mean ``void_ratio``, Newton
     ``iterations`` (their count), DEM ``evaluations`` and ``dem_steps`` (all points),
-    ``wall_time`` [s]) and a summary (``wall_s``: the whole yade process, ``cpu_s``: its CPU
-    time with its pool's; ``patches``).
+    ``wall_time`` [s]; ``platen_stress`` NaN for steps of a probe without the force) and a
+    summary (``wall_s``: the whole yade process, ``cpu_s``: its CPU time with its pool's;
+    ``patches``).
     """
     if (width, height) != (0.05, 0.1):
         raise ValueError(f"their example's specimen is 0.05 m × 0.1 m, got {width} × {height}")
@@ -250,26 +257,62 @@ def guo_zhao_biaxial(rve: str | Path, workdir: str | Path, elements: tuple[int, 
     log = work / "biaxialSmooth.log"
     cpu0 = _children_cpu_s()
     start = time.perf_counter()
+    timed_out = False
     with open(log, "w") as fh:
+        proc = subprocess.Popen([find_yade(), "-n", "-x", "biaxialSmooth.py"], cwd=work,
+                                env=env, stdout=fh, stderr=subprocess.STDOUT,
+                                stdin=subprocess.DEVNULL, start_new_session=True)
         try:
-            proc = subprocess.run([find_yade(), "-n", "-x", "biaxialSmooth.py"], cwd=work,
-                                  env=env, stdout=fh, stderr=subprocess.STDOUT,
-                                  stdin=subprocess.DEVNULL, timeout=timeout, check=False)
+            proc.wait(timeout=timeout)
+            cpu = None
         except subprocess.TimeoutExpired:
-            raise YadeError(f"Guo & Zhao's biaxialSmooth.py timed out after {timeout:g} s; "
-                            f"log {log}") from None
+            # keep the load steps done: their CPU time read before the group is stopped
+            timed_out = True
+            cpu = group_cpu_s(proc.pid)
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
     wall = time.perf_counter() - start
-    cpu = _children_cpu_s() - cpu0
+    if cpu is None:
+        cpu = _children_cpu_s() - cpu0
     text = log.read_text(errors="replace")
-    if proc.returncode != 0 or "Traceback (most recent call last)" in text:
+    if not timed_out and (proc.returncode != 0 or "Traceback (most recent call last)" in text):
         tail = "\n".join(text.splitlines()[-25:])
         raise YadeError(f"Guo & Zhao's biaxialSmooth.py failed (exit {proc.returncode}); "
                         f"log {log}:\n{tail}")
+    return finish_run(work, job, wall, cpu, timed_out, timeout)
+
+
+def group_cpu_s(pgid: int) -> float:
+    """CPU seconds (user + system, with reaped children) of the live processes of process
+    group ``pgid``, from /proc (0 where /proc is absent)."""
+    total = 0
+    ticks = os.sysconf("SC_CLK_TCK")
+    for stat in glob.glob("/proc/[0-9]*/stat"):
+        try:
+            fields = Path(stat).read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        # after the command: state ppid pgrp ... utime(12) stime(13) cutime(14) cstime(15)
+        if int(fields[2]) == pgid:
+            total += sum(int(f) for f in fields[11:15])
+    return total / ticks
+
+
+def finish_run(work: str | Path, job: dict[str, Any], wall_s: float, cpu_s: float,
+               timed_out: bool = False,
+               time_limit: float | None = None) -> tuple[pd.DataFrame, dict[str, Any]]:
+    """Read a run of theirs in ``work`` (finished, or stopped at ``time_limit`` [s] with the
+    load steps it had done), write ``gz_curve.csv`` and ``gz_summary.json`` there (a later
+    call with the same job reads them back) and return both."""
+    work = Path(work)
+    text = (work / "biaxialSmooth.log").read_text(errors="replace")
     curve = _read_results(work, job, text)
-    if len(curve) != steps + 1:
-        raise YadeError(f"Guo & Zhao's run in {work} recorded {len(curve) - 1} of {steps} "
+    done = len(curve) - 1
+    if done < job["steps"] and not timed_out:
+        raise YadeError(f"Guo & Zhao's run in {work} recorded {done} of {job['steps']} "
                         "load steps")
-    summary = {"job": job, "wall_s": wall, "cpu_s": cpu, "processes": int(processes),
+    summary = {"job": job, "wall_s": wall_s, "cpu_s": cpu_s, "processes": job["processes"],
+               "steps_done": done, "timed_out": bool(timed_out), "time_limit_s": time_limit,
                "stepping_s": float(curve["wall_time"].sum()),
                "newton_iterations_mean": float(curve["iterations"].iloc[1:].mean()),
                "dem_steps": int(curve["dem_steps"].sum()),
@@ -277,5 +320,5 @@ def guo_zhao_biaxial(rve: str | Path, workdir: str | Path, elements: tuple[int, 
                "patches": [p[0] for p in EXAMPLE_PATCHES]
                + [f"{p[0]}: {p[1]!r} -> {p[2]!r} (x{p[3]})" for p in MODULE_PATCHES]}
     curve.to_csv(work / "gz_curve.csv", index=False)
-    done.write_text(json.dumps(summary, indent=1))
+    (work / "gz_summary.json").write_text(json.dumps(summary, indent=1))
     return curve, summary

@@ -6,7 +6,8 @@ and the DEM steps they run (their ``shear2D`` runs n = max(1e5·max|∇u|, 2) st
 point). ``start`` and ``record`` append one JSON line per load step (step 0 included) to
 ``gz_probe.jsonl`` in the working folder: wall time since ``start`` [s], evaluations and DEM
 steps so far, the mesh area [m²] (updated Lagrangian), the volume-average stress [Pa,
-tension positive], and per Gauss point the stress, the accumulated ∇u and the void ratio.
+tension positive], their platen force and width, and per Gauss point the stress, the
+accumulated ∇u and the void ratio.
 """
 
 import json
@@ -58,6 +59,11 @@ def start(prob, domain):
     _write(row)
 
 
-def record(step, prob, void):
-    """Append the state after load step ``step`` (``void``: their local void ratios)."""
-    _write(_row(step, prob, void))
+def record(step, prob, void, force_top=None, length_top=None):
+    """Append the state after load step ``step`` (``void``: their local void ratios;
+    ``force_top`` [N/m], ``length_top`` [m]: their resultant platen force and width)."""
+    row = _row(step, prob, void)
+    if force_top is not None:
+        row["force_top"] = float(force_top)
+        row["length_top"] = float(length_top)
+    _write(row)
