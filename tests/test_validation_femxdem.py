@@ -22,7 +22,8 @@ def test_patches_replace_each_setting_once_and_refuse_a_changed_example() -> Non
     text = guo_zhao_runner.patch_example(SYNTHETIC_EXAMPLE, **job)
     for line in ("nx = 2", "ny = 4", "nump = 2", "while t < 30:", "vel = -0.0001",
                  "confining = -100000.0", "fout = open(", "from gz_probe import MultiScale",
-                 "gz_probe.record(t, prob, vR)", "gz_probe.start(prob, mydomain)"):
+                 "gz_probe.record(t, prob, vR, forceTop[1], lengthTop)",
+                 "gz_probe.start(prob, mydomain)"):
         assert line in text, line
     assert "file(" not in text and "nx = 8" not in text
     with pytest.raises(ValueError, match="nx = 8"):
