@@ -179,3 +179,16 @@ def test_peak_plateau_of_a_sharp_peak_is_the_peak() -> None:
     assert centre == pytest.approx(0.01)
     with pytest.raises(ValueError, match="tol"):
         metrics.peak_plateau(eps, ratio, tol=1.5)
+
+
+def test_plateau_centre_lies_between_two_near_equal_humps() -> None:
+    """Humps of 2.90 at 1.3 % and 2.895 at 2.35 % with a dip to 2.80 between them: the
+    largest value sits on the first hump, the centre between the two (the second, 0.2 %
+    lower, weighs a little less)."""
+    eps = np.linspace(0.0, 0.03, 301)
+    ratio = (2.80 + 0.10 * np.exp(-(((eps - 0.013) / 0.002) ** 2))
+             + 0.095 * np.exp(-(((eps - 0.0235) / 0.002) ** 2)))
+    ratio = np.where(eps < 0.008, 1.0 + 1.8 * eps / 0.008, ratio)
+    lo, hi, centre = metrics.peak_plateau(eps, ratio, window=1)
+    assert lo == pytest.approx(0.0118, abs=2e-4) and hi == pytest.approx(0.0246, abs=2e-4)
+    assert 0.017 < centre < 0.0182

@@ -7,10 +7,11 @@ Acceptance rules of the YADE cross-validation (issue 5), for a curve of ours aga
   peak stress (the largest principal compression at the reference peak);
 - peak stress ratio σ1/σ3 within ``PEAK_RATIO_TOL`` (5 %, relative);
 - strain at the peak within ``PEAK_STRAIN_TOL`` (0.5 % strain, absolute), the peak located
-  as the centre of its plateau (issue 15, part 4): the stretch of strain around the largest
-  running median of σ1/σ3 over which that median stays within ``PLATEAU_TOL`` (1 %) of it.
-  On a flat top the largest value jumps between far-apart points under noise (YADE's pure
-  shear: 2.890 at 1.6 % against 2.898 at 2.35 %), the plateau's centre does not. The former
+  as the centre of its plateau (issue 15, part 4): the strain weighted by how far the running
+  median of σ1/σ3 rises above (1 − ``PLATEAU_TOL``) × its largest value (``PLATEAU_TOL`` =
+  1 %; :func:`peak_plateau`). On a flat top the largest value jumps between far-apart points
+  under noise (YADE's pure shear: 2.890 at 1.6 % against 2.898 at 2.35 %), the centre does
+  not. The former
   rule (strain of the largest running median) is still reported beside it,
   ``strain_at_peak_argmax``, and decides nothing;
 - after the peak, every stress component within ``POST_PEAK_TOL`` (10 %) of the peak stress.
@@ -75,12 +76,14 @@ def stress_ratio(frame: pd.DataFrame) -> np.ndarray:
 
 def peak_plateau(strain: np.ndarray, ratio: np.ndarray, window: int = PEAK_WINDOW,
                  tol: float = PLATEAU_TOL) -> tuple[float, float, float]:
-    """(start, end, centre) strain of the plateau of the peak of ``ratio`` (shape (n,)).
+    """(first, last, centre) strain of the plateau of the peak of ``ratio`` (shape (n,)).
 
-    The plateau is the contiguous stretch around the largest centred running median of
-    ``window`` points over which that median stays at or above (1 − ``tol``) × its largest
-    value; its centre is the midpoint of that stretch. A plateau reaching the end of the
-    curve ends there.
+    On the centred running median R of ``window`` points, the plateau is where R is at or
+    above (1 − ``tol``) × max R, from its first to its last such strain (a dip between two
+    humps within ``tol`` of each other stays inside); its centre is the strain weighted by
+    the height of R above that level, w = R − (1 − tol)·max R: the peak itself on a sharp
+    peak, the middle of a flat top, and between two near-equal humps in proportion to their
+    size, so it moves continuously with the data where the largest value jumps.
     """
     strain = np.asarray(strain, dtype=np.float64)
     ratio = np.asarray(ratio, dtype=np.float64)
@@ -90,14 +93,12 @@ def peak_plateau(strain: np.ndarray, ratio: np.ndarray, window: int = PEAK_WINDO
     if i < 0:
         return float("nan"), float("nan"), float("nan")
     smooth = pd.Series(ratio).rolling(window, center=True, min_periods=1).median().to_numpy()
-    level = (1.0 - tol) * smooth[i]
-    lo = i
-    while lo > 0 and smooth[lo - 1] >= level:
-        lo -= 1
-    hi = i
-    while hi < len(smooth) - 1 and smooth[hi + 1] >= level:
-        hi += 1
-    return float(strain[lo]), float(strain[hi]), 0.5 * float(strain[lo] + strain[hi])
+    weight = np.nan_to_num(smooth - (1.0 - tol) * smooth[i], nan=0.0).clip(min=0.0)
+    inside = np.flatnonzero(weight > 0)
+    if weight.sum() == 0 or inside.size == 0:  # tol = 0: the peak alone
+        return float(strain[i]), float(strain[i]), float(strain[i])
+    centre = float(np.sum(weight * strain) / np.sum(weight))
+    return float(strain[inside[0]]), float(strain[inside[-1]]), centre
 
 
 @dataclass(frozen=True)
