@@ -130,12 +130,11 @@ def add_element(parser: argparse.ArgumentParser) -> None:
                         "a mesh of more than one element but may show as a checkerboard in a "
                         "softening band; quad9: biquadratic Lagrange, 9 nodes, 3x3 (full). "
                         "One RVE per Gauss point")
-    g.add_argument("--quadrature", type=int, default=None, metavar="N",
-                   choices=range(1, 11),
-                   help="Gauss points per direction of every element (N x N points, one RVE "
-                        "each), overriding the element's default (quad4 2, quad8 2, quad9 3); "
-                        "fewer than the default under-integrates (quad4 with 1: two hourglass "
-                        "modes per element)")
+    g.add_argument("--quadrature", type=positive_int, default=None, metavar="N",
+                   help="Gauss points per direction of every element, 1 to 10 (N x N points, "
+                        "one RVE each), overriding the element's default (quad4 2, quad8 2, "
+                        "quad9 3); fewer than the default under-integrates (quad4 with 1: "
+                        "two hourglass modes per element)")
 
 
 def add_convergence(group: Any, default: str = "force", rtol: float = 0.005) -> None:

@@ -350,23 +350,21 @@ class NewtonSolver:
             residual = f_int - f_ext
             r = float(np.linalg.norm(residual[interior]))
             history.append(r / r0 if r0 > 0 else r)
-
-            def done(by: str, stalled: bool = False) -> _Attempt:
-                return _Attempt(True, du, response, f_int, history, it, cost, "",
-                                stalled=stalled, by=by, corrections=corrections)
-
+            by = ""
             if by_displacement:
                 if corrections and corrections[-1] <= s.rtol:
-                    return done("displacement")
-                if _stalled(corrections, s):
-                    return done("stall", stalled=True)
-            else:
-                if r0 > 0 and r <= s.rtol * r0:
-                    return done("force")
-                if r <= s.atol:
-                    return done("force-atol")
-                if _stalled(history, s):
-                    return done("stall", stalled=True)
+                    by = "displacement"
+                elif _stalled(corrections, s):
+                    by = "stall"
+            elif r0 > 0 and r <= s.rtol * r0:
+                by = "force"
+            elif r <= s.atol:
+                by = "force-atol"
+            elif _stalled(history, s):
+                by = "stall"
+            if by:
+                return _Attempt(True, du, response, f_int, history, it, cost, "",
+                                stalled=by == "stall", by=by, corrections=corrections)
             if not math.isfinite(r) or (r0 > 0 and r > s.divergence * r0):
                 return _Attempt(False, du, None, None, history, it, cost, "diverged",
                                 corrections=corrections)

@@ -16,8 +16,9 @@ Tables (tension positive unless the column says otherwise):
     Newton correction).
 
 ``points`` — one row per load step and Gauss point:
-    step, axial_strain, point (``element · nqp + q``), element, x, y [m] (the Gauss point's
-    coordinates; nqp = gauss² points per element, see :mod:`granular_material.fem.problems`), sxx, syy, sxy [Pa], exx, eyy, exy,
+    step, axial_strain, point (``element · nqp + q``, nqp = gauss² points per element, see
+    :mod:`granular_material.fem.problems`), element, x, y [m] (the Gauss point's coordinates),
+    sxx, syy, sxy [Pa], exx, eyy, exy,
     volumetric_strain (tr ε), shear_strain (γ = √((ε_xx − ε_yy)² + (2ε_xy)²)), plus the
     material's own fields (void_ratio, coordination, ...).
 

@@ -80,6 +80,21 @@ def plot_stress_strain(steps: pd.DataFrame, path: str | Path, reference: pd.Data
     return path
 
 
+def _fan(cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Triangles of quad8/quad9 cells (meshio order) fanned from each element's centre: node
+    8 of a quad9, or a node appended per element (index ``n_nodes + e``) for a quad8; and
+    the element of every triangle."""
+    n_elem = cells.shape[0]
+    if cells.shape[1] == 9:
+        centre = cells[:, 8]
+    else:
+        centre = int(cells.max()) + 1 + np.arange(n_elem)
+    ring = cells[:, [0, 4, 1, 5, 2, 6, 3, 7]]  # corner, midside, corner, ... around the edge
+    triangles = np.concatenate([np.column_stack([ring[:, k], ring[:, (k + 1) % 8], centre])
+                                for k in range(8)])
+    return triangles, np.tile(np.arange(n_elem), 8)
+
+
 def plot_maps(result: BiaxialResult, axial_strain: float, path: str | Path) -> Path:
     """Maps of u_x, u_y [mm] and shear strain γ [%] at the step nearest ``axial_strain``.
 
@@ -92,19 +107,27 @@ def plot_maps(result: BiaxialResult, axial_strain: float, path: str | Path) -> P
     row = result.row_nearest(axial_strain)
     step = int(steps["step"].iloc[row])
     u = result.displacements[row]
-    basis = result.problem.basis
-    mesh = basis.mesh
-    ux, uy = u[basis.nodal_dofs[0]], u[basis.nodal_dofs[1]]
-    x, y = mesh.p[0] + ux, mesh.p[1] + uy
-    quads = mesh.t.T
-    tri = Triangulation(1e3 * x, 1e3 * y, np.vstack([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]]))
+    xy, cells, kind, dofs = result.problem.nodes()
+    ux, uy = u[dofs[0]], u[dofs[1]]
+    x, y = xy[:, 0] + ux, xy[:, 1] + uy
     points = result.points[result.points["step"] == step]
     gamma = points.groupby("element")["shear_strain"].mean().to_numpy()
+    if kind == "quad":
+        triangles = np.vstack([cells[:, [0, 1, 2]], cells[:, [0, 2, 3]]])
+        element = np.concatenate([np.arange(cells.shape[0])] * 2)
+    else:  # midside (and centre) nodes: each element as triangles fanned from its centre
+        triangles, element = _fan(cells)
+        if kind == "quad8":  # no centre node: add one, at the mean of the corners
+            x = np.concatenate([x, x[cells[:, :4]].mean(axis=1)])
+            y = np.concatenate([y, y[cells[:, :4]].mean(axis=1)])
+            ux = np.concatenate([ux, ux[cells[:, :4]].mean(axis=1)])
+            uy = np.concatenate([uy, uy[cells[:, :4]].mean(axis=1)])
+    tri = Triangulation(1e3 * x, 1e3 * y, triangles)
     fig, axes = plt.subplots(1, 3, figsize=(12, 5), constrained_layout=True)
     for ax, values, title in ((axes[0], 1e3 * ux, "u_x [mm]"), (axes[1], 1e3 * uy, "u_y [mm]")):
         im = ax.tripcolor(tri, values, shading="gouraud", cmap="viridis")
         fig.colorbar(im, ax=ax, label=title)
-    im = axes[2].tripcolor(tri, facecolors=100 * np.concatenate([gamma, gamma]), cmap="inferno",
+    im = axes[2].tripcolor(tri, facecolors=100 * gamma[element], cmap="inferno",
                           vmin=0.0, vmax=max(100 * float(gamma.max()), 1e-12))
     fig.colorbar(im, ax=axes[2], label="shear strain γ [%]")
     for ax, title in zip(axes, ("displacement u_x", "displacement u_y", "shear strain"),
