@@ -74,15 +74,20 @@ def _curve_rows(e: dict[str, Any]) -> list[str]:
              "|---|---|---|"]
     seed = e["per_seed"][0]
     strains = seed["ratios_at"]["strains"]
-    lines[0] += " | ".join(f"σ1/σ3 at {100 * s:.0f} %" for s in strains) + " |"
-    lines[1] += "---|" * len(strains)
+    lines[0] += "".join(f"σ1/σ3 at {100 * s:.0f} % | " for s in strains)
+    lines[0] += "largest contraction −εv (at εa) | −εv at the end (εa) |"
+    lines[1] += "---|" * (len(strains) + 2)
     runs = e["_runs"][0]
     for name, frame in _curves(runs).items():
         c = metrics.compare_curves(frame, frame)
         at = seed["ratios_at"].get(name, [None] * len(strains))
+        ev = -frame["volumetric_strain"].to_numpy(dtype=float)
+        ea = frame["axial_strain"].to_numpy(dtype=float)
+        k = int(ev.argmax())
         lines.append(f"| {name} | {c.peak_ratio_ref:.3f} | {_p(c.strain_at_peak_ref)}; "
                      f"{_p(c.strain_at_peak_argmax_ref)} | "
-                     + " | ".join(_f(v, ".3f") for v in at) + " |")
+                     + "".join(f"{_f(v, '.3f')} | " for v in at)
+                     + f"{_p(ev[k], 3)} ({_p(ea[k], 1)}) | {_p(ev[-1], 3)} ({_p(ea[-1], 1)}) |")
     return lines
 
 

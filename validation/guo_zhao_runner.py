@@ -68,6 +68,8 @@ MODULE_PATCHES: tuple[tuple[str, str, str, int], ...] = (
     ("saveGauss.py", "fout = file(name, 'w')", "fout = open(name, 'w')", 2),
 )
 
+#: how often the CPU time of a running yade process group is sampled [s]
+POLL_S = 1.0
 _CONVERGED = re.compile(r"Convergence reached after (\d+) iteration\(s\)! Relative error: (\S+)")
 
 
@@ -262,18 +264,20 @@ def guo_zhao_biaxial(rve: str | Path, workdir: str | Path, elements: tuple[int, 
         proc = subprocess.Popen([find_yade(), "-n", "-x", "biaxialSmooth.py"], cwd=work,
                                 env=env, stdout=fh, stderr=subprocess.STDOUT,
                                 stdin=subprocess.DEVNULL, start_new_session=True)
-        try:
-            proc.wait(timeout=timeout)
-            cpu = None
-        except subprocess.TimeoutExpired:
-            # keep the load steps done: their CPU time read before the group is stopped
-            timed_out = True
-            cpu = group_cpu_s(proc.pid)
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.wait()
+        # their pool's workers end without being waited for, so the children's rusage
+        # misses them: the group's CPU time is sampled from /proc while it runs
+        seen = 0.0
+        while proc.poll() is None:
+            seen = max(seen, group_cpu_s(proc.pid))
+            if time.perf_counter() - start > timeout:
+                # keep the load steps done
+                timed_out = True
+                os.killpg(proc.pid, signal.SIGKILL)
+                proc.wait()
+                break
+            time.sleep(POLL_S)
     wall = time.perf_counter() - start
-    if cpu is None:
-        cpu = _children_cpu_s() - cpu0
+    cpu = max(seen, _children_cpu_s() - cpu0)
     text = log.read_text(errors="replace")
     if not timed_out and (proc.returncode != 0 or "Traceback (most recent call last)" in text):
         tail = "\n".join(text.splitlines()[-25:])
