@@ -111,19 +111,23 @@ def _acceptance_rows(e: dict[str, Any]) -> list[str]:
 def _cost_rows(e: dict[str, Any]) -> list[str]:
     cost = e["per_seed"][0]["cost"]
     lines = ["| run | Newton iterations a step: to peak / after / all | DEM steps a step per "
-             "point: to peak / after / all | stepping [s] | wall [s] | cores | core-s | "
-             "CPU [s] | speed-up wall / per core / CPU |", "|---|---|---|---|---|---|---|---|---|"]
+             "point: to peak / after / all | stepping [s] (steps) | stepping speed-up | "
+             "whole run: wall [s] | cores | core-s | CPU [s] | speed-up wall / per core / "
+             "CPU |", "|---|---|---|---|---|---|---|---|---|---|"]
     for name, c in cost.items():
         speed = (f"{_f(c.get('speedup_wall'), '.2f')}× / "
                  f"{_f(c.get('speedup_per_core'), '.2f')}× / "
                  f"{_f(c.get('speedup_cpu'), '.2f')}×" if "speedup_wall" in c else "1")
+        step_speed = (f"{_f(c.get('stepping_speedup'), '.1f')}×" if "stepping_speedup" in c
+                      else "1")
         lines.append(
             f"| {name} | {_f(c['iterations_pre_peak'], '.2f')} / "
             f"{_f(c['iterations_post_peak'], '.2f')} / {_f(c['iterations_all'], '.2f')} | "
             f"{_f(c['dem_steps_per_point_pre_peak'], '.0f')} / "
             f"{_f(c['dem_steps_per_point_post_peak'], '.0f')} / "
-            f"{_f(c['dem_steps_per_point_all'], '.0f')} | {_f(c['stepping_s'], '.1f')} | "
-            f"{c['wall_s']:.1f} | {c['threads']} | {c['core_s']:.1f} | "
+            f"{_f(c['dem_steps_per_point_all'], '.0f')} | {_f(c['stepping_s'], '.1f')} "
+            f"(1–{c['last_step']}) | {step_speed} | {c['wall_s']:.1f} | {c['threads']} | "
+            f"{c['core_s']:.1f} | "
             f"{_f(c.get('cpu_s'), '.1f')} | {speed} |")
     return lines
 
@@ -167,7 +171,9 @@ def section_lines(e: dict[str, Any], out: Path) -> list[str]:
               "counted as cores; speed-up = theirs / ours; per core = their wall × their "
               "processes over our wall × our threads; CPU = their CPU time (main process and "
               "pool) over ours; wall times include each program's start-up, stepping is the "
-              "load steps alone; on a machine shared with other jobs the CPU ratio is the "
+              "load steps alone, over the steps both codes did; a whole run of ours covers "
+              "all the case's steps, so where theirs stopped early the whole-run ratios "
+              "understate ours; on a machine shared with other jobs the CPU ratio is the "
               "least distorted):", "", *_cost_rows(e), "",
               "Gauss-point fields (γ = √(2 e:e) of the strain deviator; γmax/γmean is 1 for "
               "a uniform field):", "", *_field_rows(e), "",
