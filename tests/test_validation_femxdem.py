@@ -73,13 +73,19 @@ def test_field_comparison_matches_points_by_coordinates() -> None:
 
 def test_cost_figures_split_at_the_peak() -> None:
     curve = pd.DataFrame({"step": [0, 1, 2, 3], "iterations": [0, 2, 4, 9],
-                          "particle_steps": [0, 400 * 8 * 100, 400 * 8 * 200, 400 * 8 * 300]})
+                          "particle_steps": [0, 400 * 8 * 100, 400 * 8 * 200, 400 * 8 * 300],
+                          "wall_time": [0.0, 1.0, 2.0, 4.0]})
     cost = femxdem_case.cost_figures(curve, points=8, particles=400, peak_step=2, wall_s=10.0,
                                      threads=2, theirs=False)
     assert cost["iterations_pre_peak"] == pytest.approx(3.0)
     assert cost["iterations_post_peak"] == pytest.approx(9.0)
     assert cost["dem_steps_per_point_all"] == pytest.approx(200.0)
     assert cost["core_s"] == pytest.approx(20.0)
+    assert cost["stepping_s"] == pytest.approx(7.0)
+    first_two = femxdem_case.cost_figures(curve, points=8, particles=400, peak_step=2,
+                                          wall_s=10.0, threads=2, theirs=False, last_step=2)
+    assert first_two["stepping_s"] == pytest.approx(3.0) and first_two["last_step"] == 2
+    assert first_two["iterations_post_peak"] is None
 
 
 @pytest.mark.yade
