@@ -47,7 +47,9 @@ def test_identical_curves_pass_with_zero_differences() -> None:
     ref = biaxial_curve()
     c = metrics.compare_curves(ref, ref.copy())
     assert c.peak_ratio_ref == pytest.approx(2.9, rel=1e-4)
-    assert c.strain_at_peak_ref == pytest.approx(0.02, abs=1e-4)
+    assert c.strain_at_peak_argmax_ref == pytest.approx(0.02, abs=1e-4)
+    # the 1 % plateau of R = 1 + 1.9·s·e^(1−s) spans s ∈ [0.878, 1.148]: centre 1.013 εp
+    assert c.strain_at_peak_ref == pytest.approx(0.0202, abs=1e-4)
     assert c.stress_scale == pytest.approx(2.9 * P0, rel=1e-4)
     assert c.pre_peak_diff == 0 and c.post_peak_diff == 0 and c.strain_at_peak_diff == 0
     assert c.passed
@@ -145,3 +147,48 @@ def test_tangent_difference_and_voigt_of_isotropic_tangent() -> None:
     assert diff["frobenius"] == pytest.approx(0.02) and diff["max_entry"] == pytest.approx(0.02)
     with pytest.raises(ValueError, match="shape"):
         metrics.tangent_difference(v, v[:2])
+
+
+def plateau_curve(bump_at: float, n: int = 301) -> pd.DataFrame:
+    """σ1/σ3 rising to a flat top 2.9 between 1.5 % and 2.5 % strain, then falling, with a
+    bump of +0.3 % (YADE's pure shear: 2.890 at 1.6 % against 2.898 at 2.35 %) at
+    ``bump_at``."""
+    eps = np.linspace(0.0, 0.03, n)
+    ratio = np.interp(eps, [0.0, 0.015, 0.025, 0.03], [1.0, 2.9, 2.9, 2.7])
+    ratio = ratio + 0.0087 * np.exp(-(((eps - bump_at) / 0.001) ** 2))
+    return pd.DataFrame({"axial_strain": eps, "sxx": -P0 * np.ones(n),
+                         "syy": -P0 * ratio, "sxy": np.zeros(n)})
+
+
+def test_plateau_centre_ignores_where_on_the_plateau_the_largest_value_falls() -> None:
+    """Two curves equal but for a 0.3 % bump at 1.6 % or 2.35 %: the largest values lie
+    0.75 % strain apart (the former rule fails), the plateaus' centres 0.02 % apart."""
+    c = metrics.compare_curves(plateau_curve(0.016), plateau_curve(0.0235))
+    assert c.strain_at_peak_argmax_diff == pytest.approx(0.0075, abs=2e-4)
+    assert not c.to_dict()["strain_at_peak_argmax_pass"]
+    assert c.plateau_ref[0] == pytest.approx(0.0149, abs=2e-4)
+    assert c.strain_at_peak_ref == pytest.approx(0.02, abs=5e-4)
+    assert c.strain_at_peak_diff <= 5e-4 and c.checks()["strain_at_peak"]
+
+
+def test_peak_plateau_of_a_sharp_peak_is_the_peak() -> None:
+    eps = np.linspace(0.0, 0.04, 401)
+    ratio = 3.0 - 100.0 * np.abs(eps - 0.01)  # falls 1 % of 3 within 0.03 % strain
+    lo, hi, centre = metrics.peak_plateau(eps, ratio, window=1)
+    assert (lo, hi) == (pytest.approx(0.0097), pytest.approx(0.0103))
+    assert centre == pytest.approx(0.01)
+    with pytest.raises(ValueError, match="tol"):
+        metrics.peak_plateau(eps, ratio, tol=1.5)
+
+
+def test_plateau_centre_lies_between_two_near_equal_humps() -> None:
+    """Humps of 2.90 at 1.3 % and 2.895 at 2.35 % with a dip to 2.80 between them: the
+    largest value sits on the first hump, the centre between the two (the second, 0.2 %
+    lower, weighs a little less)."""
+    eps = np.linspace(0.0, 0.03, 301)
+    ratio = (2.80 + 0.10 * np.exp(-(((eps - 0.013) / 0.002) ** 2))
+             + 0.095 * np.exp(-(((eps - 0.0235) / 0.002) ** 2)))
+    ratio = np.where(eps < 0.008, 1.0 + 1.8 * eps / 0.008, ratio)
+    lo, hi, centre = metrics.peak_plateau(eps, ratio, window=1)
+    assert lo == pytest.approx(0.0118, abs=2e-4) and hi == pytest.approx(0.0246, abs=2e-4)
+    assert 0.017 < centre < 0.0182

@@ -42,7 +42,7 @@ from granular_material_validation import engine_runner, metrics, yade_runner
 __all__ = ["CASES", "KINDS", "RULES", "Case", "SeedRun", "case_checks", "run_case",
            "shear_stress_figures", "summarise_case"]
 
-KINDS = ("biaxial", "drive", "single-element")
+KINDS = ("biaxial", "drive", "single-element", "femxdem")
 RULES = ("pre_peak", "peak_ratio", "strain_at_peak", "post_peak")
 
 
@@ -52,15 +52,20 @@ class Case:
 
     Attributes:
         name: identifier used on the command line and in the report.
-        kind: ``"biaxial"`` (pure DEM, both codes), ``"drive"`` (∇u path, both codes) or
-            ``"single-element"`` (YADE's pure-DEM biaxial against our FEM × DEM element).
+        kind: ``"biaxial"`` (pure DEM, both codes), ``"drive"`` (∇u path, both codes),
+            ``"single-element"`` (YADE's pure-DEM biaxial against our FEM × DEM element) or
+            ``"femxdem"`` (Guo & Zhao's own FEM × DEM code against ours, same specimen; see
+            :mod:`granular_material_validation.femxdem_case`).
         source: ``"yade"`` (Guo & Zhao packing built by YADE) or ``"ours"``.
         seeds: packing seeds.
         particles: discs per RVE.
         pressure: isotropic consolidation stress [Pa] (a magnitude).
         axial_strain: biaxial and single element: final axial strain (engineering,
             compression positive).
-        steps: single element: Newton load steps to ``axial_strain``.
+        steps: single element and femxdem: Newton load steps to ``axial_strain``.
+        elements: femxdem: elements across and along the specimen (nx, ny).
+        time_limit: femxdem: wall-time limit of each run of Guo & Zhao's code [s]; a run
+            stopped there keeps (and reports) the load steps it has done.
         grad_u: drive: total ∇u as (Gxx, Gxy, Gyx, Gyy).
         increments: drive: number of equal increments K.
         tangent_at: drive: increments at which both tangents are compared.
@@ -78,6 +83,8 @@ class Case:
     grad_u: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
     increments: int = 1
     tangent_at: tuple[int, ...] = ()
+    elements: tuple[int, int] = (2, 4)
+    time_limit: float = 7200.0
     description: str = ""
 
     def __post_init__(self) -> None:
@@ -113,6 +120,16 @@ CASES: dict[str, Case] = {c.name: c for c in (
          description="Guo & Zhao RVE built in YADE: YADE's pure-DEM drained biaxial against "
                      "our FEM × DEM single element (one Q4, 2×2 Gauss points, 100 Newton "
                      "load steps) to 10 % at σxx = 100 kPa"),
+    Case("gz-femxdem", "femxdem", "yade", seeds=(1,), axial_strain=0.03, steps=30,
+         elements=(2, 4), time_limit=1800.0,
+         description="Guo & Zhao's own FEM × DEM code (YADE's FEMxDEM on esys-escript, "
+                     "their biaxialSmooth example) against ours: 2 × 4 elements, 32 Gauss "
+                     "points each holding their seed-1 RVE, smooth platens, 0.1 % axial "
+                     "strain a load step to 3 % (each run of theirs stopped after 30 min "
+                     "with the steps it has done), σ3 = 100 kPa"),
+    Case("gz-femxdem-smoke", "femxdem", "yade", seeds=(1,), axial_strain=0.002, steps=2,
+         elements=(1, 2),
+         description="gz-femxdem at smoke size: 1 × 2 elements, two load steps of 0.1 %"),
 )}
 
 
@@ -185,6 +202,15 @@ def _run_seed(case: Case, seed: int, out: Path, device: str | None) -> SeedRun:
     work.mkdir(parents=True, exist_ok=True)
     extra: dict[str, Any] = {"packing": prep}
     curves: dict[str, pd.DataFrame] = {}
+    if case.kind == "femxdem":
+        from granular_material_validation.femxdem_case import run_femxdem_seed
+
+        got = run_femxdem_seed(case, seed, rve, prep, work, device)
+        comparison = metrics.compare_curves(got["yade"], got["ours"])
+        return SeedRun(seed, got["yade"], got["ours"], comparison,
+                       yade_wall_s=got["yade_wall_s"], yade_run_s=got["yade_run_s"],
+                       ours_wall_s=got["ours_wall_s"], extra=got["extra"],
+                       baseline=got["baseline"], curves=got["curves"])
     if case.kind in ("biaxial", "single-element"):
         yade, ysum = yade_runner.yade_biaxial(rve, axial_strain=case.axial_strain,
                                               confining=case.pressure, workdir=work / "yade")
@@ -255,8 +281,8 @@ def shear_stress_figures(yade: pd.DataFrame, fem: pd.DataFrame) -> dict[str, flo
     """
     c = metrics.compare_curves(yade, fem)
     x = yade["axial_strain"].to_numpy(dtype=np.float64)
-    pre = (x <= c.strain_at_peak_ref) & (x > 0)
-    fem_pre = (fem["axial_strain"] <= c.strain_at_peak_ref) & (fem["axial_strain"] > 0)
+    pre = (x <= c.strain_at_peak_argmax_ref) & (x > 0)
+    fem_pre = (fem["axial_strain"] <= c.strain_at_peak_argmax_ref) & (fem["axial_strain"] > 0)
     normal = max(float(np.abs(np.interp(x[pre], fem["axial_strain"], fem[col])
                               - yade.loc[pre, col]).max()) for col in ("sxx", "syy"))
     return {"max_abs_sxy_yade": float(yade.loc[pre, "sxy"].abs().max()),
@@ -332,7 +358,8 @@ def summarise_case(case: Case, runs: list[SeedRun]) -> dict[str, Any]:
         peaks = np.array([r.comparison.peak_ratio_ref for r in runs])
         entry["yade_seed_spread"] = {
             "peak_ratio_mean": float(peaks.mean()), "peak_ratio_std": float(peaks.std(ddof=1)),
-            "strain_at_peak": [r.comparison.strain_at_peak_ref for r in runs]}
+            "strain_at_peak": [r.comparison.strain_at_peak_ref for r in runs],
+            "strain_at_peak_argmax": [r.comparison.strain_at_peak_argmax_ref for r in runs]}
     if all(r.baseline is not None for r in runs):
         base_checks, base_ensemble, base_seeds = case_checks(case, refs,
                                                              [r.baseline for r in runs])

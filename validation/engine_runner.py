@@ -8,6 +8,7 @@ measured the same way as YADE's: the whole process, start-up included.
 from __future__ import annotations
 
 import json
+import resource
 import subprocess
 import sys
 import time
@@ -22,6 +23,7 @@ __all__ = [
     "engine_available",
     "ours_biaxial",
     "ours_drive",
+    "ours_femxdem_biaxial",
     "ours_prepare",
     "ours_single_element",
     "ours_tangents",
@@ -44,8 +46,15 @@ def engine_available() -> bool:
     return True
 
 
+def _children_cpu_s() -> float:
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime
+
+
 def _run(args: list[str], timeout: float) -> tuple[dict[str, Any], float]:
+    """Run our command line; its JSON (with ``cpu_s``: the process's CPU time) and wall [s]."""
     cmd = [sys.executable, "-m", "granular_material.cli", *args, "--json"]
+    cpu0 = _children_cpu_s()
     start = time.perf_counter()
     try:
         proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, check=False,
@@ -62,6 +71,8 @@ def _run(args: list[str], timeout: float) -> tuple[dict[str, Any], float]:
     except json.JSONDecodeError as exc:
         raise EngineError(f"granular-material {args[0]} printed no JSON: {exc}\n"
                           f"{proc.stdout[-2000:]}") from None
+    if isinstance(result, dict):
+        result["cpu_s"] = _children_cpu_s() - cpu0
     return result, wall
 
 
@@ -139,6 +150,53 @@ def ours_single_element(rve: str | Path, out_dir: str | Path, axial_strain: floa
     result["wall_s"] = wall
     curve = pd.read_csv(out_dir / "steps.csv")
     return curve.drop(columns=["residual_history"], errors="ignore"), result
+
+
+def biaxial_options() -> str:
+    """The help text of ``granular-material biaxial`` (which options this engine has)."""
+    proc = subprocess.run([sys.executable, "-m", "granular_material.cli", "biaxial", "--help"],
+                          capture_output=True, text=True, timeout=120, check=False)
+    return proc.stdout
+
+
+def ours_femxdem_biaxial(rve: str | Path, out_dir: str | Path,
+                         elements: tuple[int, int] = (2, 4), axial_strain: float = 0.03,
+                         steps: int = 30, confining: float = 1e5, width: float = 0.05,
+                         height: float = 0.1, extra: list[str] | None = None,
+                         device: str | None = None, timeout: float = 3600.0
+                         ) -> tuple[pd.DataFrame, pd.DataFrame, dict[str, Any]]:
+    """``granular-material biaxial`` with RVE 0 of ``rve`` copied to every Gauss point.
+
+    Smooth platens, ``elements`` (nx, ny) on a ``width`` × ``height`` [m] specimen, ``steps``
+    equal load steps to ``axial_strain`` (compression positive) at ``confining`` [Pa];
+    ``extra``: further options (element, Newton). Returns ``DIR/steps.csv`` (step 0
+    included; ``platen_stress``, ``stress_ratio``, volume-average ``sxx``, ``syy``, ``sxy``
+    [Pa] tension positive, ``volumetric_strain``, ``void_ratio``, ``iterations``,
+    ``particle_steps``, ``wall_time`` [s] ...), ``DIR/points.csv`` (Gauss-point states of
+    every step) and the JSON summary plus ``wall_s`` [s] (the whole process) and ``cpu_s``.
+    A finished run in ``DIR`` with the same arguments (``DIR/run.json``) is read back.
+    """
+    if steps < 1 or not axial_strain > 0:
+        raise ValueError(f"steps must be >= 1 and axial_strain > 0, got {steps}, "
+                         f"{axial_strain}")
+    out_dir = Path(out_dir)
+    args = ["biaxial", "--rve", str(rve), "--elements", str(int(elements[0])),
+            str(int(elements[1])), "--width", repr(float(width)), "--height",
+            repr(float(height)), "--platens", "smooth", "--axial-strain",
+            repr(float(axial_strain)), "--steps", str(int(steps)), "--confining",
+            repr(float(confining)), "--out", str(out_dir), "--no-progress", *(extra or []),
+            *_device(device)]
+    done = out_dir / "run.json"
+    cached = json.loads(done.read_text()) if done.is_file() else {}
+    if cached.get("args") == args:
+        result = cached["result"]
+    else:
+        result, wall = _run(args, timeout)
+        result["wall_s"] = wall
+        done.write_text(json.dumps({"args": args, "result": result}, indent=1))
+    curve = pd.read_csv(out_dir / "steps.csv").drop(columns=["residual_history"],
+                                                    errors="ignore")
+    return curve, pd.read_csv(out_dir / "points.csv"), result
 
 
 def voigt_tangent(tangent: np.ndarray) -> np.ndarray:

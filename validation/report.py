@@ -7,7 +7,7 @@ import math
 from pathlib import Path
 from typing import Any
 
-from granular_material_validation import metrics
+from granular_material_validation import femxdem_report, metrics
 
 from granular_material.results import pyplot
 
@@ -22,6 +22,22 @@ def _fmt(value: Any, spec: str = ".3g") -> str:
 
 def _pct(value: Any) -> str:
     return "–" if value is None else f"{100 * value:.2f} %"
+
+
+def _span(plateau: list | None) -> str:
+    """``a–b %``: a plateau's strain range."""
+    if not plateau or plateau[0] is None:
+        return "–"
+    return f"{100 * plateau[0]:.2f}–{100 * plateau[1]:.2f} %"
+
+
+def _former(c: dict[str, Any]) -> str:
+    """The former strain-at-peak rule (largest running median), reported beside."""
+    if c.get("strain_at_peak_argmax_diff") is None:
+        return "–"
+    return (f"{_pct(c['strain_at_peak_argmax_ref'])} / {_pct(c['strain_at_peak_argmax_ours'])}"
+            f" ({_pct(c['strain_at_peak_argmax_diff'])}, "
+            f"{'pass' if c['strain_at_peak_argmax_pass'] else 'fail'})")
 
 
 def _passing(counts: dict[str, int] | None, seeds: int) -> str:
@@ -89,9 +105,11 @@ def json_entries(entries: list[dict[str, Any]]) -> list[dict[str, Any]]:
 
 def _table(entries: list[dict[str, Any]]) -> list[str]:
     lines = [
-        "| case | seed | peak σ1/σ3 YADE / ours (Δ) | εa at peak YADE / ours (Δ) | "
-        "pre-peak Δσ | post-peak Δσ | max Δεv | max Δe | wall YADE / ours [s] (ratio) |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "| case | seed | peak σ1/σ3 YADE / ours (Δ) | εa at peak, plateau centre, YADE / "
+        "ours (Δ) | plateau YADE; ours | former rule: εa of the largest value, YADE / ours "
+        "(Δ, pass) | pre-peak Δσ | post-peak Δσ | max Δεv | max Δe | "
+        "wall YADE / ours [s] (ratio) |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for e in entries:
         rows = [(str(r["seed"]), r["comparison"], r) for r in e["per_seed"]]
@@ -108,7 +126,8 @@ def _table(entries: list[dict[str, Any]]) -> list[str]:
                 f"| {e['case']['name']} | {seed} | {c['peak_ratio_ref']:.3f} / "
                 f"{c['peak_ratio_ours']:.3f} ({_pct(c['peak_ratio_diff'])}) | "
                 f"{_pct(c['strain_at_peak_ref'])} / {_pct(c['strain_at_peak_ours'])} "
-                f"({_pct(c['strain_at_peak_diff'])}) | {_pct(c['pre_peak_diff'])} | "
+                f"({_pct(c['strain_at_peak_diff'])}) | {_span(c.get('plateau_ref'))}; "
+                f"{_span(c.get('plateau_ours'))} | {_former(c)} | {_pct(c['pre_peak_diff'])} | "
                 f"{_pct(c['post_peak_diff'])} | {_pct(c['volumetric_strain_diff'])} | "
                 f"{_fmt(c['void_ratio_diff'], '.4f')} | {wall} |")
     return lines
@@ -127,7 +146,12 @@ def write_report(entries: list[dict[str, Any]], out: str | Path,
         "Acceptance (issue 5, the lead's policy): before the peak every stress component "
         f"within {metrics.PRE_PEAK_TOL:.0%} of the peak stress σ1; peak σ1/σ3 within "
         f"{metrics.PEAK_RATIO_TOL:.0%}; strain at peak within {100 * metrics.PEAK_STRAIN_TOL:.1f} %"
-        f" strain; after the peak within {metrics.POST_PEAK_TOL:.0%} of the peak stress. "
+        f" strain, the peak located at the centre of its plateau (the strain weighted by how "
+        f"far the running median of σ1/σ3 rises above {1 - metrics.PLATEAU_TOL:.0%} of its "
+        "largest value; issue 15: on "
+        "a flat top the largest value wanders; the former measure, the strain of the largest "
+        "value, is listed beside and decides nothing); after the peak within "
+        f"{metrics.POST_PEAK_TOL:.0%} of the peak stress. "
         "**All four rules are judged on the seed-mean curves** (on the one curve when a case "
         "has one seed): per seed, the pre-peak and strain-at-peak rules are stricter than "
         "YADE's own reproducibility (YADE against a perturbed YADE misses them), so every "
@@ -171,6 +195,9 @@ def write_report(entries: list[dict[str, Any]], out: str | Path,
     lines += ["", "## Figures", "", *_table(entries), ""]
     for e in entries:
         name = e["case"]["name"]
+        if e["case"]["kind"] == "femxdem":
+            lines += femxdem_report.section_lines(e, out)
+            continue
         plot = plot_case(e, out / "plots" / f"{name}.png")
         lines += [f"### {name}", "", e["case"]["description"], "",
                   f"![{name}]({plot.relative_to(out).as_posix()})", ""]
