@@ -75,8 +75,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--scale", choices=tuple(SCALES), default="cpu",
                    help="smoke: every part at a toy size (about a minute); cpu: the whole "
                         "study reduced for a 2-core workstation (specimen 5 × 10 elements "
-                        "of 100-disc RVEs to 5 %%; about an hour); paper: Wu et al.'s sizes, "
-                        "for a GPU (default cpu)")
+                        "of 100-disc RVEs to 5 %%; 17 to 35 min on 2 cores); paper: Wu et "
+                        "al.'s sizes, for a GPU (default cpu)")
     p.add_argument("--out", type=Path, default=Path("reproduction"),
                    help="output folder (default ./reproduction)")
     p.add_argument("--redo", nargs="+", default=[], choices=tuple(PARTS), metavar="PART",
