@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+from run_helpers import StopAtStep, without_clock
 
 from granular_material.cli import main
 from granular_material.dem import save_rve
@@ -32,7 +33,6 @@ from granular_material.procedures import prepare_packing
 
 SETUP = BiaxialSetup(width=1.0, height=1.0, nx=1, ny=1, confining=100e3, axial_strain=0.003)
 #: columns that hold a clock time [s], the only ones a resumed run may change
-CLOCK = ("wall_time", "seconds")
 
 
 @pytest.fixture(scope="module")
@@ -43,8 +43,6 @@ def rve64(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return path
 
 
-def _without_clock(frame: pd.DataFrame) -> pd.DataFrame:
-    return frame.drop(columns=[c for c in frame.columns if any(k in c for k in CLOCK)])
 
 
 def _same_arrays(a: Path, b: Path) -> bool:
@@ -72,18 +70,9 @@ def _material(kind: str, rve: Path):
 
 def _records(result) -> pd.DataFrame:
     """The Newton records of a run as a table, without their clock times."""
-    return _without_clock(pd.DataFrame([asdict(r) for r in result.records]))
+    return without_clock(pd.DataFrame([asdict(r) for r in result.records]))
 
 
-class _StopAt:
-    """on_step callback: Ctrl-C once load step ``step`` is committed."""
-
-    def __init__(self, step: int) -> None:
-        self.step = step
-
-    def __call__(self, solver, record, points) -> None:
-        if record.step == self.step:
-            raise KeyboardInterrupt
 
 
 # -- the checkpoint folder ------------------------------------------------------------------
@@ -117,7 +106,7 @@ def test_resume_in_process_equals_a_run_that_never_stopped(kind, rve64, tmp_path
     checkpoint = RunCheckpoint(tmp_path / "part", every=3)
     first = _material(kind, rve64)
     first.allocate(SETUP.n_points)
-    stopped = _run(kind, first, 7, checkpoint=checkpoint, on_step=_StopAt(5))
+    stopped = _run(kind, first, 7, checkpoint=checkpoint, on_step=StopAtStep(5))
     assert "interrupted after load step 5 of 7" in stopped.error
     assert isinstance(stopped.interrupt, KeyboardInterrupt)
     assert (checkpoint.folder / "steps" / "step_00005.npz").is_file()
@@ -125,7 +114,7 @@ def test_resume_in_process_equals_a_run_that_never_stopped(kind, rve64, tmp_path
     again = _material(kind, rve64)  # a new process: nothing allocated
     resumed = _run(kind, again, 7, checkpoint=checkpoint, resume=True)
     assert resumed.error is None and resumed.resumed_from == 3  # the last saved state
-    pd.testing.assert_frame_equal(_without_clock(resumed.steps), _without_clock(full.steps),
+    pd.testing.assert_frame_equal(without_clock(resumed.steps), without_clock(full.steps),
                                   check_exact=True)
     pd.testing.assert_frame_equal(resumed.points, full.points, check_exact=True)
     np.testing.assert_array_equal(resumed.displacements, full.displacements)
@@ -138,7 +127,7 @@ def test_load_keeps_the_last_whole_checkpoint(rve64, tmp_path):
     checkpoint = RunCheckpoint(tmp_path / "ck", every=2)
     material = _material("linear-elastic", rve64)
     material.allocate(SETUP.n_points)
-    _run("linear-elastic", material, 6, checkpoint=checkpoint, on_step=_StopAt(3))
+    _run("linear-elastic", material, 6, checkpoint=checkpoint, on_step=StopAtStep(3))
     saved = checkpoint.load()
     assert saved.step == 2 and [s.row["step"] for s in saved.steps] == [0, 1, 2]
     assert not (checkpoint.folder / "steps" / "step_00003.npz").exists()  # past the state
@@ -202,8 +191,8 @@ def _command(rve: Path, out_option: str, out: Path, steps: int = 24) -> list[str
 
 def _assert_same_run(out: Path, reference: Path, steps: int = 24) -> None:
     for table in ("steps.csv", "points.csv", "tracked.csv"):
-        pd.testing.assert_frame_equal(_without_clock(pd.read_csv(out / table)),
-                                      _without_clock(pd.read_csv(reference / table)),
+        pd.testing.assert_frame_equal(without_clock(pd.read_csv(out / table)),
+                                      without_clock(pd.read_csv(reference / table)),
                                       check_exact=True, obj=table)
     name = f"material_{steps:05d}.npz"
     assert _same_arrays(out / "checkpoint" / name, reference / "checkpoint" / name)

@@ -21,6 +21,7 @@ import meshio
 import numpy as np
 import pandas as pd
 import pytest
+from run_helpers import StopAtStep, without_clock
 from skfem import Basis, MeshQuad, MeshTri, condense, solve
 
 from granular_material.cli import main
@@ -40,7 +41,6 @@ from granular_material.fem.problems import DEFAULT_GAUSS, ELEMENTS, TRIANGLES, e
 
 ELEMENT_NAMES = tuple(ELEMENTS)
 E, NU, P = 60e6, 0.3, 100e3
-CLOCK = ("wall_time", "seconds")
 
 
 def _elastic(initial_stress: float = -P):
@@ -364,21 +364,11 @@ def test_dem_biaxial_quad8_outputs(tmp_path, capsys):
 
 
 def _records(result) -> pd.DataFrame:
-    frame = pd.DataFrame([asdict(r) for r in result.records])
-    return frame.drop(columns=[c for c in frame.columns if any(k in c for k in CLOCK)])
+    return without_clock(pd.DataFrame([asdict(r) for r in result.records]))
 
 
-def _without_clock(frame: pd.DataFrame) -> pd.DataFrame:
-    return frame.drop(columns=[c for c in frame.columns if any(k in c for k in CLOCK)])
 
 
-class _StopAt:
-    def __init__(self, step: int) -> None:
-        self.step = step
-
-    def __call__(self, solver, record, points) -> None:
-        if record.step == self.step:
-            raise KeyboardInterrupt
 
 
 def test_quad8_dem_run_resumes_to_the_same_result(tmp_path):
@@ -400,12 +390,12 @@ def test_quad8_dem_run_resumes_to_the_same_result(tmp_path):
     first = material()
     first.allocate(setup.n_points)
     stopped = run_biaxial(setup, first, 4, settings, stress_tol=tol, checkpoint=checkpoint,
-                          on_step=_StopAt(2))
+                          on_step=StopAtStep(2))
     assert stopped.interrupt is not None and len(stopped.steps) == 3
     resumed = run_biaxial(setup, material(), 4, settings, stress_tol=tol,
                           checkpoint=checkpoint, resume=True)
     assert resumed.resumed_from == 2 and resumed.error is None
-    pd.testing.assert_frame_equal(_without_clock(resumed.steps), _without_clock(full.steps),
+    pd.testing.assert_frame_equal(without_clock(resumed.steps), without_clock(full.steps),
                                   check_exact=True)
     pd.testing.assert_frame_equal(resumed.points, full.points, check_exact=True)
     np.testing.assert_array_equal(resumed.displacements, full.displacements)
@@ -458,7 +448,7 @@ def test_quad9_biaxial_on_two_ranks_is_the_in_process_run(tmp_path):
         done = subprocess.run(run, capture_output=True, text=True, env=env, timeout=300)
         assert done.returncode == 0, done.stderr[-3000:]
     for table in ("steps.csv", "points.csv", "tracked.csv"):
-        a, b = (_without_clock(pd.read_csv(tmp_path / k / table)) for k in runs)
+        a, b = (without_clock(pd.read_csv(tmp_path / k / table)) for k in runs)
         pd.testing.assert_frame_equal(a, b, check_exact=True, obj=table)
     assert len(pd.read_csv(tmp_path / "mpi" / "points.csv")) == 3 * 18
 
