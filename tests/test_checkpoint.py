@@ -228,8 +228,11 @@ def test_a_stopped_run_keeps_its_work_and_resumes(stop, code, rve64, reference_r
     figures and summary of the steps done, the --resume line, no traceback; the resumed run
     is the reference."""
     out = tmp_path / "run"
+    # as from a terminal: a job a shell starts in the background has SIGINT ignored, and
+    # Python then keeps it ignored; the run must get Ctrl-C as it would in the foreground
     process = subprocess.Popen(_command(rve64, "--out", out), stdout=subprocess.PIPE,
-                               stderr=subprocess.PIPE, text=True)
+                               stderr=subprocess.PIPE, text=True,
+                               preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     _wait_for(out / "checkpoint" / "steps" / "step_00007.npz", process)
     process.send_signal(stop)
     stdout, stderr = process.communicate(timeout=300)
