@@ -230,3 +230,11 @@ def test_rve_size_study_is_a_scene(tmp_path, capsys):
     assert main(["run", str(bad), "--out", str(tmp_path / "bad")]) == 2
     assert "seed" in capsys.readouterr().err
     assert not (tmp_path / "bad").exists()
+
+
+def test_fits_of_a_run_stopped_early_are_nan_not_an_error():
+    rows = [{"role": role, "point": n, "contraction": 0.001 * k, "D0": 1.7, "alpha0": 1.8}
+            for n, role in enumerate(("inside", "edge", "outside")) for k in range(2)]
+    fits = fractal_fits(pd.DataFrame(rows))
+    assert fits["slope"].isna().all() and (fits["samples"] == 2).all()
+    assert not slopes_differ(fits, "D0", "inside", "outside")["differ"]

@@ -241,16 +241,21 @@ def point_histories(points: pd.DataFrame, tracked: pd.DataFrame,
 def fractal_fits(histories: pd.DataFrame) -> pd.DataFrame:
     """Fig. 10: least-squares lines of D0 and α0 against the volumetric strain (compression
     positive) for each chosen point: slope, its standard error, intercept, R², and the
-    range of volumetric strain covered."""
+    range of volumetric strain covered; NaN where fewer than three samples (a run that
+    stopped early) or no change of volume leave no line to fit."""
     rows = []
     for (role, point), history in histories.groupby(["role", "point"], sort=False):
         ev = history["contraction"].to_numpy()
         for index in ("D0", "alpha0"):
-            fit = stats.linregress(ev, history[index].to_numpy())
-            rows.append({"role": role, "point": int(point), "index": index,
-                         "slope": fit.slope, "slope_se": fit.stderr,
-                         "intercept": fit.intercept, "r2": fit.rvalue ** 2,
-                         "ev_range": float(ev.max() - ev.min()), "samples": len(ev)})
+            line = {"slope": math.nan, "slope_se": math.nan, "intercept": math.nan,
+                    "r2": math.nan}
+            if len(ev) >= 3 and np.ptp(ev) > 0:
+                fit = stats.linregress(ev, history[index].to_numpy())
+                line = {"slope": fit.slope, "slope_se": fit.stderr,
+                        "intercept": fit.intercept, "r2": fit.rvalue ** 2}
+            rows.append({"role": role, "point": int(point), "index": index, **line,
+                         "ev_range": float(np.ptp(ev)) if len(ev) else math.nan,
+                         "samples": len(ev)})
     return pd.DataFrame(rows)
 
 

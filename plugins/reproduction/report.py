@@ -119,14 +119,16 @@ def headline(scale: ReproductionScale, results: Results) -> pd.DataFrame:
                     f"{_num(100 * r['band_last']['axial_strain'])} % (localisation "
                     f"{_num(r['band_last']['localization'])})",
             "verdict": _verdict(band["through_going"])})
-        signs = [_fit(results, role, index)["slope"] < 0 for role in r["chosen"]
+        signs = [(_fit(results, role, index)["slope"] or 0.0) < 0 for role in r["chosen"]
                  for index in ("D0", "alpha0")]
         rows.append({
             "figure": "9", "claim": "D0, α0 fall under contraction, rise under dilation",
             "ours": f"slope against contraction negative in {sum(signs)} of {len(signs)} fits",
             "verdict": _verdict(all(signs))})
-        r2 = [_fit(results, role, index)["r2"] for role in r["chosen"]
-              for index in ("D0", "alpha0")]
+        r2 = [value for role in r["chosen"] for index in ("D0", "alpha0")
+              if (value := _fit(results, role, index)["r2"]) is not None]
+        if not r2:  # a run too short for any line
+            r2 = [math.nan]
         differ = r["slopes"]["D0"]
         out_word = "differ" if differ["inside_vs_outside"]["differ"] else "do not differ"
         edge_word = "differ" if differ["inside_vs_edge"]["differ"] else "agree"

@@ -81,7 +81,7 @@ def _part_rve_size(scale: ReproductionScale, folder: Path, device: str,
     return {"settle": settle, "per_size": per_size.to_dict("records"),
             "rves": len(indices), "dq_decreasing": int(indices["dq_decreasing"].sum()),
             "void_ratio_range": [float(indices["void_ratio"].min()),
-                                                       float(indices["void_ratio"].max())]}
+                                 float(indices["void_ratio"].max())]}
 
 
 def _part_size_biaxial(scale: ReproductionScale, folder: Path, device: str,
@@ -127,6 +127,9 @@ def _part_element(scale: ReproductionScale, folder: Path, device: str, progress:
     code = coupling.run_element(scale, rve, folder, device)
     steps, summary = coupling.read_run(folder / "run")
     error = _fem_status(code, summary, "single-element")
+    if not (folder / "run" / "pure_dem.csv").exists():
+        raise coupling.FEMRunError(f"the single-element run wrote no pure_dem.csv "
+                                   f"({error or 'see its run.log'})")
     dem = pd.read_csv(folder / "run" / "pure_dem.csv")
     comparison = coupling.compare_with_dem(steps, dem)
     seeds = pd.read_csv(root / "size-biaxial" / "responses.csv") \
