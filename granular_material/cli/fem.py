@@ -6,7 +6,6 @@ import argparse
 import contextlib
 import json
 import math
-import os
 import sys
 import time
 from collections.abc import Callable, Iterator
@@ -59,6 +58,7 @@ from granular_material.results import (
     find_peak,
     run_summary,
     write_csv,
+    write_json,
     write_outputs,
 )
 
@@ -492,10 +492,7 @@ def _report(args: argparse.Namespace, summary: dict[str, Any],
     or not at all); the exit code: 0, 1 when the run stopped short, 130/143 when Ctrl-C or
     SIGTERM (``interrupt``) stopped it."""
     if args.out is not None and Path(args.out).is_dir():
-        path = Path(args.out) / "summary.json"
-        part = path.with_name(path.name + ".part")
-        part.write_text(json.dumps(summary, indent=2, default=str) + "\n")
-        os.replace(part, path)
+        write_json(summary, Path(args.out) / "summary.json")
     emit(args, summary)
     if interrupt is not None:
         print(f"error: {summary['error']}", file=sys.stderr)

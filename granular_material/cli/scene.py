@@ -19,7 +19,6 @@ import argparse
 import contextlib
 import difflib
 import json
-import os
 import re
 import shlex
 import sys
@@ -29,6 +28,7 @@ from pathlib import Path
 from typing import Any
 
 from granular_material.cli.options import UsageError, check_output_dir, reports_to
+from granular_material.results import write_json
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -487,10 +487,7 @@ def _scene_copied(scene: Scene) -> Iterator[None]:
 
 def _write_summary(folder: Path, report: dict[str, Any]) -> None:
     """``report`` as ``folder/summary.json``, whole or not at all."""
-    path = folder / _SUMMARY
-    part = path.with_name(path.name + ".part")
-    part.write_text(json.dumps(report, indent=2, default=str) + "\n")
-    os.replace(part, path)
+    write_json(report, folder / _SUMMARY)
 
 
 def _located(scene: Scene, message: str) -> str:

@@ -24,6 +24,7 @@ from granular_material.results.writers import (
     BiaxialWriter,
     FieldWriter,
     write_csv,
+    write_json,
     write_outputs,
     write_tables,
 )
@@ -44,6 +45,7 @@ __all__ = [
     "shear_band",
     "summarize_biaxial",
     "write_csv",
+    "write_json",
     "write_outputs",
     "write_tables",
 ]

@@ -1,4 +1,4 @@
-"""Files of the runs: CSV tables and an XDMF time series for ParaView.
+"""Files of the runs: CSV tables, JSON summaries and an XDMF time series for ParaView.
 
 ``steps.csv`` and ``points.csv`` of a biaxial run are written by :func:`write_tables` only,
 whether whole at the end or step by step while the run goes (:class:`BiaxialWriter`).
@@ -6,6 +6,7 @@ whether whole at the end or step by step while the run goes (:class:`BiaxialWrit
 
 from __future__ import annotations
 
+import json
 import os
 from collections.abc import Sequence
 from contextlib import ExitStack
@@ -21,7 +22,8 @@ if TYPE_CHECKING:
     from granular_material.fem.problems import BiaxialProblem
     from granular_material.fem.runner import BiaxialResult
 
-__all__ = ["BiaxialWriter", "FieldWriter", "write_csv", "write_outputs", "write_tables"]
+__all__ = ["BiaxialWriter", "FieldWriter", "write_csv", "write_json", "write_outputs",
+           "write_tables"]
 
 _CELL_FIELDS = ("sxx", "syy", "sxy", "exx", "eyy", "exy", "volumetric_strain",
                 "shear_strain", "void_ratio", "coordination")
@@ -41,6 +43,20 @@ def write_csv(frame: pd.DataFrame, path: str | Path, append: bool = False) -> Pa
     tmp = path.with_name(path.name + ".part")
     try:
         frame.to_csv(tmp, index=False)
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)  # only there when writing or replacing failed
+    return path
+
+
+def write_json(data: Any, path: str | Path, indent: int = 2) -> Path:
+    """Write ``data`` as JSON to ``path`` (values JSON cannot hold as their ``str``); a new
+    file replaces the old one only once it is complete, and a failed write leaves no
+    ``.part`` behind."""
+    path = Path(path)
+    tmp = path.with_name(path.name + ".part")
+    try:
+        tmp.write_text(json.dumps(data, indent=indent, default=str) + "\n")
         os.replace(tmp, path)
     finally:
         tmp.unlink(missing_ok=True)  # only there when writing or replacing failed

@@ -4,7 +4,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from pathlib import Path
@@ -21,6 +20,7 @@ from granular_material.cli.options import (
     positive_int,
     progress_enabled,
 )
+from granular_material.results import write_json
 
 from .scales import SCALES
 from .study import PARTS
@@ -53,7 +53,7 @@ def run(args: argparse.Namespace) -> int:
                "verdicts": {f"Fig. {row.figure}": row.verdict for row in table.itertuples()},
                "wall_time_s": time.perf_counter() - started,
                "report": str(Path(args.out) / "report.md")}
-    _write_summary(args.out, summary)
+    write_json(summary, Path(args.out) / "summary.json")
     emit(args, summary)
     return 0
 
@@ -131,14 +131,9 @@ def run_size_study(args: argparse.Namespace) -> int:
                             for row in headline(scale, results).itertuples()},
                "wall_time_s": time.perf_counter() - started,
                "report": str(Path(args.out) / "report.md")}
-    _write_summary(args.out, summary)
+    write_json(summary, Path(args.out) / "summary.json")
     emit(args, summary)
     return 0
-
-
-def _write_summary(out: Path, summary: dict) -> None:
-    """``out/summary.json``: what the command printed."""
-    (Path(out) / "summary.json").write_text(json.dumps(summary, indent=2, default=str) + "\n")
 
 
 def register_size_study(subparsers: argparse._SubParsersAction) -> None:

@@ -156,29 +156,34 @@ def headline(scale: ReproductionScale, results: Results) -> pd.DataFrame:
 def _settings(scale: ReproductionScale, parts: set[str]) -> list[str]:
     """The settings of the parts run, one bullet each."""
     nx, ny = scale.specimen_elements
+    points = 4 * nx * ny
     lines = [
-        f"- RVEs: {', '.join(map(str, scale.sizes))} discs × seeds "
-        f"{', '.join(map(str, scale.seeds))}; random gas compacted to e0 = "
-        f"{scale.void_ratio:g}, then consolidated at p0 = {scale.pressure / 1e3:g} kPa "
-        "(Table 1 material: radii 3–7 mm, kn = 3e6 N/m, kt/kn = 0.8, friction 0.5 rad, "
-        "damping 0.1).",
-        "- Pore spectra: pixel 0.3 mm, boxes ε = 2⁻ᵏL, k = 1…8, q = −10…10 step 0.5.",
-        f"- Pure-DEM biaxial tests: to {100 * scale.dem_axial_strain:g} % axial strain at "
-        f"{scale.dem_strain_per_step:g} a DEM step, σ3 = p0 held by a servo.",
-        f"- Single element: 4 Gauss points sharing the seed-{scale.seeds[0]} RVE of "
-        f"{scale.element_discs} discs, {scale.element_steps} load steps to "
-        f"{100 * scale.fem_axial_strain:g} %, Newton at the command's defaults.",
-        f"- Specimen: 50 × 100 mm, {nx} × {ny} Q4 elements, {4 * nx * ny} Gauss points, one "
-        f"packing of {scale.specimen_discs} discs each (seeds 1…{4 * nx * ny}), smooth "
-        f"platens, {scale.specimen_steps} load steps to {100 * scale.fem_axial_strain:g} %; "
-        f"every RVE's pore space analysed every {scale.track_every} steps.",
-        f"- Speed-up: {', '.join(map(str, scale.speedup_sizes))} discs, "
-        f"{', '.join(map(str, scale.speedup_batches))} RVEs, {scale.speedup_steps} DEM steps "
-        f"timed (scaled to 10⁴), median of {scale.repeats}.",
+        ("rve-size",
+         f"- RVEs: {', '.join(map(str, scale.sizes))} discs × seeds "
+         f"{', '.join(map(str, scale.seeds))}; random gas compacted to e0 = "
+         f"{scale.void_ratio:g}, then consolidated at p0 = {scale.pressure / 1e3:g} kPa "
+         "(Table 1 material: radii 3–7 mm, kn = 3e6 N/m, kt/kn = 0.8, friction 0.5 rad, "
+         "damping 0.1)."),
+        ("rve-size",
+         "- Pore spectra: pixel 0.3 mm, boxes ε = 2⁻ᵏL, k = 1…8, q = −10…10 step 0.5."),
+        ("size-biaxial",
+         f"- Pure-DEM biaxial tests: to {100 * scale.dem_axial_strain:g} % axial strain at "
+         f"{scale.dem_strain_per_step:g} a DEM step, σ3 = p0 held by a servo."),
+        ("element",
+         f"- Single element: 4 Gauss points sharing the seed-{scale.seeds[0]} RVE of "
+         f"{scale.element_discs} discs, {scale.element_steps} load steps to "
+         f"{100 * scale.fem_axial_strain:g} %, Newton at the command's defaults."),
+        ("specimen",
+         f"- Specimen: 50 × 100 mm, {nx} × {ny} Q4 elements, {points} Gauss points, one "
+         f"packing of {scale.specimen_discs} discs each (seeds 1…{points}), smooth "
+         f"platens, {scale.specimen_steps} load steps to {100 * scale.fem_axial_strain:g} %; "
+         f"every RVE's pore space analysed every {scale.track_every} steps."),
+        ("speedup",
+         f"- Speed-up: {', '.join(map(str, scale.speedup_sizes))} discs, "
+         f"{', '.join(map(str, scale.speedup_batches))} RVEs, {scale.speedup_steps} DEM steps "
+         f"timed (scaled to 10⁴), median of {scale.repeats}."),
     ]
-    wanted = {0: "rve-size", 1: "rve-size", 2: "size-biaxial", 3: "element", 4: "specimen",
-              5: "speedup"}
-    return [line for n, line in enumerate(lines) if wanted[n] in parts]
+    return [line for part, line in lines if part in parts]
 
 
 def _dq_verdict(r: dict[str, Any]) -> bool | str:

@@ -16,7 +16,7 @@ import numpy as np
 import pandas as pd
 from granular_material_pore_fractal.postprocess import analyse_rve
 
-from granular_material.dem import DEMBatch, load_rve, save_rve
+from granular_material.dem import DEMBatch, load_rve, save_rve, void_ratio
 from granular_material.procedures import biaxial_test, prepare_packing, progress_bar
 from granular_material.results import write_csv
 from granular_material.results.peaks import find_peak
@@ -69,7 +69,7 @@ def size_spectra(scale: ReproductionScale, folder: Path, device: str,
                       unit="size") as bar:
         for discs in scale.sizes:
             data = load_rve(packings(scale, discs, folder, device))
-            void = DEMBatch(data, device=device).homogenize().void_ratio
+            void = void_ratio(data.radius, data.cell)
             for b, seed in enumerate(scale.seeds):
                 image, spectrum = analyse_rve(data, b)
                 spectra.append(pd.DataFrame({"discs": discs, "seed": seed, "q": spectrum.q,

@@ -24,6 +24,7 @@ import pandas as pd
 
 from granular_material.cli.options import Terminated
 from granular_material.dem import load_rve, save_rve
+from granular_material.results import write_csv, write_json
 
 from . import coupling, plots, rve_size, speedup
 from .report import write_report
@@ -88,7 +89,7 @@ def _part_size_biaxial(scale: ReproductionScale, folder: Path, device: str,
                        progress: bool, root: Path) -> dict[str, Any]:
     curves = rve_size.size_tests(scale, root / "rve-size", device, progress)
     responses = rve_size.size_responses(curves)
-    responses.to_csv(folder / "responses.csv", index=False)
+    write_csv(responses, folder / "responses.csv")
     stats = responses.groupby("discs").agg(
         peak_mean=("peak_stress_ratio", "mean"), peak_std=("peak_stress_ratio", "std"),
         final_mean=("final_stress_ratio", "mean"), final_std=("final_stress_ratio", "std"),
@@ -101,9 +102,14 @@ def _part_size_biaxial(scale: ReproductionScale, folder: Path, device: str,
     return {"per_size": stats.to_dict("records"), "agreement": agreement}
 
 
-def _rve_file(scale: ReproductionScale, root: Path, discs: int, device: str) -> Path:
-    """The RVE-size part's packings of ``discs`` discs (one of its sizes)."""
-    return rve_size.packings(scale, discs, root / "rve-size", device)
+def _first_rve(scale: ReproductionScale, root: Path, discs: int, device: str,
+               path: Path) -> Path:
+    """The first seed's packing of ``discs`` discs (of the RVE-size part) alone, as the RVE
+    file ``path``; written once."""
+    if not path.exists():
+        packed = rve_size.packings(scale, discs, root / "rve-size", device)
+        save_rve(path, load_rve(packed).take([0]))
+    return path
 
 
 def _fem_status(code: int, summary: dict[str, Any], what: str) -> str | None:
@@ -121,9 +127,7 @@ def _fem_status(code: int, summary: dict[str, Any], what: str) -> str | None:
 
 def _part_element(scale: ReproductionScale, folder: Path, device: str, progress: bool,
                   root: Path) -> dict[str, Any]:
-    rve = folder / "rve.npz"
-    if not rve.exists():
-        save_rve(rve, load_rve(_rve_file(scale, root, scale.element_discs, device)).take([0]))
+    rve = _first_rve(scale, root, scale.element_discs, device, folder / "rve.npz")
     code = coupling.run_element(scale, rve, folder, device)
     steps, summary = coupling.read_run(folder / "run")
     error = _fem_status(code, summary, "single-element")
@@ -165,9 +169,9 @@ def _part_specimen(scale: ReproductionScale, folder: Path, device: str, progress
     last = int(tracked["step"].max())
     chosen = coupling.choose_points(points, last)
     histories = coupling.point_histories(points, tracked, chosen)
-    histories.to_csv(folder / "chosen_rves.csv", index=False)
+    write_csv(histories, folder / "chosen_rves.csv")
     fits = coupling.fractal_fits(histories)
-    fits.to_csv(folder / "fits.csv", index=False)
+    write_csv(fits, folder / "fits.csv")
     differ = {index: {"inside_vs_outside": coupling.slopes_differ(fits, index, "inside",
                                                                   "outside"),
                       "inside_vs_edge": coupling.slopes_differ(fits, index, "inside", "edge")}
@@ -204,12 +208,10 @@ def _part_speedup(scale: ReproductionScale, folder: Path, device: str, progress:
         table = pd.read_csv(table_path)
     else:
         table = speedup.speedup_table(scale, files, device, progress)
-        table.to_csv(table_path, index=False)
+        write_csv(table, table_path)  # a cache: whole or not at all
     yade_discs = 400 if 400 in scale.sizes else max(scale.speedup_sizes)
-    yade_file = rve_size.packings(scale, yade_discs, root / "rve-size", device)
-    one = yade_file.parent / f"discs{yade_discs}_seed{scale.seeds[0]}.npz"
-    if not one.exists():
-        save_rve(one, load_rve(yade_file).take([0]))
+    one = _first_rve(scale, root, yade_discs, device,
+                     root / "rve-size" / "rves" / f"discs{yade_discs}_seed{scale.seeds[0]}.npz")
     yade = speedup.yade_rate(one, scale.yade_steps)
     plots.plot_speedup(table, folder / "fig11_speedup.png")
     best = table.loc[table["speed_up"].idxmax()]
@@ -251,29 +253,28 @@ def run_reproduction(scale: str | ReproductionScale, out: str | Path, device: st
         if name in redo:
             for file in (done, *(folder / f for f in _REDO_REMOVES.get(name, ()))):
                 file.unlink(missing_ok=True)
-        carried: dict[str, Any] = {}
-        if done.exists() and json.loads(done.read_text()).get("version") != RESULT_VERSION:
+        previous = json.loads(done.read_text()) if done.exists() else None
+        computed_wall_s = None
+        if previous is not None and previous.get("version") != RESULT_VERSION:
             log(f"{name} ({figures}): done by an older version of this code, redone from "
                 "its cached runs")
-            old = json.loads(done.read_text())
-            carried["computed_wall_s"] = old.get("computed_wall_s", old.get("part_wall_s"))
-            done.unlink()
-        if done.exists():
+            computed_wall_s = previous.get("computed_wall_s", previous.get("part_wall_s"))
+            previous = None
+        if previous is not None:
             log(f"{name} ({figures}): done before, skipped")
+            results[name] = previous
         else:
             folder.mkdir(parents=True, exist_ok=True)
             log(f"{name} ({figures}): running")
             started = time.perf_counter()
             result = _RUNNERS[name](study, folder, device, progress, root)
             result["part_wall_s"] = time.perf_counter() - started
-            result["computed_wall_s"] = carried.get("computed_wall_s") or result["part_wall_s"]
+            result["computed_wall_s"] = computed_wall_s or result["part_wall_s"]
             result["device"] = device
             result["version"] = RESULT_VERSION
-            text = json.dumps(_json_ready(result), indent=1)
-            done.with_suffix(".part").write_text(text)
-            done.with_suffix(".part").replace(done)  # the part's commit point
+            write_json(_json_ready(result), done, indent=1)  # the part's commit point
             log(f"{name}: done in {result['part_wall_s']:.0f} s")
-        results[name] = json.loads(done.read_text())
+            results[name] = json.loads(done.read_text())  # as a later run reads it
     write_report(study, results, root)
     return results
 
