@@ -1,7 +1,9 @@
-"""Helpers shared by the tests that stop and resume FEM runs."""
+"""Helpers shared by the FEM tests: test materials' committed strain, a stop at a load
+step, tables without their clock times."""
 
 from __future__ import annotations
 
+import numpy as np
 import pandas as pd
 
 #: columns that hold clock times, which differ between equal runs
@@ -22,3 +24,32 @@ class StopAtStep:
     def __call__(self, solver, record, points) -> None:
         if record.step == self.step:
             raise KeyboardInterrupt
+
+
+class CommittedStrain:
+    """The state of a test material whose response depends on its committed total strain
+    alone (n, 2, 2): allocate, commit, revert, checkpoint and restore. A subclass's
+    ``evaluate`` reads ``self.strain`` and sets ``self.trial``."""
+
+    def __init__(self) -> None:
+        self.strain = np.zeros((0, 2, 2))
+        self.trial: np.ndarray | None = None
+
+    @property
+    def n_points(self) -> int:
+        return int(self.strain.shape[0])
+
+    def allocate(self, n_points: int) -> None:
+        self.strain = np.zeros((n_points, 2, 2))
+
+    def commit(self) -> None:
+        self.strain = self.trial
+
+    def revert(self) -> None:
+        self.trial = None
+
+    def checkpoint(self, path) -> None:
+        np.save(path, self.strain)
+
+    def restore(self, path) -> None:
+        self.strain = np.load(path)

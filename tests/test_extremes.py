@@ -14,6 +14,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from run_helpers import CommittedStrain
 from skfem import Basis, ElementQuad1, ElementVector, FacetBasis, LinearForm, MeshQuad
 
 from granular_material.dem import (
@@ -478,7 +479,7 @@ def test_float32_packing_too_soft_for_its_cell_is_refused_before_work(no_work: N
 
 
 # -- Newton on a softening material ------------------------------------------------------------
-class SofteningElastic:
+class SofteningElastic(CommittedStrain):
     """σ = σ0·I + K·tr ε·I + 2G·exp(−γ/γ0)·e (e = dev ε, γ = |e|): the deviatoric stress
     peaks at γ = γ0 and then falls; the exact tangent (negative past the peak) is returned.
 
@@ -488,15 +489,7 @@ class SofteningElastic:
                  initial_stress: float = 0.0) -> None:
         self.bulk, self.shear, self.gamma0, self.initial_stress = (bulk, shear, gamma0,
                                                                    initial_stress)
-        self.strain = np.zeros((0, 2, 2))
-        self.trial: np.ndarray | None = None
-
-    @property
-    def n_points(self) -> int:
-        return int(self.strain.shape[0])
-
-    def allocate(self, n_points: int) -> None:
-        self.strain = np.zeros((n_points, 2, 2))
+        super().__init__()
 
     def evaluate(self, grad_u: np.ndarray) -> MaterialResponse:
         eye = np.eye(2)
@@ -517,18 +510,6 @@ class SofteningElastic:
                        projector[None] - (gamma / self.gamma0)[:, None, None, None, None]
                        * np.einsum("nij,nkl->nijkl", unit, unit)))
         return MaterialResponse(stress, tangent, np.zeros(self.n_points, dtype=np.int8))
-
-    def commit(self) -> None:
-        self.strain = self.trial
-
-    def revert(self) -> None:
-        self.trial = None
-
-    def checkpoint(self, path) -> None:
-        np.save(path, self.strain)
-
-    def restore(self, path) -> None:
-        self.strain = np.load(path)
 
     def platen_stress(self, axial_strain: float, confining: float) -> float:
         """Closed form [Pa, compression +] of the homogeneous drained biaxial element: with

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 import pytest
+from run_helpers import CommittedStrain
 from skfem import Basis, ElementQuad1, ElementVector, FacetBasis, LinearForm, MeshQuad
 
 from granular_material.fem import (
@@ -69,7 +70,7 @@ def test_single_element_plane_strain_uniaxial_analytic():
     assert (result.steps["iterations"].iloc[1:] == 1).all()  # a linear law: the predictor
 
 
-class StiffeningElastic:
+class StiffeningElastic(CommittedStrain):
     """σ = (1 + ε:ε/ε0²) C:ε with a tangent frozen at the committed state.
 
     Written for the cut-back test: the frozen (too soft) tangent makes Newton's iteration a
@@ -81,15 +82,7 @@ class StiffeningElastic:
         lam, mu = young * poisson / ((1 + poisson) * (1 - 2 * poisson)), young / (2 + 2 * poisson)
         self.c = isotropic_tangent(lam, mu)
         self.eps0 = eps0
-        self.strain = np.zeros((0, 2, 2))
-        self.trial = None
-
-    @property
-    def n_points(self) -> int:
-        return self.strain.shape[0]
-
-    def allocate(self, n_points: int) -> None:
-        self.strain = np.zeros((n_points, 2, 2))
+        super().__init__()
 
     def _factor(self, strain):
         return 1.0 + np.einsum("nij,nij->n", strain, strain) / self.eps0**2
@@ -100,18 +93,6 @@ class StiffeningElastic:
         stress = self._factor(strain)[:, None, None] * np.einsum("ijkl,nkl->nij", self.c, strain)
         tangent = self._factor(self.strain)[:, None, None, None, None] * self.c
         return MaterialResponse(stress, tangent, np.zeros(self.n_points, dtype=np.int8))
-
-    def commit(self) -> None:
-        self.strain = self.trial
-
-    def revert(self) -> None:
-        self.trial = None
-
-    def checkpoint(self, path) -> None:
-        np.save(path, self.strain)
-
-    def restore(self, path) -> None:
-        self.strain = np.load(path)
 
 
 @LinearForm
