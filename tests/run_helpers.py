@@ -1,10 +1,13 @@
-"""Helpers shared by the FEM tests: test materials' committed strain, a stop at a load
-step, tables without their clock times."""
+"""Helpers shared by the FEM tests: test materials' committed strain, a unit element loaded
+on top, a stop at a load step, tables without their clock times."""
 
 from __future__ import annotations
 
 import numpy as np
 import pandas as pd
+from skfem import Basis, ElementQuad1, ElementVector, FacetBasis, LinearForm, MeshQuad
+
+from granular_material.fem import Loading
 
 #: columns that hold clock times, which differ between equal runs
 CLOCK = ("wall_time", "seconds")
@@ -53,3 +56,21 @@ class CommittedStrain:
 
     def restore(self, path) -> None:
         self.strain = np.load(path)
+
+
+@LinearForm
+def _pressure(v, w):
+    return -w.q * (w.n[0] * v[0] + w.n[1] * v[1])
+
+
+def top_loaded_element(q: float) -> tuple[Basis, Loading]:
+    """One unit Q4 on rollers at the bottom (one node pinned), pressure q [Pa] on top: its
+    basis and loading."""
+    mesh = MeshQuad()
+    basis = Basis(mesh, ElementVector(ElementQuad1()), intorder=2)
+    bottom = np.flatnonzero(mesh.p[1] == 0)
+    dofs = np.concatenate([basis.nodal_dofs[1, bottom], basis.nodal_dofs[0, bottom[:1]]])
+    top = FacetBasis(mesh, basis.elem, facets=mesh.facets_satisfying(lambda x: x[1] == 1),
+                     intorder=2)
+    force = _pressure.assemble(top, q=q)
+    return basis, Loading(dofs, np.zeros(dofs.size), np.zeros(basis.N), force)

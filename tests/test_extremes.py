@@ -14,8 +14,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from run_helpers import CommittedStrain
-from skfem import Basis, ElementQuad1, ElementVector, FacetBasis, LinearForm, MeshQuad
+from run_helpers import CommittedStrain, top_loaded_element
 
 from granular_material.dem import (
     DEMBatch,
@@ -28,7 +27,6 @@ from granular_material.dem import (
 from granular_material.dem.model import FLOAT32_MAX_RESOLUTION
 from granular_material.fem import (
     BiaxialSetup,
-    Loading,
     MaterialResponse,
     NewtonError,
     NewtonSettings,
@@ -543,11 +541,6 @@ def test_newton_follows_a_softening_material_past_its_peak() -> None:
     assert 0 < peak < len(platen) - 1 and np.all(np.diff(platen[peak:]) < 0)
 
 
-@LinearForm
-def _pressure(v, w):
-    return -w.q * (w.n[0] * v[0] + w.n[1] * v[1])
-
-
 # at the limit point an iterate's tangent is singular (scipy warns); Newton then diverges
 @pytest.mark.filterwarnings("ignore::scipy.sparse.linalg.MatrixRankWarning")
 def test_newton_under_load_past_the_limit_stops_with_a_named_step() -> None:
@@ -555,15 +548,8 @@ def test_newton_under_load_past_the_limit_stops_with_a_named_step() -> None:
     q* = 2G·d*·e⁻¹ (d* = √2 γ0): no equilibrium exists past q*, so Newton raises NewtonError
     naming the step, and the committed state stays below q*, finite."""
     material = SofteningElastic()
-    mesh = MeshQuad()
-    basis = Basis(mesh, ElementVector(ElementQuad1()), intorder=2)
-    bottom = np.flatnonzero(mesh.p[1] == 0)
-    dofs = np.concatenate([basis.nodal_dofs[1, bottom], basis.nodal_dofs[0, bottom[:1]]])
-    top = FacetBasis(mesh, basis.elem, facets=mesh.facets_satisfying(lambda x: x[1] == 1),
-                     intorder=2)
     limit = 2 * material.shear * math.sqrt(2) * material.gamma0 / math.e
-    loading = Loading(dofs, np.zeros(dofs.size), np.zeros(basis.N),
-                      _pressure.assemble(top, q=1.5 * limit))
+    basis, loading = top_loaded_element(1.5 * limit)
     solver = NewtonSolver(basis, material, loading, NewtonSettings(rtol=1e-8, max_cutbacks=4))
     with pytest.raises(NewtonError, match=r"load step \d+ .* did not converge"):
         solver.run(10)

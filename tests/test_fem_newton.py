@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 import pytest
-from run_helpers import CommittedStrain
-from skfem import Basis, ElementQuad1, ElementVector, FacetBasis, LinearForm, MeshQuad
+from run_helpers import CommittedStrain, top_loaded_element
+from skfem import Basis, ElementQuad1, ElementVector, MeshQuad
 
 from granular_material.fem import (
     BiaxialSetup,
@@ -95,28 +95,11 @@ class StiffeningElastic(CommittedStrain):
         return MaterialResponse(stress, tangent, np.zeros(self.n_points, dtype=np.int8))
 
 
-@LinearForm
-def _pressure(v, w):
-    return -w.q * (w.n[0] * v[0] + w.n[1] * v[1])
-
-
-def _top_loaded_element(q: float):
-    """One unit Q4 on rollers at the bottom (one node pinned), pressure q [Pa] on top."""
-    mesh = MeshQuad()
-    basis = Basis(mesh, ElementVector(ElementQuad1()), intorder=2)
-    bottom = np.flatnonzero(mesh.p[1] == 0)
-    dofs = np.concatenate([basis.nodal_dofs[1, bottom], basis.nodal_dofs[0, bottom[:1]]])
-    top = FacetBasis(mesh, basis.elem, facets=mesh.facets_satisfying(lambda x: x[1] == 1),
-                     intorder=2)
-    force = _pressure.assemble(top, q=q)
-    return basis, Loading(dofs, np.zeros(dofs.size), np.zeros(basis.N), force)
-
-
 def test_diverging_step_is_cut_back_and_recovers():
     # q = 20 kPa on E = 10 MPa: the final stiffening factor is about 1.4 (ε ≈ 1.3e-3 vs
     # ε0 = 2e-3), enough for one increment to diverge and for 32 increments not to
     settings = NewtonSettings(rtol=1e-6, max_iterations=40, max_cutbacks=8)
-    basis, loading = _top_loaded_element(q=20e3)
+    basis, loading = top_loaded_element(q=20e3)
     big = NewtonSolver(basis, StiffeningElastic(), loading, settings)
     record = big.step(1.0, step=1)
     assert record.cutbacks >= 1
@@ -135,7 +118,7 @@ def test_diverging_step_is_cut_back_and_recovers():
 
 def test_cut_back_limit_names_the_step_and_keeps_committed_state():
     settings = NewtonSettings(rtol=1e-6, max_iterations=40, max_cutbacks=0)
-    basis, loading = _top_loaded_element(q=20e3)
+    basis, loading = top_loaded_element(q=20e3)
     material = StiffeningElastic()
     solver = NewtonSolver(basis, material, loading, settings)
     solver.step(0.05, step=1)  # a small first step converges
