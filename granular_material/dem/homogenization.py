@@ -14,7 +14,8 @@ from granular_material.dem.kernels import KernelSet, kernels_for, launch
 from granular_material.dem.model import Model
 from granular_material.dem.state import State
 
-__all__ = ["Homogenized", "MeasureBuffers", "homogenize", "void_ratio"]
+__all__ = ["Homogenized", "MeasureBuffers", "homogenize", "objective_tangent",
+           "spin_tangent", "symmetric_part", "void_ratio"]
 
 
 @dataclass(frozen=True)
@@ -75,6 +76,33 @@ def void_ratio(radius: np.ndarray, cell: np.ndarray) -> np.ndarray:
     """2D void ratio of discs ``radius`` (B, N) [m] in cells ``cell`` (B, 2, 2) [m]."""
     solid = np.pi * np.sum(np.asarray(radius) ** 2, axis=1)
     return np.linalg.det(cell) / solid - 1.0
+
+
+def symmetric_part(tangent: np.ndarray) -> np.ndarray:
+    """C_(ij)(kl): ``tangent`` (B, 2, 2, 2, 2) averaged over i↔j and k↔l (minor symmetries;
+    of the Kruyt–Rothenburg tangent this is Guo & Zhao's
+    Σ_c [kn (n⊗d)ˢ⊗(n⊗d)ˢ + kt (t⊗d)ˢ⊗(t⊗d)ˢ]/V, which has the major symmetry too)."""
+    c = np.asarray(tangent, dtype=np.float64)
+    return 0.25 * (c + c.swapaxes(1, 2) + c.swapaxes(3, 4) + c.swapaxes(1, 2).swapaxes(3, 4))
+
+
+def spin_tangent(stress: np.ndarray) -> np.ndarray:
+    """∂(Wσ − σW)_ij/∂(∂u_k/∂x_l) [Pa], W = skew ∇u, of symmetric stresses ``stress``
+    (B, 2, 2): how a small rigid spin rotates σ; shape (B, 2, 2, 2, 2)."""
+    s = np.asarray(stress, dtype=np.float64)
+    eye = np.eye(2)
+    return 0.5 * (np.einsum("ik,blj->bijkl", eye, s) - np.einsum("il,bkj->bijkl", eye, s)
+                  - np.einsum("bik,jl->bijkl", s, eye) + np.einsum("bil,jk->bijkl", s, eye))
+
+
+def objective_tangent(tangent: np.ndarray, stress: np.ndarray) -> np.ndarray:
+    """The objective tangent [Pa], (B, 2, 2, 2, 2): the symmetric part of ``tangent``
+    (:func:`symmetric_part`, applied to the strain ε = sym ∇u) plus the rotation of the
+    symmetric ``stress`` by the spin (:func:`spin_tangent`). A spin W then gives
+    Wσ − σW, as an objective RVE does, where the Kruyt–Rothenburg tangent sends it through
+    its kt term (about 1000× too stiff). The lever arms' stretch and the volume change
+    (terms of order σ·ε) are left out, as Kruyt–Rothenburg leaves them out."""
+    return symmetric_part(tangent) + spin_tangent(stress)
 
 
 class MeasureBuffers:

@@ -18,6 +18,7 @@ from typing import Protocol
 import numpy as np
 
 from granular_material.dem import DEMBatch, DEMInstabilityError, Homogenized, RVEData, save_rve
+from granular_material.dem.homogenization import objective_tangent
 from granular_material.procedures import (
     drive_grad_u,
     has_real_logarithm,
@@ -36,7 +37,10 @@ __all__ = [
     "check_reuse",
 ]
 
-TANGENTS = ("kruyt-rothenburg", "perturbation")
+#: the RVEs' tangents: the objective one (symmetric Kruyt–Rothenburg plus the stress's spin,
+#: see granular_material.dem.homogenization.objective_tangent), Kruyt–Rothenburg as Wu et al.
+#: publish it, or forward differences of the RVE's own response
+TANGENTS = ("objective", "kruyt-rothenburg", "perturbation")
 #: how an RVE that must move is driven to a new trial ∇u: from the committed state along the
 #: whole path of the step (``restart``, Guo & Zhao), or from its last trial state by the change
 DRIVES = ("restart", "continue")
@@ -155,8 +159,11 @@ class InProcessBackend:
         batch: the RVEs, in their committed state.
         max_strain_per_step: largest strain component per DEM step (Guo & Zhao: 1e-5).
         min_steps: fewest DEM steps per evaluation.
-        tangent: "kruyt-rothenburg" (the contact-network estimate, one DEM run per
-            evaluation) or "perturbation" (the derivative of the RVE's own response to ∇u by
+        tangent: "objective" (the symmetric Kruyt–Rothenburg estimate plus the stress's
+            spin, one DEM run per evaluation: see
+            :func:`~granular_material.dem.homogenization.objective_tangent`),
+            "kruyt-rothenburg" (the contact-network estimate as Wu et al. publish it) or
+            "perturbation" (the derivative of the RVE's own response to ∇u by
             forward differences: four more runs from the committed state, with ∇u + h E_kl,
             h = max(perturbation · max|∇u|, min_perturbation) per RVE).
         perturbation: relative size of the perturbation [-].
@@ -173,7 +180,7 @@ class InProcessBackend:
     """
 
     def __init__(self, batch: DEMBatch, max_strain_per_step: float = 1.0e-5,
-                 min_steps: int = 2, tangent: str = "kruyt-rothenburg",
+                 min_steps: int = 2, tangent: str = "objective",
                  perturbation: float = 0.1, min_perturbation: float = 1.0e-4,
                  reuse_tol: float = 0.0, reuse_correction: str = "none",
                  drive: str = "restart", max_steps: int | None = None) -> None:
@@ -320,14 +327,18 @@ class InProcessBackend:
 
     def _response(self, current: Homogenized, target: np.ndarray) -> Homogenized:
         """What the RVEs answer for ``target``: their current response, reused RVEs'
-        corrected to first order when asked (σ + D : Δ∇u)."""
-        if self.reuse_correction != "tangent":
-            return current
-        change = target - self._reached
-        if not change.any():
-            return current
-        stress = current.stress + np.einsum("bijkl,bkl->bij", current.tangent, change)
-        return replace(current, stress=stress)
+        corrected to first order when asked (σ + D : Δ∇u), with the objective tangent
+        where it is chosen."""
+        if self.reuse_correction == "tangent":
+            change = target - self._reached
+            if change.any():
+                stress = current.stress + np.einsum("bijkl,bkl->bij", current.tangent, change)
+                current = replace(current, stress=stress)
+        if self.tangent == "objective":
+            stress = np.asarray(current.stress, dtype=np.float64)
+            symmetric = 0.5 * (stress + np.swapaxes(stress, 1, 2))
+            current = replace(current, tangent=objective_tangent(current.tangent, symmetric))
+        return current
 
     def commit(self) -> None:
         """Snapshot the state of the last successful evaluate as the committed state; the

@@ -3,8 +3,15 @@
 The material is driven by the displacement gradient since its last commit (the
 strain-driven protocol of Guo & Zhao 2014): every RVE is restored to its committed state,
 deformed by ∇u over n = max(⌈max|∇u| / 1e-5⌉, 2) DEM steps, and homogenised into the Love
-stress σ = (1/V) Σ_c f^c ⊗ d^c and the Kruyt–Rothenburg tangent
-D = (1/V) Σ_c (k_n n⊗d⊗n⊗d + k_t t⊗d⊗t⊗d) (Wu, Fu & Zhou 2025, eqs. 5–6).
+stress σ = (1/V) Σ_c f^c ⊗ d^c, symmetrised (its antisymmetric part, the RVE's imbalance of
+moments, is reported as the field ``stress_skew``), and a tangent: by default the objective
+one, the Kruyt–Rothenburg D = (1/V) Σ_c (k_n n⊗d⊗n⊗d + k_t t⊗d⊗t⊗d) (Wu, Fu & Zhou 2025,
+eqs. 5–6) applied to sym ∇u plus the stress's rotation by the spin.
+
+∇u is the displacement gradient since the last commit, measured on the configuration the
+RVE was committed in (the FEM's updated-Lagrangian formulation hands over exactly that; see
+:mod:`granular_material.fem.kinematics`); the stress is the Cauchy stress of the deformed
+RVE, the tangent D_ijkl = ∂σ_ij/∂(∂u_k/∂x_l) on that configuration.
 """
 
 from __future__ import annotations
@@ -42,7 +49,7 @@ class DEMMaterial:
                  pressure: float = 100.0e3, replicate: bool = False,
                  device: str | None = None, max_strain_per_step: float = 1.0e-5,
                  min_steps: int = 2, shards: int | None = None,
-                 progress: bool = False, tangent: str = "kruyt-rothenburg",
+                 progress: bool = False, tangent: str = "objective",
                  perturbation: float = 0.1, reuse_tol: float = 0.0,
                  reuse_correction: str = "none", drive: str = "restart",
                  max_dem_steps: int | None = None, backend: str = "inprocess",
@@ -147,11 +154,13 @@ class DEMMaterial:
         return batch.to_data()
 
     def evaluate(self, grad_u: np.ndarray) -> MaterialResponse:
-        """Love stress and Kruyt–Rothenburg tangent for ∇u (n, 2, 2) since the commit.
+        """Symmetrised Love stress and the tangent for ∇u (n, 2, 2) since the commit.
 
         ``dem_steps`` is the number of DEM steps run, ``rve_evaluations`` the RVE paths and
-        ``particle_steps`` the disc-steps; ``fields`` holds ``void_ratio`` and
-        ``coordination``. RVEs that blew up are reported with ``PointStatus.FAILED``.
+        ``particle_steps`` the disc-steps; ``fields`` holds ``void_ratio``,
+        ``coordination`` and ``stress_skew`` (σxy − σyx of the Love sum over 2 [Pa], what
+        the symmetrisation removed). RVEs that blew up are reported with
+        ``PointStatus.FAILED``.
         """
         if self.backend is None:
             raise RuntimeError("allocate() the DEM material before evaluate()")
@@ -165,11 +174,13 @@ class DEMMaterial:
         def f64(values: np.ndarray) -> np.ndarray:
             return np.asarray(values, dtype=np.float64)
 
+        love = f64(h.stress)
         return MaterialResponse(
-            stress=f64(h.stress), tangent=f64(h.tangent), status=status,
-            dem_steps=ev.dem_steps, rve_evaluations=ev.rve_evaluations,
+            stress=0.5 * (love + np.swapaxes(love, 1, 2)), tangent=f64(h.tangent),
+            status=status, dem_steps=ev.dem_steps, rve_evaluations=ev.rve_evaluations,
             particle_steps=ev.particle_steps,
-            fields={"void_ratio": f64(h.void_ratio), "coordination": f64(h.coordination)},
+            fields={"void_ratio": f64(h.void_ratio), "coordination": f64(h.coordination),
+                    "stress_skew": 0.5 * (love[:, 0, 1] - love[:, 1, 0])},
         )
 
     def commit(self) -> None:

@@ -36,7 +36,9 @@ class DEMMaterialParameters:
             the engine's default (one per core; with ``mpi`` the cores of a node shared by
             its ranks). With 1, independent RVEs are also prepared one at a time (RVE p from
             the random gas of seed + p, consolidated on its own).
-        tangent: "kruyt-rothenburg" (Wu et al. eq. 6) or "perturbation" (forward
+        tangent: "objective" (default: Kruyt–Rothenburg applied to the strain, sym ∇u,
+            plus the stress's rotation by the spin, so that a rigid rotation costs
+            nothing), "kruyt-rothenburg" (Wu et al. eq. 6 as published) or "perturbation" (forward
             differences of the RVE response, four extra DEM runs per evaluation; see
             :class:`~granular_material_skfem.backend.InProcessBackend`).
         perturbation: relative perturbation of ∇u for the "perturbation" tangent [-].
@@ -66,7 +68,7 @@ class DEMMaterialParameters:
     max_strain_per_step: float = 1.0e-5
     min_steps: int = 2
     shards: int | None = None
-    tangent: str = "kruyt-rothenburg"
+    tangent: str = "objective"
     perturbation: float = 0.1
     reuse_tol: float = 0.0
     reuse_correction: str = "none"
