@@ -22,9 +22,27 @@ def _example():
     return module
 
 
+def test_single_element_finite_strain_linear_elastic(capsys):
+    """The default (updated-Lagrangian) formulation: σxx held at −p on the current sides;
+    each step strains the element by its platen displacement over the current height, so
+    σyy = −p − E/(1−ν²) Σ_k h/(H − k·h) for the hypoelastic linear law."""
+    code = main(["single-element", "--material", "linear-elastic", "--E", "50e6", "--nu",
+                 "0.25", "--axial-strain", "0.01", "--steps", "4", "--confining", "100e3",
+                 "--json", "--no-progress"])
+    assert code == 0
+    out = json.loads(capsys.readouterr().out)
+    h = 0.0025
+    strain = sum(h / (1.0 - k * h) for k in range(4))
+    # within the Newton tolerance (rtol 0.005 of the step's residual)
+    assert out["syy"] == pytest.approx(-100e3 - 50e6 / (1 - 0.25**2) * strain, rel=1e-4)
+    assert out["sxx"] == pytest.approx(-100e3, rel=1e-4)
+    assert out["syy"] != pytest.approx(-100e3 - 50e6 / (1 - 0.25**2) * 0.01, rel=1e-4)
+
+
 def test_single_element_linear_elastic_json(tmp_path, capsys):
     code = main(["single-element", "--material", "linear-elastic", "--E", "50e6", "--nu",
                  "0.25", "--axial-strain", "0.01", "--steps", "4", "--confining", "100e3",
+                 "--formulation", "small-strain",
                  "--out", str(tmp_path), "--json", "--no-progress"])
     assert code == 0
     out = json.loads(capsys.readouterr().out)

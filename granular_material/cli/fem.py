@@ -51,6 +51,7 @@ from granular_material.fem import (
     load_material,
     run_biaxial,
 )
+from granular_material.fem.kinematics import FORMULATIONS
 from granular_material.fem.presets import load_presets
 from granular_material.results import (
     BiaxialWriter,
@@ -69,6 +70,9 @@ __all__ = ["register", "run_biaxial_command", "run_single_element"]
 
 #: the Newton settings of the commands (fem.default_settings), shown as the option defaults
 _NEWTON = default_settings("dem")
+#: the RVEs' tangents the commands offer, and their default
+TANGENTS = ("objective", "kruyt-rothenburg", "perturbation")
+DEFAULT_TANGENT = "objective"
 #: the DEM material's default strain per DEM step [-]
 DEFAULT_STRAIN_PER_STEP = 1e-5
 #: single-element's default discs per prepared RVE
@@ -84,8 +88,9 @@ FULL_SCALE = ((10, 15), 400)
 def _newton_arguments(parser: argparse.ArgumentParser) -> None:
     g = parser.add_argument_group("Newton solver")
     g.add_argument("--rtol", type=float, default=_NEWTON.rtol,
-                   help="relative residual tolerance ||R||/||R0|| "
-                        f"(default {_NEWTON.rtol:g}, Wu et al.)")
+                   help="relative tolerance of the --convergence test: ||du||/||Du|| "
+                        f"(default {_NEWTON.rtol:g}, Guo & Zhao) or ||R||/||R0|| (Wu et al. "
+                        "use 0.005)")
     g.add_argument("--stress-tol", type=float, default=None,
                    help="absolute tolerance as a stress error [Pa] at the Gauss points, for "
                         "DEM noise (default 0.005 x confining for dem, 0 for linear-elastic)")
@@ -102,10 +107,20 @@ def _newton_arguments(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--predictor", choices=("tangent", "extrapolate"), default=_NEWTON.predictor,
                    help="first guess of a step: committed-tangent solve or the last increment "
                         f"scaled (default {_NEWTON.predictor})")
-    g.add_argument("--tangent", choices=("kruyt-rothenburg", "perturbation"),
-                   default="kruyt-rothenburg",
-                   help="dem: tangent of the RVEs: Kruyt-Rothenburg (Wu et al. eq. 6, default) "
-                        "or forward differences of each RVE's response (4 more DEM runs per "
+    g.add_argument("--formulation", choices=FORMULATIONS, default=_NEWTON.formulation,
+                   help="kinematics: updated-lagrangian (finite strain as Guo & Zhao: "
+                        "equilibrium on the current configuration, RVEs driven by grad du on "
+                        "the committed one, the confining pressure on the current sides; "
+                        f"default {_NEWTON.formulation}) or small-strain")
+    g.add_argument("--accept-correction", type=float, default=None, metavar="RATIO",
+                   help="accept an increment whose residual has stalled once the Newton "
+                        "correction ||du||/||Du|| is at most this (Guo & Zhao's test; default "
+                        "1e-2 for dem, off for linear-elastic; 0: off)")
+    g.add_argument("--tangent", choices=TANGENTS, default=DEFAULT_TANGENT,
+                   help="dem: tangent of the RVEs: objective (Kruyt-Rothenburg on sym grad u "
+                        "plus the stress's spin, symmetric: a rigid rotation costs nothing; "
+                        "default), kruyt-rothenburg (Wu et al. eq. 6 as published) or forward "
+                        "differences of each RVE's response (perturbation: 4 more DEM runs per "
                         "iteration)")
     g.add_argument("--perturbation", type=float, default=0.1,
                    help="dem, --tangent perturbation: perturbation of grad u relative to its "
@@ -330,7 +345,8 @@ def _settings(args: argparse.Namespace, material: str) -> NewtonSettings:
                             predictor=args.predictor, relaxation=args.relaxation,
                             tangent_update=args.tangent_update,
                             secant_min_change=args.secant_min_change,
-                            convergence=args.convergence)
+                            convergence=args.convergence, formulation=args.formulation,
+                            accept_correction=args.accept_correction)
 
 
 def _stress_tol(args: argparse.Namespace, material: str) -> float:
@@ -348,7 +364,8 @@ _RESUME_FREE = frozenset({"resume", "out", "progress", "json", "checkpoint_every
 
 #: options added after checkpoints were first written, with the value older runs had (the
 #: RVE material options: RVE_MATERIAL_DEFAULTS)
-_ADDED_OPTIONS = {"element": "quad4", "quadrature": None, "convergence": "force"}
+_ADDED_OPTIONS = {"element": "quad4", "quadrature": None, "convergence": "force",
+                  "formulation": "small-strain", "accept_correction": 0.0}
 
 
 def _run_options(args: argparse.Namespace) -> dict[str, Any]:
@@ -421,6 +438,12 @@ def _checkpointed(args: argparse.Namespace, checkpoint: RunCheckpoint | None,
             raise
 
 
+def _preset_tangent(preset: Any) -> str:
+    """The RVE tangent of a preset: its Kruyt–Rothenburg (the affine estimate the trade
+    study measured, before the objective form existed) is taken in the objective form."""
+    return DEFAULT_TANGENT if preset.tangent == "kruyt-rothenburg" else preset.tangent
+
+
 def _apply_preset(args: argparse.Namespace) -> None:
     """``--preset NAME``: its values for every option it sets that is at its default."""
     if args.preset is None:
@@ -433,8 +456,11 @@ def _apply_preset(args: argparse.Namespace) -> None:
     secant = preset.tangent == "secant"
     values = {  # option: (its default, the preset's value)
         "rtol": (_NEWTON.rtol, preset.rtol),
+        # the presets were measured with the force test and 25 iterations an increment
+        "convergence": (_NEWTON.convergence, "force"),
+        "max_iterations": (_NEWTON.max_iterations, 25),
         "stress_tol": (None, preset.stress_floor * args.confining),
-        "tangent": ("kruyt-rothenburg", "kruyt-rothenburg" if secant else preset.tangent),
+        "tangent": (DEFAULT_TANGENT, DEFAULT_TANGENT if secant else _preset_tangent(preset)),
         "tangent_update": (_NEWTON.tangent_update, "secant" if secant else "none"),
         "predictor": (_NEWTON.predictor, predictor),
         "relaxation": (_NEWTON.relaxation, relaxation),

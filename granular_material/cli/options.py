@@ -151,12 +151,12 @@ def add_element(parser: argparse.ArgumentParser) -> None:
 def add_convergence(group: Any, default: str = "force", rtol: float = 0.005) -> None:
     """``--convergence`` of the FEM commands' Newton solver, in ``group``."""
     group.add_argument("--convergence", choices=("force", "displacement"), default=default,
-                       help="Newton convergence test. force (default): ||R||/||R0|| <= "
-                            "--rtol, or ||R|| below the --stress-tol floor; displacement "
-                            "(Guo & Zhao): ||du||/||Du|| <= --rtol, du the Newton correction "
-                            "of the iteration, Du the increment of the load step so far, L2 "
-                            "norms over the specimen; the material is evaluated once more "
-                            "after the accepted correction (at least 2 evaluations per "
+                       help=f"Newton convergence test (default {default}). force: "
+                            "||R||/||R0|| <= --rtol, or ||R|| below the --stress-tol floor; "
+                            "displacement (Guo & Zhao): ||du||/||Du|| <= --rtol, du the Newton "
+                            "correction of the iteration, Du the increment of the load step so "
+                            "far, L2 norms over the specimen; the material is evaluated once "
+                            "more after the accepted correction (at least 2 evaluations per "
                             "increment) and --stress-tol is not used (Guo & Zhao: --rtol "
                             f"0.01; default --rtol {rtol:g} either way). steps.csv records "
                             "which test accepted each step (converged_by)")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -18,12 +19,18 @@ class Loading:
         dirichlet_end: prescribed displacement at λ = 1 [m], shape (m,); u_D(λ) = λ · end.
         force_start: external nodal forces at λ = 0 [N/m], shape (ndofs,) (e.g. confinement).
         force_end: external nodal forces at λ = 1 [N/m], shape (ndofs,).
+        follower: None, or the nodal forces [N/m] (ndofs,) of the same load acting on the
+            configuration displaced by u [m] (ndofs,) — a pressure on the current sides,
+            for the finite-strain formulation; it needs a load constant in λ
+            (``force_start`` equal to ``force_end``), which it replaces where a displacement
+            is given.
     """
 
     dirichlet_dofs: np.ndarray
     dirichlet_end: np.ndarray
     force_start: np.ndarray
     force_end: np.ndarray
+    follower: Callable[[np.ndarray], np.ndarray] | None = None
 
     def __post_init__(self) -> None:
         if self.dirichlet_dofs.shape != self.dirichlet_end.shape:
@@ -36,8 +43,16 @@ class Loading:
                 f"force_end shape {self.force_end.shape} differs from force_start "
                 f"shape {self.force_start.shape}"
             )
+        if self.follower is not None and not np.array_equal(self.force_start, self.force_end):
+            raise ValueError("a follower load must be constant in the load factor "
+                             "(force_start equal to force_end)")
 
-    def at(self, load_factor: float) -> tuple[np.ndarray, np.ndarray]:
-        """(u_D [m] shape (m,), f_ext [N/m] shape (ndofs,)) at load factor λ."""
+    def at(self, load_factor: float, u: np.ndarray | None = None,
+           ) -> tuple[np.ndarray, np.ndarray]:
+        """(u_D [m] shape (m,), f_ext [N/m] shape (ndofs,)) at load factor λ; with a
+        follower load and a displacement ``u`` [m], f_ext acts on the displaced
+        configuration."""
+        if u is not None and self.follower is not None:
+            return load_factor * self.dirichlet_end, self.follower(u)
         f = (1.0 - load_factor) * self.force_start + load_factor * self.force_end
         return load_factor * self.dirichlet_end, f

@@ -1,4 +1,5 @@
-"""Newton–Raphson load stepping for the small-strain equilibrium problem.
+"""Newton–Raphson load stepping for the equilibrium problem, in small strain or, as Guo &
+Zhao's FEM×DEM code, updated-Lagrangian finite strain (:mod:`granular_material.fem.kinematics`).
 
 Each load step follows Wu, Fu & Zhou (2025) §1.4: (a) the equivalent nodal forces of the
 step, with prescribed displacements moved to the right-hand side by condensation;
@@ -33,6 +34,7 @@ from skfem import Basis, BilinearForm, condense, solve
 
 from granular_material.fem.acceleration import AitkenRelaxation, SecantTangent
 from granular_material.fem.forms import gauss_points_grad, internal_force, stiffness
+from granular_material.fem.kinematics import FORMULATIONS, Kinematics
 from granular_material.fem.loading import Loading
 from granular_material.fem.material import Material, MaterialResponse
 from granular_material.procedures.progress import progress_bar
@@ -85,6 +87,19 @@ class NewtonSettings:
         convergence: "force" (‖R‖/‖R₀‖ ≤ rtol or ‖R‖ ≤ atol, default) or "displacement"
             (Guo & Zhao: ‖δu‖_L2 / ‖Δu‖_L2 ≤ rtol, see the module docstring; atol is not
             used, the stall test, when on, applies to the displacement ratios).
+        formulation: "small-strain" (default here: the textbook problem) or
+            "updated-lagrangian" (finite strain as Guo & Zhao: equilibrium on the current
+            configuration, the material driven by ∇Δu on the committed one, a follower
+            pressure; see :mod:`granular_material.fem.kinematics`).
+        geometric_stiffness: updated-Lagrangian: assemble the initial-stress stiffness
+            with the material tangent (the exact linearisation); Guo & Zhao leave it out.
+        accept_correction: 0 (off) or the largest Newton correction ‖δu‖_L2/‖Δu‖_L2 (Guo
+            & Zhao's test, their 1e-2) with which an increment whose force residual has
+            stalled (no 10 % drop over ``stall_window`` iterations) or has used
+            ``max_iterations`` is accepted instead of cut back: a residual that sits at the
+            DEM stress noise of its RVEs does not fall when the increment is halved (it
+            shrinks R₀, not the noise). Counted in ``StepRecord.stalled``, converged_by
+            "correction".
     """
 
     rtol: float = 0.005
@@ -99,8 +114,17 @@ class NewtonSettings:
     tangent_update: str = "none"
     secant_min_change: float = 1e-4
     convergence: str = "force"
+    formulation: str = "small-strain"
+    geometric_stiffness: bool = True
+    accept_correction: float = 0.0
 
     def __post_init__(self) -> None:
+        if self.formulation not in FORMULATIONS:
+            raise ValueError(f"formulation must be one of {', '.join(FORMULATIONS)}, "
+                             f"got {self.formulation!r}")
+        if not (0 <= self.accept_correction < 1):
+            raise ValueError(f"accept_correction must be 0 (off) or lie in (0, 1), "
+                             f"got {self.accept_correction!r}")
         if self.convergence not in CONVERGENCE_TESTS:
             raise ValueError(f"convergence must be one of {', '.join(CONVERGENCE_TESTS)}, "
                              f"got {self.convergence!r}")
@@ -149,12 +173,16 @@ class StepRecord:
         rve_evaluations: RVE strain paths run, all attempts included.
         particle_steps: DEM disc-steps run, all attempts included.
         cutbacks: how many times an increment of this step was halved.
-        stalled: increments accepted on a stalled residual (``NewtonSettings.stall_rtol``).
+        stalled: increments accepted on a stalled residual (``NewtonSettings.stall_rtol``)
+            or on a small correction once the residual stalled
+            (``NewtonSettings.accept_correction``).
         residual_history: ‖R‖₂ / ‖R₀‖₂ of every iteration, one list per attempt.
         wall_time: seconds spent on the step.
         converged_by: the test that accepted each converged increment of the step:
             "force" (‖R‖/‖R₀‖ ≤ rtol), "force-atol" (‖R‖ ≤ atol, the stress floor),
-            "displacement" (‖δu‖/‖Δu‖ ≤ rtol) or "stall" (a stalled ratio, see stall_rtol).
+            "displacement" (‖δu‖/‖Δu‖ ≤ rtol), "stall" (a stalled ratio, see stall_rtol)
+            or "correction" (a stalled residual with a small correction, see
+            accept_correction).
         correction_history: ‖δu‖_L2 / ‖Δu‖_L2 of every Newton correction, one list per
             attempt (recorded whatever the test; the predictor is not a correction).
     """
@@ -234,6 +262,20 @@ def _stalled(history: list[float], settings: NewtonSettings) -> bool:
     return min(history[-w:]) >= 0.9 * min(history[:-w])
 
 
+def _small_correction(history: list[float], corrections: list[float], iteration: int,
+                      settings: NewtonSettings) -> bool:
+    """``accept_correction``: the last correction is within it, and the force residual has
+    stalled (no 10 % drop over ``stall_window`` iterations) or the iterations are spent."""
+    if settings.accept_correction <= 0 or not corrections:
+        return False
+    if corrections[-1] > settings.accept_correction:
+        return False
+    if iteration >= settings.max_iterations:
+        return True
+    w = settings.stall_window
+    return len(history) > w and min(history[-w:]) >= 0.9 * min(history[:-w])
+
+
 class NewtonSolver:
     """Load-stepping Newton solver for one basis, one material and one loading.
 
@@ -252,6 +294,8 @@ class NewtonSolver:
         self.material = material
         self.loading = loading
         self.settings = settings or NewtonSettings()
+        self.kinematics = Kinematics(self.settings.formulation,
+                                     self.settings.geometric_stiffness)
         n_points = basis.nelems * basis.X.shape[-1]
         if material.n_points == 0:
             material.allocate(n_points)
@@ -260,6 +304,7 @@ class NewtonSolver:
                 f"material holds {material.n_points} points, the mesh has {n_points}"
             )
         self.u = np.zeros(basis.N)
+        self._grad_committed = np.zeros((n_points, 2, 2))
         self.load_factor = 0.0
         self._run_start = 0.0
         self._last: tuple[float, np.ndarray] | None = None  # last converged (Δλ, Δu)
@@ -273,6 +318,11 @@ class NewtonSolver:
             )
         self.f_int = internal_force(basis, self.response.stress)
         self._mass_matrix = None
+
+    def _external(self, load_factor: float, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(u_D, f_ext) at ``load_factor`` with the displacement ``u`` [m] (a follower load
+        acts on the displaced configuration in the finite-strain formulation)."""
+        return self.loading.at(load_factor, u if self.kinematics.finite else None)
 
     def l2_norm(self, v: np.ndarray) -> float:
         """‖v‖_L2 = (∫ v·v dV)^½ [m · m] of a nodal displacement field ``v`` (ndofs,), with a
@@ -304,23 +354,28 @@ class NewtonSolver:
         self._last = state.last_increment
         self.records = list(state.records)
         self.response = state.response
-        self.f_int = internal_force(self.basis, self.response.stress)
+        self._grad_committed = gauss_points_grad(self.basis, self.u)
+        self.f_int = internal_force(self.basis, self.kinematics.assembled_stress(
+            self.response.stress, self._grad_committed))
 
     @property
     def reaction(self) -> np.ndarray:
         """f_int − f_ext [N/m] at the committed state, shape (ndofs,); nonzero at D only."""
-        return self.f_int - self.loading.at(self.load_factor)[1]
+        return self.f_int - self._external(self.load_factor, self.u)[1]
 
     def grad_u(self) -> np.ndarray:
         """Total ∇u [-] at the Gauss points, committed state, shape (n, 2, 2)."""
         return gauss_points_grad(self.basis, self.u)
 
     def _increment(self, target: float) -> _Attempt:
-        s, D = self.settings, self.loading.dirichlet_dofs
-        u_d, f_ext = self.loading.at(target)
+        s, D, kin = self.settings, self.loading.dirichlet_dofs, self.kinematics
+        grad_n = self._grad_committed
+        u_d, f_ext = self._external(target, self.u)
         du = np.zeros_like(self.u)
         du[D] = u_d - self.u[D]
-        K = stiffness(self.basis, self.response.tangent)
+        response = self.response
+        K = stiffness(self.basis, kin.assembled_tangent(response.tangent, response.stress,
+                                                        grad_n, grad_n))
         A, b, x, interior = condense(K, f_ext - self.f_int, x=du, D=D)
         r0 = float(np.linalg.norm(b))
         du = solve(A, b, x, interior)
@@ -338,7 +393,8 @@ class NewtonSolver:
             secant = SecantTangent(np.zeros_like(stress), stress, self.response.tangent,
                                    s.secant_min_change)
         for it in range(1, s.max_iterations + 1):
-            grad_u = gauss_points_grad(self.basis, du)
+            grad_step = gauss_points_grad(self.basis, du)
+            grad_u = kin.material_gradient(grad_n, grad_step)
             response = self.material.evaluate(grad_u)
             cost += (int(response.dem_steps), int(response.rve_evaluations),
                      int(response.particle_steps))
@@ -346,7 +402,11 @@ class NewtonSolver:
                 bad = response.failed_points()
                 return _Attempt(False, du, None, None, history, it, cost,
                                 f"material failed at points {bad[:8].tolist()}")
-            f_int = internal_force(self.basis, response.stress)
+            grad_total = grad_n + grad_step
+            f_int = internal_force(self.basis, kin.assembled_stress(response.stress,
+                                                                    grad_total))
+            if kin.finite:
+                f_ext = self._external(target, self.u + du)[1]
             residual = f_int - f_ext
             r = float(np.linalg.norm(residual[interior]))
             history.append(r / r0 if r0 > 0 else r)
@@ -362,9 +422,12 @@ class NewtonSolver:
                 by = "force-atol"
             elif _stalled(history, s):
                 by = "stall"
+            elif _small_correction(history, corrections, it, s):
+                by = "correction"
             if by:
                 return _Attempt(True, du, response, f_int, history, it, cost, "",
-                                stalled=by == "stall", by=by, corrections=corrections)
+                                stalled=by in ("stall", "correction"), by=by,
+                                corrections=corrections)
             if not math.isfinite(r) or (r0 > 0 and r > s.divergence * r0):
                 return _Attempt(False, du, None, None, history, it, cost, "diverged",
                                 corrections=corrections)
@@ -372,7 +435,8 @@ class NewtonSolver:
                 break
             tangent = (response.tangent if secant is None
                        else secant.update(grad_u, response.stress))
-            K = stiffness(self.basis, tangent)
+            K = stiffness(self.basis, kin.assembled_tangent(tangent, response.stress, grad_n,
+                                                            grad_total))
             A, b, x, interior = condense(K, -residual, D=D)
             correction = solve(A, b, x, interior)
             previous = du
@@ -408,6 +472,7 @@ class NewtonSolver:
                 record.converged_by.append(attempt.by)
                 self.material.commit()
                 self.u = self.u + attempt.du
+                self._grad_committed = gauss_points_grad(self.basis, self.u)
                 self.response, self.f_int = attempt.response, attempt.f_int
                 self._last = (end - self.load_factor, attempt.du)
                 record.stalled += int(attempt.stalled)

@@ -31,8 +31,9 @@ class Preset:
         rtol: Newton's relative residual tolerance.
         stress_floor: Newton's absolute stress tolerance as a fraction of the confining
             pressure [-].
-        tangent: kruyt-rothenburg, perturbation or secant (Kruyt–Rothenburg with Broyden
-            updates).
+        tangent: objective, kruyt-rothenburg, perturbation or secant (the objective
+            tangent with Broyden updates); the command line takes a preset's
+            kruyt-rothenburg, measured before the objective form existed, in that form.
         acceleration: "predictor/relaxation", e.g. "extrapolate/aitken".
         reuse_tol: reuse tolerance of undisturbed RVEs [-].
     """

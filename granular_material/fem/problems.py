@@ -187,12 +187,13 @@ class BiaxialProblem:
     def force_tolerance(self, stress: float) -> float:
         """‖R‖₂ [N/m] that a stress error of ``stress`` [Pa] at every Gauss point leaves.
 
-        Nodal forces from a stress error τ scale as τ·h (h = √(area / elements), unit
+        Nodal forces from a stress error τ scale as τ·h (h = √(area / elements), every
+        triangle counted, unit
         thickness); uncorrelated errors add in quadrature over the free degrees of freedom:
         ‖R‖ ≈ τ · h · √n_free. Used as the absolute Newton tolerance for noisy (DEM) stress.
         """
         s = self.setup
-        h = math.sqrt(s.width * s.height / (s.nx * s.ny))
+        h = math.sqrt(s.width * s.height / s.n_elements)
         n_free = self.basis.N - self.loading.dirichlet_dofs.size
         return float(stress * h * math.sqrt(n_free))
 
@@ -214,9 +215,15 @@ class BiaxialProblem:
         kind = {6: "triangle6", 8: "quad8", 9: "quad9"}[scalar.element_dofs.shape[0]]
         return scalar.doflocs.T, scalar.element_dofs.T, kind, np.vstack([2 * k, 2 * k + 1])
 
-    def axial_stress(self, reaction: np.ndarray) -> float:
-        """Axial stress from the platen reaction [Pa], compression positive (σ = −ΣR_y / W)."""
-        return float(-reaction[self.top_dofs].sum() / self.setup.width)
+    def axial_stress(self, reaction: np.ndarray, u: np.ndarray | None = None) -> float:
+        """Axial stress from the platen reaction [Pa], compression positive (σ = −ΣR_y / W),
+        W the platen's reference width, or with the displacement ``u`` [m] (ndofs,) its
+        current width (the spread of the top nodes' current x)."""
+        width = self.setup.width
+        if u is not None:  # u_x of a node is the dof before its u_y (scikit-fem's order)
+            x = self.basis.doflocs[0, self.top_dofs - 1] + u[self.top_dofs - 1]
+            width = float(x.max() - x.min())
+        return float(-reaction[self.top_dofs].sum() / width)
 
 
 def _component_dofs(basis: Basis, component: int) -> tuple[np.ndarray, np.ndarray]:
@@ -262,12 +269,27 @@ def build_biaxial(setup: BiaxialSetup) -> BiaxialProblem:
     # against linear and quadratic shape functions (consistent nodal forces)
     facet_basis = FacetBasis(mesh, basis.elem, facets=sides, intorder=2)
     traction = confining_traction.assemble(facet_basis, p=setup.confining)
+
+    def on_current_sides(u: np.ndarray) -> np.ndarray:
+        return follower_traction.assemble(facet_basis, p=setup.confining,
+                                          u=facet_basis.interpolate(u))
+
     loading = Loading(
         dirichlet_dofs=dofs.astype(np.int64), dirichlet_end=end,
-        force_start=traction, force_end=traction.copy(),
+        force_start=traction, force_end=traction.copy(), follower=on_current_sides,
     )
     weights = to_points(basis.dx)
     return BiaxialProblem(setup, basis, loading, uy[top].astype(np.int64), weights)
+
+
+@LinearForm
+def follower_traction(v, w):
+    """∫ −p n · v ds over the *current* facets, taken on the reference ones by Nanson's
+    n ds = cof(F) N dS (F = I + ∇u of ``w.u``, N the reference normal; ``w.p`` in Pa)."""
+    g = w.u.grad
+    n0 = (1.0 + g[1, 1]) * w.n[0] - g[1, 0] * w.n[1]
+    n1 = -g[0, 1] * w.n[0] + (1.0 + g[0, 0]) * w.n[1]
+    return -w.p * (n0 * v[0] + n1 * v[1])
 
 
 @LinearForm

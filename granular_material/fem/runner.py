@@ -3,10 +3,13 @@
 Tables (tension positive unless the column says otherwise):
 
 ``steps`` — one row per load step (step 0 is the initial state):
-    step, load_factor, axial_strain (compression +), platen_stress [Pa] (axial stress from
-    the top platen reaction, compression +), confining [Pa] (compression +), stress_ratio
-    (platen_stress / confining), sxx, syy, sxy [Pa] (volume averages over Gauss points),
-    volumetric_strain (tr ε volume average, contraction negative), void_ratio (mean, NaN if
+    step, load_factor, axial_strain (compression +, the top platen's displacement over the
+    initial height), platen_stress [Pa] (axial stress from the top platen reaction over the
+    platen's width — its current width in the finite-strain formulation — compression +),
+    confining [Pa] (compression +), stress_ratio (platen_stress / confining), sxx, syy, sxy
+    [Pa] (averages over the Gauss points' current volumes of the Cauchy stress),
+    volumetric_strain (small strain: tr ε volume average; finite strain: the specimen's area
+    change A/A0 − 1; contraction negative), void_ratio (mean, NaN if
     the material has none), iterations, dem_steps (DEM steps run: each evaluation's longest
     RVE path, summed), rve_evaluations (RVE paths run), particle_steps (DEM disc-steps run),
     cutbacks, stalled (increments accepted on a stalled residual), wall_time [s],
@@ -17,10 +20,11 @@ Tables (tension positive unless the column says otherwise):
 
 ``points`` — one row per load step and Gauss point:
     step, axial_strain, point (``element · nqp + q``, nqp = gauss² points per element, see
-    :mod:`granular_material.fem.problems`), element, x, y [m] (the Gauss point's coordinates),
-    sxx, syy, sxy [Pa], exx, eyy, exy,
-    volumetric_strain (tr ε), shear_strain (γ = √((ε_xx − ε_yy)² + (2ε_xy)²)), plus the
-    material's own fields (void_ratio, coordination, ...).
+    :mod:`granular_material.fem.problems`), element, x, y [m] (the Gauss point's reference
+    coordinates), sxx, syy, sxy [Pa] (Cauchy), exx, eyy, exy (sym ∇u in small strain, the
+    Hencky strain ½ ln(F Fᵀ) in finite strain), volumetric_strain (tr ε; finite strain:
+    J − 1, the area change), shear_strain (γ = √((ε_xx − ε_yy)² + (2ε_xy)²)), plus the
+    material's own fields (void_ratio, coordination, stress_skew, ...).
 
 ``tracked`` — with a :class:`~granular_material.fem.tracking.Tracking`: one row per tracked
     step, point and post-processor (see :mod:`granular_material.fem.tracking`).
@@ -100,13 +104,18 @@ class BiaxialResult:
 
 
 def _rows(solver: NewtonSolver, problem: BiaxialProblem, record: StepRecord | None):
+    kinematics = solver.kinematics
     grad = solver.grad_u()
-    strain = 0.5 * (grad + np.swapaxes(grad, 1, 2))
+    strain = kinematics.strain(grad)
     stress = solver.response.stress
-    w = problem.weights / problem.weights.sum()
+    jacobian = kinematics.current_volume(grad)
+    w = problem.weights * jacobian / (problem.weights @ jacobian)
     s = problem.setup
     eps_a = solver.load_factor * s.axial_strain
-    platen = problem.axial_stress(solver.reaction)
+    platen = problem.axial_stress(solver.reaction, solver.u if kinematics.finite else None)
+    volumetric = (np.trace(strain, axis1=1, axis2=2) if not kinematics.finite
+                  else jacobian - 1.0)
+    w_reference = problem.weights / problem.weights.sum()
     fields = {k: np.asarray(v, dtype=float) for k, v in solver.response.fields.items()}
     step = record.step if record else 0
     mean_stress = np.einsum("p,pij->ij", w, stress)
@@ -115,7 +124,7 @@ def _rows(solver: NewtonSolver, problem: BiaxialProblem, record: StepRecord | No
         "platen_stress": platen, "confining": s.confining,
         "stress_ratio": platen / s.confining if s.confining > 0 else np.nan,
         "sxx": mean_stress[0, 0], "syy": mean_stress[1, 1], "sxy": mean_stress[0, 1],
-        "volumetric_strain": float(w @ np.trace(strain, axis1=1, axis2=2)),
+        "volumetric_strain": float(w_reference @ volumetric),
         "void_ratio": float(w @ fields["void_ratio"]) if "void_ratio" in fields else np.nan,
         "iterations": record.iterations if record else 0,
         "dem_steps": record.dem_steps if record else 0,
@@ -136,7 +145,7 @@ def _rows(solver: NewtonSolver, problem: BiaxialProblem, record: StepRecord | No
         "element": np.arange(n) // nqp, "x": xy[:, 0], "y": xy[:, 1],
         "sxx": stress[:, 0, 0], "syy": stress[:, 1, 1], "sxy": stress[:, 0, 1],
         "exx": strain[:, 0, 0], "eyy": strain[:, 1, 1], "exy": strain[:, 0, 1],
-        "volumetric_strain": strain[:, 0, 0] + strain[:, 1, 1],
+        "volumetric_strain": volumetric,
         "shear_strain": np.hypot(strain[:, 0, 0] - strain[:, 1, 1], 2 * strain[:, 0, 1]),
         **fields,
     })
