@@ -3,8 +3,9 @@
 The measure is split into boxes of side ε = 2⁻ᵏL (L the image side, k = 1…8 by default),
 or into boxes of given sides in pixels (``box_px``, the boxes of a physical box rule: the
 image is then covered by ⌊n/b⌋² whole boxes from its lower-left corner, the last n mod b
-rows and columns left out, never padded); p_i(ε) is the mass of box i over the total mass
-of the boxes. Boxes with zero mass are left out for every q
+rows and columns left out, never padded, and the moments are scaled up to the whole image
+as if the covered part were a sample of it); p_i(ε) is the mass of box i over the total
+mass of the boxes. Boxes with zero mass are left out for every q
 (NumPy's 0⁰ = 1 would count them at q = 0). For every moment order q the Chhabra–Jensen
 direct method gives α(q) and f(α(q)); the mass exponent τ(q) and the generalised dimensions
 D_q = τ/(q − 1) (D1 = α(1)) come from the partition sum. All sums are taken in the log
@@ -273,8 +274,10 @@ def multifractal_spectrum(
             ``box_px`` is given.
         min_r2: fits with R² below this are flagged in ``poor_fit``.
         box_px: box sides in pixels instead of the levels k (at least two, each ≤ n); each
-            size covers the image with ⌊n/b⌋² whole boxes from the lower-left corner, so
-            the sides that divide n use every pixel. See :func:`.boxes.physical_boxes`.
+            size covers the image with ⌊n/b⌋² whole boxes from the lower-left corner (the
+            sides that divide n use every pixel), whose moments stand for the whole image's:
+            the covered fraction a enters as ln Σ p_iᑫ + (q − 1) ln a and α, f sums + ln a,
+            so a uniform image has D_q = 2 for any sides. See :func:`.boxes.physical_boxes`.
         min_fill: a box whose mass is below ``min_fill`` × (its pixels) counts as empty
             (for a binary image: whose pore fraction is below it); 0 keeps every box with
             mass. Drops the boxes that hold only a sliver of pore a pixel wide, whose count
@@ -344,6 +347,12 @@ def multifractal_spectrum(
     else:
         for j, side in enumerate(sides):
             add_moments(j, box_masses_px(images, int(side)))
+            # the whole boxes cover a = (⌊n/b⌋·b/n)² of the image; taken as a sample of
+            # it, the image holds 1/a times as many boxes with masses a·p_i: ln Σ p_iᑫ
+            # gains (q − 1) ln a, Σ μ_i ln p_i and Σ μ_i ln μ_i gain ln a (0 when b | n)
+            log_a = 2.0 * np.log((n // int(side)) * int(side) / n)
+            moments[:, :, 0:2, j] += log_a
+            moments[:, :, 2, j] += (q_all - 1.0) * log_a
         log_eps = np.log(sides.astype(np.float64))  # ln(ε / 1 px)
     slopes, r2s, ses = _fit(log_eps, moments)
     alpha_all, f_all, tau_all = slopes[..., 0], slopes[..., 1], slopes[..., 2]
