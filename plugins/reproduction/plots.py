@@ -90,6 +90,9 @@ def plot_resolution(table: pd.DataFrame, path: Path) -> Path:
                     color=colors.get(str(rule), "k"))
         ax.set(xscale="log", xlabel="requested pixel [mm]", ylabel=label,
                title=f"{label} of {int(table['discs'].iloc[0])}-disc RVEs by pixel")
+        pixels = sorted(1e3 * table["pixel_request"].unique())
+        ax.set_xticks(pixels, [f"{v:g}" for v in pixels])
+        ax.minorticks_off()
         ax.invert_xaxis()
         ax.legend(fontsize=8)
     return _save(fig, path)
