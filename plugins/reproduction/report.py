@@ -311,8 +311,10 @@ def _both_rules(r: dict[str, Any]) -> list[str]:
         + f" discs; the seed scatter (the band of Fig. 4) is "
         f"{_num(s['scatter_pct_smallest'])} % at the smallest size and "
         f"{_num(s['scatter_pct_largest'])} % at the largest, and the means move by "
-        f"{_num(s['range_above'])} from there on and by {_num(s['range_below'])} below. "
-        f"Verdict on \"α0/D0 settles above 400 discs\": **{words}** once the boxes are "
+        f"{_num(s['range_above'])} from there on"
+        + (f" and by {_num(s['range_below'])} below. " if s["settle_discs"] > min(
+            row["discs"] for row in r["per_size_physical"]) else " (every size). ")
+        + f"Verdict on \"α0/D0 settles above 400 discs\": **{words}** once the boxes are "
         f"held fixed in metres: it settles from {s['settle_discs']} discs"
         + ("" if s["settle_discs"] >= 400 else ", so the sizes below 400 do not fluctuate "
            "beyond the seeds' scatter, which narrows with size instead") + ". "
