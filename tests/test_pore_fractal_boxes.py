@@ -68,6 +68,13 @@ def test_uniform_image_is_two_with_sides_that_are_not_powers_of_two():
     np.testing.assert_allclose(result.Dq, 2.0, atol=TOL)
     np.testing.assert_allclose(result.alpha, 2.0, atol=TOL)
     np.testing.assert_allclose(result.f, 2.0, atol=TOL)
+    # mass only in the strip that boxes of 40 px leave out (80 = 2·40 of 100 px)
+    stray = np.zeros((100, 100))
+    stray[85, 5] = 1.0
+    with pytest.raises(ValueError, match="every box size covers"):
+        multifractal_spectrum(stray, box_px=[40, 50])
+    with pytest.raises(ValueError, match="smaller than the largest box"):
+        multifractal_spectrum(np.ones((30, 30)), box_px=[8, 40])
 
 
 def test_standard_errors_are_those_of_the_least_squares_slope():

@@ -141,7 +141,9 @@ def _check_boxes(box_px: Sequence[int] | ArrayLike) -> np.ndarray:
     return np.sort(sides)[::-1].copy()  # coarse to fine, as the levels k = 1, 2, …
 
 
-def _check_measure(measure: ArrayLike, kmax: int | None, largest_px: int = 1) -> np.ndarray:
+def _check_measure(
+    measure: ArrayLike, kmax: int | None, sides: np.ndarray | None = None
+) -> np.ndarray:
     array = np.asarray(measure)
     if array.dtype == np.bool_:
         array = array.astype(np.float64)
@@ -160,8 +162,9 @@ def _check_measure(measure: ArrayLike, kmax: int | None, largest_px: int = 1) ->
                 f"image side {nx} px must be a positive multiple of 2^{kmax} = {n_min} px so "
                 f"that boxes of side 2^-{kmax}·L hold whole pixels (images are never padded)"
             )
-    elif nx < largest_px:
-        raise ValueError(f"image side {nx} px is smaller than the largest box, {largest_px} px")
+    elif sides is not None and nx < int(sides.max()):
+        raise ValueError(f"image side {nx} px is smaller than the largest box, "
+                         f"{int(sides.max())} px")
     if not np.all(np.isfinite(array)):
         raise ValueError("measure holds a non-finite value (NaN or inf)")
     if np.any(array < 0):
@@ -169,14 +172,15 @@ def _check_measure(measure: ArrayLike, kmax: int | None, largest_px: int = 1) ->
         raise ValueError(
             f"measure must be non-negative, got {array[tuple(where)]!r} at index {where}"
         )
-    if kmax is None:  # only the whole boxes count: the part they cover must hold mass
-        crop = (nx // largest_px) * largest_px
+    totals = array.reshape(-1, ny * nx).sum(axis=1)
+    where = "everywhere"
+    if sides is not None and np.all(totals > 0):  # only whole boxes count: the part that
+        crop = int(((nx // sides) * sides).min())  # every box size covers needs mass
         totals = array[..., :crop, :crop].reshape(-1, crop * crop).sum(axis=1)
-    else:
-        totals = array.reshape(-1, ny * nx).sum(axis=1)
+        where = f"in its first {crop} × {crop} px, which every box size covers"
     if np.any(totals <= 0):
         which = int(np.argmax(totals <= 0))
-        raise ValueError(f"measure of image {which} is zero everywhere: no spectrum exists")
+        raise ValueError(f"measure of image {which} is zero {where}: no spectrum exists")
     return array
 
 
@@ -313,7 +317,7 @@ def multifractal_spectrum(
     else:
         sides = _check_boxes(box_px)
         levels = np.zeros(0, dtype=np.int64)
-        image = _check_measure(measure, None, int(sides[0]))
+        image = _check_measure(measure, None, sides)
     batch_shape = image.shape[:-2]
     n = image.shape[-1]
     images = image.reshape(-1, n, n)
