@@ -6,6 +6,14 @@ multifractal spectrum by box counting with Chhabra & Jensen's (1989) direct meth
 ``pore-fractal`` post-processor and the ``granular-material fractal`` command.
 """
 
+from .boxes import (
+    BOX_RULES,
+    DEFAULT_BOX_MAX,
+    DEFAULT_BOX_MIN,
+    DEFAULT_MIN_FILL,
+    DEFAULT_PER_OCTAVE,
+    physical_boxes,
+)
 from .image import (
     DEFAULT_PIXEL,
     PoreImage,
@@ -21,19 +29,27 @@ from .spectrum import (
     DEFAULT_Q,
     MultifractalSpectrum,
     box_masses,
+    box_masses_px,
     multifractal_spectrum,
 )
 
 __all__ = [
+    "BOX_RULES",
+    "DEFAULT_BOX_MAX",
+    "DEFAULT_BOX_MIN",
     "DEFAULT_K",
+    "DEFAULT_MIN_FILL",
+    "DEFAULT_PER_OCTAVE",
     "DEFAULT_PIXEL",
     "DEFAULT_Q",
     "MultifractalSpectrum",
     "PoreImage",
     "analyse_rve",
     "box_masses",
+    "box_masses_px",
     "choose_window",
     "multifractal_spectrum",
+    "physical_boxes",
     "pore_fractal",
     "pore_image",
     "pore_images",

@@ -11,22 +11,45 @@ import numpy as np
 from granular_material.cli.options import emit
 from granular_material.dem.rve_file import load_rve
 
+from .boxes import (
+    BOX_RULES,
+    DEFAULT_BOX_MAX,
+    DEFAULT_BOX_MIN,
+    DEFAULT_MIN_FILL,
+    DEFAULT_PER_OCTAVE,
+)
 from .image import DEFAULT_PIXEL
 from .postprocess import analyse_rve, summary
 
-__all__ = ["register", "run"]
+__all__ = ["POOR_FIT_HINT", "register", "run"]
+
+#: one line on what a flagged fit means for a pore image and what to do about it
+POOR_FIT_HINT = (
+    "R² < {min_r2:g}: the log box moments bend over the boxes used, so the pores are not "
+    "self-similar across them (the grains set a scale; at one-pixel boxes the pixels do) "
+    "and those D_q depend on the range: compare RVEs only at one --box-rule physical range "
+    "and pixel, or narrow --box-min/--box-max"
+)
 
 _DESCRIPTION = """\
 Rasterise the pore space (pixels whose centre lies in no disc) of one periodic RVE and
-compute the multifractal spectrum of the pore pixels by box counting: boxes of side
-eps = 2^-k L (k = 1..K), moment orders q in [q-min, q-max], Chhabra & Jensen's direct
-method for alpha(q) and f(alpha), tau(q) and D_q = tau/(q - 1), D_1 = alpha(1).
+compute the multifractal spectrum of the pore pixels by box counting, moment orders q in
+[q-min, q-max], Chhabra & Jensen's direct method for alpha(q) and f(alpha), tau(q) and
+D_q = tau/(q - 1), D_1 = alpha(1).
+
+Boxes (--box-rule): `cell` (default, Wu et al. 2025): eps = 2^-k L (k = 1..K), fractions
+of the window side L, on a window of m * 2^K pixels; the indices then move with the image's
+size in pixels and with the RVE's size. `physical`: box sides fixed in metres, --box-min to
+--box-max (capped at half the window), --per-octave sides per doubling, on a window at the
+pixel nearest --pixel; a box less than --min-fill pore counts as empty. Use `physical` to
+compare RVEs of different sizes or images of different pixels.
 
 The image is an axis-aligned square window of the periodic tiling (also for a sheared
-cell) with the cell's area; its side is m * 2^K pixels, the pixel being the one nearest
---pixel among these (0.3 mm after Wu et al. 2025). Reported: D0 (capacity dimension),
-alpha0 (alpha at q = 0), alpha0/D0, the image's porosity next to the RVE's own, the pixel
-size actually used and the image side in pixels. Fits with R^2 below --min-r2 are flagged.
+cell) with the cell's area. Reported: D0 (capacity dimension), alpha0 (alpha at q = 0),
+alpha0/D0 with their standard errors (of the least-squares slopes), the fit range (smallest
+and largest box) and R^2 of the fits at q = 0, the image's porosity next to the RVE's own,
+the pixel size actually used and the image side in pixels. Fits with R^2 below --min-r2
+are flagged.
 """
 
 _EPILOG = """\
@@ -34,6 +57,7 @@ examples:
   granular-material fractal rve.npz
   granular-material fractal batch.npz --rve-index 3 --json
   granular-material fractal rve.npz --pixel 0.25e-3 --plot spectrum.png
+  granular-material fractal rve.npz --box-rule physical --pixel 0.15e-3
 """
 
 
@@ -56,8 +80,31 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="requested pixel size in m (default 0.3e-3); the one used is reported",
     )
     parser.add_argument(
+        "--box-rule", choices=BOX_RULES, default="cell",
+        help="cell: eps = 2^-k L (the paper's, default); physical: boxes fixed in metres, "
+             "comparable across RVE sizes and pixels",
+    )
+    parser.add_argument(
         "--k-max", type=int, default=8, metavar="K",
-        help="finest box level: eps = 2^-k L for k = 1..K (default 8)",
+        help="cell rule: finest box level, eps = 2^-k L for k = 1..K (default 8)",
+    )
+    parser.add_argument(
+        "--box-min", type=float, default=DEFAULT_BOX_MIN, metavar="M",
+        help=f"physical rule: smallest box in m, at least 2 pixels (default {DEFAULT_BOX_MIN})",
+    )
+    parser.add_argument(
+        "--box-max", type=float, default=DEFAULT_BOX_MAX, metavar="M",
+        help=f"physical rule: largest box in m, capped at half the window "
+             f"(default {DEFAULT_BOX_MAX})",
+    )
+    parser.add_argument(
+        "--per-octave", type=int, default=DEFAULT_PER_OCTAVE, metavar="N",
+        help=f"physical rule: box sides per doubling (default {DEFAULT_PER_OCTAVE})",
+    )
+    parser.add_argument(
+        "--min-fill", type=float, default=DEFAULT_MIN_FILL, metavar="F",
+        help=f"physical rule: a box less than this fraction pore counts as empty "
+             f"(default {DEFAULT_MIN_FILL})",
     )
     parser.add_argument("--q-min", type=float, default=-10.0, help="lowest q (default -10)")
     parser.add_argument("--q-max", type=float, default=10.0, help="highest q (default 10)")
@@ -72,8 +119,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument(
         "--json", action="store_true",
-        help="print one JSON object: D0, alpha0, alpha0_over_D0, porosity, rve_porosity, "
-             "pixel_size, image_size, window_side, min_r2, rve_index, poor_fit_q",
+        help="print one JSON object: D0, alpha0, alpha0_over_D0 and their _se, porosity, "
+             "rve_porosity, pixel_size, image_size, window_side, box_rule, box_min_m, "
+             "box_max_m, box_min_px, box_max_px, box_sizes, r2_q0, min_r2, rve_index, "
+             "poor_fit_q",
     )
     parser.set_defaults(func=run)
 
@@ -102,9 +151,12 @@ def run(args: argparse.Namespace) -> int:
     levels = list(range(1, args.k_max + 1))
     data = load_rve(args.rve)
     image, spectrum = analyse_rve(
-        data, args.rve_index, args.pixel, q=q, k=levels, min_r2=args.min_r2
+        data, args.rve_index, args.pixel, q=q, k=levels, min_r2=args.min_r2,
+        box_rule=args.box_rule, box_min=args.box_min, box_max=args.box_max,
+        per_octave=args.per_octave, min_fill=args.min_fill,
     )
     result: dict[str, object] = dict(summary(image, spectrum))
+    result["box_rule"] = args.box_rule
     result["rve_index"] = args.rve_index
     result["poor_fit_q"] = [float(v) for v in spectrum.q[spectrum.poor_fit]]
     if args.plot is not None:
@@ -123,12 +175,17 @@ def _print_text(args: argparse.Namespace, result: dict[str, object]) -> None:
     print(f"  image        {result['image_size']}² px, pixel {result['pixel_size']:.6g} m, "
           f"window {result['window_side']:.6g} m")
     print(f"  porosity     {result['porosity']:.5f} image, {result['rve_porosity']:.5f} RVE")
-    print(f"  D0           {result['D0']:.6f}")
-    print(f"  alpha0       {result['alpha0']:.6f}")
-    print(f"  alpha0/D0    {result['alpha0_over_D0']:.6f}")
+    print(f"  boxes        {args.box_rule}: {1e3 * result['box_min_m']:.4g}–"
+          f"{1e3 * result['box_max_m']:.4g} mm ({result['box_min_px']}–{result['box_max_px']} "
+          f"px, {result['box_sizes']} sizes); R² at q = 0: {result['r2_q0']:.5f}")
+    print(f"  D0           {result['D0']:.6f} ± {result['D0_se']:.2g}")
+    print(f"  alpha0       {result['alpha0']:.6f} ± {result['alpha0_se']:.2g}")
+    print(f"  alpha0/D0    {result['alpha0_over_D0']:.6f} ± {result['alpha0_over_D0_se']:.2g}"
+          "  (± standard error of the fits)")
     poor = result["poor_fit_q"]
     if poor:
         print(f"  poor fits    R² < {args.min_r2:g} at q = {', '.join(f'{v:g}' for v in poor)}")
+        print(f"  meaning      {POOR_FIT_HINT.format(min_r2=args.min_r2)}")
     else:
         print(f"  fits         all R² >= {args.min_r2:g} (smallest {result['min_r2']:.5f})")
     if args.plot is not None:

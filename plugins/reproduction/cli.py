@@ -108,7 +108,9 @@ def run_size_study(args: argparse.Namespace) -> int:
     if len(set(args.discs)) < 2:
         raise UsageError("--discs needs at least two sizes")
     device = resolve_device(args.device)
-    scale = replace(SCALES["cpu"], name="rve-size-study", sizes=tuple(sorted(set(args.discs))),
+    sizes = tuple(sorted(set(args.discs)))
+    scale = replace(SCALES["cpu"], name="rve-size-study", sizes=sizes,
+                    resolution_discs=min(sizes, key=lambda n: (abs(n - 400), n)),
                     seeds=tuple(sorted(args.seeds)), biaxial_sizes=tuple(sorted(set(biaxial))),
                     dem_axial_strain=args.axial_strain,
                     dem_strain_per_step=args.strain_per_step,

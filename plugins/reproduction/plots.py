@@ -12,7 +12,11 @@ from matplotlib.figure import Figure
 from granular_material.results.plots import pyplot
 
 __all__ = ["plot_coupled", "plot_fits", "plot_histories", "plot_ratio_by_size",
-           "plot_size_curves", "plot_spectra", "plot_speedup"]
+           "plot_resolution", "plot_size_curves", "plot_spectra", "plot_speedup"]
+
+#: the box rules, as the figures name them
+_RULE_TITLES = {"cell": "cell rule: ε = 2⁻ᵏL, k = 1…8",
+                "physical": "physical rule: ε = 2.4–38.4 mm"}
 
 
 def _save(fig: Figure, path: Path) -> Path:
@@ -23,32 +27,74 @@ def _save(fig: Figure, path: Path) -> Path:
 
 
 def plot_spectra(spectra: pd.DataFrame, sizes: tuple[int, ...], path: Path) -> Path:
-    """Fig. 3: q–D_q and α–f(α), the seeds' mean, for the RVE sizes ``sizes`` [discs]."""
+    """Fig. 3: q–D_q and α–f(α), the seeds' mean, for the RVE sizes ``sizes`` [discs], one
+    row per box rule."""
     plt = pyplot()
-    fig, (left, right) = plt.subplots(1, 2, figsize=(9, 3.8), constrained_layout=True)
-    for discs in sizes:
-        mean = spectra[spectra["discs"] == discs].groupby("q").mean(numeric_only=True)
-        label = f"{discs} discs"
-        left.plot(mean.index, mean["Dq"], marker=".", label=label)
-        right.plot(mean["alpha"], mean["f"], marker=".", label=label)
-    left.set(xlabel="q", ylabel="$D_q$", title="generalised dimensions")
-    right.set(xlabel="α", ylabel="f(α)", title="singularity spectrum")
-    left.legend(fontsize=8)
+    rules = [rule for rule in _RULE_TITLES if (spectra["box_rule"] == rule).any()]
+    fig, axes = plt.subplots(len(rules), 2, figsize=(9, 3.6 * len(rules)),
+                             constrained_layout=True, squeeze=False)
+    for (left, right), rule in zip(axes, rules, strict=True):
+        of_rule = spectra[spectra["box_rule"] == rule]
+        for discs in sizes:
+            mean = of_rule[of_rule["discs"] == discs].groupby("q").mean(numeric_only=True)
+            label = f"{discs} discs"
+            left.plot(mean.index, mean["Dq"], marker=".", label=label)
+            right.plot(mean["alpha"], mean["f"], marker=".", label=label)
+        left.set(xlabel="q", ylabel="$D_q$", title=f"generalised dimensions ({rule} rule)")
+        right.set(xlabel="α", ylabel="f(α)", title=f"singularity spectrum ({rule} rule)")
+        left.legend(fontsize=8)
     return _save(fig, path)
 
 
-def plot_ratio_by_size(indices: pd.DataFrame, settle: int, path: Path) -> Path:
-    """Fig. 4: α0/D0 of every RVE against its number of discs, the seeds' mean ± one
-    standard deviation, and the size from which it has settled."""
+def _band(ax, x: pd.Index, mean: pd.Series, std: pd.Series, color: str, label: str) -> None:
+    """The seeds' mean as a line and mean ± one standard deviation as a shaded band."""
+    ax.plot(x, mean, "-", color=color, label=label)
+    ax.fill_between(x, mean - std, mean + std, color=color, alpha=0.25, lw=0)
+
+
+def plot_ratio_by_size(indices: pd.DataFrame, settle: dict[str, int], path: Path) -> Path:
+    """Fig. 4: α0/D0 of every RVE against its number of discs, the seeds' mean with a band
+    of ± one standard deviation (the seed scatter), and the size from which it has settled;
+    one panel per box rule (``settle``: rule → discs)."""
     plt = pyplot()
-    fig, ax = plt.subplots(figsize=(6, 3.8), constrained_layout=True)
-    ax.plot(indices["discs"], indices["alpha0_over_D0"], "o", alpha=0.4, label="one RVE")
-    stats = indices.groupby("discs")["alpha0_over_D0"].agg(["mean", "std"])
-    ax.errorbar(stats.index, stats["mean"], yerr=stats["std"], color="k", capsize=3,
-                label="mean ± std over seeds")
-    ax.axvline(settle, color="tab:red", ls="--", label=f"settled from {settle} discs")
-    ax.set(xlabel="discs per RVE", ylabel="α0/D0")
-    ax.legend(fontsize=8)
+    rules = [rule for rule in _RULE_TITLES if rule in settle]
+    fig, axes = plt.subplots(1, len(rules), figsize=(5.5 * len(rules), 3.8),
+                             constrained_layout=True, squeeze=False)
+    for ax, rule in zip(axes[0], rules, strict=True):
+        of_rule = indices[indices["box_rule"] == rule]
+        ax.plot(of_rule["discs"], of_rule["alpha0_over_D0"], "o", alpha=0.4, ms=4,
+                label="one RVE")
+        stats = of_rule.groupby("discs")["alpha0_over_D0"].agg(["mean", "std"])
+        _band(ax, stats.index, stats["mean"], stats["std"].fillna(0.0), "k",
+              "seeds' mean ± std")
+        ax.axvline(settle[rule], color="tab:red", ls="--",
+                   label=f"settled from {settle[rule]} discs")
+        ax.set(xlabel="discs per RVE", ylabel="α0/D0", title=_RULE_TITLES[rule])
+        ax.legend(fontsize=8)
+    return _save(fig, path)
+
+
+def plot_resolution(table: pd.DataFrame, path: Path) -> Path:
+    """The resolution study: D0 and α0/D0 of the same RVEs against the pixel [mm], the
+    seeds' mean with a ± one standard deviation band, one line per box rule."""
+    plt = pyplot()
+    fig, axes = plt.subplots(1, 2, figsize=(10, 3.8), constrained_layout=True)
+    colors = {"cell": "tab:blue", "physical": "tab:orange"}
+    for ax, column, label in zip(axes, ("D0", "alpha0_over_D0"), ("$D_0$", "α0/D0"),
+                                 strict=True):
+        for rule, of_rule in table.groupby("box_rule"):
+            stats = of_rule.groupby("pixel_request")[column].agg(["mean", "std"])
+            _band(ax, 1e3 * stats.index, stats["mean"], stats["std"].fillna(0.0),
+                  colors.get(str(rule), "k"), f"{rule} rule")
+            ax.plot(1e3 * of_rule["pixel_request"], of_rule[column], "o", ms=3, alpha=0.4,
+                    color=colors.get(str(rule), "k"))
+        ax.set(xscale="log", xlabel="requested pixel [mm]", ylabel=label,
+               title=f"{label} of {int(table['discs'].iloc[0])}-disc RVEs by pixel")
+        pixels = sorted(1e3 * table["pixel_request"].unique())
+        ax.set_xticks(pixels, [f"{v:g}" for v in pixels])
+        ax.minorticks_off()
+        ax.invert_xaxis()
+        ax.legend(fontsize=8)
     return _save(fig, path)
 
 

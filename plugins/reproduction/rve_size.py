@@ -5,6 +5,11 @@ multifractal spectrum of each one's pore space is taken (q–D_q, α–f(α)), a
 followed against the number of discs (:func:`settle_size` says from which size on it no
 longer moves); the drained biaxial tests of a few sizes say the same from the stress–strain
 side (:func:`size_responses`). Everything is cached under the part's folder as it is made.
+
+Every spectrum is taken under both box rules of the pore fractal plugin: ``cell`` (the
+paper's ε = 2⁻ᵏL, on a window of m·256 pixels) and ``physical`` (boxes of 2.4–38.4 mm at
+the requested pixel, the same for every size); :func:`resolution_study` takes the indices of
+one size's RVEs at pixels from 0.6 to 0.075 mm under both.
 """
 
 from __future__ import annotations
@@ -14,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from granular_material_pore_fractal.boxes import BOX_RULES
 from granular_material_pore_fractal.postprocess import analyse_rve
 
 from granular_material.dem import DEMBatch, load_rve, save_rve, void_ratio
@@ -27,8 +33,12 @@ from .scales import ReproductionScale
 #: statistical one
 SETTLE_TOLERANCES_PCT = (2.0, 1.0, 0.5)
 
-__all__ = ["SETTLE_TOLERANCES_PCT", "packings", "response_agreement", "settle_size",
-           "size_responses", "size_spectra", "size_tests"]
+#: requested pixels [m] of the resolution study, coarse to fine
+RESOLUTION_PIXELS = (0.6e-3, 0.3e-3, 0.15e-3, 0.075e-3)
+
+__all__ = ["RESOLUTION_PIXELS", "SETTLE_TOLERANCES_PCT", "packings", "resolution_changes",
+           "resolution_study", "response_agreement", "settle_size", "size_responses",
+           "size_spectra", "size_tests"]
 
 
 def packings(scale: ReproductionScale, discs: int, folder: Path, device: str) -> Path:
@@ -48,17 +58,32 @@ def packings(scale: ReproductionScale, discs: int, folder: Path, device: str) ->
 
 
 #: the columns of ``indices.csv``
-INDEX_COLUMNS = ("discs", "seed", "void_ratio", "D0", "alpha0", "alpha0_over_D0", "min_r2",
-                 "r2_q0", "dq_decreasing", "pixel_size", "image_size")
+INDEX_COLUMNS = ("discs", "seed", "box_rule", "void_ratio", "D0", "alpha0", "alpha0_over_D0",
+                 "D0_se", "alpha0_se", "alpha0_over_D0_se", "min_r2", "r2_q0",
+                 "dq_decreasing", "pixel_size", "image_size", "box_min_m", "box_max_m")
+
+
+def _index_row(image, spectrum) -> dict[str, float]:
+    """The indices, their standard errors, fit quality and boxes of one spectrum."""
+    return {"D0": float(spectrum.D0), "alpha0": float(spectrum.alpha0),
+            "alpha0_over_D0": float(spectrum.alpha0_over_D0),
+            "D0_se": float(spectrum.D0_se), "alpha0_se": float(spectrum.alpha0_se),
+            "alpha0_over_D0_se": float(spectrum.alpha0_over_D0_se),
+            "min_r2": float(np.min(spectrum.r2)), "r2_q0": float(spectrum.r2_q0),
+            "dq_decreasing": bool(np.all(np.diff(spectrum.Dq) <= 1e-9)),
+            "pixel_size": image.pixel_size, "image_size": image.n_pixels,
+            "box_min_m": float(spectrum.box_px.min() * image.pixel_size),
+            "box_max_m": float(spectrum.box_px.max() * image.pixel_size)}
 
 
 def size_spectra(scale: ReproductionScale, folder: Path, device: str,
                  progress: bool = False) -> tuple[pd.DataFrame, pd.DataFrame]:
-    """The spectra of every RVE of Figs. 3–4 (``spectra.csv``: discs, seed, q, Dq, alpha,
-    f) and their indices (``indices.csv``: discs, seed, void_ratio, D0, alpha0,
-    alpha0_over_D0, min_r2 (the smallest R² of its fits), r2_q0 (the smallest R² of the
-    fits at q = 0, which give D0 and α0), dq_decreasing (D_q never rises with q), pixel_size [m],
-    image_size [px]); read back when written."""
+    """The spectra of every RVE of Figs. 3–4 under both box rules (``spectra.csv``: discs,
+    seed, box_rule, q, Dq, alpha, f) and their indices (``indices.csv``: discs, seed,
+    box_rule, void_ratio, D0, alpha0, alpha0_over_D0 and their standard errors (_se),
+    min_r2 (the smallest R² of its fits), r2_q0 (the smallest R² of the fits at q = 0, which
+    give D0 and α0), dq_decreasing (D_q never rises with q), pixel_size [m], image_size [px],
+    box_min_m and box_max_m (the fit range) [m]); read back when written."""
     spectra_path, indices_path = folder / "spectra.csv", folder / "indices.csv"
     if spectra_path.exists() and indices_path.exists():
         indices = pd.read_csv(indices_path)
@@ -71,21 +96,66 @@ def size_spectra(scale: ReproductionScale, folder: Path, device: str,
             data = load_rve(packings(scale, discs, folder, device))
             void = void_ratio(data.radius, data.cell)
             for b, seed in enumerate(scale.seeds):
-                image, spectrum = analyse_rve(data, b)
-                spectra.append(pd.DataFrame({"discs": discs, "seed": seed, "q": spectrum.q,
-                                             "Dq": spectrum.Dq, "alpha": spectrum.alpha,
-                                             "f": spectrum.f}))
-                indices.append({"discs": discs, "seed": seed, "void_ratio": float(void[b]),
-                                "D0": float(spectrum.D0), "alpha0": float(spectrum.alpha0),
-                                "alpha0_over_D0": float(spectrum.alpha0_over_D0),
-                                "min_r2": float(np.min(spectrum.r2)),
-                                "r2_q0": float(spectrum.r2[np.argmin(np.abs(spectrum.q))]),
-                                "dq_decreasing": bool(np.all(np.diff(spectrum.Dq) <= 1e-9)),
-                                "pixel_size": image.pixel_size, "image_size": image.n_pixels})
+                for rule in BOX_RULES:
+                    image, spectrum = analyse_rve(data, b, box_rule=rule)
+                    spectra.append(pd.DataFrame({"discs": discs, "seed": seed,
+                                                 "box_rule": rule, "q": spectrum.q,
+                                                 "Dq": spectrum.Dq, "alpha": spectrum.alpha,
+                                                 "f": spectrum.f}))
+                    indices.append({"discs": discs, "seed": seed, "box_rule": rule,
+                                    "void_ratio": float(void[b]),
+                                    **_index_row(image, spectrum)})
             bar.update(1)
     write_csv(pd.concat(spectra, ignore_index=True), spectra_path)
     write_csv(pd.DataFrame(indices), indices_path)
     return pd.read_csv(spectra_path), pd.read_csv(indices_path)
+
+
+#: the columns of ``resolution.csv``
+RESOLUTION_COLUMNS = ("discs", "seed", "box_rule", "pixel_request", *INDEX_COLUMNS[4:])
+
+
+def resolution_study(scale: ReproductionScale, folder: Path, device: str,
+                     progress: bool = False) -> pd.DataFrame:
+    """The indices of the seeds' RVEs of ``scale.resolution_discs`` discs at every pixel of
+    :data:`RESOLUTION_PIXELS` under both box rules (``resolution.csv``: discs, seed,
+    box_rule, pixel_request [m] and the columns of ``indices.csv`` from D0 on); read back
+    when written."""
+    path = folder / "resolution.csv"
+    if path.exists():
+        table = pd.read_csv(path)
+        if set(RESOLUTION_COLUMNS) <= set(table.columns):
+            return table
+    discs = scale.resolution_discs
+    data = load_rve(packings(scale, discs, folder, device))
+    rows = []
+    with progress_bar(len(RESOLUTION_PIXELS), f"RVE sizes: resolution study ({discs} discs)",
+                      progress, unit="pixel") as bar:
+        for pixel in RESOLUTION_PIXELS:
+            for b, seed in enumerate(scale.seeds):
+                for rule in BOX_RULES:
+                    image, spectrum = analyse_rve(data, b, pixel, box_rule=rule)
+                    rows.append({"discs": discs, "seed": seed, "box_rule": rule,
+                                 "pixel_request": pixel, **_index_row(image, spectrum)})
+            bar.update(1)
+    write_csv(pd.DataFrame(rows), path)
+    return pd.read_csv(path)
+
+
+def resolution_changes(table: pd.DataFrame) -> pd.DataFrame:
+    """Per box rule and pixel: the seeds' mean and standard deviation of D0, α0 and α0/D0,
+    the image side [px], and the change [%] of the means of D0 and α0/D0 from the next
+    coarser pixel."""
+    stats = table.groupby(["box_rule", "pixel_request"]).agg(
+        image_px=("image_size", "mean"), D0_mean=("D0", "mean"), D0_std=("D0", "std"),
+        alpha0_mean=("alpha0", "mean"), ratio_mean=("alpha0_over_D0", "mean"),
+        ratio_std=("alpha0_over_D0", "std"), D0_se=("D0_se", "mean"),
+        r2_q0=("r2_q0", "min"), box_min_m=("box_min_m", "mean"),
+        box_max_m=("box_max_m", "mean")).reset_index()
+    stats = stats.sort_values(["box_rule", "pixel_request"], ascending=[True, False])
+    for column, name in (("D0_mean", "D0_change_pct"), ("ratio_mean", "ratio_change_pct")):
+        stats[name] = 100.0 * stats.groupby("box_rule")[column].pct_change()
+    return stats.reset_index(drop=True)
 
 
 def _stats(table: pd.DataFrame, column: str) -> pd.DataFrame:

@@ -34,6 +34,7 @@ class ReproductionScale:
         fem_axial_strain: final axial strain of the FEM × DEM runs [-].
         map_strain: axial strain of the maps and shear-band measures (Wu et al.: 2 %).
         track_every: load steps between pore-fractal analyses of every Gauss point's RVE.
+        resolution_discs: RVE size of the resolution study [discs] (one of ``sizes``).
         speedup_sizes: RVE sizes of Fig. 11 [discs] (a subset of ``sizes``).
         speedup_batches: numbers of RVEs of Fig. 11.
         speedup_steps: DEM steps timed per case (the paper times 10⁴; fewer are scaled).
@@ -60,6 +61,7 @@ class ReproductionScale:
     speedup_steps: int
     yade_steps: int
     repeats: int = 3
+    resolution_discs: int = 400
     void_ratio: float = 0.18
     pressure: float = 100.0e3
 
@@ -68,8 +70,9 @@ class ReproductionScale:
             if not set(getattr(self, name)) <= set(self.sizes):
                 raise ValueError(f"{name} must be among the sizes {self.sizes} (the same "
                                  "RVEs)")
-        if self.element_discs not in self.sizes:
-            raise ValueError(f"element_discs must be among the sizes {self.sizes}")
+        for name in ("element_discs", "resolution_discs"):
+            if getattr(self, name) not in self.sizes:
+                raise ValueError(f"{name} must be among the sizes {self.sizes}")
         if len(self.seeds) < 2:
             raise ValueError("a reproduction needs at least two seeds (a scatter)")
 
@@ -81,6 +84,7 @@ SCALES: dict[str, ReproductionScale] = {
         element_steps=3, specimen_elements=(1, 2), specimen_discs=16, specimen_steps=3,
         fem_axial_strain=0.015, map_strain=0.01, track_every=1, speedup_sizes=(16,),
         speedup_batches=(1, 4), speedup_steps=200, yade_steps=0, repeats=1,
+        resolution_discs=36,
     ),
     "cpu": ReproductionScale(
         name="cpu", sizes=tuple(side * side for side in range(10, 31, 2)),

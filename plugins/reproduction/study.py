@@ -65,24 +65,45 @@ def _json_ready(value: Any) -> Any:
     return value
 
 
-def _part_rve_size(scale: ReproductionScale, folder: Path, device: str,
-                   progress: bool) -> dict[str, Any]:
-    spectra, indices = rve_size.size_spectra(scale, folder, device, progress)
-    settle = rve_size.settle_size(indices)
+def _per_size(indices: pd.DataFrame) -> pd.DataFrame:
+    """The seeds' means and scatter of the indices per number of discs (one box rule)."""
     per_size = indices.groupby("discs").agg(
         ratio_mean=("alpha0_over_D0", "mean"), ratio_std=("alpha0_over_D0", "std"),
         D0_mean=("D0", "mean"), alpha0_mean=("alpha0", "mean"),
         void_ratio_mean=("void_ratio", "mean"), min_r2=("min_r2", "min"),
-        r2_q0=("r2_q0", "min"),
-        image_px=("image_size", "first"), rves=("seed", "count"),
+        r2_q0=("r2_q0", "min"), ratio_fit_se=("alpha0_over_D0_se", "mean"),
+        image_px=("image_size", "first"), box_min_mm=("box_min_m", "mean"),
+        box_max_mm=("box_max_m", "mean"), rves=("seed", "count"),
         dq_decreasing_count=("dq_decreasing", "sum")).reset_index()
+    per_size["box_min_mm"] *= 1e3
+    per_size["box_max_mm"] *= 1e3
     per_size["ratio_scatter_pct"] = 100 * per_size["ratio_std"] / per_size["ratio_mean"]
+    return per_size
+
+
+def _part_rve_size(scale: ReproductionScale, folder: Path, device: str,
+                   progress: bool) -> dict[str, Any]:
+    spectra, indices = rve_size.size_spectra(scale, folder, device, progress)
+    by_rule = {rule: indices[indices["box_rule"] == rule] for rule in ("cell", "physical")}
+    settle = {rule: rve_size.settle_size(table) for rule, table in by_rule.items()}
+    per_size = {rule: _per_size(table) for rule, table in by_rule.items()}
+    cell = by_rule["cell"]
     plots.plot_spectra(spectra, scale.biaxial_sizes, folder / "fig3_spectra.png")
-    plots.plot_ratio_by_size(indices, settle["settle_discs"], folder / "fig4_ratio.png")
-    return {"settle": settle, "per_size": per_size.to_dict("records"),
-            "rves": len(indices), "dq_decreasing": int(indices["dq_decreasing"].sum()),
-            "void_ratio_range": [float(indices["void_ratio"].min()),
-                                 float(indices["void_ratio"].max())]}
+    plots.plot_ratio_by_size(indices, {rule: s["settle_discs"] for rule, s in settle.items()},
+                             folder / "fig4_ratio.png")
+    resolution = rve_size.resolution_study(scale, folder, device, progress)
+    changes = rve_size.resolution_changes(resolution)
+    write_csv(changes, folder / "resolution_summary.csv")
+    plots.plot_resolution(resolution, folder / "fig4_resolution.png")
+    return {"settle": settle["cell"], "settle_physical": settle["physical"],
+            "per_size": per_size["cell"].to_dict("records"),
+            "per_size_physical": per_size["physical"].to_dict("records"),
+            "resolution_discs": scale.resolution_discs,
+            "resolution": changes.to_dict("records"),
+            "rves": len(cell), "dq_decreasing": int(cell["dq_decreasing"].sum()),
+            "dq_decreasing_physical": int(by_rule["physical"]["dq_decreasing"].sum()),
+            "void_ratio_range": [float(cell["void_ratio"].min()),
+                                 float(cell["void_ratio"].max())]}
 
 
 def _part_size_biaxial(scale: ReproductionScale, folder: Path, device: str,
