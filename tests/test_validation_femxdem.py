@@ -71,6 +71,22 @@ def test_field_comparison_matches_points_by_coordinates() -> None:
         femxdem_case.field_comparison(theirs, ours.iloc[:3], 3)
 
 
+def test_band_measures_read_the_spread_and_the_localisation_at_the_band_strains() -> None:
+    """σ1/σ3 interpolated on the curve; σyy s.d. and γmax/γmean of the step at a strain;
+    None past the run's end."""
+    curve = pd.DataFrame({"step": [0, 1, 2], "axial_strain": [0.0, 0.016, 0.02],
+                          "sxx": -1e5, "syy": [-1e5, -2.6e5, -2.8e5], "sxy": 0.0})
+    points = pd.concat([_fields(1, [0, 1, 2, 3], [-2e5, -2e5, -2e5, -2.4e5],
+                                [1e-3, 1e-3, 1e-3, 5e-3]),
+                        _fields(2, [0, 1, 2, 3], [-2e5] * 4, [1e-3] * 4)])
+    band = femxdem_case.band_measures(curve, points, strains=(0.016, 0.018, 0.025))
+    assert band["ratio"][0] == pytest.approx(2.6) and band["ratio"][1] == pytest.approx(2.7)
+    assert band["ratio"][2] is None
+    assert band["syy_sd_kpa"][0] == pytest.approx(np.std([200, 200, 200, 240]))
+    assert band["localisation"][0] == pytest.approx(10e-3 / 4e-3)
+    assert band["syy_sd_kpa"][1] is None and band["localisation"][2] is None
+
+
 def test_cost_figures_split_at_the_peak() -> None:
     curve = pd.DataFrame({"step": [0, 1, 2, 3], "iterations": [0, 2, 4, 9],
                           "particle_steps": [0, 400 * 8 * 100, 400 * 8 * 200, 400 * 8 * 300],
@@ -121,3 +137,8 @@ def test_femxdem_smoke_case_through_the_command_line(tmp_path: Path) -> None:
                                                           rel=0.02)
     assert first["theirs"]["syy_mean_kpa"] > 110.0  # loaded beyond the 100 kPa at rest
     assert seed["guo_zhao_patches"][0] == "python 3"
+    # the band table: theirs and every run of ours; fields beside theirs where the points
+    # are theirs (not the 9-node rule, not the finer mesh)
+    assert "The shear band" in report
+    assert set(seed["bands"]) == {"guo-zhao", *femxdem_case.ours_variants((1, 2))}
+    assert "ours-as-gz" in seed["fields"] and "ours-fine" not in seed["fields"]

@@ -4,12 +4,14 @@ Both codes run the drained biaxial specimen of Guo & Zhao's example (50 mm × 10
 platens, one bottom node pinned, the confining stress on the sides, equal load steps of axial
 strain) on the same mesh, every Gauss point starting from the same RVE (their
 ``prepareRVE.py`` procedure, one RVE copied to every point). Theirs is run as shipped (8-node
-quadrilaterals, 2 × 2 Gauss points, Newton ``rtol = 1e-2`` on ‖δu‖/‖u‖; see
-:mod:`granular_material_validation.guo_zhao_runner`); ours twice where our command line
-allows it: with its defaults (``ours-defaults``) and as Guo & Zhao (``ours-as-gz``: 8-node
-elements and their displacement test), so a difference can be put on the element, the
-convergence test or neither. The curve judged is ``ours-as-gz`` when it runs, else
-``ours-defaults``. Chaos baseline: their code against itself at 1 % less strain a load step.
+quadrilaterals, 2 × 2 Gauss points, Newton ``rtol = 1e-2`` on ‖δu‖/‖Δu‖; see
+:mod:`granular_material_validation.guo_zhao_runner`); ours with its defaults (``ours-defaults``:
+Q4, finite strain, Guo & Zhao's Newton loop), as Guo & Zhao (``ours-as-gz``: their 8-node
+elements), and, where the command line has the options, with 9-node elements
+(``ours-q9``), in small strain (``ours-small-strain``) and on a mesh twice as fine
+(``ours-fine``), so that the band can be put on the element, the mesh or the kinematics.
+The curve judged is ``ours-as-gz`` when it runs, else ``ours-defaults``. Chaos baseline:
+their code against itself at 1 % less strain a load step.
 """
 
 from __future__ import annotations
@@ -22,8 +24,8 @@ import numpy as np
 import pandas as pd
 from granular_material_validation import engine_runner, guo_zhao_runner, metrics
 
-__all__ = ["AS_GZ_OPTIONS", "PERTURBATION", "cost_figures", "field_comparison",
-           "ours_variants", "run_femxdem_seed", "shear_strain"]
+__all__ = ["AS_GZ_OPTIONS", "BAND_STRAINS", "PERTURBATION", "band_measures", "cost_figures",
+           "field_comparison", "ours_variants", "run_femxdem_seed", "shear_strain"]
 
 #: our options that reproduce Guo & Zhao's element and convergence test
 AS_GZ_OPTIONS = ["--element", "quad8", "--convergence", "displacement", "--rtol", "1e-2"]
@@ -31,14 +33,49 @@ AS_GZ_OPTIONS = ["--element", "quad8", "--convergence", "displacement", "--rtol"
 PERTURBATION = 0.99
 
 
-def ours_variants() -> dict[str, list[str]]:
-    """Our runs of the case and their extra options: defaults, and as Guo & Zhao where our
-    ``biaxial`` command has ``--element`` and ``--convergence``."""
+#: axial strains [-] of the band measures: σ1/σ3 (all), σyy spread and γmax/γmean (the
+#: second and last), after the issue that measured Guo & Zhao's band
+BAND_STRAINS = (0.016, 0.02, 0.022, 0.025)
+
+
+def ours_variants(elements: tuple[int, int] = (2, 4)) -> dict[str, list[str]]:
+    """Our runs of the case and their extra options: defaults; as Guo & Zhao where our
+    ``biaxial`` command has ``--element`` and ``--convergence``; with 9-node elements, in
+    small strain (where it has ``--formulation``) and on a mesh of twice the ``elements``
+    each way."""
     variants = {"ours-defaults": []}
     text = engine_runner.biaxial_options()
     if "--element " in text and "--convergence" in text:
         variants["ours-as-gz"] = list(AS_GZ_OPTIONS)
+        variants["ours-q9"] = ["--element", "quad9"]
+        if "--formulation" in text:
+            variants["ours-small-strain"] = [*AS_GZ_OPTIONS, "--formulation", "small-strain"]
+        fine = [str(2 * int(elements[0])), str(2 * int(elements[1]))]
+        variants["ours-fine"] = [*AS_GZ_OPTIONS, "--elements", *fine]
     return variants
+
+
+def band_measures(curve: pd.DataFrame, points: pd.DataFrame,
+                  strains: tuple[float, ...] = BAND_STRAINS) -> dict[str, Any]:
+    """The shear band of one run: σ1/σ3 of the volume-average stress at ``strains`` [-], and
+    at each of them the spread (s.d. over the points, kPa) of σyy and γmax/γmean of the
+    Gauss points (None past the run's end); ``curve`` has ``step``, ``axial_strain``,
+    ``sxx``, ``syy``, ``sxy``, ``points`` has ``step``, ``syy``, ``exx``, ``eyy``, ``exy``."""
+    x = curve["axial_strain"].to_numpy(dtype=np.float64)
+    out: dict[str, Any] = {"strains": list(strains), "ratio": [], "syy_sd_kpa": [],
+                           "localisation": []}
+    for strain in strains:
+        out["ratio"].append(_ratio_at(curve, strain))
+        k = int(np.argmin(np.abs(x - strain)))
+        rows = points[points["step"] == curve["step"].iloc[k]]
+        if abs(x[k] - strain) > 1e-6 or rows.empty:
+            out["syy_sd_kpa"].append(None)
+            out["localisation"].append(None)
+            continue
+        g = shear_strain(rows["exx"], rows["eyy"], rows["exy"])
+        out["syy_sd_kpa"].append(float((rows["syy"].to_numpy(dtype=np.float64) / 1e3).std()))
+        out["localisation"].append(float(g.max() / g.mean()) if g.mean() > 0 else None)
+    return out
 
 
 def shear_strain(exx: np.ndarray, eyy: np.ndarray, exy: np.ndarray) -> np.ndarray:
@@ -150,7 +187,7 @@ def run_femxdem_seed(case: Any, seed: int, rve: Path, prep: dict[str, Any], work
     their_fields = guo_zhao_runner.gauss_fields(work / "guo_zhao")
     points = int(their_fields["point"].nunique())
     runs: dict[str, tuple[pd.DataFrame, pd.DataFrame, dict[str, Any]]] = {}
-    for name, options in ours_variants().items():
+    for name, options in ours_variants(elements).items():
         runs[name] = engine_runner.ours_femxdem_biaxial(
             rve, work / name, elements=elements, axial_strain=case.axial_strain,
             steps=case.steps, confining=case.pressure, extra=options, device=device)
@@ -171,7 +208,9 @@ def run_femxdem_seed(case: Any, seed: int, rve: Path, prep: dict[str, Any], work
     strains = [s for s in (0.01, 0.02, 0.03, 0.05, 0.07) if s <= case.axial_strain + 1e-12]
     ratios = {"guo-zhao": [_ratio_at(theirs, s) for s in strains],
               "guo-zhao-perturbed": [_ratio_at(slower, s) for s in strains]}
+    bands = {"guo-zhao": band_measures(theirs, their_fields)}
     for name, (curve, pts, summary) in runs.items():
+        bands[name] = band_measures(curve, pts)
         comparisons[name] = metrics.compare_curves(theirs, curve).to_dict()
         cost[name] = cost_figures(curve, points, case.particles, peak_step,
                                   summary["wall_s"], _our_threads(summary), theirs=False,
@@ -182,13 +221,15 @@ def run_femxdem_seed(case: Any, seed: int, rve: Path, prep: dict[str, Any], work
         cost[name]["speedup_per_core"] = cost["guo-zhao"]["core_s"] / cost[name]["core_s"]
         if cost["guo-zhao"]["cpu_s"] and cost[name]["cpu_s"]:
             cost[name]["speedup_cpu"] = cost["guo-zhao"]["cpu_s"] / cost[name]["cpu_s"]
-        fields[name] = [field_comparison(their_fields, pts, k) for k in chosen]
+        if pts["point"].nunique() == points:  # the same Gauss points as theirs
+            fields[name] = [field_comparison(their_fields, pts, k) for k in chosen]
         ratios[name] = [_ratio_at(curve, s) for s in strains]
     extra = {"packing": prep, "judged": judged, "comparisons": comparisons,
              "guo_zhao_perturbed_vs_guo_zhao": {
                  **metrics.compare_curves(theirs, slower).to_dict(),
                  "strain_per_step": PERTURBATION * per_step},
              "fields": fields, "cost": cost, "ratios_at": {"strains": strains, **ratios},
+             "bands": bands, "options": ours_variants(elements),
              "points": points, "elements": list(elements), "strain_per_step": per_step,
              "guo_zhao_patches": tsum["patches"], "guo_zhao_rve_state": tsum["rve_state"],
              "baseline_wall_s": bsum["wall_s"], "steps": case.steps,

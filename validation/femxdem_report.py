@@ -132,6 +132,35 @@ def _cost_rows(e: dict[str, Any]) -> list[str]:
     return lines
 
 
+def _band_rows(e: dict[str, Any]) -> list[str]:
+    """The shear band of every run (theirs first): σ1/σ3 at the band strains, σyy spread and
+    γmax/γmean at the first and last, Newton iterations a step before and after the peak."""
+    seed = e["per_seed"][0]
+    bands, cost = seed.get("bands", {}), seed["cost"]
+    if not bands:
+        return []
+    strains = next(iter(bands.values()))["strains"]
+    pick = [0, len(strains) - 1]
+    head = (" / ".join(_p(s, 1) for s in strains[1:]), " / ".join(_p(strains[i], 1)
+                                                                    for i in pick))
+    lines = [f"| run | options | σ1/σ3 at {head[0]} | σyy s.d. at {head[1]} [kPa] | "
+             f"γmax/γmean at {head[1]} | Newton it/step before / after peak |",
+             "|---|---|---|---|---|---|"]
+    options = seed.get("options", {})
+    for name, b in bands.items():
+        c = cost.get(name, {})
+        opts = "their biaxialSmooth.py" if name == "guo-zhao" else (
+            " ".join(options.get(name, [])) or "defaults")
+        lines.append(
+            f"| {name} | {opts} | "
+            + " / ".join(_f(v, ".3f") for v in b["ratio"][1:]) + " | "
+            + " / ".join(_f(b["syy_sd_kpa"][i], ".2f") for i in pick) + " | "
+            + " / ".join(_f(b["localisation"][i], ".3f") for i in pick) + " | "
+            f"{_f(c.get('iterations_pre_peak'), '.1f')} / "
+            f"{_f(c.get('iterations_post_peak'), '.1f')} |")
+    return lines
+
+
 def _field_rows(e: dict[str, Any]) -> list[str]:
     seed = e["per_seed"][0]
     lines = ["| run | step | σyy mean ± s.d. [kPa] theirs / ours | γ mean theirs / ours | "
@@ -165,6 +194,11 @@ def section_lines(e: dict[str, Any], out: Path) -> list[str]:
     for run in e["_runs"]:
         plot = plot_femxdem(run, out / "plots" / f"{name}_seed{run.seed}.png")
         lines += [f"![{name} seed {run.seed}]({plot.relative_to(out).as_posix()})", ""]
+    band = _band_rows(e)
+    if band:
+        lines += ["The shear band (σ1/σ3 of the volume-average stress; σyy spread over the "
+                  "Gauss points; γ = √(2 e:e) of the strain deviator, γmax/γmean 1 for a "
+                  "uniform field; the peak is theirs for every run):", "", *band, ""]
     lines += ["Global curve:", "", *_curve_rows(e), "", "Acceptance rules on the global "
               "curve (the same rules for the chaos baseline):", "", *_acceptance_rows(e), "",
               "Cost (same machine, same run; their pool of processes and our CPU shards "
