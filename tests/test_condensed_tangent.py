@@ -215,3 +215,30 @@ def test_condensed_predicts_the_relaxed_dem_response() -> None:
         assert error < 0.03, (direction.tolist(), error)
         if direction[0, 0] != direction[1, 1]:  # deviatoric: affine is far off
             assert error_kr > 0.1, (direction.tolist(), error_kr)
+
+
+# -- the DEM material ---------------------------------------------------------------------------
+def test_dem_material_returns_the_condensed_tangent(sheared: RVEData, tmp_path) -> None:
+    """``tangent="condensed"``: the material's tangent is the condensed tangent of each
+    RVE's trial state, at no DEM run beyond the evaluation's own."""
+    from granular_material_skfem import DEMMaterial
+
+    from granular_material.dem import save_rve
+
+    path = tmp_path / "sheared.npz"
+    save_rve(path, sheared)
+    grad = np.array([[[1e-4, 0.0], [0.0, -1e-4]], [[0.0, 1e-4], [1e-4, 0.0]]])
+    kr = DEMMaterial(rve=path, device="cpu", replicate=True)
+    kr.allocate(2)
+    condensed = DEMMaterial(rve=path, device="cpu", replicate=True, tangent="condensed")
+    condensed.allocate(2)
+    response = condensed.evaluate(grad)
+    reference = kr.evaluate(grad)
+    np.testing.assert_array_equal(response.stress, reference.stress)
+    assert response.dem_steps == reference.dem_steps
+    expected = condensed_tangent(condensed.backend.batch.to_data()).tangent
+    scale = np.abs(expected).max()
+    np.testing.assert_allclose(response.tangent, expected, rtol=0, atol=1e-9 * scale)
+    assert np.abs(response.tangent - reference.tangent).max() > 0.1 * scale
+    with pytest.raises(ValueError, match="tangent must be one of"):
+        DEMMaterial(rve=path, device="cpu", tangent="condensd").allocate(1)

@@ -102,11 +102,12 @@ def _newton_arguments(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--predictor", choices=("tangent", "extrapolate"), default=_NEWTON.predictor,
                    help="first guess of a step: committed-tangent solve or the last increment "
                         f"scaled (default {_NEWTON.predictor})")
-    g.add_argument("--tangent", choices=("kruyt-rothenburg", "perturbation"),
+    g.add_argument("--tangent", choices=("kruyt-rothenburg", "perturbation", "condensed"),
                    default="kruyt-rothenburg",
-                   help="dem: tangent of the RVEs: Kruyt-Rothenburg (Wu et al. eq. 6, default) "
-                        "or forward differences of each RVE's response (4 more DEM runs per "
-                        "iteration)")
+                   help="dem: tangent of the RVEs: Kruyt-Rothenburg (Wu et al. eq. 6, default), "
+                        "forward differences of each RVE's response (4 more DEM runs per "
+                        "iteration) or condensed (the contact network's stiffness with the "
+                        "discs' fluctuations condensed out, no DEM run)")
     g.add_argument("--perturbation", type=float, default=0.1,
                    help="dem, --tangent perturbation: perturbation of grad u relative to its "
                         "largest component (default 0.1)")

@@ -18,6 +18,7 @@ from typing import Protocol
 import numpy as np
 
 from granular_material.dem import DEMBatch, DEMInstabilityError, Homogenized, RVEData, save_rve
+from granular_material.dem.condensed import condensed_tangent
 from granular_material.procedures import (
     drive_grad_u,
     has_real_logarithm,
@@ -36,7 +37,7 @@ __all__ = [
     "check_reuse",
 ]
 
-TANGENTS = ("kruyt-rothenburg", "perturbation")
+TANGENTS = ("kruyt-rothenburg", "perturbation", "condensed")
 #: how an RVE that must move is driven to a new trial ∇u: from the committed state along the
 #: whole path of the step (``restart``, Guo & Zhao), or from its last trial state by the change
 DRIVES = ("restart", "continue")
@@ -106,6 +107,13 @@ def _nan_like(h: Homogenized) -> Homogenized:
                                                np.nan) for f in fields(h)})
 
 
+def _with_condensed(batch: DEMBatch, h: Homogenized, moved: np.ndarray) -> Homogenized:
+    """``h`` with the condensed tangent [Pa] of the ``moved`` RVEs' current states."""
+    tangent = np.array(h.tangent, dtype=np.float64, copy=True)
+    tangent[moved] = condensed_tangent(batch.to_data(), rves=np.flatnonzero(moved)).tangent
+    return replace(h, tangent=tangent)
+
+
 def _totals(drives: list[tuple[int, int, int]]) -> tuple[int, int, int]:
     """DEM steps, RVE paths and particle-steps of ``drives`` together."""
     steps, paths, particles = (int(sum(d[k] for d in drives)) for k in range(3))
@@ -158,7 +166,9 @@ class InProcessBackend:
         tangent: "kruyt-rothenburg" (the contact-network estimate, one DEM run per
             evaluation) or "perturbation" (the derivative of the RVE's own response to ∇u by
             forward differences: four more runs from the committed state, with ∇u + h E_kl,
-            h = max(perturbation · max|∇u|, min_perturbation) per RVE).
+            h = max(perturbation · max|∇u|, min_perturbation) per RVE) or "condensed" (the
+            contact network's stiffness with the discs' fluctuations condensed out,
+            :mod:`granular_material.dem.condensed`: no DEM run, a sparse LU per RVE).
         perturbation: relative size of the perturbation [-].
         min_perturbation: smallest perturbation [-].
         reuse_tol: largest change of ∇u [-] (max over the components) for which an RVE keeps
@@ -311,6 +321,8 @@ class InProcessBackend:
                 tangent[moved, :, :, row, col] = ((sigma[moved] - stress[moved])
                                                   / size[moved, None, None])
             new = replace(new, tangent=tangent)
+        if self.tangent == "condensed" and moved.any():
+            new = _with_condensed(self.batch, new, moved)
         self._reached[moved] = target[moved]
         self._current = new
         self._target = target

@@ -36,8 +36,9 @@ class DEMMaterialParameters:
             the engine's default (one per core; with ``mpi`` the cores of a node shared by
             its ranks). With 1, independent RVEs are also prepared one at a time (RVE p from
             the random gas of seed + p, consolidated on its own).
-        tangent: "kruyt-rothenburg" (Wu et al. eq. 6) or "perturbation" (forward
-            differences of the RVE response, four extra DEM runs per evaluation; see
+        tangent: "kruyt-rothenburg" (Wu et al. eq. 6), "perturbation" (forward
+            differences of the RVE response, four extra DEM runs per evaluation) or
+            "condensed" (fluctuations condensed out of the contact network's stiffness; see
             :class:`~granular_material_skfem.backend.InProcessBackend`).
         perturbation: relative perturbation of ∇u for the "perturbation" tangent [-].
         reuse_tol: strain [-]: an RVE whose ∇u moved by at most this (every component) since
