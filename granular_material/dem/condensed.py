@@ -142,10 +142,12 @@ def _fractional(data: RVEData, rve: int) -> np.ndarray:
     return frac - np.floor(frac)
 
 
-def contact_network(data: RVEData, rve: int = 0) -> ContactNetwork:
+def contact_network(data: RVEData, rve: int = 0,
+                    cap_tolerance: float = SLIDING_TOLERANCE) -> ContactNetwork:
     """The touching pairs of RVE ``rve`` of ``data`` with their forces: from the engine's
     contact lists and tangential springs when ``data`` carries them (a state written by the
-    engine), else from the geometry with no tangential force."""
+    engine), else from the geometry with no tangential force. A contact slides where
+    |fs| >= μ·fn·(1 − ``cap_tolerance``) (the engine's test by default)."""
     cell = np.asarray(data.cell[rve], dtype=np.float64)
     radius = np.asarray(data.radius[rve], dtype=np.float64)
     frac = _fractional(data, rve)
@@ -172,7 +174,7 @@ def contact_network(data: RVEData, rve: int = 0) -> ContactNetwork:
     kn, kt = _stiffness(data, ra, rc)
     fn = kn * (ra + rc - dist)
     mu = math.tan(data.meta.friction_angle)
-    sliding = np.abs(shear) >= mu * fn * (1.0 - SLIDING_TOLERANCE)
+    sliding = np.abs(shear) >= mu * fn * (1.0 - cap_tolerance)
     return ContactNetwork(
         a=a, c=c, branch=d, radius_a=ra, radius_c=rc, kn=kn, kt=kt, normal_force=fn,
         shear_force=shear, sliding=sliding, friction=mu,
@@ -227,42 +229,54 @@ def _condense_one(net: ContactNetwork, sliding: str,
     """(C, affine) [Pa] as 4 × 4 (index 2i + j) of one RVE, discs left out, unknowns."""
     kept, alive = _kept_discs(net)
     b, k = _contact_matrices(net, sliding)
+    local = np.matmul(b.transpose(0, 2, 1), np.matmul(k, b))  # Bᵀ k B, (M, 10, 10)
     # the affine term of every contact; the contacts of discs left out relax fully
-    affine_all = np.einsum("mpi,mpq,mqj->ij", b[:, :, 6:], k, b[:, :, 6:])
-    b, k = b[alive], k[alive]
-    a, c = net.a[alive], net.c[alive]
-    local = np.einsum("mpi,mpq,mqj->mij", b, k, b)  # Bᵀ k B, (M, 10, 10)
-    n_u = 3 * net.n_disc
-    dofs = np.concatenate([3 * a[:, None] + np.arange(3), 3 * c[:, None] + np.arange(3),
-                           np.broadcast_to(n_u + np.arange(4), (len(a), 4))], axis=1)
-    rows = np.repeat(dofs, 10, axis=1).ravel()
-    cols = np.tile(dofs, (1, 10)).ravel()
-    full = sp.coo_matrix((local.ravel(), (rows, cols)), shape=(n_u + 4, n_u + 4)).tocsr()
-    affine = full[n_u:, n_u:].toarray()
+    affine_all = local[:, 6:, 6:].sum(axis=0)
+    local = local[alive]
+    affine = local[:, 6:, 6:].sum(axis=0)
     # unknowns: the kept discs' translations and rotations, less one disc's translation
     free = np.repeat(kept, 3)
     if kept.any():
         first = int(np.argmax(kept))
         free[3 * first: 3 * first + 2] = False
-    index = np.flatnonzero(free)
-    if index.size == 0:
-        return affine / net.volume, affine_all / net.volume, int((~kept).sum()), 0
-    k_uu = full[index][:, index].tocsc()
-    k_ug = full[index][:, n_u:].toarray()
-    k_gu = full[n_u:][:, index].toarray()
-    scale = float(k_uu.diagonal().mean())
-    k_uu = k_uu + regularization * scale * sp.identity(index.size, format="csc")
-    x = spla.splu(k_uu).solve(k_ug)
+    n_free = int(free.sum())
+    left_out = int((~kept).sum())
+    if n_free == 0:
+        return affine / net.volume, affine_all / net.volume, left_out, 0
+    number = np.where(free, np.cumsum(free) - 1, -1)  # reduced index of each unknown, or −1
+    a, c = net.a[alive], net.c[alive]
+    dofs = number[np.concatenate([3 * a[:, None] + np.arange(3),
+                                  3 * c[:, None] + np.arange(3)], axis=1)]  # (M, 6)
+    k_disc = local[:, :6, :6]
+    rows = np.broadcast_to(dofs[:, :, None], k_disc.shape)
+    cols = np.broadcast_to(dofs[:, None, :], k_disc.shape)
+    used = (rows >= 0) & (cols >= 0)
+    on_diagonal = used & (rows == cols)
+    scale = float(k_disc[on_diagonal].sum()) / n_free  # mean diagonal stiffness [N/m]
+    diagonal = np.arange(n_free)
+    entries = np.concatenate([k_disc[used], np.full(n_free, regularization * scale)])
+    k_uu = sp.csc_matrix((entries, (np.concatenate([rows[used], diagonal]),
+                                    np.concatenate([cols[used], diagonal]))),
+                         shape=(n_free, n_free))
+    # K_uG and K_Gu, dense (n_free, 4) and (4, n_free)
+    k_ug, k_gu = np.zeros((n_free + 1, 4)), np.zeros((4, n_free + 1))
+    np.add.at(k_ug, dofs.ravel(), local[:, :6, 6:].reshape(-1, 4))
+    np.add.at(k_gu.T, dofs.ravel(), local[:, 6:, :6].transpose(0, 2, 1).reshape(-1, 4))
+    k_ug, k_gu = k_ug[:-1], k_gu[:, :-1]  # row −1 gathered what belongs to no unknown
+    x = spla.splu(k_uu, permc_spec="MMD_AT_PLUS_A").solve(k_ug)
     condensed = affine - k_gu @ x
-    return condensed / net.volume, affine_all / net.volume, int((~kept).sum()), int(index.size)
+    return condensed / net.volume, affine_all / net.volume, left_out, n_free
 
 
 def condensed_tangent(data: RVEData, sliding: str = "free", regularization: float = 1e-9,
-                      rves: np.ndarray | None = None) -> CondensedTangent:
+                      rves: np.ndarray | None = None,
+                      cap_tolerance: float = SLIDING_TOLERANCE) -> CondensedTangent:
     """The condensed tangent C [Pa] (B, 2, 2, 2, 2), C_ijkl = ∂σ_ij/∂(∂u_k/∂x_l), of every
     RVE of ``data`` (or of the indices ``rves``) in its current configuration (see the
     module docstring). ``sliding``: "free" (a sliding contact has kt = 0, symmetric) or
-    "coulomb" (Δfs = μ·sign(fs)·Δfn). A scipy sparse LU per RVE, on the CPU."""
+    "coulomb" (Δfs = μ·sign(fs)·Δfn). ``cap_tolerance``: a contact within this share of
+    its Coulomb cap counts as sliding (default: the engine's own test, at the cap). A scipy
+    sparse LU per RVE, on the CPU."""
     if sliding not in SLIDING_MODES:
         raise ValueError(f"sliding must be one of {', '.join(SLIDING_MODES)}, got {sliding!r}")
     if not (math.isfinite(regularization) and regularization > 0):
@@ -275,7 +289,7 @@ def condensed_tangent(data: RVEData, sliding: str = "free", regularization: floa
     seconds = np.zeros(count)
     for slot, rve in enumerate(index):
         start = time.perf_counter()
-        net = contact_network(data, int(rve))
+        net = contact_network(data, int(rve), cap_tolerance)
         tangent[slot], affine[slot], n_left_out[slot], n_unknowns[slot] = _condense_one(
             net, sliding, regularization)
         seconds[slot] = time.perf_counter() - start
