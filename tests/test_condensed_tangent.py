@@ -242,3 +242,21 @@ def test_dem_material_returns_the_condensed_tangent(sheared: RVEData, tmp_path) 
     assert np.abs(response.tangent - reference.tangent).max() > 0.1 * scale
     with pytest.raises(ValueError, match="tangent must be one of"):
         DEMMaterial(rve=path, device="cpu", tangent="condensd").allocate(1)
+
+
+def test_prediction_benchmark_smoke(tmp_path) -> None:
+    """benchmarks/condensed_tangent.py at smoke size: every state, protocol and direction
+    of one seed, finite errors, and the costs."""
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / "condensed_tangent.py"
+    spec = importlib.util.spec_from_file_location("condensed_tangent_bench", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    table = module.main(["--particles", "24", "--seeds", "1", "--hold", "200",
+                         "--out", str(tmp_path)])
+    assert len(table) == 3 * 2 * len(module.DIRECTIONS)
+    errors = table[[c for c in table.columns if c.endswith("_err")]].to_numpy()
+    assert np.isfinite(errors).all()
+    assert (tmp_path / "prediction.md").exists() and (tmp_path / "cost.json").exists()
