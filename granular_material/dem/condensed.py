@@ -259,11 +259,19 @@ def _condense_one(net: ContactNetwork, sliding: str,
                                     np.concatenate([cols[used], diagonal]))),
                          shape=(n_free, n_free))
     # K_uG and K_Gu, dense (n_free, 4) and (4, n_free)
-    k_ug, k_gu = np.zeros((n_free + 1, 4)), np.zeros((4, n_free + 1))
-    np.add.at(k_ug, dofs.ravel(), local[:, :6, 6:].reshape(-1, 4))
-    np.add.at(k_gu.T, dofs.ravel(), local[:, 6:, :6].transpose(0, 2, 1).reshape(-1, 4))
-    k_ug, k_gu = k_ug[:-1], k_gu[:, :-1]  # row −1 gathered what belongs to no unknown
-    x = spla.splu(k_uu, permc_spec="MMD_AT_PLUS_A").solve(k_ug)
+    slot = dofs.ravel() + 1  # 0: no unknown (a fixed translation), dropped below
+
+    def gather(values: np.ndarray) -> np.ndarray:
+        return np.bincount(slot, weights=values.ravel(), minlength=n_free + 1)[1:]
+
+    k_ug = np.stack([gather(local[:, :6, 6 + g]) for g in range(4)], axis=1)
+    k_gu = np.stack([gather(local[:, 6 + g, :6]) for g in range(4)], axis=0)
+    if sliding == "free":  # symmetric positive definite: diagonal pivots are stable
+        lu = spla.splu(k_uu, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
+                       options={"SymmetricMode": True})
+    else:
+        lu = spla.splu(k_uu, permc_spec="MMD_AT_PLUS_A")
+    x = lu.solve(k_ug)
     condensed = affine - k_gu @ x
     return condensed / net.volume, affine_all / net.volume, left_out, n_free
 
