@@ -15,6 +15,7 @@ back) are applied two ways, each less the change the same steps make at a fixed 
 packing's own drift, as ``tests/test_extremes.py`` measures it):
 
 - ``drive``: ``drive_grad_u`` as the FEM does (1e-5 strain a step: 10 steps for 1e-4);
+- ``drive-30``: the same over 30 steps (as an increment inside a longer FEM load step);
 - ``quasi-static``: 1000 steps for the increment, then ``--hold`` steps at a fixed cell.
 
 The tangents: ``kr`` (Kruyt–Rothenburg, ``homogenize``), ``condensed`` (free sliding),
@@ -54,6 +55,8 @@ def _change(data: RVEData, grad_u: np.ndarray, protocol: str, hold: int) -> np.n
     snap = batch.snapshot()
     if protocol == "drive":
         steps = drive_grad_u(batch, grad_u)
+    elif protocol == "drive-30":
+        steps = drive_grad_u(batch, grad_u, max_strain_per_step=float(np.abs(grad_u).max()) / 30)
     else:
         size = float(np.abs(grad_u).max())
         steps = drive_grad_u(batch, grad_u, max_strain_per_step=size / 1000)
@@ -148,7 +151,7 @@ def main(argv: list[str] | None = None) -> pd.DataFrame:
             "condensed-coulomb": condensed_tangent(data, sliding="coulomb").tangent,
             "perturbation": _perturbation(data),
         }
-        for protocol in ("drive", "quasi-static"):
+        for protocol in ("drive", "drive-30", "quasi-static"):
             for direction, unit in DIRECTIONS.items():
                 grad = args.increment * unit
                 dem = _change(data, grad, protocol, args.hold)

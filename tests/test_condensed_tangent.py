@@ -256,7 +256,7 @@ def test_prediction_benchmark_smoke(tmp_path) -> None:
     spec.loader.exec_module(module)
     table = module.main(["--particles", "24", "--seeds", "1", "--hold", "200",
                          "--out", str(tmp_path)])
-    assert len(table) == 3 * 2 * len(module.DIRECTIONS)
+    assert len(table) == 3 * 3 * len(module.DIRECTIONS)
     errors = table[[c for c in table.columns if c.endswith("_err")]].to_numpy()
     assert np.isfinite(errors).all()
     assert (tmp_path / "prediction.md").exists() and (tmp_path / "cost.json").exists()
