@@ -16,7 +16,8 @@ packing's own drift, as ``tests/test_extremes.py`` measures it):
 
 - ``drive``: ``drive_grad_u`` as the FEM does (1e-5 strain a step: 10 steps for 1e-4);
 - ``drive-30``: the same over 30 steps (as an increment inside a longer FEM load step);
-- ``quasi-static``: 1000 steps for the increment, then ``--hold`` steps at a fixed cell.
+- ``quasi-static``: ``--hold``/2 steps for the increment (1000), then ``--hold`` steps at a
+  fixed cell.
 
 The tangents: ``kr`` (Kruyt–Rothenburg, ``homogenize``), ``condensed`` (free sliding),
 ``condensed-coulomb``, and ``perturbation`` (the DEM material's forward differences: four
@@ -36,6 +37,7 @@ import numpy as np
 import pandas as pd
 
 from granular_material.dem import DEMBatch, RVEData
+from granular_material.dem.batch import BatchSnapshot
 from granular_material.dem.condensed import condensed_tangent
 from granular_material.procedures import drive_grad_u, prepare_packing
 from granular_material.results.compare import markdown_table
@@ -49,17 +51,18 @@ DIRECTIONS = {
 }
 
 
-def _change(data: RVEData, grad_u: np.ndarray, protocol: str, hold: int) -> np.ndarray:
-    """Stress change [Pa] (B, 2, 2) that ``grad_u`` (2, 2) causes, less the drift."""
-    batch = DEMBatch(data, device="cpu")
-    snap = batch.snapshot()
+def _change(batch: DEMBatch, snap: BatchSnapshot, grad_u: np.ndarray, protocol: str,
+            hold: int) -> np.ndarray:
+    """Stress change [Pa] (B, 2, 2) that ``grad_u`` (2, 2) causes from the state ``snap``,
+    less the drift."""
+    batch.restore(snap)
+    size = float(np.abs(grad_u).max())
     if protocol == "drive":
         steps = drive_grad_u(batch, grad_u)
     elif protocol == "drive-30":
-        steps = drive_grad_u(batch, grad_u, max_strain_per_step=float(np.abs(grad_u).max()) / 30)
+        steps = drive_grad_u(batch, grad_u, max_strain_per_step=size / 30)
     else:
-        size = float(np.abs(grad_u).max())
-        steps = drive_grad_u(batch, grad_u, max_strain_per_step=size / 1000)
+        steps = drive_grad_u(batch, grad_u, max_strain_per_step=size / hold * 2)
         steps += drive_grad_u(batch, np.zeros((2, 2)), min_steps=hold)
     driven = batch.homogenize().stress
     batch.restore(snap)
@@ -67,16 +70,16 @@ def _change(data: RVEData, grad_u: np.ndarray, protocol: str, hold: int) -> np.n
     return driven - batch.homogenize().stress
 
 
-def _perturbation(data: RVEData, size: float = 1e-4) -> np.ndarray:
+def _perturbation(batch: DEMBatch, snap: BatchSnapshot, size: float = 1e-4) -> np.ndarray:
     """Forward differences [Pa] (B, 2, 2, 2, 2) of the ``drive`` response to ∇u = size·E_kl
     (the DEM material's "perturbation" tangent at ∇u = 0), each less the drift of its
     steps at a fixed cell."""
-    tangent = np.zeros((data.n_rve, 2, 2, 2, 2))
+    tangent = np.zeros((batch.n_rve, 2, 2, 2, 2))
     for k in range(2):
         for m in range(2):
             g = np.zeros((2, 2))
             g[k, m] = size
-            tangent[:, :, :, k, m] = _change(data, g, "drive", 0) / size
+            tangent[:, :, :, k, m] = _change(batch, snap, g, "drive", 0) / size
     return tangent
 
 
@@ -144,17 +147,19 @@ def main(argv: list[str] | None = None) -> pd.DataFrame:
     states = _states(args.particles, seeds, args.hold)
     rows = []
     for state, data in states.items():
-        h = DEMBatch(data, device="cpu").homogenize()
+        batch = DEMBatch(data, device="cpu")
+        snap = batch.snapshot()
+        h = batch.homogenize()
         tangents = {
             "kr": h.tangent,
             "condensed": condensed_tangent(data).tangent,
             "condensed-coulomb": condensed_tangent(data, sliding="coulomb").tangent,
-            "perturbation": _perturbation(data),
+            "perturbation": _perturbation(batch, snap),
         }
         for protocol in ("drive", "drive-30", "quasi-static"):
             for direction, unit in DIRECTIONS.items():
                 grad = args.increment * unit
-                dem = _change(data, grad, protocol, args.hold)
+                dem = _change(batch, snap, grad, protocol, args.hold)
                 for b, seed in enumerate(seeds):
                     row = {"state": state, "protocol": protocol, "direction": direction,
                            "seed": seed, "dem_norm_pa": float(np.linalg.norm(dem[b])),
