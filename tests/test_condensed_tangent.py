@@ -168,8 +168,8 @@ def test_symmetries_and_objectivity(sheared: RVEData) -> None:
 
 
 def test_regularisation_does_not_move_c(sheared: RVEData) -> None:
-    """The floppy modes left after pruning carry no load: C does not depend on the
-    regularisation over four decades."""
+    """The floppy modes left after pruning carry no load: the regularisation shifts C only
+    in proportion to itself (below 1e-5 of max|C| at 1e-7, against 1e-11)."""
     loose = condensed_tangent(sheared, regularization=1e-7).tangent[0]
     tight = condensed_tangent(sheared, regularization=1e-11).tangent[0]
     assert np.abs(loose - tight).max() < 1e-5 * np.abs(tight).max()
