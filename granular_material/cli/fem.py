@@ -71,7 +71,7 @@ __all__ = ["register", "run_biaxial_command", "run_single_element"]
 #: the Newton settings of the commands (fem.default_settings), shown as the option defaults
 _NEWTON = default_settings("dem")
 #: the RVEs' tangents the commands offer, and their default
-TANGENTS = ("objective", "kruyt-rothenburg", "perturbation")
+TANGENTS = ("objective", "kruyt-rothenburg", "perturbation", "condensed")
 DEFAULT_TANGENT = "objective"
 #: the DEM material's default strain per DEM step [-]
 DEFAULT_STRAIN_PER_STEP = 1e-5
@@ -119,9 +119,10 @@ def _newton_arguments(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--tangent", choices=TANGENTS, default=DEFAULT_TANGENT,
                    help="dem: tangent of the RVEs: objective (Kruyt-Rothenburg on sym grad u "
                         "plus the stress's spin, symmetric: a rigid rotation costs nothing; "
-                        "default), kruyt-rothenburg (Wu et al. eq. 6 as published) or forward "
+                        "default), kruyt-rothenburg (Wu et al. eq. 6 as published), forward "
                         "differences of each RVE's response (perturbation: 4 more DEM runs per "
-                        "iteration)")
+                        "iteration) or condensed (the contact network's stiffness with the "
+                        "discs' fluctuations condensed out, plus the stress's spin; no DEM run)")
     g.add_argument("--perturbation", type=float, default=0.1,
                    help="dem, --tangent perturbation: perturbation of grad u relative to its "
                         "largest component (default 0.1)")

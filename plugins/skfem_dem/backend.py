@@ -18,7 +18,8 @@ from typing import Protocol
 import numpy as np
 
 from granular_material.dem import DEMBatch, DEMInstabilityError, Homogenized, RVEData, save_rve
-from granular_material.dem.homogenization import objective_tangent
+from granular_material.dem.condensed import condensed_tangent
+from granular_material.dem.homogenization import objective_tangent, spin_tangent
 from granular_material.procedures import (
     drive_grad_u,
     has_real_logarithm,
@@ -39,8 +40,9 @@ __all__ = [
 
 #: the RVEs' tangents: the objective one (symmetric Kruyt–Rothenburg plus the stress's spin,
 #: see granular_material.dem.homogenization.objective_tangent), Kruyt–Rothenburg as Wu et al.
-#: publish it, or forward differences of the RVE's own response
-TANGENTS = ("objective", "kruyt-rothenburg", "perturbation")
+#: publish it, forward differences of the RVE's own response, or the condensed stiffness of
+#: its contact network (granular_material.dem.condensed, plus the stress's spin)
+TANGENTS = ("objective", "kruyt-rothenburg", "perturbation", "condensed")
 #: how an RVE that must move is driven to a new trial ∇u: from the committed state along the
 #: whole path of the step (``restart``, Guo & Zhao), or from its last trial state by the change
 DRIVES = ("restart", "continue")
@@ -110,6 +112,13 @@ def _nan_like(h: Homogenized) -> Homogenized:
                                                np.nan) for f in fields(h)})
 
 
+def _with_condensed(batch: DEMBatch, h: Homogenized, moved: np.ndarray) -> Homogenized:
+    """``h`` with the condensed tangent [Pa] of the ``moved`` RVEs' current states."""
+    tangent = np.array(h.tangent, dtype=np.float64, copy=True)
+    tangent[moved] = condensed_tangent(batch.to_data(), rves=np.flatnonzero(moved)).tangent
+    return replace(h, tangent=tangent)
+
+
 def _totals(drives: list[tuple[int, int, int]]) -> tuple[int, int, int]:
     """DEM steps, RVE paths and particle-steps of ``drives`` together."""
     steps, paths, particles = (int(sum(d[k] for d in drives)) for k in range(3))
@@ -165,7 +174,9 @@ class InProcessBackend:
             "kruyt-rothenburg" (the contact-network estimate as Wu et al. publish it) or
             "perturbation" (the derivative of the RVE's own response to ∇u by
             forward differences: four more runs from the committed state, with ∇u + h E_kl,
-            h = max(perturbation · max|∇u|, min_perturbation) per RVE).
+            h = max(perturbation · max|∇u|, min_perturbation) per RVE) or "condensed" (the
+            contact network's stiffness with the discs' fluctuations condensed out,
+            :mod:`granular_material.dem.condensed`: no DEM run, a sparse LU per RVE).
         perturbation: relative size of the perturbation [-].
         min_perturbation: smallest perturbation [-].
         reuse_tol: largest change of ∇u [-] (max over the components) for which an RVE keeps
@@ -318,6 +329,8 @@ class InProcessBackend:
                 tangent[moved, :, :, row, col] = ((sigma[moved] - stress[moved])
                                                   / size[moved, None, None])
             new = replace(new, tangent=tangent)
+        if self.tangent == "condensed" and moved.any():
+            new = _with_condensed(self.batch, new, moved)
         self._reached[moved] = target[moved]
         self._current = new
         self._target = target
@@ -328,16 +341,20 @@ class InProcessBackend:
     def _response(self, current: Homogenized, target: np.ndarray) -> Homogenized:
         """What the RVEs answer for ``target``: their current response, reused RVEs'
         corrected to first order when asked (σ + D : Δ∇u), with the objective tangent
-        where it is chosen."""
+        where it is chosen (the condensed one gets the stress's spin added: it is
+        objective already, C:W = 0)."""
         if self.reuse_correction == "tangent":
             change = target - self._reached
             if change.any():
                 stress = current.stress + np.einsum("bijkl,bkl->bij", current.tangent, change)
                 current = replace(current, stress=stress)
-        if self.tangent == "objective":
+        if self.tangent in ("objective", "condensed"):
             stress = np.asarray(current.stress, dtype=np.float64)
             symmetric = 0.5 * (stress + np.swapaxes(stress, 1, 2))
-            current = replace(current, tangent=objective_tangent(current.tangent, symmetric))
+            tangent = (objective_tangent(current.tangent, symmetric)
+                       if self.tangent == "objective"
+                       else current.tangent + spin_tangent(symmetric))
+            current = replace(current, tangent=tangent)
         return current
 
     def commit(self) -> None:

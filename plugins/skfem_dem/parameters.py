@@ -38,8 +38,10 @@ class DEMMaterialParameters:
             the random gas of seed + p, consolidated on its own).
         tangent: "objective" (default: Kruyt–Rothenburg applied to the strain, sym ∇u,
             plus the stress's rotation by the spin, so that a rigid rotation costs
-            nothing), "kruyt-rothenburg" (Wu et al. eq. 6 as published) or "perturbation" (forward
-            differences of the RVE response, four extra DEM runs per evaluation; see
+            nothing), "kruyt-rothenburg" (Wu et al. eq. 6 as published), "perturbation"
+            (forward differences of the RVE response, four extra DEM runs per evaluation) or
+            "condensed" (fluctuations condensed out of the contact network's stiffness, plus
+            the stress's spin; see
             :class:`~granular_material_skfem.backend.InProcessBackend`).
         perturbation: relative perturbation of ∇u for the "perturbation" tangent [-].
         reuse_tol: strain [-]: an RVE whose ∇u moved by at most this (every component) since
