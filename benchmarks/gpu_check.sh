@@ -19,7 +19,7 @@ cd "$(dirname "$0")/.."
 PYTHON=${PYTHON:-python}
 OUT=${1:-out/gpu-check}
 # limits [s] of the steps (sum 290 s)
-T_TESTS=${T_TESTS:-50} T_THROUGHPUT=${T_THROUGHPUT:-130} T_AGREEMENT=${T_AGREEMENT:-30}
+T_TESTS=${T_TESTS:-60} T_THROUGHPUT=${T_THROUGHPUT:-120} T_AGREEMENT=${T_AGREEMENT:-30}
 T_SPECIMEN=${T_SPECIMEN:-80}
 
 if [ "${GPU_CHECK_SMOKE:-0}" = 1 ]; then  # the script itself, on the CPU, at toy sizes
