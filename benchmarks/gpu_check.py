@@ -1,0 +1,155 @@
+"""Pieces of ``benchmarks/gpu_check.sh`` that are Python: is a CUDA device there, and does
+a sheared batch on it agree with the CPU.
+
+Usage::
+
+    python benchmarks/gpu_check.py require-cuda
+    python benchmarks/gpu_check.py agreement --out DIR [--device cuda] [--reference cpu]
+        [--batch 16] [--particles 400] [--strain 2e-3] [--dtypes float64,float32]
+
+``agreement`` prepares one packing (seed 1, 100 kPa, on the reference device, float64),
+gives each of the B copies its own displacement gradient (simple and pure shear,
+compression, a rotation among them, |∇u| up to ``--strain``), drives the copies on both
+devices from the same file with ``drive_grad_u``, and compares the homogenised measures RVE
+by RVE: ``agreement.csv`` (one row per float type and RVE) and ``agreement.json`` (the
+largest differences and whether they are within the tolerance of ``tests/test_dem_cuda.py``,
+rtol 1e-6 on stress for float64, 1e-3 for float32). The same device on both sides (a CPU
+against itself) checks the piece itself: every difference is then zero.
+Measures; exit 1 only where the agreement is outside the tolerance.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+#: relative tolerance on stress between devices (same kernels; the compilers' FMA choices)
+TOLERANCE = {"float64": 1e-6, "float32": 1e-3}
+
+
+def require_cuda() -> str:
+    """The name of CUDA device 0; exits 2 with a message where there is none."""
+    import warp as wp
+
+    wp.config.quiet = True
+    wp.init()
+    if not wp.is_cuda_available():
+        print("gpu_check: no CUDA device (warp sees none: no NVIDIA driver or GPU here); "
+              "this check needs one. The CPU-only parts are tested by "
+              "tests/test_cuda_compile.py and tests/test_gpu_check.py.", file=sys.stderr)
+        raise SystemExit(2)
+    return wp.get_device("cuda:0").name
+
+
+def gradients(n_rve: int, strain: float) -> np.ndarray:
+    """``n_rve`` displacement gradients (B, 2, 2), all of largest entry ``strain``: simple
+    shear, pure shear, axial compression, dilation and a rotation with shear, in turn, their
+    signs and sizes varied."""
+    shapes = np.array([
+        [[0.0, 1.0], [0.0, 0.0]],      # simple shear
+        [[1.0, 0.0], [0.0, -1.0]],     # pure shear
+        [[0.0, 0.0], [0.0, -1.0]],     # axial compression
+        [[-0.5, 0.0], [0.0, -0.5]],    # isotropic compression
+        [[0.2, 1.0], [-0.6, -0.4]],    # rotation and shear
+    ])
+    out = np.empty((n_rve, 2, 2))
+    for b in range(n_rve):
+        scale = (1.0 if b % 2 == 0 else -0.5) * (1.0 - 0.5 * b / max(n_rve, 1))
+        out[b] = strain * scale * shapes[b % len(shapes)]
+    return out
+
+
+def agreement(out: Path, device: str = "cuda", reference: str = "cpu", n_rve: int = 16,
+              particles: int = 400, strain: float = 2e-3,
+              dtypes: tuple[str, ...] = ("float64", "float32")) -> dict:
+    """Compare ``device`` with ``reference`` on a sheared batch; writes ``agreement.csv``
+    and ``agreement.json`` under ``out`` and returns the summary."""
+    import warp as wp
+
+    wp.config.quiet = True
+    from granular_material.dem import DEMBatch, load_rve, save_rve
+    from granular_material.procedures import drive_grad_u, prepare_packing
+    from granular_material.results import write_csv, write_json
+
+    out.mkdir(parents=True, exist_ok=True)
+    grad = gradients(n_rve, strain)
+    rows, summary = [], {"device": device, "reference": reference, "n_rve": n_rve,
+                         "particles": particles, "strain": strain, "dtypes": {}}
+    with tempfile.TemporaryDirectory() as scratch:
+        path = Path(scratch) / "rve.npz"
+        save_rve(path, prepare_packing(n_disc=particles, seed=1, pressure=100e3,
+                                       device=reference).to_data().select(0))
+        data = load_rve(path).replicate(n_rve)
+        for dtype in dtypes:
+            measures, seconds = {}, {}
+            for name in (reference, device) if device != reference else (reference, "again"):
+                batch = DEMBatch(data, device=reference if name == "again" else name,
+                                 dtype=dtype)
+                t0 = time.perf_counter()
+                steps = drive_grad_u(batch, grad)
+                seconds[name] = time.perf_counter() - t0
+                measures[name] = batch.homogenize()
+            ref, dev = measures.values()
+            pressure = np.abs(np.trace(ref.stress, axis1=1, axis2=2)) / 2
+            stress_rel = np.abs(dev.stress - ref.stress).max(axis=(1, 2)) / pressure
+            tangent_rel = (np.abs(dev.tangent - ref.tangent).max(axis=(1, 2, 3, 4))
+                           / np.abs(ref.tangent).max(axis=(1, 2, 3, 4)))
+            for b in range(n_rve):
+                rows.append({"dtype": dtype, "rve": b, "grad_u_xx": grad[b, 0, 0],
+                             "grad_u_xy": grad[b, 0, 1], "grad_u_yx": grad[b, 1, 0],
+                             "grad_u_yy": grad[b, 1, 1],
+                             "pressure_pa": pressure[b], "stress_rel_diff": stress_rel[b],
+                             "tangent_rel_diff": tangent_rel[b],
+                             "coordination_ref": ref.coordination[b],
+                             "coordination_dev": dev.coordination[b]})
+            summary["dtypes"][dtype] = {
+                "dem_steps": int(steps), "seconds": seconds,
+                "max_stress_rel_diff": float(stress_rel.max()),
+                "max_tangent_rel_diff": float(tangent_rel.max()),
+                "max_coordination_diff": float(np.abs(dev.coordination
+                                                      - ref.coordination).max()),
+                "tolerance": TOLERANCE[dtype],
+                "within_tolerance": bool(stress_rel.max() <= TOLERANCE[dtype]),
+            }
+    write_csv(pd.DataFrame(rows), out / "agreement.csv")
+    summary["within_tolerance"] = all(d["within_tolerance"] for d in summary["dtypes"].values())
+    write_json(summary, out / "agreement.json")
+    return summary
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    sub = parser.add_subparsers(dest="command", required=True)
+    sub.add_parser("require-cuda", help="exit 2 with a message where there is no CUDA device")
+    agree = sub.add_parser("agreement", help="a sheared batch on --device against --reference")
+    agree.add_argument("--out", type=Path, required=True)
+    agree.add_argument("--device", default="cuda")
+    agree.add_argument("--reference", default="cpu")
+    agree.add_argument("--batch", type=int, default=16)
+    agree.add_argument("--particles", type=int, default=400)
+    agree.add_argument("--strain", type=float, default=2e-3)
+    agree.add_argument("--dtypes", default="float64,float32")
+    args = parser.parse_args(argv)
+    if args.command == "require-cuda":
+        print(require_cuda())
+        return 0
+    if args.device.startswith("cuda") or args.reference.startswith("cuda"):
+        require_cuda()
+    summary = agreement(args.out, args.device, args.reference, args.batch, args.particles,
+                        args.strain, tuple(args.dtypes.split(",")))
+    for dtype, d in summary["dtypes"].items():
+        print(f"{dtype}: {args.device} against {args.reference}, {args.batch} RVEs, "
+              f"{d['dem_steps']} steps: stress rel. diff <= {d['max_stress_rel_diff']:.3g}, "
+              f"tangent <= {d['max_tangent_rel_diff']:.3g} (tolerance {d['tolerance']:g}: "
+              f"{'within' if d['within_tolerance'] else 'OUTSIDE'})")
+    return 0 if summary["within_tolerance"] else 1
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

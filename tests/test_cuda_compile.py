@@ -1,0 +1,78 @@
+"""Every kernel module the engine can launch compiles for CUDA (sm_90), without a GPU.
+
+warp's ahead-of-time compiler generates the CUDA source of a module and compiles it to PTX
+with the NVRTC bundled in warp's library, so a CUDA compile error fails this test on any
+machine, GPU or not. Each module is compiled into a fresh folder (never from a cache).
+"""
+
+from __future__ import annotations
+
+import importlib
+import pkgutil
+import re
+from pathlib import Path
+
+import pytest
+import warp as wp
+
+from granular_material.dem.kernels import DTYPES, STEP_VARIANTS, kernel_modules
+
+ARCH = 90  #: Hopper (H100, H200)
+
+wp.init()
+_RUNTIME = wp._src.context.runtime
+pytestmark = pytest.mark.skipif(
+    not _RUNTIME.is_cuda_enabled or ARCH not in (_RUNTIME.nvrtc_supported_archs or ()),
+    reason=f"this warp build cannot compile CUDA for sm_{ARCH} (no NVRTC)",
+)
+
+#: the packages whose warp kernels must all be covered by ``kernel_modules``
+PACKAGES = ("granular_material", "granular_material_skfem", "granular_material_pore_fractal",
+            "granular_material_reproduction", "granular_material_validation")
+
+
+def _base_name(name: str) -> str:
+    """A module's name with the replica number left out (replicas hold the same code)."""
+    return re.sub(r"_r\d+(?=_|$)", "_r*", name)
+
+
+def test_kernel_modules_cover_every_variant_and_kernel():
+    modules = kernel_modules()
+    assert len(modules) == len(DTYPES) * len(STEP_VARIANTS) == 16
+    for name, module in modules.items():
+        kernels = [k for k in module.kernels.values()
+                   if not k.is_generic or k.overloads]
+        assert kernels, f"{name} holds no compilable kernel"
+        assert all(len(k.overloads) == 1 for k in module.kernels.values() if k.is_generic), \
+            f"{name}: a generic kernel with no or several overloads"
+
+
+def test_every_warp_module_of_the_project_is_compiled():
+    """A kernel module added anywhere in the project (an ``@wp.kernel`` in a new file) must
+    join :func:`kernel_modules`, or this test names it."""
+    for package in PACKAGES:
+        root = importlib.import_module(package)
+        for info in pkgutil.walk_packages(root.__path__, prefix=package + "."):
+            if info.name.endswith("__main__"):
+                continue
+            importlib.import_module(info.name)
+    covered = {_base_name(name) for name in kernel_modules()}
+    ours = {
+        _base_name(name) for name, module in wp._src.context.user_modules.items()
+        if name.startswith("granular_material") and module.kernels
+    }
+    assert ours <= covered, f"kernel modules not compiled by this test: {sorted(ours - covered)}"
+
+
+@pytest.mark.parametrize("name", sorted(kernel_modules()))
+def test_module_compiles_to_ptx_for_sm90(name: str, tmp_path: Path):
+    module = kernel_modules()[name]
+    paths = wp.compile_aot_module(module, arch=ARCH, use_ptx=True, module_dir=tmp_path)
+    assert len(paths) == 1 and paths[0].suffix == ".ptx" and f"sm{ARCH}" in paths[0].name
+    ptx = paths[0].read_text()
+    assert f".target sm_{ARCH}" in ptx
+    entries = set(re.findall(r"\.entry\s+(\w+)\(", ptx))
+    for kernel in module.kernels.values():
+        # every kernel of the module (its one overload where generic), forward only
+        assert any(entry.startswith(kernel.key) and entry.endswith("_cuda_kernel_forward")
+                   for entry in entries), f"{kernel.key} missing from the PTX of {name}"

@@ -1,0 +1,79 @@
+"""The CPU-runnable pieces of ``benchmarks/gpu_check.sh``: it stops at once and says why
+without a GPU, and its agreement check runs (a CPU against itself: every difference zero)."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import warp as wp
+
+BENCH = Path(__file__).resolve().parents[1] / "benchmarks"
+
+
+def _module():
+    spec = importlib.util.spec_from_file_location("gpu_check", BENCH / "gpu_check.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.mark.skipif(wp.is_cuda_available(), reason="a CUDA device is here")
+def test_script_stops_with_a_message_without_a_gpu(tmp_path):
+    out = tmp_path / "check"
+    done = subprocess.run(["bash", str(BENCH / "gpu_check.sh"), str(out)],
+                          capture_output=True, text=True, timeout=120,
+                          env={"PYTHON": sys.executable, "PATH": "/usr/bin:/bin"})
+    assert done.returncode == 2
+    assert "no CUDA device" in done.stderr
+    assert not out.exists()  # nothing started
+
+
+def test_script_is_valid_bash_and_names_every_step():
+    text = (BENCH / "gpu_check.sh").read_text()
+    assert subprocess.run(["bash", "-n", str(BENCH / "gpu_check.sh")]).returncode == 0
+    for step in ("tests", "throughput", "agreement", "specimen"):
+        assert f"run_step {step} " in text
+    limits = [int(v) for v in re.findall(r"T_\w+=\$\{T_\w+:-(\d+)\}", text)]
+    assert len(limits) == 4 and sum(limits) < 300  # under 5 minutes with the start-up
+
+
+def test_gradients_cover_the_batch():
+    grad = _module().gradients(7, 2e-3)
+    assert grad.shape == (7, 2, 2)
+    assert np.abs(grad).max() == pytest.approx(2e-3)
+    assert len({tuple(g.ravel()) for g in grad}) == 7
+
+
+def test_agreement_of_a_device_with_itself(tmp_path):
+    summary = _module().agreement(tmp_path, device="cpu", reference="cpu", n_rve=3,
+                                  particles=30, strain=5e-4, dtypes=("float64",))
+    f64 = summary["dtypes"]["float64"]
+    assert f64["max_stress_rel_diff"] == 0 and f64["max_tangent_rel_diff"] == 0
+    assert summary["within_tolerance"]
+    assert json.loads((tmp_path / "agreement.json").read_text())["n_rve"] == 3
+    assert (tmp_path / "agreement.csv").read_text().count("\n") == 4
+
+
+@pytest.mark.slow
+def test_whole_script_at_smoke_size_on_the_cpu(tmp_path):
+    """GPU_CHECK_SMOKE=1: every step of the script on the CPU at toy sizes (about 80 s on
+    2 busy cores), its results and summary.json where the script says."""
+    out = tmp_path / "check"
+    done = subprocess.run(["bash", str(BENCH / "gpu_check.sh"), str(out)],
+                          capture_output=True, text=True, timeout=600,
+                          env={"PYTHON": sys.executable, "PATH": "/usr/bin:/bin",
+                               "GPU_CHECK_SMOKE": "1"})
+    assert done.returncode == 0, done.stdout[-3000:]
+    summary = json.loads((out / "summary.json").read_text())
+    assert {name: step["exit"] for name, step in summary["steps"].items()} == {
+        "tests": 0, "throughput": 0, "agreement": 0, "specimen": 0}
+    for name in ("tests.xml", "throughput.csv", "throughput.json", "agreement.csv",
+                 "agreement.json", "specimen/steps.csv", "specimen/summary.json"):
+        assert (out / name).exists(), name
