@@ -61,6 +61,7 @@ from granular_material.results import (
     write_json,
     write_outputs,
 )
+from granular_material.results.lock import FolderLock
 
 if TYPE_CHECKING:
     from granular_material.procedures.packing import PackingParameters
@@ -367,13 +368,20 @@ def _check_resume(args: argparse.Namespace) -> None:
         raise UsageError(f"--resume {args.resume} continues in that folder; --out {args.out} "
                          "names another (leave --out out)")
     args.out = args.resume
+    check_output_dir(args.out, "--resume")
+    _lock_out(args.out)
     checkpoint = RunCheckpoint(Path(args.resume) / "checkpoint")
     if not checkpoint.has_options():
+        if checkpoint.has_state():
+            raise UsageError(f"--resume {args.resume}: {checkpoint.folder / 'options.json'} "
+                             "is missing, so the options the run was started with cannot be "
+                             "checked; nothing in the folder was changed")
         return
     try:
         saved = checkpoint.read_options()
     except CheckpointError as exc:
-        raise UsageError(f"--resume {args.resume}: {exc}") from None
+        raise UsageError(f"--resume {args.resume}: {exc}; nothing in the folder was "
+                         "changed") from None
     given = json.loads(json.dumps(_run_options(args), default=str))
     if saved.get("command") not in (None, args.command):
         raise UsageError(f"--resume {args.resume} is a {saved['command']} run, not "
@@ -386,7 +394,34 @@ def _check_resume(args: argparse.Namespace) -> None:
               for k in sorted(set(saved) | set(given)) if saved.get(k) != given.get(k)]
     if differ:
         raise UsageError(f"--resume {args.resume}: give the options the run was started with; "
-                         f"these differ: {'; '.join(differ)}")
+                         f"these differ: {'; '.join(differ)} (nothing in the folder was "
+                         "changed)")
+
+
+#: the output folders this process holds locked while a command runs (:func:`_locked`)
+_HELD: dict[Path, FolderLock] = {}
+
+
+def _lock_out(out: Path | None) -> None:
+    """Take the lock of the output folder ``out`` (None: none) before anything is written
+    there: a second run or resume into it is refused at once (exit 2, naming the holder's
+    pid). Held until the command ends (:func:`_locked`), or the process dies."""
+    if out is None or Path(out).resolve() in _HELD:
+        return
+    lock = FolderLock(out)
+    lock.acquire()
+    _HELD[Path(out).resolve()] = lock
+
+
+def _locked(command: Callable[[argparse.Namespace], int]) -> Callable[[argparse.Namespace], int]:
+    """``command`` that lets go of the output folders it locked when it ends, however."""
+    def run(args: argparse.Namespace) -> int:
+        try:
+            return command(args)
+        finally:
+            while _HELD:
+                _HELD.popitem()[1].release()
+    return run
 
 
 def _open_checkpoint(args: argparse.Namespace) -> tuple[RunCheckpoint | None, bool]:
@@ -396,6 +431,15 @@ def _open_checkpoint(args: argparse.Namespace) -> tuple[RunCheckpoint | None, bo
         return None, False
     checkpoint = RunCheckpoint(Path(args.out) / "checkpoint", every=args.checkpoint_every)
     if args.resume is not None and checkpoint.has_state():
+        try:  # read and checked whole before anything in the folder is touched
+            saved = checkpoint.verify()
+        except CheckpointError as exc:
+            raise UsageError(f"--resume {args.resume}: {exc}; nothing in the folder was "
+                             "changed") from None
+        if saved.step > args.steps:
+            raise UsageError(f"--resume {args.resume}: its checkpoint is of load step "
+                             f"{saved.step}, past --steps {args.steps}; nothing in the "
+                             "folder was changed")
         return checkpoint, True
     if args.resume is not None:
         print(f"granular-material {args.command}: {args.resume} holds no saved step yet; "
@@ -458,6 +502,7 @@ def _check(args: argparse.Namespace) -> None:
         raise UsageError(f"--confining must be a positive number of Pa (σxx is held at "
                          f"−confining, σ1/σ3 divides by it), got {args.confining:g}")
     check_output_dir(args.out)
+    _lock_out(args.out)
     if args.rve is not None and not args.rve.exists():
         raise FileNotFoundError(f"--rve {args.rve} does not exist")
 
@@ -544,7 +589,7 @@ def _on_backend(args: argparse.Namespace,
 
 def run_single_element(args: argparse.Namespace) -> int:
     """The ``single-element`` command; returns the exit code."""
-    return _on_backend(args, _single_element)
+    return _on_backend(args, _locked(_single_element))
 
 
 def _single_element(args: argparse.Namespace) -> int:
@@ -621,7 +666,7 @@ def _pure_dem(material: Any, args: argparse.Namespace, progress: bool) -> pd.Dat
 
 def run_biaxial_command(args: argparse.Namespace) -> int:
     """The ``biaxial`` command; returns the exit code."""
-    return _on_backend(args, _biaxial)
+    return _on_backend(args, _locked(_biaxial))
 
 
 def _biaxial(args: argparse.Namespace) -> int:
