@@ -6,6 +6,7 @@ import argparse
 import contextlib
 import json
 import math
+import re
 import sys
 import time
 from collections.abc import Callable, Iterator
@@ -15,6 +16,7 @@ from typing import TYPE_CHECKING, Any
 import pandas as pd
 
 from granular_material.cli.options import (
+    DISC_BYTES,
     RVE_MATERIAL_DEFAULTS,
     UsageError,
     add_convergence,
@@ -24,6 +26,7 @@ from granular_material.cli.options import (
     add_out,
     add_progress,
     add_rve_material_options,
+    check_memory,
     check_output_dir,
     cleanup_on_rejection,
     emit,
@@ -505,6 +508,39 @@ def _check(args: argparse.Namespace) -> None:
     _lock_out(args.out)
     if args.rve is not None and not args.rve.exists():
         raise FileNotFoundError(f"--rve {args.rve} does not exist")
+    material = getattr(args, "material", "dem")
+    try:  # the Newton settings refused now, not after the RVEs are made
+        _settings(args, material)
+    except ValueError as exc:  # name the option: secant_min_change -> --secant-min-change
+        raise UsageError(re.sub(r"^([a-z]+(?:_[a-z]+)+)",
+                                lambda m: "--" + m.group(1).replace("_", "-"),
+                                str(exc))) from None
+    if not (math.isfinite(_stress_tol(args, material)) and _stress_tol(args, material) >= 0):
+        raise UsageError(f"--stress-tol must be a stress >= 0 Pa, got {args.stress_tol:g}")
+
+
+#: memory of one element of the mesh beside its RVEs, about [bytes]: its stiffness entries
+#: in assembly, its Gauss points' tables and tangents, with room for the solver
+_ELEMENT_BYTES = 16_384
+#: memory of one Gauss point's row of one load step, kept for the tables [bytes]
+_POINT_ROW_BYTES = 400
+
+
+def _check_size(args: argparse.Namespace, setup: BiaxialSetup, particles: int,
+                biaxial: bool = False) -> None:
+    """Before any work: the mesh, its RVEs (``particles`` discs at each Gauss point; 0
+    without) and the tables of every step fit in memory (UsageError with the estimate);
+    a biaxial specimen has the 4 Gauss points its shear-band measures need."""
+    if biaxial and setup.n_points < 4:
+        raise UsageError(f"--element {setup.element} on --elements {setup.nx} {setup.ny} has "
+                         f"{setup.n_points} Gauss points; the shear-band measures of a "
+                         "biaxial run need at least 4 (more elements)")
+    needed = (float(setup.n_elements) * _ELEMENT_BYTES
+              + float(setup.n_points) * particles * DISC_BYTES
+              + float(setup.n_points) * (args.steps + 1) * _POINT_ROW_BYTES)
+    discs = f" of {particles}-disc RVEs" if particles else ""
+    check_memory(needed, f"{setup.n_elements} {setup.element} elements ({setup.n_points} "
+                         f"Gauss points{discs}) over {args.steps} load steps")
 
 
 def _replicate(args: argparse.Namespace, n_points: int = 4) -> bool:
@@ -599,6 +635,8 @@ def _single_element(args: argparse.Namespace) -> int:
     setup = BiaxialSetup(width=1.0, height=1.0, nx=1, ny=1, confining=args.confining,
                          axial_strain=args.axial_strain, element=args.element,
                          gauss=args.quadrature)
+    _check_size(args, setup, 0 if args.material != "dem" else
+                args.particles if args.rve is None else rve_file_shape(args.rve)[1])
     tracking = _tracking(args, setup.n_points)
     packing = _packing(args, args.particles)
     progress = progress_enabled(args)
@@ -684,6 +722,7 @@ def _biaxial(args: argparse.Namespace) -> int:
     setup = BiaxialSetup(width=args.width, height=args.height, nx=nx, ny=ny,
                          confining=args.confining, axial_strain=args.axial_strain,
                          platens=args.platens, element=args.element, gauss=args.quadrature)
+    _check_size(args, setup, particles, biaxial=True)
     tracking = _tracking(args, setup.n_points)
     packing = _packing(args, particles)
     progress = progress_enabled(args)

@@ -34,6 +34,8 @@ __all__ = [
     "add_out",
     "add_progress",
     "add_rve_material_options",
+    "check_figure_file",
+    "check_memory",
     "check_output_dir",
     "check_output_file",
     "cleanup_on_rejection",
@@ -381,6 +383,72 @@ def check_output_file(path: Path | None, option: str = "--out") -> None:
     if path.exists() and not os.access(path, os.W_OK):
         raise UsageError(f"{option} {path} exists and cannot be overwritten")
     _writable_folder(path.parent, option, path)
+
+
+#: memory one disc of an RVE takes while it is run, about [bytes]: its state, the committed
+#: and trial copies, and 16 neighbour slots (partner and shear history) each, a safe margin
+DISC_BYTES = 2048
+#: a request for more memory than this is refused whatever the machine [bytes]: 1 TiB
+MEMORY_LIMIT = 2**40
+
+
+def _size(n_bytes: float) -> str:
+    """``n_bytes`` in words: 12.3 GB, 4.1 TB, 2e+25 B."""
+    if n_bytes >= 1e21:
+        return f"{n_bytes:.3g} B"
+    for unit, scale in (("EB", 1e18), ("PB", 1e15), ("TB", 1e12), ("GB", 1e9), ("MB", 1e6),
+                        ("kB", 1e3)):
+        if n_bytes >= scale:
+            return f"{n_bytes / scale:.3g} {unit}"
+    return f"{n_bytes:.0f} B"
+
+
+def available_memory() -> int | None:
+    """Memory the system can give this process now [bytes] (MemAvailable of Linux, else the
+    free pages), or None where it cannot be told."""
+    with contextlib.suppress(OSError, ValueError):
+        with open("/proc/meminfo") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    with contextlib.suppress(OSError, ValueError, AttributeError):
+        return int(os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
+    return None
+
+
+def check_memory(needed: float, what: str) -> None:
+    """Before any allocation: ``what`` (the options, in words) needs about ``needed`` bytes;
+    refused (UsageError with the estimate) beyond :data:`MEMORY_LIMIT`, which no machine
+    this runs on has, or beyond the memory available now."""
+    if not needed <= MEMORY_LIMIT:  # NaN and inf too
+        raise UsageError(f"{what} needs about {_size(needed)} of memory, more than the "
+                         f"{_size(MEMORY_LIMIT)} any run may take; ask for less")
+    available = available_memory()
+    if available is not None and needed > available:
+        raise UsageError(f"{what} needs about {_size(needed)} of memory; this machine has "
+                         f"{_size(available)} available now; ask for less")
+
+
+def check_figure_file(path: Path | None, option: str = "--plot",
+                      others: dict[str, Path | None] | None = None) -> None:
+    """Before any work: the figure file ``path`` (None: none) can be written, in a format
+    matplotlib writes (its suffix), and is none of the command's ``others`` output files
+    (option: path), which it would overwrite."""
+    if path is None:
+        return
+    check_output_file(path, option)
+    from matplotlib.backend_bases import FigureCanvasBase
+
+    formats = FigureCanvasBase.get_supported_filetypes()
+    suffix = Path(path).suffix.lower().removeprefix(".")
+    if suffix not in formats:
+        raise UsageError(f"{option} {path}: a figure is written as one of "
+                         f"{', '.join('.' + f for f in sorted(formats))} (its suffix), not "
+                         f"{'.' + suffix if suffix else 'a file without suffix'}")
+    for name, other in (others or {}).items():
+        if other is not None and Path(other).resolve() == Path(path).resolve():
+            raise UsageError(f"{option} {path} and {name} {other} name the same file; give "
+                             "each its own")
 
 
 def check_output_dir(path: Path | None, option: str = "--out") -> None:
