@@ -81,7 +81,8 @@ def test_newton_settings_are_refused_before_the_rves_are_made(tmp_path, capsys):
     out = tmp_path / "run"
     err = _refused(capsys, "biaxial", "--secant-min-change", "0", "--elements", "2", "2",
                    "--particles", "64", "--out", str(out))
-    assert "--secant-min-change must be a finite number > 0" in err and not out.exists()
+    assert "--secant-min-change: secant_min_change must be a finite number > 0" in err
+    assert not out.exists()
 
 
 def test_radii_too_wide_for_the_discs_drawn_are_refused_first(tmp_path, capsys):
