@@ -67,37 +67,55 @@ class UsageError(ValueError):
 
 
 class Terminated(KeyboardInterrupt):
-    """SIGTERM (a batch scheduler's or ``timeout``'s stop), raised where Ctrl-C raises
-    ``KeyboardInterrupt``, so that every command stops on it as on Ctrl-C."""
+    """SIGTERM (a batch scheduler's or ``timeout``'s stop) or SIGHUP (a closed terminal or
+    ssh session), raised where Ctrl-C raises ``KeyboardInterrupt``, so that every command
+    stops on it as on Ctrl-C; ``signum`` is the signal's number."""
+
+    signum: int = int(signal.SIGTERM)
+
+
+#: the signals other than Ctrl-C that stop a command as Ctrl-C does
+_STOP_SIGNALS = tuple(getattr(signal, name) for name in ("SIGTERM", "SIGHUP")
+                      if hasattr(signal, name))
 
 
 def _raise_terminated(signum: int, frame: object) -> None:
-    raise Terminated(f"signal {signal.Signals(signum).name}")
+    exc = Terminated(f"signal {signal.Signals(signum).name}")
+    exc.signum = int(signum)
+    raise exc
 
 
 @contextlib.contextmanager
 def stop_signals_as_interrupt() -> Iterator[None]:
-    """While the block runs, SIGTERM raises :class:`Terminated` (a ``KeyboardInterrupt``) in
-    the main thread, as Ctrl-C does; the previous handler comes back afterwards. A no-op
-    outside the main thread, where Python cannot install signal handlers."""
+    """While the block runs, SIGTERM and SIGHUP raise :class:`Terminated` (a
+    ``KeyboardInterrupt``) in the main thread, as Ctrl-C does; the previous handlers come
+    back afterwards. A no-op outside the main thread, where Python cannot install signal
+    handlers. (A SIGHUP that was ignored when the process started, as ``nohup`` does, stays
+    ignored.)"""
+    previous = {}
     try:
-        previous = signal.signal(signal.SIGTERM, _raise_terminated)
+        for signum in _STOP_SIGNALS:
+            if signum != getattr(signal, "SIGHUP", None) or \
+                    signal.getsignal(signum) is not signal.SIG_IGN:
+                previous[signum] = signal.signal(signum, _raise_terminated)
     except ValueError:  # not the main thread
         yield
         return
     try:
         yield
     finally:
-        signal.signal(signal.SIGTERM, previous)
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
 
 
 def interrupt_exit_code(exc: KeyboardInterrupt) -> int:
     """The shell's exit code of a command stopped by ``exc``: 128 + the signal number (130 for
-    Ctrl-C, 143 for SIGTERM), looked up through interrupts raised ``from`` another."""
+    Ctrl-C, 143 for SIGTERM, 129 for SIGHUP), looked up through interrupts raised ``from``
+    another."""
     cause: BaseException | None = exc
     while cause is not None and not isinstance(cause, Terminated):
         cause = cause.__cause__
-    return 128 + (signal.SIGTERM if cause is not None else signal.SIGINT)
+    return 128 + (cause.signum if isinstance(cause, Terminated) else int(signal.SIGINT))
 
 
 def positive(text: str) -> float:

@@ -33,7 +33,6 @@ import hashlib
 import io
 import json
 import math
-import os
 import re
 import zipfile
 from collections.abc import Iterator
@@ -46,6 +45,7 @@ import pandas as pd
 
 from granular_material.fem.material import Material, MaterialResponse
 from granular_material.fem.newton import CommittedState, NewtonSolver, StepRecord
+from granular_material.filesafe import write_whole
 
 __all__ = ["CheckpointError", "RunCheckpoint", "SavedRun", "SavedStep"]
 
@@ -145,15 +145,7 @@ def _file_sha256(path: Path) -> str:
 def _write_bytes(path: Path, data: bytes) -> None:
     """``path`` written whole or not at all (a temporary file renamed into place); a failed
     write leaves no ``.part`` behind, and its error names the file."""
-    tmp = path.with_name(path.name + ".part")
-    try:
-        with open(tmp, "wb") as fh:
-            fh.write(data)
-        os.replace(tmp, path)
-    except OSError as exc:
-        raise OSError(exc.errno, f"cannot write {path}: {exc.strerror or exc}") from exc
-    finally:
-        tmp.unlink(missing_ok=True)  # only there when writing or replacing failed
+    write_whole(path, lambda tmp: tmp.write_bytes(data))
 
 
 def _write_npz(path: Path, arrays: dict[str, np.ndarray]) -> str:

@@ -81,9 +81,13 @@ class FolderLock:
             os.close(fd)  # its holder removed it as we opened it: lock the new one
         else:  # pragma: no cover - a file replaced a hundred times over
             raise FolderLockedError(f"{self.folder}: its lock file keeps changing")
-        os.ftruncate(fd, 0)
-        os.write(fd, f"{os.getpid()}\n".encode())
         self._fd = fd
+        try:
+            os.ftruncate(fd, 0)
+            os.write(fd, f"{os.getpid()}\n".encode())
+        except OSError as exc:
+            self.release()
+            raise OSError(exc.errno, f"cannot write {self.path}: {exc.strerror}") from exc
 
     def release(self) -> None:
         """Remove the lock file and let the lock go; remove the folders :meth:`acquire`

@@ -7,7 +7,6 @@ volumetric strain are drawn compression positive.
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 from types import ModuleType
 from typing import TYPE_CHECKING, Any
@@ -15,6 +14,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import pandas as pd
 
+from granular_material.filesafe import write_whole
 from granular_material.results.localization import shear_band
 
 if TYPE_CHECKING:
@@ -38,15 +38,8 @@ def save_figure(fig: Any, path: str | Path, dpi: int = 120) -> Path:
     at all: drawn into ``path.part`` and renamed into place; a failed write leaves no
     ``.part`` and its error names the file."""
     path = Path(path)
-    tmp = path.with_name(path.name + ".part")
-    try:
-        fig.savefig(tmp, dpi=dpi, format=path.suffix.removeprefix(".").lower() or "png")
-        os.replace(tmp, path)
-    except OSError as exc:
-        raise OSError(exc.errno, f"cannot write {path}: {exc.strerror or exc}") from exc
-    finally:
-        tmp.unlink(missing_ok=True)  # only there when writing or replacing failed
-    return path
+    return write_whole(path, lambda tmp: fig.savefig(
+        tmp, dpi=dpi, format=path.suffix.removeprefix(".").lower() or "png"))
 
 
 def plot_biaxial_curves(curve: pd.DataFrame, path: str | Path) -> Path:
