@@ -175,3 +175,44 @@ def test_a_path_that_collapses_the_rve_fails_naming_it(rve16, tmp_path, capsys):
 def test_writers_still_write(tmp_path):
     assert pd.read_csv(write_csv(pd.DataFrame({"a": [1]}), tmp_path / "t.csv"))["a"][0] == 1
     assert json.loads(write_json({"a": 1}, tmp_path / "s.json").read_text()) == {"a": 1}
+
+
+@posix
+def test_only_the_first_stop_signal_is_raised():
+    with stop_signals_as_interrupt():
+        with pytest.raises(Terminated):
+            os.kill(os.getpid(), signal.SIGTERM)
+            time.sleep(1)
+        os.kill(os.getpid(), signal.SIGTERM)  # stopping already: ignored
+        os.kill(os.getpid(), signal.SIGINT)
+        time.sleep(0.05)
+    with stop_signals_as_interrupt(), pytest.raises(KeyboardInterrupt):  # a new command
+        os.kill(os.getpid(), signal.SIGINT)
+        time.sleep(1)
+
+
+@posix
+@pytest.mark.parametrize(("stop", "count"), [(signal.SIGTERM, 30), (signal.SIGINT, 5)])
+def test_a_storm_of_signals_near_the_end_cuts_no_file(stop, count, rve16, tmp_path):
+    """Signals every 50 ms from load step 4 of 6 to the end: the exit code of the first,
+    the summary, whole files, no .part, no traceback."""
+    out = tmp_path / "run"
+    process = subprocess.Popen(
+        [sys.executable, "-m", "granular_material.cli", "single-element", "--rve", str(rve16),
+         "--steps", "6", "--axial-strain", "0.003", "--device", "cpu", "--no-progress",
+         "--json", "--out", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+        text=True, preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    while not (out / "checkpoint" / "steps" / "step_00004.npz").exists():
+        assert process.poll() is None, process.communicate()[1]
+        time.sleep(0.01)
+    sent = 0
+    while process.poll() is None and sent < count:
+        process.send_signal(stop)
+        sent += 1
+        time.sleep(0.05)
+    _, stderr = process.communicate(timeout=300)
+    assert process.returncode == 128 + stop, stderr
+    assert "Traceback" not in stderr
+    assert json.loads((out / "summary.json").read_text())["error"]
+    files = [p for p in out.rglob("*") if p.is_file()]
+    assert not [p for p in files if p.name.endswith(".part") or p.stat().st_size == 0]

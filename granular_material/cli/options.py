@@ -79,33 +79,53 @@ _STOP_SIGNALS = tuple(getattr(signal, name) for name in ("SIGTERM", "SIGHUP")
                       if hasattr(signal, name))
 
 
+#: set once a stop signal has been raised in the block of :func:`stop_signals_as_interrupt`
+_STOPPING = {"now": False}
+
+
 def _raise_terminated(signum: int, frame: object) -> None:
+    if _STOPPING["now"]:  # the command is stopping already: let it write what it keeps
+        return
+    _STOPPING["now"] = True
     exc = Terminated(f"signal {signal.Signals(signum).name}")
     exc.signum = int(signum)
     raise exc
+
+
+def _raise_interrupt(signum: int, frame: object) -> None:
+    if _STOPPING["now"]:
+        return
+    _STOPPING["now"] = True
+    raise KeyboardInterrupt
 
 
 @contextlib.contextmanager
 def stop_signals_as_interrupt() -> Iterator[None]:
     """While the block runs, SIGTERM and SIGHUP raise :class:`Terminated` (a
     ``KeyboardInterrupt``) in the main thread, as Ctrl-C does; the previous handlers come
-    back afterwards. A no-op outside the main thread, where Python cannot install signal
-    handlers. (A SIGHUP that was ignored when the process started, as ``nohup`` does, stays
-    ignored.)"""
+    back afterwards. Only the first stop signal is raised: the ones after it (a storm of
+    SIGTERMs, Ctrl-C pressed again) are ignored while the command writes what it keeps and
+    ends. A no-op outside the main thread, where Python cannot install signal handlers.
+    (A signal ignored when the process started, as ``nohup`` does with SIGHUP and a shell
+    with a background job's SIGINT, stays ignored.)"""
+    handlers = {signum: _raise_terminated for signum in _STOP_SIGNALS}
+    if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+        handlers[signal.SIGINT] = _raise_interrupt
     previous = {}
     try:
-        for signum in _STOP_SIGNALS:
-            if signum != getattr(signal, "SIGHUP", None) or \
-                    signal.getsignal(signum) is not signal.SIG_IGN:
-                previous[signum] = signal.signal(signum, _raise_terminated)
+        for signum, handler in handlers.items():
+            if signum == signal.SIGTERM or signal.getsignal(signum) is not signal.SIG_IGN:
+                previous[signum] = signal.signal(signum, handler)
     except ValueError:  # not the main thread
         yield
         return
+    _STOPPING["now"] = False
     try:
         yield
     finally:
         for signum, handler in previous.items():
             signal.signal(signum, handler)
+        _STOPPING["now"] = False
 
 
 def interrupt_exit_code(exc: KeyboardInterrupt) -> int:
