@@ -161,6 +161,14 @@ def test_a_file_of_another_run_is_refused(name, runs, tmp_path, capsys):
     # (step 0, the initial state, is the same in both runs: taking it is an identical resume)
     shutil.copy(runs["other"] / "checkpoint" / name, out / "checkpoint" / name)
     _assert_refused(runs, out, capsys, "")
+    if name != STATE:
+        return
+    # nothing was lost (issue 24: the refusal deleted the later files): the run's own
+    # state.npz put back, the resume goes on
+    shutil.copy(runs["reference"] / "checkpoint" / name, out / "checkpoint" / name)
+    code, err = _resume(runs, out, capsys)
+    assert code == 0, err
+    _assert_same_run(runs, out)
 
 
 def test_random_damage_is_refused_or_resumes_to_the_same_run(runs, tmp_path, capsys):
