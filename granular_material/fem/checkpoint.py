@@ -464,8 +464,9 @@ class RunCheckpoint:
             self.read_options()
             options_sum = _file_sha256(options)
         if recorded is not None and recorded != options_sum:
-            raise CheckpointError(f"{options} is not the one this checkpoint saved (its "
-                                  "SHA-256 differs: edited, or copied from another run)")
+            raise CheckpointError(f"{path} was saved with other options than {options} "
+                                  "holds (their SHA-256 differs): one of them is another "
+                                  "run's, or options.json was edited")
         lost = [self._step_path(k).name for k in range(step + 1)
                 if not self._step_path(k).is_file()]
         if lost:
