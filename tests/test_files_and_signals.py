@@ -162,6 +162,12 @@ def test_a_path_that_collapses_the_rve_fails_naming_it(rve16, tmp_path, capsys):
                  "--max-dem-steps", "100000000", "--device", "cpu", "--out", str(out)])
     err = capsys.readouterr().err
     assert code == 1 and "collapse RVE(s) 0 (e = -0.4" in err and "void ratio <= 0" in err
+    code = main(["dem-drive", str(rve16), "--grad-u=-0.6,0,0,0", "--increments", "4",
+                 "--max-dem-steps", "100000000", "--device", "cpu", "--out", str(out)])
+    err = capsys.readouterr().err
+    assert code == 1 and "in increment 2 of 4; the path to increment 1 is kept" in err
+    assert sorted(pd.read_csv(out)["increment"]) == [0, 1]  # the path before it is kept
+    assert (pd.read_csv(out)["void_ratio"] > 0).all()
     batch = DEMBatch(load_rve(rve16).replicate(3), device="cpu")
     before = batch.to_data()
     grad = np.zeros((3, 2, 2))

@@ -266,6 +266,7 @@ def _drive_plan(args: argparse.Namespace) -> list[int]:
 
 
 def _run_drive(args: argparse.Namespace) -> int:
+    from granular_material.dem import DEMInstabilityError
     from granular_material.procedures import drive_grad_u, path_increment, progress_bar
     from granular_material.results import write_csv
 
@@ -292,6 +293,7 @@ def _run_drive(args: argparse.Namespace) -> int:
 
     record(0)
     interrupt = None
+    failure: DEMInstabilityError | None = None
     # the bar counts DEM steps (what takes the time), moved at the end of each increment
     with progress_bar(sum(plan), "dem-drive", progress_enabled(args)) as bar:
         try:
@@ -306,6 +308,10 @@ def _run_drive(args: argparse.Namespace) -> int:
                 bar.set_postfix(increment=f"{inc}/{args.increments}")
         except KeyboardInterrupt as exc:  # keep and write the increments finished before it
             interrupt = exc
+        except DEMInstabilityError as exc:  # a blow-up or a collapse: keep the path to it
+            if isinstance(exc, ValueError):  # refused input (a cell made too thin)
+                raise
+            failure = exc
     table = pd.concat(rows, ignore_index=True)
     if args.out:
         make_parents(args.out)
@@ -324,6 +330,9 @@ def _run_drive(args: argparse.Namespace) -> int:
     if args.out:
         report["out"] = str(args.out)
     error = None
+    if failure is not None:
+        error = (f"{failure} (in increment {finished + 1} of {args.increments}; the path to "
+                 f"increment {finished} is kept)")
     if interrupt is not None:
         error = (f"interrupted after increment {finished} of {args.increments}: the path to "
                  "it is kept")
