@@ -512,8 +512,9 @@ def _check(args: argparse.Namespace) -> None:
     try:  # the Newton settings refused now, not after the RVEs are made
         _settings(args, material)
     except ValueError as exc:  # name the option too: secant_min_change: --secant-min-change
-        field = re.match(r"[a-z]+(?:_[a-z]+)+", str(exc))
-        option = f"--{field.group(0).replace('_', '-')}: " if field else ""
+        field = re.match(r"[a-z]+(?:_[a-z]+)*", str(exc))
+        option = (f"--{field.group(0).replace('_', '-')}: "
+                  if field and hasattr(args, field.group(0)) else "")
         raise UsageError(f"{option}{exc}") from None
     if not (math.isfinite(_stress_tol(args, material)) and _stress_tol(args, material) >= 0):
         raise UsageError(f"--stress-tol must be a stress >= 0 Pa, got {args.stress_tol:g}")
