@@ -69,3 +69,16 @@ def test_a_second_run_into_a_running_folder_is_refused_at_once(tmp_path, capsys)
     err = capsys.readouterr().err
     assert code == 2 and "--steps 201 (the run had 200)" in err, err
     assert "another run" not in err
+
+
+def test_a_dem_scene_into_a_locked_run_folder_is_refused(tmp_path, capsys):
+    """A DEM command's scene (whose summary.json the scene writes) locks its run folder."""
+    scene = tmp_path / "p.toml"
+    scene.write_text('test = "prepare"\nparticles = 16\ndevice = "cpu"\n')
+    run_dir = tmp_path / "p"
+    with FolderLock(run_dir):
+        code = main(["run", str(scene), "--out", str(run_dir)])
+        err = capsys.readouterr().err
+        assert code == 2 and f"pid {os.getpid()}" in err, err
+        assert sorted(p.name for p in run_dir.iterdir()) == [LOCK_NAME]
+    assert not run_dir.exists()
