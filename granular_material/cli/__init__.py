@@ -13,6 +13,7 @@ taking the parsed arguments and returning the exit code).
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
 import warnings
 from importlib.metadata import entry_points
@@ -71,17 +72,19 @@ def main(argv: list[str] | None = None) -> int:
     quiet_warp()  # keep stdout clean for --json
     parser = build_parser()
     args = parser.parse_args(argv)
-    try:
-        with stop_signals_as_interrupt():
+    with stop_signals_as_interrupt():  # the reports below too: a later signal is ignored
+        try:
             return int(args.func(args) or 0)
-    except KeyboardInterrupt as exc:  # Ctrl-C or SIGTERM that the command did not catch
-        what = "terminated (SIGTERM)" if interrupt_exit_code(exc) == 143 else "interrupted"
-        print(f"granular-material {args.command}: {what} before its outputs "
-              "were complete", file=sys.stderr)
-        return interrupt_exit_code(exc)
-    except (UsageError, ValueError, OSError) as exc:
-        print(f"granular-material {args.command}: error: {exc}", file=sys.stderr)
-        return 2
-    except RuntimeError as exc:  # e.g. DEMInstabilityError naming the RVEs
-        print(f"granular-material {args.command}: failed: {exc}", file=sys.stderr)
-        return 1
+        except KeyboardInterrupt as exc:  # Ctrl-C or SIGTERM that the command did not catch
+            code = interrupt_exit_code(exc)
+            what = ("interrupted" if code == 130 else
+                    f"terminated ({signal.Signals(code - 128).name})")
+            print(f"granular-material {args.command}: {what} before its outputs "
+                  "were complete", file=sys.stderr)
+            return code
+        except (UsageError, ValueError, OSError) as exc:
+            print(f"granular-material {args.command}: error: {exc}", file=sys.stderr)
+            return 2
+        except RuntimeError as exc:  # e.g. DEMInstabilityError naming the RVEs
+            print(f"granular-material {args.command}: failed: {exc}", file=sys.stderr)
+            return 1

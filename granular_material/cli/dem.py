@@ -12,6 +12,7 @@ import numpy as np
 import pandas as pd
 
 from granular_material.cli.options import (
+    DISC_BYTES,
     UsageError,
     add_device,
     add_dtype,
@@ -20,6 +21,8 @@ from granular_material.cli.options import (
     add_out,
     add_progress,
     add_rve_material_options,
+    check_figure_file,
+    check_memory,
     check_output_file,
     emit,
     interrupt_exit_code,
@@ -103,6 +106,8 @@ def _run_prepare(args: argparse.Namespace) -> int:
 
     check_output_file(args.out)
     packing = packing_parameters(args, args.particles, args.pressure)
+    check_memory(float(args.batch) * args.particles * DISC_BYTES,
+                 f"--batch {args.batch} RVEs of --particles {args.particles} discs")
     batch = prepare_packing(
         n_disc=args.particles, n_rve=args.batch, seed=args.seed, pressure=args.pressure,
         meta=packing.meta, target_void_ratio=packing.target_void_ratio,
@@ -152,7 +157,7 @@ def _run_biaxial(args: argparse.Namespace) -> int:
     from granular_material.results import plot_biaxial_curves, summarize_biaxial, write_csv
 
     check_output_file(args.out)
-    check_output_file(args.plot, "--plot")
+    check_figure_file(args.plot, "--plot", {"--out": args.out})
     if args.axial_strain >= 0.9:
         raise UsageError(f"--axial-strain must be below 0.9, got {args.axial_strain:g}")
     try:
@@ -215,6 +220,10 @@ def _run_biaxial(args: argparse.Namespace) -> int:
 
 
 # -- dem-drive -----------------------------------------------------------------------------
+#: the fewest DEM steps one increment of dem-drive takes (drive_grad_u's min_steps)
+_MIN_INCREMENT_STEPS = 2
+
+
 def _drive_plan(args: argparse.Namespace) -> list[int]:
     """DEM steps of each increment of ``dem-drive``, checked against --max-dem-steps before
     any work (UsageError naming the options)."""
@@ -223,6 +232,10 @@ def _drive_plan(args: argparse.Namespace) -> list[int]:
     cap = args.max_dem_steps
     shown = ",".join(f"{v:g}" for v in args.grad_u.ravel())
     n = args.increments
+    if n * _MIN_INCREMENT_STEPS > cap:  # before a loop over them: 10⁷ would take minutes
+        raise UsageError(f"--increments {n} needs at least {n * _MIN_INCREMENT_STEPS} DEM "
+                         f"steps ({_MIN_INCREMENT_STEPS} an increment), more than "
+                         f"--max-dem-steps {cap}; use fewer --increments")
     plan = []
     for k in range(1, n + 1):
         det = float(np.linalg.det(np.eye(2) + args.grad_u * k / n))
@@ -253,6 +266,7 @@ def _drive_plan(args: argparse.Namespace) -> list[int]:
 
 
 def _run_drive(args: argparse.Namespace) -> int:
+    from granular_material.dem import DEMInstabilityError
     from granular_material.procedures import drive_grad_u, path_increment, progress_bar
     from granular_material.results import write_csv
 
@@ -279,6 +293,7 @@ def _run_drive(args: argparse.Namespace) -> int:
 
     record(0)
     interrupt = None
+    failure: DEMInstabilityError | None = None
     # the bar counts DEM steps (what takes the time), moved at the end of each increment
     with progress_bar(sum(plan), "dem-drive", progress_enabled(args)) as bar:
         try:
@@ -293,6 +308,10 @@ def _run_drive(args: argparse.Namespace) -> int:
                 bar.set_postfix(increment=f"{inc}/{args.increments}")
         except KeyboardInterrupt as exc:  # keep and write the increments finished before it
             interrupt = exc
+        except DEMInstabilityError as exc:  # a blow-up or a collapse: keep the path to it
+            if isinstance(exc, ValueError):  # refused input (a cell made too thin)
+                raise
+            failure = exc
     table = pd.concat(rows, ignore_index=True)
     if args.out:
         make_parents(args.out)
@@ -311,6 +330,9 @@ def _run_drive(args: argparse.Namespace) -> int:
     if args.out:
         report["out"] = str(args.out)
     error = None
+    if failure is not None:
+        error = (f"{failure} (in increment {finished + 1} of {args.increments}; the path to "
+                 f"increment {finished} is kept)")
     if interrupt is not None:
         error = (f"interrupted after increment {finished} of {args.increments}: the path to "
                  "it is kept")

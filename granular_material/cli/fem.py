@@ -6,6 +6,7 @@ import argparse
 import contextlib
 import json
 import math
+import re
 import sys
 import time
 from collections.abc import Callable, Iterator
@@ -15,6 +16,7 @@ from typing import TYPE_CHECKING, Any
 import pandas as pd
 
 from granular_material.cli.options import (
+    DISC_BYTES,
     RVE_MATERIAL_DEFAULTS,
     UsageError,
     add_convergence,
@@ -24,6 +26,7 @@ from granular_material.cli.options import (
     add_out,
     add_progress,
     add_rve_material_options,
+    check_memory,
     check_output_dir,
     cleanup_on_rejection,
     emit,
@@ -62,6 +65,7 @@ from granular_material.results import (
     write_json,
     write_outputs,
 )
+from granular_material.results.lock import FolderLock
 
 if TYPE_CHECKING:
     from granular_material.procedures.packing import PackingParameters
@@ -385,13 +389,20 @@ def _check_resume(args: argparse.Namespace) -> None:
         raise UsageError(f"--resume {args.resume} continues in that folder; --out {args.out} "
                          "names another (leave --out out)")
     args.out = args.resume
+    check_output_dir(args.out, "--resume")
+    _lock_out(args.out)
     checkpoint = RunCheckpoint(Path(args.resume) / "checkpoint")
     if not checkpoint.has_options():
+        if checkpoint.has_state():
+            raise UsageError(f"--resume {args.resume}: {checkpoint.folder / 'options.json'} "
+                             "is missing, so the options the run was started with cannot be "
+                             "checked; nothing in the folder was changed")
         return
     try:
         saved = checkpoint.read_options()
     except CheckpointError as exc:
-        raise UsageError(f"--resume {args.resume}: {exc}") from None
+        raise UsageError(f"--resume {args.resume}: {exc}; nothing in the folder was "
+                         "changed") from None
     given = json.loads(json.dumps(_run_options(args), default=str))
     if saved.get("command") not in (None, args.command):
         raise UsageError(f"--resume {args.resume} is a {saved['command']} run, not "
@@ -404,7 +415,34 @@ def _check_resume(args: argparse.Namespace) -> None:
               for k in sorted(set(saved) | set(given)) if saved.get(k) != given.get(k)]
     if differ:
         raise UsageError(f"--resume {args.resume}: give the options the run was started with; "
-                         f"these differ: {'; '.join(differ)}")
+                         f"these differ: {'; '.join(differ)} (nothing in the folder was "
+                         "changed)")
+
+
+#: the output folders this process holds locked while a command runs (:func:`_locked`)
+_HELD: dict[Path, FolderLock] = {}
+
+
+def _lock_out(out: Path | None) -> None:
+    """Take the lock of the output folder ``out`` (None: none) before anything is written
+    there: a second run or resume into it is refused at once (exit 2, naming the holder's
+    pid). Held until the command ends (:func:`_locked`), or the process dies."""
+    if out is None or Path(out).resolve() in _HELD:
+        return
+    lock = FolderLock(out)
+    lock.acquire()
+    _HELD[Path(out).resolve()] = lock
+
+
+def _locked(command: Callable[[argparse.Namespace], int]) -> Callable[[argparse.Namespace], int]:
+    """``command`` that lets go of the output folders it locked when it ends, however."""
+    def run(args: argparse.Namespace) -> int:
+        try:
+            return command(args)
+        finally:
+            while _HELD:
+                _HELD.popitem()[1].release()
+    return run
 
 
 def _open_checkpoint(args: argparse.Namespace) -> tuple[RunCheckpoint | None, bool]:
@@ -414,6 +452,15 @@ def _open_checkpoint(args: argparse.Namespace) -> tuple[RunCheckpoint | None, bo
         return None, False
     checkpoint = RunCheckpoint(Path(args.out) / "checkpoint", every=args.checkpoint_every)
     if args.resume is not None and checkpoint.has_state():
+        try:  # read and checked whole before anything in the folder is touched
+            saved = checkpoint.verify()
+        except CheckpointError as exc:
+            raise UsageError(f"--resume {args.resume}: {exc}; nothing in the folder was "
+                             "changed") from None
+        if saved.step > args.steps:
+            raise UsageError(f"--resume {args.resume}: its checkpoint is of load step "
+                             f"{saved.step}, past --steps {args.steps}; nothing in the "
+                             "folder was changed")
         return checkpoint, True
     if args.resume is not None:
         print(f"granular-material {args.command}: {args.resume} holds no saved step yet; "
@@ -485,8 +532,43 @@ def _check(args: argparse.Namespace) -> None:
         raise UsageError(f"--confining must be a positive number of Pa (σxx is held at "
                          f"−confining, σ1/σ3 divides by it), got {args.confining:g}")
     check_output_dir(args.out)
+    _lock_out(args.out)
     if args.rve is not None and not args.rve.exists():
         raise FileNotFoundError(f"--rve {args.rve} does not exist")
+    material = getattr(args, "material", "dem")
+    try:  # the Newton settings refused now, not after the RVEs are made
+        _settings(args, material)
+    except ValueError as exc:  # name the option too: secant_min_change: --secant-min-change
+        field = re.match(r"[a-z]+(?:_[a-z]+)*", str(exc))
+        option = (f"--{field.group(0).replace('_', '-')}: "
+                  if field and hasattr(args, field.group(0)) else "")
+        raise UsageError(f"{option}{exc}") from None
+    if not (math.isfinite(_stress_tol(args, material)) and _stress_tol(args, material) >= 0):
+        raise UsageError(f"--stress-tol must be a stress >= 0 Pa, got {args.stress_tol:g}")
+
+
+#: memory of one element of the mesh beside its RVEs, about [bytes]: its stiffness entries
+#: in assembly, its Gauss points' tables and tangents, with room for the solver
+_ELEMENT_BYTES = 16_384
+#: memory of one Gauss point's row of one load step, kept for the tables [bytes]
+_POINT_ROW_BYTES = 400
+
+
+def _check_size(args: argparse.Namespace, setup: BiaxialSetup, particles: int,
+                biaxial: bool = False) -> None:
+    """Before any work: the mesh, its RVEs (``particles`` discs at each Gauss point; 0
+    without) and the tables of every step fit in memory (UsageError with the estimate);
+    a biaxial specimen has the 4 Gauss points its shear-band measures need."""
+    if biaxial and setup.n_points < 4:
+        raise UsageError(f"--element {setup.element} on --elements {setup.nx} {setup.ny} has "
+                         f"{setup.n_points} Gauss points; the shear-band measures of a "
+                         "biaxial run need at least 4 (more elements)")
+    needed = (float(setup.n_elements) * _ELEMENT_BYTES
+              + float(setup.n_points) * particles * DISC_BYTES
+              + float(setup.n_points) * (args.steps + 1) * _POINT_ROW_BYTES)
+    discs = f" of {particles}-disc RVEs" if particles else ""
+    check_memory(needed, f"{setup.n_elements} {setup.element} elements ({setup.n_points} "
+                         f"Gauss points{discs}) over {args.steps} load steps")
 
 
 def _replicate(args: argparse.Namespace, n_points: int = 4) -> bool:
@@ -571,7 +653,7 @@ def _on_backend(args: argparse.Namespace,
 
 def run_single_element(args: argparse.Namespace) -> int:
     """The ``single-element`` command; returns the exit code."""
-    return _on_backend(args, _single_element)
+    return _on_backend(args, _locked(_single_element))
 
 
 def _single_element(args: argparse.Namespace) -> int:
@@ -581,6 +663,8 @@ def _single_element(args: argparse.Namespace) -> int:
     setup = BiaxialSetup(width=1.0, height=1.0, nx=1, ny=1, confining=args.confining,
                          axial_strain=args.axial_strain, element=args.element,
                          gauss=args.quadrature)
+    _check_size(args, setup, 0 if args.material != "dem" else
+                args.particles if args.rve is None else rve_file_shape(args.rve)[1])
     tracking = _tracking(args, setup.n_points)
     packing = _packing(args, args.particles)
     progress = progress_enabled(args)
@@ -648,7 +732,7 @@ def _pure_dem(material: Any, args: argparse.Namespace, progress: bool) -> pd.Dat
 
 def run_biaxial_command(args: argparse.Namespace) -> int:
     """The ``biaxial`` command; returns the exit code."""
-    return _on_backend(args, _biaxial)
+    return _on_backend(args, _locked(_biaxial))
 
 
 def _biaxial(args: argparse.Namespace) -> int:
@@ -666,6 +750,7 @@ def _biaxial(args: argparse.Namespace) -> int:
     setup = BiaxialSetup(width=args.width, height=args.height, nx=nx, ny=ny,
                          confining=args.confining, axial_strain=args.axial_strain,
                          platens=args.platens, element=args.element, gauss=args.quadrature)
+    _check_size(args, setup, particles, biaxial=True)
     tracking = _tracking(args, setup.n_points)
     packing = _packing(args, particles)
     progress = progress_enabled(args)

@@ -34,6 +34,8 @@ __all__ = [
     "add_out",
     "add_progress",
     "add_rve_material_options",
+    "check_figure_file",
+    "check_memory",
     "check_output_dir",
     "check_output_file",
     "cleanup_on_rejection",
@@ -65,37 +67,75 @@ class UsageError(ValueError):
 
 
 class Terminated(KeyboardInterrupt):
-    """SIGTERM (a batch scheduler's or ``timeout``'s stop), raised where Ctrl-C raises
-    ``KeyboardInterrupt``, so that every command stops on it as on Ctrl-C."""
+    """SIGTERM (a batch scheduler's or ``timeout``'s stop) or SIGHUP (a closed terminal or
+    ssh session), raised where Ctrl-C raises ``KeyboardInterrupt``, so that every command
+    stops on it as on Ctrl-C; ``signum`` is the signal's number."""
+
+    signum: int = int(signal.SIGTERM)
+
+
+#: the signals other than Ctrl-C that stop a command as Ctrl-C does
+_STOP_SIGNALS = tuple(getattr(signal, name) for name in ("SIGTERM", "SIGHUP")
+                      if hasattr(signal, name))
+
+
+#: set once a stop signal has been raised in the block of :func:`stop_signals_as_interrupt`
+_STOPPING = {"now": False}
 
 
 def _raise_terminated(signum: int, frame: object) -> None:
-    raise Terminated(f"signal {signal.Signals(signum).name}")
+    if _STOPPING["now"]:  # the command is stopping already: let it write what it keeps
+        return
+    _STOPPING["now"] = True
+    exc = Terminated(f"signal {signal.Signals(signum).name}")
+    exc.signum = int(signum)
+    raise exc
+
+
+def _raise_interrupt(signum: int, frame: object) -> None:
+    if _STOPPING["now"]:
+        return
+    _STOPPING["now"] = True
+    raise KeyboardInterrupt
 
 
 @contextlib.contextmanager
 def stop_signals_as_interrupt() -> Iterator[None]:
-    """While the block runs, SIGTERM raises :class:`Terminated` (a ``KeyboardInterrupt``) in
-    the main thread, as Ctrl-C does; the previous handler comes back afterwards. A no-op
-    outside the main thread, where Python cannot install signal handlers."""
+    """While the block runs, SIGTERM and SIGHUP raise :class:`Terminated` (a
+    ``KeyboardInterrupt``) in the main thread, as Ctrl-C does; the previous handlers come
+    back afterwards. Only the first stop signal is raised: the ones after it (a storm of
+    SIGTERMs, Ctrl-C pressed again) are ignored while the command writes what it keeps and
+    ends. A no-op outside the main thread, where Python cannot install signal handlers.
+    (A signal ignored when the process started, as ``nohup`` does with SIGHUP and a shell
+    with a background job's SIGINT, stays ignored.)"""
+    handlers = {signum: _raise_terminated for signum in _STOP_SIGNALS}
+    if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+        handlers[signal.SIGINT] = _raise_interrupt
+    previous = {}
     try:
-        previous = signal.signal(signal.SIGTERM, _raise_terminated)
+        for signum, handler in handlers.items():
+            if signum == signal.SIGTERM or signal.getsignal(signum) is not signal.SIG_IGN:
+                previous[signum] = signal.signal(signum, handler)
     except ValueError:  # not the main thread
         yield
         return
+    _STOPPING["now"] = False
     try:
         yield
     finally:
-        signal.signal(signal.SIGTERM, previous)
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+        _STOPPING["now"] = False
 
 
 def interrupt_exit_code(exc: KeyboardInterrupt) -> int:
     """The shell's exit code of a command stopped by ``exc``: 128 + the signal number (130 for
-    Ctrl-C, 143 for SIGTERM), looked up through interrupts raised ``from`` another."""
+    Ctrl-C, 143 for SIGTERM, 129 for SIGHUP), looked up through interrupts raised ``from``
+    another."""
     cause: BaseException | None = exc
     while cause is not None and not isinstance(cause, Terminated):
         cause = cause.__cause__
-    return 128 + (signal.SIGTERM if cause is not None else signal.SIGINT)
+    return 128 + (cause.signum if isinstance(cause, Terminated) else int(signal.SIGINT))
 
 
 def positive(text: str) -> float:
@@ -381,6 +421,72 @@ def check_output_file(path: Path | None, option: str = "--out") -> None:
     if path.exists() and not os.access(path, os.W_OK):
         raise UsageError(f"{option} {path} exists and cannot be overwritten")
     _writable_folder(path.parent, option, path)
+
+
+#: memory one disc of an RVE takes while it is run, about [bytes]: its state, the committed
+#: and trial copies, and 16 neighbour slots (partner and shear history) each, a safe margin
+DISC_BYTES = 2048
+#: a request for more memory than this is refused whatever the machine [bytes]: 1 TiB
+MEMORY_LIMIT = 2**40
+
+
+def _size(n_bytes: float) -> str:
+    """``n_bytes`` in words: 12.3 GB, 4.1 TB, 2e+25 B."""
+    if n_bytes >= 1e21:
+        return f"{n_bytes:.3g} B"
+    for unit, scale in (("EB", 1e18), ("PB", 1e15), ("TB", 1e12), ("GB", 1e9), ("MB", 1e6),
+                        ("kB", 1e3)):
+        if n_bytes >= scale:
+            return f"{n_bytes / scale:.3g} {unit}"
+    return f"{n_bytes:.0f} B"
+
+
+def available_memory() -> int | None:
+    """Memory the system can give this process now [bytes] (MemAvailable of Linux, else the
+    free pages), or None where it cannot be told."""
+    with contextlib.suppress(OSError, ValueError):
+        with open("/proc/meminfo") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    with contextlib.suppress(OSError, ValueError, AttributeError):
+        return int(os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
+    return None
+
+
+def check_memory(needed: float, what: str) -> None:
+    """Before any allocation: ``what`` (the options, in words) needs about ``needed`` bytes;
+    refused (UsageError with the estimate) beyond :data:`MEMORY_LIMIT`, which no machine
+    this runs on has, or beyond the memory available now."""
+    if not needed <= MEMORY_LIMIT:  # NaN and inf too
+        raise UsageError(f"{what} needs about {_size(needed)} of memory, more than the "
+                         f"{_size(MEMORY_LIMIT)} any run may take; ask for less")
+    available = available_memory()
+    if available is not None and needed > available:
+        raise UsageError(f"{what} needs about {_size(needed)} of memory; this machine has "
+                         f"{_size(available)} available now; ask for less")
+
+
+def check_figure_file(path: Path | None, option: str = "--plot",
+                      others: dict[str, Path | None] | None = None) -> None:
+    """Before any work: the figure file ``path`` (None: none) can be written, in a format
+    matplotlib writes (its suffix), and is none of the command's ``others`` output files
+    (option: path), which it would overwrite."""
+    if path is None:
+        return
+    check_output_file(path, option)
+    from matplotlib.backend_bases import FigureCanvasBase
+
+    formats = FigureCanvasBase.get_supported_filetypes()
+    suffix = Path(path).suffix.lower().removeprefix(".")
+    if suffix not in formats:
+        raise UsageError(f"{option} {path}: a figure is written as one of "
+                         f"{', '.join('.' + f for f in sorted(formats))} (its suffix), not "
+                         f"{'.' + suffix if suffix else 'a file without suffix'}")
+    for name, other in (others or {}).items():
+        if other is not None and Path(other).resolve() == Path(path).resolve():
+            raise UsageError(f"{option} {path} and {name} {other} name the same file; give "
+                             "each its own")
 
 
 def check_output_dir(path: Path | None, option: str = "--out") -> None:

@@ -29,6 +29,7 @@ from typing import Any
 
 from granular_material.cli.options import UsageError, check_output_dir, reports_to
 from granular_material.results import write_json
+from granular_material.results.lock import FolderLock
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -502,15 +503,20 @@ def run_scene(scene: Scene) -> int:
     """Run the checked ``scene`` into its run folder; returns the command's exit code."""
     reports: list[dict[str, Any]] = []
     namespace = scene.namespace
-    try:
-        with _scene_copied(scene), reports_to(reports.append):
-            code = int(namespace.func(namespace) or 0)
-    except ValueError as exc:  # the command's own checks: say where the scene set the option
-        raise UsageError(_located(scene, str(exc))) from exc
-    # the FEM commands write summary.json into their folder themselves; the DEM commands,
-    # whose --out is a file, report on stdout only: their report is kept here
-    if TESTS[scene.test] is not None and reports:
-        _write_summary(scene.run_dir, reports[-1])
+    # one writer per run folder: the FEM commands lock their --out themselves; a DEM
+    # command's scene is locked here, its summary.json included
+    with contextlib.ExitStack() as stack:
+        if TESTS[scene.test] is not None:
+            stack.enter_context(FolderLock(scene.run_dir))
+        try:
+            with _scene_copied(scene), reports_to(reports.append):
+                code = int(namespace.func(namespace) or 0)
+        except ValueError as exc:  # the command's own checks: say where the scene set it
+            raise UsageError(_located(scene, str(exc))) from exc
+        # the FEM commands write summary.json into their folder themselves; the DEM
+        # commands, whose --out is a file, report on stdout only: their report is kept here
+        if TESTS[scene.test] is not None and reports:
+            _write_summary(scene.run_dir, reports[-1])
     return code
 
 

@@ -28,6 +28,8 @@ from typing import Any
 import numpy as np
 from scipy.spatial import cKDTree
 
+from granular_material.filesafe import write_whole
+
 __all__ = [
     "CONTACT_HISTORY_KEYS",
     "FORMAT_VERSION",
@@ -552,10 +554,12 @@ def save_rve(path: str | Path, data: RVEData) -> None:
         if key in arrays:
             raise ValueError(f"extra array {key!r} clashes with a core key")
         arrays[key] = value
-    tmp = path.with_name(path.name + ".part")
-    with open(tmp, "wb") as fh:
-        np.savez_compressed(fh, **arrays)
-    tmp.replace(path)
+
+    def write(tmp: Path) -> None:
+        with open(tmp, "wb") as fh:
+            np.savez_compressed(fh, **arrays)
+
+    write_whole(path, write)
 
 
 def load_rve(path: str | Path) -> RVEData:

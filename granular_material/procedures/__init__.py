@@ -8,6 +8,7 @@ from granular_material.procedures.progress import progress_bar
 from granular_material.procedures.servo import consolidate, servo_steps
 from granular_material.procedures.strain_path import (
     CellTooThinError,
+    RVECollapseError,
     drive_grad_u,
     has_real_logarithm,
     over_step_cap,
@@ -18,6 +19,7 @@ from granular_material.procedures.strain_path import (
 __all__ = [
     "CellTooThinError",
     "PackingParameters",
+    "RVECollapseError",
     "biaxial_test",
     "consolidate",
     "drive_grad_u",

@@ -217,6 +217,28 @@ def random_gas(
     )
 
 
+def _check_drawn_radii(n_disc: int, n_rve: int, seed: int,
+                       radius_range: tuple[float, float]) -> None:
+    """``ValueError`` before any work when the radii RVE b draws (as :func:`random_gas`
+    does) would not keep its consolidated cell wider than twice the contact cut-off:
+    :func:`min_discs` holds for the mean of the radii, a draw of few discs can hold larger
+    ones. Only near that limit (below four times it), where a draw can matter."""
+    if n_disc >= 4 * min_discs(radius_range):
+        return
+    r_min, r_max = radius_range
+    for b in range(n_rve):
+        radius = np.random.default_rng(seed + b).uniform(r_min, r_max, size=n_disc)
+        side = math.sqrt(np.pi * float(np.sum(radius**2)) / DENSE_SOLID_FRACTION)
+        cutoff = 2.0 * float(radius.max()) + 2.0 * SKIN_FRACTION * float(radius.mean())
+        if side <= 2.0 * cutoff:
+            raise ValueError(
+                f"{n_disc} discs of radii {r_min:g}–{r_max:g} m are too few for seed "
+                f"{seed + b} (RVE {b}): its discs (largest {radius.max():.4g} m) would "
+                f"consolidate to a cell {side:.4g} m wide, not wider than twice the contact "
+                f"cut-off ({2 * cutoff:.4g} m); take more discs or a narrower radius range"
+            )
+
+
 def prepare_packing(
     n_disc: int = 400,
     n_rve: int = 1,
@@ -247,6 +269,7 @@ def prepare_packing(
     meta = meta or RVEMeta()
     meta.validate()
     _check_limits(n_disc, pressure, meta, radius_range, dtype)
+    _check_drawn_radii(n_disc, n_rve, seed, radius_range)
     gas = random_gas(n_disc, n_rve, seed, radius_range, meta=replace(meta, friction_angle=0.0))
     batch = DEMBatch(gas, device=device, dtype=dtype, shards=shards)
     if target_void_ratio is not None:

@@ -16,6 +16,7 @@ from granular_material.dem.model import cell_heights
 
 __all__ = [
     "CellTooThinError",
+    "RVECollapseError",
     "drive_grad_u",
     "has_real_logarithm",
     "log_deformation",
@@ -42,6 +43,36 @@ class CellTooThinError(DEMInstabilityError, ValueError):
         self.rve = rve
         self.reasons = [message]
         RuntimeError.__init__(self, message)
+
+
+class RVECollapseError(DEMInstabilityError):
+    """A ∇u that would press an RVE's cell to no more area than its discs' (void ratio
+    e = det H / Σπr² − 1 ≤ 0: overlaps far beyond the contact law's validity): refused by
+    :func:`drive_grad_u` before any step, a failed run (exit 1) naming the RVEs, as a blow-up
+    is; a caller that treats failed RVEs (the FEM's DEM material) cuts back."""
+
+    def __init__(self, rve: list[int], message: str) -> None:
+        self.rve = rve
+        self.reasons = [message]
+        RuntimeError.__init__(self, message)
+
+
+def _check_collapse(batch: DEMBatch, g: np.ndarray, active: np.ndarray) -> None:
+    """``RVECollapseError`` naming the RVEs whose cell (I + ∇u)·H would leave no void."""
+    solid = np.pi * np.concatenate([np.sum(s.model.radius**2, axis=1) for s in batch.shards])
+    area = np.linalg.det(np.eye(2) + g) * np.linalg.det(batch.cell())
+    void = area / solid - 1.0
+    collapsed = ~(void > 0) & active
+    if not collapsed.any():
+        return
+    rves = np.flatnonzero(collapsed)
+    shown = ", ".join(f"{b} (e = {void[b]:.3g})" for b in rves[:5])
+    raise RVECollapseError(
+        rves.tolist(),
+        f"grad_u would collapse RVE(s) {shown}{' ...' if rves.size > 5 else ''}: a void "
+        f"ratio <= 0, its cell no larger than its discs (overlaps far beyond the contact "
+        f"law); refused before any step ({rves.size} RVE(s) in all): apply less "
+        "compression")
 
 
 def _check_path_heights(batch: DEMBatch, log_f: np.ndarray, active: np.ndarray) -> None:
@@ -229,6 +260,7 @@ def drive_grad_u(
         b = int(np.argmax(~real))
         raise ValueError(f"grad_u of RVE {b} has no real logarithm (I + grad_u turns by half a "
                          f"turn or more, or has a negative eigenvalue): {g[b].tolist()}")
+    _check_collapse(batch, g, active)
     log_f = log_deformation(g)
     _check_path_heights(batch, log_f, active)
     steps_dt = np.where(active, n_steps * dt, 1.0)

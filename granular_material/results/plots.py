@@ -9,17 +9,18 @@ from __future__ import annotations
 
 from pathlib import Path
 from types import ModuleType
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pandas as pd
 
+from granular_material.filesafe import write_whole
 from granular_material.results.localization import shear_band
 
 if TYPE_CHECKING:
     from granular_material.fem.runner import BiaxialResult
 
-__all__ = ["plot_biaxial_curves", "plot_maps", "plot_stress_strain", "pyplot"]
+__all__ = ["plot_biaxial_curves", "plot_maps", "plot_stress_strain", "pyplot", "save_figure"]
 
 
 def pyplot() -> ModuleType:
@@ -30,6 +31,15 @@ def pyplot() -> ModuleType:
     import matplotlib.pyplot as plt
 
     return plt
+
+
+def save_figure(fig: Any, path: str | Path, dpi: int = 120) -> Path:
+    """Save the matplotlib figure ``fig`` to ``path`` (format from its suffix) whole or not
+    at all: drawn into ``path.part`` and renamed into place; a failed write leaves no
+    ``.part`` and its error names the file."""
+    path = Path(path)
+    return write_whole(path, lambda tmp: fig.savefig(
+        tmp, dpi=dpi, format=path.suffix.removeprefix(".").lower() or "png"))
 
 
 def plot_biaxial_curves(curve: pd.DataFrame, path: str | Path) -> Path:
@@ -48,10 +58,10 @@ def plot_biaxial_curves(curve: pd.DataFrame, path: str | Path) -> Path:
     if curve["rve"].nunique() <= 10:
         ax1.legend()
     fig.suptitle("Drained biaxial test of the RVE(s)")
-    path = Path(path)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    try:
+        return save_figure(fig, path)
+    finally:
+        plt.close(fig)
 
 
 def plot_stress_strain(steps: pd.DataFrame, path: str | Path, reference: pd.DataFrame | None = None,
@@ -74,10 +84,10 @@ def plot_stress_strain(steps: pd.DataFrame, path: str | Path, reference: pd.Data
     for ax in (a, b):
         ax.grid(alpha=0.3)
         ax.legend()
-    path = Path(path)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    try:
+        return save_figure(fig, path)
+    finally:
+        plt.close(fig)
 
 
 def _fan(cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -147,7 +157,7 @@ def plot_maps(result: BiaxialResult, axial_strain: float, path: str | Path) -> P
                  f"(compression +)\nlargest-γ {100 * band.band_fraction:.0f} % of points: "
                  f"inclination {band.inclination_deg:.0f}°, elongation "
                  f"{band.elongation:.2f}, γ ratio {band.localization:.1f}")
-    path = Path(path)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    try:
+        return save_figure(fig, path)
+    finally:
+        plt.close(fig)

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from granular_material.results.plots import pyplot
+from granular_material.results.plots import pyplot, save_figure
 
 __all__ = ["pareto_front", "plot_knob", "plot_pareto"]
 
@@ -56,9 +56,10 @@ def plot_pareto(table: pd.DataFrame, error: pd.Series, path: str | Path) -> Path
     ax.set_xlabel("wall time of the run [s]")
     ax.set_ylabel("|peak σ1/σ3 error| [% of the reference peak]")
     ax.legend(title="test")
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return Path(path)
+    try:
+        return save_figure(fig, path, dpi=110)
+    finally:
+        plt.close(fig)
 
 
 def plot_knob(rows: pd.DataFrame, knob: str, path: str | Path) -> Path:
@@ -77,6 +78,7 @@ def plot_knob(rows: pd.DataFrame, knob: str, path: str | Path) -> Path:
     twin = ax.twinx()
     twin.plot(x, rows["wall_s"], "k:", marker="x", label="wall time")
     twin.set_ylabel("wall time [s] (dotted)")
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return Path(path)
+    try:
+        return save_figure(fig, path, dpi=110)
+    finally:
+        plt.close(fig)

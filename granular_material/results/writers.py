@@ -7,7 +7,6 @@ whether whole at the end or step by step while the run goes (:class:`BiaxialWrit
 from __future__ import annotations
 
 import json
-import os
 from collections.abc import Sequence
 from contextlib import ExitStack
 from pathlib import Path
@@ -16,6 +15,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import pandas as pd
 
+from granular_material.filesafe import write_whole
 from granular_material.results.plots import plot_maps, plot_stress_strain
 
 if TYPE_CHECKING:
@@ -37,30 +37,21 @@ def write_csv(frame: pd.DataFrame, path: str | Path, append: bool = False) -> Pa
     if path.is_dir():
         raise IsADirectoryError(f"{path} is a folder, not a CSV file")
     if append:
-        frame.to_csv(path, index=False, mode="a", header=False)
+        try:
+            frame.to_csv(path, index=False, mode="a", header=False)
+        except OSError as exc:
+            raise OSError(exc.errno, f"cannot add to {path}: {exc.strerror or exc}") from exc
         return path
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".part")
-    try:
-        frame.to_csv(tmp, index=False)
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)  # only there when writing or replacing failed
-    return path
+    return write_whole(path, lambda tmp: frame.to_csv(tmp, index=False))
 
 
 def write_json(data: Any, path: str | Path, indent: int = 2) -> Path:
     """Write ``data`` as JSON to ``path`` (values JSON cannot hold as their ``str``); a new
     file replaces the old one only once it is complete, and a failed write leaves no
     ``.part`` behind."""
-    path = Path(path)
-    tmp = path.with_name(path.name + ".part")
-    try:
-        tmp.write_text(json.dumps(data, indent=indent, default=str) + "\n")
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)  # only there when writing or replacing failed
-    return path
+    text = json.dumps(data, indent=indent, default=str) + "\n"
+    return write_whole(path, lambda tmp: tmp.write_text(text))
 
 
 def write_tables(steps: pd.DataFrame, points: pd.DataFrame, out_dir: str | Path,
@@ -100,15 +91,17 @@ class FieldWriter:
 
         self.path.parent.mkdir(parents=True, exist_ok=True)
         xy, cells, kind, self._dofs = self.problem.nodes()
+        # meshio writes the whole file when it is closed: under a temporary name, renamed
+        # into place by __exit__ (write_whole)
         self._writer = self._stack.enter_context(
-            meshio.xdmf.TimeSeriesWriter(str(self.path), data_format="XML")
+            meshio.xdmf.TimeSeriesWriter(str(self.path) + ".part", data_format="XML")
         )
         points = np.column_stack([xy, np.zeros(xy.shape[0])])
         self._writer.write_points_cells(points, [(kind, cells.astype(np.int64))])
         return self
 
     def __exit__(self, *exc: object) -> None:
-        self._stack.close()
+        write_whole(self.path, lambda tmp: self._stack.close())
 
     def write(self, time: float, u: np.ndarray, points: pd.DataFrame) -> None:
         """Append one step: nodal displacement ``u`` (ndofs,) and the Gauss-point table."""

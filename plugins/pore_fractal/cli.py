@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from granular_material.cli.options import emit
+from granular_material.cli.options import UsageError, check_figure_file, check_memory, emit
 from granular_material.dem.rve_file import load_rve
 
 from .boxes import (
@@ -127,6 +127,34 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.set_defaults(func=run)
 
 
+#: the most moment orders q of one spectrum (41 by default)
+_MAX_ORDERS = 10_000
+#: memory per pixel of the image while it is analysed, about [bytes]: the pore mask and the
+#: box masses of its finest level (float64), with room for their temporaries
+_PIXEL_BYTES = 24
+#: memory per (box of the finest level, moment order), about [bytes]: the log-moments and
+#: their weights (float64)
+_MOMENT_BYTES = 32
+
+
+def _check_size(args: argparse.Namespace, data: object, n_orders: int) -> None:
+    """Before the image is made: its side in pixels and the moments' memory, refused with
+    the estimate where the machine cannot hold them."""
+    from .image import choose_window
+
+    cells = data.cell  # type: ignore[attr-defined]
+    if not -len(cells) <= args.rve_index < len(cells):
+        return  # analyse_rve names the index
+    try:
+        n, _ = choose_window(cells[args.rve_index], args.pixel, 1 << args.k_max)
+    except (ValueError, OverflowError):
+        return  # analyse_rve says what is wrong with the cell or the pixel
+    boxes = 4.0 ** args.k_max
+    check_memory(float(n) ** 2 * _PIXEL_BYTES + boxes * n_orders * _MOMENT_BYTES,
+                 f"--pixel {args.pixel:g} m ({n} x {n} pixels) with {n_orders} moment "
+                 "orders")
+
+
 def _orders(q_min: float, q_max: float, q_step: float) -> np.ndarray:
     if not all(math.isfinite(v) for v in (q_min, q_max, q_step)):
         raise ValueError("--q-min, --q-max and --q-step must be finite numbers")
@@ -136,6 +164,10 @@ def _orders(q_min: float, q_max: float, q_step: float) -> np.ndarray:
             f"range [{q_min}, {q_max}]"
         )
     count = math.floor((q_max - q_min) / q_step + 1e-9) + 1
+    if count > _MAX_ORDERS:
+        raise UsageError(f"--q-min {q_min:g} to --q-max {q_max:g} by --q-step {q_step:g} is "
+                         f"{count:.4g} moment orders, more than {_MAX_ORDERS}; take a larger "
+                         "--q-step")
     return q_min + q_step * np.arange(count)
 
 
@@ -147,9 +179,11 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError(f"--k-max must lie in 2..12, got {args.k_max}")
     if not 0.0 <= args.min_r2 <= 1.0:
         raise ValueError(f"--min-r2 must lie in [0, 1], got {args.min_r2}")
+    check_figure_file(args.plot, "--plot")
     q = _orders(args.q_min, args.q_max, args.q_step)
     levels = list(range(1, args.k_max + 1))
     data = load_rve(args.rve)
+    _check_size(args, data, q.size)
     image, spectrum = analyse_rve(
         data, args.rve_index, args.pixel, q=q, k=levels, min_r2=args.min_r2,
         box_rule=args.box_rule, box_min=args.box_min, box_max=args.box_max,

@@ -76,7 +76,8 @@ def spectrum_figure(image: PoreImage, spectrum: MultifractalSpectrum) -> Figure:
 
 
 def save_figure(fig: Figure, path: str | Path, dpi: int = 150) -> Path:
-    """Save ``fig`` to ``path`` (format from the suffix) and return the path."""
-    path = Path(path)
-    fig.savefig(path, dpi=dpi)
-    return path
+    """Save ``fig`` to ``path`` (format from the suffix), whole or not at all, and return
+    the path."""
+    from granular_material.results.plots import save_figure as save_whole
+
+    return save_whole(fig, path, dpi=dpi)

@@ -9,7 +9,7 @@ import numpy as np
 import pandas as pd
 from matplotlib.figure import Figure
 
-from granular_material.results.plots import pyplot
+from granular_material.results.plots import pyplot, save_figure
 
 __all__ = ["plot_coupled", "plot_fits", "plot_histories", "plot_ratio_by_size",
            "plot_resolution", "plot_size_curves", "plot_spectra", "plot_speedup"]
@@ -21,9 +21,10 @@ _RULE_TITLES = {"cell": "cell rule: ε = 2⁻ᵏL, k = 1…8",
 
 def _save(fig: Figure, path: Path) -> Path:
     """``fig`` written to ``path`` (PNG) and closed."""
-    fig.savefig(path, dpi=110)
-    pyplot().close(fig)
-    return path
+    try:
+        return save_figure(fig, path, dpi=110)
+    finally:
+        pyplot().close(fig)
 
 
 def plot_spectra(spectra: pd.DataFrame, sizes: tuple[int, ...], path: Path) -> Path:
