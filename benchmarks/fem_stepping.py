@@ -91,7 +91,8 @@ def main(argv: list[str] | None = None) -> pd.DataFrame:
     parser.add_argument("--repeats", type=int, default=1)
     parser.add_argument("--variants", default=",".join(VARIANTS),
                         help=f"comma-separated, from {', '.join(VARIANTS)}; exact comes first")
-    parser.add_argument("--newton", default="--max-iterations 60 --max-cutbacks 8",
+    parser.add_argument("--newton", default="--convergence force --max-iterations 60 "
+                                            "--max-cutbacks 8",
                         help="Newton options of every run (default: %(default)s)")
     parser.add_argument("--out", type=Path, default=Path("out/stepping"))
     args = parser.parse_args(argv)

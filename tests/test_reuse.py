@@ -180,11 +180,20 @@ def test_tracked_postprocessor_runs_exactly_on_the_named_points_and_steps(small_
         Tracking(("no-such-thing",))
 
 
+def test_cli_refuses_reuse_with_the_displacement_test(small_rve_path, capsys):
+    """Reused RVEs answer in steps: with the displacement test (the default) no increment
+    could converge, so the pair is refused before any work, naming both options."""
+    code = main(["single-element", "--rve", str(small_rve_path), "--steps", "2",
+                 "--reuse-tol", "1e-6"])
+    assert code == 2
+    assert "--reuse-tol 1e-06 needs --convergence force" in capsys.readouterr().err
+
+
 def test_cli_reports_counts_and_writes_tracked_csv(small_rve_path, tmp_path, capsys):
     out = tmp_path / "se"
     code = main(["single-element", "--rve", str(small_rve_path), "--steps", "2",
-                 "--axial-strain", "0.004", "--reuse-tol", "1e-6", "--track", "0", "2",
-                 "--every", "2", "--out", str(out), "--json"])
+                 "--axial-strain", "0.004", "--reuse-tol", "1e-6", "--convergence", "force",
+                 "--track", "0", "2", "--every", "2", "--out", str(out), "--json"])
     assert code == 0
     summary = json.loads(capsys.readouterr().out)
     assert summary["rve_evaluations"] > 0 and summary["particle_steps"] > 0

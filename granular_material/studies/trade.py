@@ -336,7 +336,9 @@ class _Runner:
                                    replicate=replicate, device=self.device, tangent=tangent,
                                    reuse_tol=s["reuse_tol"])
         material.allocate(setup.n_points)
-        settings = default_settings("dem", rtol=s["rtol"], predictor=predictor,
+        # the knobs are those of the force test (rtol of ‖R‖/‖R₀‖, the stress floor, reuse)
+        settings = default_settings("dem", convergence="force", max_iterations=25,
+                                    rtol=s["rtol"], predictor=predictor,
                                     relaxation=relaxation, tangent_update=tangent_update)
         started = time.perf_counter()
         result = run_biaxial(setup, material, steps, settings,
