@@ -222,3 +222,26 @@ def test_a_storm_of_signals_near_the_end_cuts_no_file(stop, count, rve16, tmp_pa
     assert json.loads((out / "summary.json").read_text())["error"]
     files = [p for p in out.rglob("*") if p.is_file()]
     assert not [p for p in files if p.name.endswith(".part") or p.stat().st_size == 0]
+
+
+class _StoppedInItsFinaliser:
+    """Sends SIGTERM to this process from its ``__del__``: the handler's exception is then
+    raised inside the finaliser, where Python swallows it ("Exception ignored in")."""
+
+    def __del__(self) -> None:
+        signal.raise_signal(signal.SIGTERM)
+        for _ in range(1000):  # the handler runs at one of these bytecodes, still in here
+            pass
+
+
+def test_a_stop_swallowed_by_a_finaliser_is_sent_again() -> None:
+    """A SIGTERM that lands in a garbage collector's finaliser (seen on a long biaxial run:
+    "Exception ignored in WeakKeyDictionary ... Terminated", and the run went on) stops the
+    command all the same, a moment later, instead of being lost with every later signal
+    ignored."""
+    from granular_material.cli.options import Terminated, stop_signals_as_interrupt
+
+    with stop_signals_as_interrupt(), pytest.raises(Terminated):
+        dying = _StoppedInItsFinaliser()
+        del dying
+        time.sleep(5.0)  # the signal comes back within 0.05 s

@@ -11,6 +11,7 @@ import os
 import re
 import signal
 import sys
+import threading
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -99,13 +100,38 @@ def _raise_interrupt(signum: int, frame: object) -> None:
     raise KeyboardInterrupt
 
 
+#: how long after a stop lost in a finaliser it is sent again [s]
+_RESEND_S = 0.05
+
+
+def _resend_lost_stop(previous: Callable[[Any], object]) -> Callable[[Any], object]:
+    """A ``sys.unraisablehook`` that sends a stop signal again when its exception was raised
+    where Python cannot raise one (a ``__del__`` or a weakref callback run by the garbage
+    collector, which print "Exception ignored in" and go on): without it the run would go on
+    and, the stop being marked as under way, ignore every later signal. The signal comes
+    back from a thread a moment later, once the finaliser has returned."""
+
+    def hook(unraisable: Any) -> object:
+        lost = unraisable.exc_value
+        if isinstance(lost, KeyboardInterrupt) and _STOPPING["now"]:
+            _STOPPING["now"] = False
+            signum = int(getattr(lost, "signum", signal.SIGINT))
+            threading.Timer(_RESEND_S, os.kill, (os.getpid(), signum)).start()
+            return None
+        return previous(unraisable)
+
+    return hook
+
+
 @contextlib.contextmanager
 def stop_signals_as_interrupt() -> Iterator[None]:
     """While the block runs, SIGTERM and SIGHUP raise :class:`Terminated` (a
     ``KeyboardInterrupt``) in the main thread, as Ctrl-C does; the previous handlers come
     back afterwards. Only the first stop signal is raised: the ones after it (a storm of
     SIGTERMs, Ctrl-C pressed again) are ignored while the command writes what it keeps and
-    ends. A no-op outside the main thread, where Python cannot install signal handlers.
+    ends; a stop whose exception a finaliser swallowed is sent again
+    (:func:`_resend_lost_stop`). A no-op outside the main thread, where Python cannot
+    install signal handlers.
     (A signal ignored when the process started, as ``nohup`` does with SIGHUP and a shell
     with a background job's SIGINT, stays ignored.)"""
     handlers = {signum: _raise_terminated for signum in _STOP_SIGNALS}
@@ -120,9 +146,12 @@ def stop_signals_as_interrupt() -> Iterator[None]:
         yield
         return
     _STOPPING["now"] = False
+    unraisable = sys.unraisablehook
+    sys.unraisablehook = _resend_lost_stop(unraisable)
     try:
         yield
     finally:
+        sys.unraisablehook = unraisable
         for signum, handler in previous.items():
             signal.signal(signum, handler)
         _STOPPING["now"] = False
