@@ -56,10 +56,11 @@ def _run(kind: str, material, n_steps: int, **keywords):
     """``run_biaxial`` with the settings the commands use for the material."""
     name = "linear-elastic" if kind == "linear-elastic" else "dem"
     # reused RVEs answer in steps, which the displacement test cannot see converge: the
-    # reuse run takes the force test (as the command line requires)
-    convergence = "force" if kind == "dem-continue-reuse" else None
-    return run_biaxial(SETUP, material, n_steps,
-                       default_settings(name, convergence=convergence),
+    # reuse run takes the force test (as the command line requires) with the loop it was
+    # measured with (Aitken, 25 iterations)
+    loop = ({"convergence": "force", "relaxation": "aitken", "max_iterations": 25}
+            if kind == "dem-continue-reuse" else {})
+    return run_biaxial(SETUP, material, n_steps, default_settings(name, **loop),
                        stress_tol=default_stress_tol(name, SETUP.confining), **keywords)
 
 

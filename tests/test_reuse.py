@@ -15,6 +15,7 @@ from granular_material_skfem import DEMMaterial
 
 from granular_material.cli import main
 from granular_material.dem import DEMBatch, load_rve
+from granular_material.dem.homogenization import objective_tangent
 from granular_material.fem import BiaxialSetup, NewtonSettings, Tracking, run_biaxial
 from granular_material.procedures import drive_grad_u, path_steps
 
@@ -32,6 +33,13 @@ def _material(path, **options) -> DEMMaterial:
     return material
 
 
+def _as_material(h) -> tuple[np.ndarray, np.ndarray]:
+    """What the DEM material answers for homogenised RVEs ``h``: the Love stress
+    symmetrised and the objective tangent."""
+    stress = 0.5 * (h.stress + np.swapaxes(h.stress, 1, 2))
+    return stress, objective_tangent(h.tangent, stress)
+
+
 def test_reuse_off_is_bit_identical_to_restarting_every_rve(small_rve_path):
     """reuse_tol = 0: every evaluation drives every RVE from the committed state, exactly as
     a batch that is restored and driven by hand."""
@@ -42,9 +50,9 @@ def test_reuse_off_is_bit_identical_to_restarting_every_rve(small_rve_path):
         response = material.evaluate(grad)
         batch.restore(committed)
         drive_grad_u(batch, grad)
-        h = batch.homogenize()
-        np.testing.assert_array_equal(response.stress, h.stress)
-        np.testing.assert_array_equal(response.tangent, h.tangent)
+        stress, tangent = _as_material(batch.homogenize())
+        np.testing.assert_array_equal(response.stress, stress)
+        np.testing.assert_array_equal(response.tangent, tangent)
         assert response.rve_evaluations == 4
         assert response.particle_steps == path_steps(grad).sum() * 100
     material.commit()
@@ -52,7 +60,7 @@ def test_reuse_off_is_bit_identical_to_restarting_every_rve(small_rve_path):
     response = material.evaluate(GRAD)
     batch.restore(committed)
     drive_grad_u(batch, GRAD)
-    np.testing.assert_array_equal(response.stress, batch.homogenize().stress)
+    np.testing.assert_array_equal(response.stress, _as_material(batch.homogenize())[0])
 
 
 def test_an_unchanged_point_is_not_stepped_and_answers_the_same(small_rve_path):

@@ -546,10 +546,11 @@ def _check(args: argparse.Namespace) -> None:
     if not (math.isfinite(_stress_tol(args, material)) and _stress_tol(args, material) >= 0):
         raise UsageError(f"--stress-tol must be a stress >= 0 Pa, got {args.stress_tol:g}")
     if getattr(args, "reuse_tol", 0.0) > 0 and args.convergence == "displacement":
-        raise UsageError(f"--reuse-tol {args.reuse_tol:g} needs --convergence force: a reused "
-                         "RVE answers the same stress for any change of grad u below the "
-                         "tolerance, so the Newton corrections stall above --rtol and no "
-                         "increment passes the displacement test")
+        raise UsageError(f"--reuse-tol {args.reuse_tol:g} needs --convergence force (with "
+                         "--relaxation aitken, as measured): a reused RVE answers the same "
+                         "stress for any change of grad u below the tolerance, so the Newton "
+                         "corrections stall above --rtol and no increment passes the "
+                         "displacement test")
 
 
 #: memory of one element of the mesh beside its RVEs, about [bytes]: its stiffness entries

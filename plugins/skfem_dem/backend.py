@@ -343,11 +343,6 @@ class InProcessBackend:
         corrected to first order when asked (σ + D : Δ∇u), with the objective tangent
         where it is chosen (the condensed one gets the stress's spin added: it is
         objective already, C:W = 0)."""
-        if self.reuse_correction == "tangent":
-            change = target - self._reached
-            if change.any():
-                stress = current.stress + np.einsum("bijkl,bkl->bij", current.tangent, change)
-                current = replace(current, stress=stress)
         if self.tangent in ("objective", "condensed"):
             stress = np.asarray(current.stress, dtype=np.float64)
             symmetric = 0.5 * (stress + np.swapaxes(stress, 1, 2))
@@ -355,6 +350,11 @@ class InProcessBackend:
                        if self.tangent == "objective"
                        else current.tangent + spin_tangent(symmetric))
             current = replace(current, tangent=tangent)
+        if self.reuse_correction == "tangent":
+            change = target - self._reached
+            if change.any():
+                stress = current.stress + np.einsum("bijkl,bkl->bij", current.tangent, change)
+                current = replace(current, stress=stress)
         return current
 
     def commit(self) -> None:
