@@ -298,7 +298,9 @@ def test_convergence_setting_is_checked():
     with pytest.raises(ValueError, match="convergence must be one of force, displacement"):
         NewtonSettings(convergence="energy")
     assert default_settings("dem", convergence="displacement").convergence == "displacement"
-    assert default_settings("dem").convergence == "force"
+    # the commands' default: Guo & Zhao's test (with finite strain, see the README)
+    assert default_settings("dem").convergence == "displacement"
+    assert default_settings("dem", convergence="force").convergence == "force"
 
 
 def test_dem_single_element_converges_by_displacement(tmp_path, capsys):
@@ -455,10 +457,11 @@ def test_quad9_biaxial_on_two_ranks_is_the_in_process_run(tmp_path):
 
 def test_a_checkpoint_from_before_the_element_options_resumes(tmp_path, capsys):
     """Options written before --element, --quadrature and --convergence existed resume with
-    them at their defaults (and not with others)."""
+    them at the values runs then had (quad4, the default rule, the force test), and not with
+    others."""
     out = tmp_path / "le"
     argv = ["single-element", "--material", "linear-elastic", "--steps", "3",
-            "--axial-strain", "0.01", "--map-strain", "0.01", "--json"]
+            "--axial-strain", "0.01", "--map-strain", "0.01", "--convergence", "force", "--json"]
     assert main([*argv, "--out", str(out)]) == 0
     first = json.loads(capsys.readouterr().out)
     options = out / "checkpoint" / "options.json"
@@ -466,6 +469,11 @@ def test_a_checkpoint_from_before_the_element_options_resumes(tmp_path, capsys):
     for key in ("element", "quadrature", "convergence"):
         saved.pop(key)
     options.write_text(json.dumps(saved))
+    # such a checkpoint has no manifest either (it came before them)
+    state = out / "checkpoint" / "state.npz"
+    with np.load(state, allow_pickle=False) as npz:
+        arrays = {k: np.array(npz[k]) for k in npz.files if k != "manifest"}
+    np.savez(state, **arrays)
     assert main([*argv, "--resume", str(out)]) == 0
     again = json.loads(capsys.readouterr().out)
     assert again["resumed_from_step"] == 3 and again["syy"] == first["syy"]
