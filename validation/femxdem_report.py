@@ -13,7 +13,8 @@ from granular_material.results import pyplot
 __all__ = ["plot_femxdem", "section_lines"]
 
 _STYLE = {"guo-zhao": ("k", "-"), "guo-zhao-perturbed": ("0.6", ":"),
-          "ours-defaults": ("C0", "--"), "ours-as-gz": ("C3", "-.")}
+          "ours-defaults": ("C0", "--"), "ours-as-gz": ("C3", "-."),
+          "ours-q9": ("C2", "--"), "ours-small-strain": ("C1", ":"), "ours-fine": ("C4", "--")}
 _RULES = ("pre_peak", "peak_ratio", "strain_at_peak", "post_peak")
 
 
