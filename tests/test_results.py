@@ -37,8 +37,11 @@ def test_summarize_biaxial_takes_the_first_largest_ratio():
 
 def test_default_settings_are_the_commands_and_depend_on_the_material_by_name():
     dem, elastic = default_settings("dem"), default_settings("linear-elastic")
-    for s in (dem, elastic):
-        assert (s.predictor, s.relaxation) == ("extrapolate", "aitken")
+    for s in (dem, elastic):  # Guo & Zhao's loop in finite strain, our predictor
+        assert (s.predictor, s.relaxation) == ("extrapolate", "none")
+        assert (s.convergence, s.rtol, s.max_iterations) == ("displacement", 0.01, 100)
+        assert s.formulation == "updated-lagrangian"
+    assert dem.accept_correction == 0.01 and elastic.accept_correction == 0.0
     assert dem.stall_rtol == 2 * dem.rtol and elastic.stall_rtol == 0.0
     assert default_settings("dem", rtol=0.01).stall_rtol == 0.02
     assert default_settings("dem", stall_rtol=None, predictor="tangent").predictor == "tangent"

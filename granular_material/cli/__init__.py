@@ -25,7 +25,7 @@ from granular_material.cli.options import (
     stop_signals_as_interrupt,
 )
 
-__all__ = ["UsageError", "build_parser", "main", "quiet_warp"]
+__all__ = ["UsageError", "build_parser", "entry", "main", "quiet_warp"]
 
 
 def _register_plugins(subparsers: argparse._SubParsersAction) -> None:
@@ -64,6 +64,23 @@ def build_parser() -> argparse.ArgumentParser:
     study.register(subparsers)
     _register_plugins(subparsers)
     return parser
+
+
+#: exit codes of a command stopped by a signal (SIGHUP, Ctrl-C, SIGTERM)
+_STOPPED_CODES = frozenset({128 + 1, 128 + 2, 128 + 15})
+
+
+def entry() -> None:
+    """The process's entry point (console script, ``python -m``): :func:`main`, then exit
+    with its code. A command stopped by a signal ignores the stop signals of a storm that
+    arrive after its reports, until the process has exited (they would kill it by the
+    signal, without its exit code)."""
+    code = main()
+    if code in _STOPPED_CODES:
+        for name in ("SIGTERM", "SIGHUP"):
+            if hasattr(signal, name):
+                signal.signal(getattr(signal, name), signal.SIG_IGN)
+    sys.exit(code)
 
 
 def main(argv: list[str] | None = None) -> int:

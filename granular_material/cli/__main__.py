@@ -1,7 +1,5 @@
 """``python -m granular_material.cli``: the command line."""
 
-import sys
+from granular_material.cli import entry
 
-from granular_material.cli import main
-
-sys.exit(main())
+entry()
