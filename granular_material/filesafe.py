@@ -25,10 +25,11 @@ STOP_SIGNALS = tuple(getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SI
 
 
 @contextlib.contextmanager
-def deferred_signals() -> Iterator[None]:
+def deferred_signals(deliver: bool = True) -> Iterator[None]:
     """Hold back the stop signals while the block runs: one that comes is recorded, and its
-    handler (the one in place before the block) runs when the block ends. Signals that are
-    ignored stay ignored. A no-op outside the main thread, where Python runs no handlers."""
+    handler (the one in place before the block) runs when the block ends, or it is dropped
+    (``deliver`` False). Signals that are ignored stay ignored. A no-op outside the main
+    thread, where Python runs no handlers."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
@@ -47,7 +48,7 @@ def deferred_signals() -> Iterator[None]:
     finally:
         for signum, handler in previous.items():
             signal.signal(signum, handler)
-        if pending:
+        if pending and deliver:
             handler = previous[pending[0]]
             if callable(handler):
                 handler(pending[0], None)

@@ -40,9 +40,7 @@ from __future__ import annotations
 import contextlib
 import enum
 import os
-import signal
 import sys
-import threading
 import time
 import traceback
 from collections.abc import Callable, Iterator
@@ -55,6 +53,7 @@ from granular_material_skfem.backend import Evaluation, InProcessBackend
 from granular_material_skfem.parameters import DEMMaterialParameters, in_process_backend
 
 from granular_material.dem import Homogenized, RVEData, resolve_device, save_rve
+from granular_material.filesafe import deferred_signals
 
 __all__ = [
     "FAULT_VARIABLE",
@@ -171,31 +170,11 @@ def _wait(request: Any) -> None:
 
 @contextlib.contextmanager
 def _signals_held(deliver: bool = True) -> Iterator[None]:
-    """SIGINT and SIGTERM wait while the block runs (an exchange must not be left half done);
-    afterwards one that came is delivered as it would have been (``deliver``) or dropped."""
-    if threading.current_thread() is not threading.main_thread():
+    """The stop signals (Ctrl-C, SIGTERM, SIGHUP) wait while the block runs (an exchange must
+    not be left half done); afterwards one that came is delivered as it would have been
+    (``deliver``) or dropped (:func:`granular_material.filesafe.deferred_signals`)."""
+    with deferred_signals(deliver):
         yield
-        return
-    caught: list[int] = []
-
-    def hold(signum: int, frame: object) -> None:
-        caught.append(signum)
-
-    previous = {}
-    for signum in (signal.SIGINT, signal.SIGTERM):
-        if signal.getsignal(signum) is not None:
-            previous[signum] = signal.signal(signum, hold)
-    try:
-        yield
-    finally:
-        for signum, handler in previous.items():
-            signal.signal(signum, handler)
-        for signum in dict.fromkeys(caught) if deliver else ():
-            handler = previous[signum]
-            if callable(handler):
-                handler(signum, None)
-            elif handler == signal.SIG_DFL:
-                signal.raise_signal(signum)
 
 
 def _describe(exc: BaseException) -> str:
