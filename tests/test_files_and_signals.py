@@ -60,6 +60,15 @@ def test_a_failed_write_names_the_file_and_leaves_no_part(tmp_path):
 def test_stop_signals_wait_until_the_file_is_whole(tmp_path):
     """SIGTERM and SIGHUP sent while a file is written are delivered after it is renamed
     into place: whole file, no .part, then the stop."""
+    # under nohup SIGHUP starts ignored, and a command leaves an ignored signal ignored
+    hangup = signal.signal(signal.SIGHUP, signal.SIG_DFL)
+    try:
+        _stop_while_writing(tmp_path)
+    finally:
+        signal.signal(signal.SIGHUP, hangup)
+
+
+def _stop_while_writing(tmp_path: Path) -> None:
     for stop in (signal.SIGTERM, signal.SIGHUP):
         path = tmp_path / f"{stop.name}.json"
 
@@ -128,7 +137,8 @@ def test_sighup_stops_a_run_with_its_summary_and_figures(rve16, tmp_path):
         [sys.executable, "-m", "granular_material.cli", "single-element", "--rve", str(rve16),
          "--steps", "200", "--axial-strain", "0.02", "--device", "cpu", "--no-progress",
          "--json", "--out", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-        text=True)
+        # a test run under nohup hands its children SIGHUP ignored, which a command keeps
+        text=True, preexec_fn=lambda: signal.signal(signal.SIGHUP, signal.SIG_DFL))
     end = time.monotonic() + 300
     while not (out / "checkpoint" / "steps" / "step_00002.npz").exists():
         assert process.poll() is None, process.communicate()[1]
