@@ -253,13 +253,17 @@ def _mass(u, v, _):
     return u[0] * v[0] + u[1] * v[1]
 
 
+def _no_progress(history: list[float], window: int) -> bool:
+    """The smallest value of ``history`` has not dropped by 10 % over its last ``window``."""
+    return len(history) > window and min(history[-window:]) >= 0.9 * min(history[:-window])
+
+
 def _stalled(history: list[float], settings: NewtonSettings) -> bool:
     """The last relative residual is within stall_rtol, and the smallest one has not dropped
     by 10 % over the last stall_window iterations."""
-    w = settings.stall_window
-    if settings.stall_rtol <= 0 or len(history) <= w or history[-1] > settings.stall_rtol:
+    if settings.stall_rtol <= 0 or not history or history[-1] > settings.stall_rtol:
         return False
-    return min(history[-w:]) >= 0.9 * min(history[:-w])
+    return _no_progress(history, settings.stall_window)
 
 
 def _small_correction(history: list[float], corrections: list[float], iteration: int,
@@ -272,8 +276,7 @@ def _small_correction(history: list[float], corrections: list[float], iteration:
         return False
     if iteration >= settings.max_iterations:
         return True
-    w = settings.stall_window
-    return len(history) > w and min(history[-w:]) >= 0.9 * min(history[:-w])
+    return _no_progress(history, settings.stall_window)
 
 
 class NewtonSolver:
