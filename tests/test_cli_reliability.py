@@ -218,13 +218,16 @@ def test_biaxial_summary_reports_what_ran(rve64, tmp_path, capsys):
 
 
 def test_single_element_uses_the_four_rves_of_a_file(rve64, tmp_path):
-    import argparse
+    from granular_material.runs import MaterialSpec, ProblemSpec, RunSpec, check
 
-    from granular_material.cli.fem import _replicate
+    def replicated(**parameters) -> bool:
+        spec = RunSpec(problem=ProblemSpec(test="single-element"), device="cpu",
+                       material=MaterialSpec(name="dem", parameters=parameters))
+        context = check(spec).context
+        return spec.material.cls.for_run(spec.material.parameters, context).parameters.replicate
 
     four = tmp_path / "four.npz"
     save_rve(four, load_rve(rve64[0]).replicate(4))
-    args = argparse.Namespace(rve=four, independent=False)
-    assert _replicate(args) is False  # one RVE per Gauss point, not RVE 0 four times
-    assert _replicate(argparse.Namespace(rve=rve64[0], independent=False)) is True
-    assert _replicate(argparse.Namespace(rve=None, independent=True)) is False
+    assert replicated(rve=four) is False  # one RVE per Gauss point, not RVE 0 four times
+    assert replicated(rve=rve64[0]) is True
+    assert replicated(independent=True) is False

@@ -142,7 +142,7 @@ def test_sigterm_in_the_specimen_run_resumes_to_the_same_result(smoke, tmp_path)
                           check=False)
     assert done.returncode == 0, done.stderr[-2000:]
     log = (out / "specimen" / "run.log").read_text()
-    assert log.count("$ granular-material biaxial") == 2
+    assert log.count("# granular-material biaxial, in this process") == 2
     for table in ("fits.csv", "chosen_rves.csv"):
         pd.testing.assert_frame_equal(pd.read_csv(out / "specimen" / table),
                                       pd.read_csv(reference / "specimen" / table))

@@ -141,18 +141,20 @@ def test_command_presets_are_the_committed_study_s():
 
 def test_preset_sets_the_options_left_at_their_defaults(tmp_path, capsys):
     from granular_material.cli import build_parser
-    from granular_material.cli.fem import _apply_preset
+    from granular_material.cli.fem import spec_from_args
     from granular_material.fem.presets import load_presets
 
     quick = load_presets()["quick"]
     args = build_parser().parse_args(["single-element", "--preset", "quick",
                                       "--rtol", "0.02"])
-    _apply_preset(args)
-    assert args.rtol == 0.02  # given: kept
-    assert args.particles == quick.discs
-    assert args.max_strain_per_step == quick.strain_per_step
-    assert args.reuse_tol == quick.reuse_tol
-    assert args.stress_tol == pytest.approx(quick.stress_floor * args.confining)
+    spec = spec_from_args(args)
+    dem = spec.material.parameters
+    assert spec.newton.rtol == 0.02  # given: kept
+    assert spec.preset == "quick"
+    assert dem.particles == quick.discs
+    assert dem.max_strain_per_step == quick.strain_per_step
+    assert dem.reuse_tol == quick.reuse_tol
+    assert spec.newton.stress_tol == pytest.approx(quick.stress_floor * args.confining)
     code = main(["single-element", "--material", "linear-elastic", "--preset", "quick",
                  "--steps", "2"])
     assert code == 2 and "--material dem" in capsys.readouterr().err

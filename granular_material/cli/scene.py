@@ -36,8 +36,8 @@ if sys.version_info >= (3, 11):
 else:  # Python 3.10
     import tomli as tomllib
 
-__all__ = ["TESTS", "Scene", "command_parsers", "load_scene", "register", "run_scene",
-           "scene_keys"]
+__all__ = ["TESTS", "Scene", "check_scene", "command_parsers", "load_scene", "register",
+           "run_scene", "scene_keys"]
 
 #: the commands a scene can run (its ``test``), each with the file its ``--out`` names inside
 #: the run folder; None: its ``--out`` is the run folder itself
@@ -520,10 +520,31 @@ def run_scene(scene: Scene) -> int:
     return code
 
 
+#: the tests whose options make a run specification (checked whole by ``run --check``)
+_SPEC_TESTS = frozenset({"single-element", "biaxial"})
+
+
+def check_scene(scene: Scene) -> None:
+    """What ``run`` checks before any work, without running: the scene's keys (done by
+    :func:`load_scene`) and, for a FEM test, its run specification as the run makes it
+    (:func:`granular_material.runs.check`: the material's inputs, memory, output folder).
+    A refusal is a UsageError naming the scene's line where it can."""
+    if scene.test not in _SPEC_TESTS:
+        return
+    from granular_material.cli.fem import spec_from_args
+    from granular_material.runs import check
+
+    try:
+        check(spec_from_args(scene.namespace))
+    except ValueError as exc:
+        raise UsageError(_located(scene, str(exc))) from exc
+
+
 def _run_command(parsers: Mapping[str, argparse.ArgumentParser], args: argparse.Namespace,
                  ) -> int:
     scene = load_scene(args.scene, parsers, out=args.out, resume=args.resume)
     if args.check:
+        check_scene(scene)
         print(scene.command_line())
         return 0
     return run_scene(scene)
@@ -559,6 +580,7 @@ scene.toml, the command's tables, figures and fields, and summary.json.""",
                    help="continue the stopped or killed run in the run folder from its last "
                         "checkpoint (single-element, biaxial)")
     p.add_argument("--check", action="store_true",
-                   help="check the scene and print the same run as a command line; run "
-                        "nothing, write nothing")
+                   help="check the scene as the run would (for single-element and biaxial: "
+                        "its whole run specification) and print the same run as a command "
+                        "line; run nothing, write nothing")
     p.set_defaults(func=lambda args: _run_command(subparsers.choices, args))

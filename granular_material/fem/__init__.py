@@ -10,7 +10,6 @@ settings the commands use.
 
 from granular_material.fem.checkpoint import CheckpointError, RunCheckpoint, SavedRun
 from granular_material.fem.defaults import (
-    DEM_REUSE_TOL,
     default_settings,
     default_stress_tol,
 )
@@ -41,7 +40,6 @@ from granular_material.fem.tracking import (
 )
 
 __all__ = [
-    "DEM_REUSE_TOL",
     "BiaxialProblem",
     "BiaxialResult",
     "BiaxialSetup",

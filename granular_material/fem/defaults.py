@@ -2,21 +2,19 @@
 
 :class:`~granular_material.fem.NewtonSettings` itself defaults to plain Newton (tangent
 predictor, no relaxation, no stall acceptance), the textbook method a library caller
-starts from. The commands ask :func:`default_settings` for the settings of a material by
-name, so what ``--help`` shows and what a run does come from here.
+starts from. The commands ask :func:`default_settings` for the settings of a material (by whether
+its stress is noisy: a material class's ``noisy`` attribute, True for DEM RVEs), so what
+``--help`` shows and what a run does come from here.
 """
 
 from __future__ import annotations
 
 from typing import Any
 
+from granular_material.fem.material import load_material
 from granular_material.fem.newton import NewtonSettings
 
-__all__ = ["DEM_REUSE_TOL", "NOISY_MATERIALS", "default_settings", "default_stress_tol"]
-
-#: materials whose stress carries noise (DEM RVEs): they get a stall tolerance and an
-#: absolute stress tolerance by default
-NOISY_MATERIALS = frozenset({"dem"})
+__all__ = ["COMMAND_DEFAULTS", "default_settings", "default_stress_tol", "is_noisy"]
 
 #: what the commands change from NewtonSettings' own defaults, for every material: Guo &
 #: Zhao's FEM×DEM solve() — finite strain in the updated-Lagrangian form, plain Newton steps
@@ -34,34 +32,41 @@ COMMAND_DEFAULTS: dict[str, Any] = {"formulation": "updated-lagrangian",
 #: correction is this small (Guo & Zhao's ‖δu‖/‖Δu‖ test and tolerance)
 NOISY_ACCEPT_CORRECTION = 1e-2
 
-#: the commands' reuse tolerance of the DEM material [-]: an RVE whose ∇u moved by at most
-#: this since it was last driven keeps its response (see the README's measurements)
-DEM_REUSE_TOL = 0.0
 
 
-def default_settings(material: str, **overrides: Any) -> NewtonSettings:
-    """The Newton settings of the commands for the material named ``material``.
+def is_noisy(material: str | bool) -> bool:
+    """Whether the stress of ``material`` (an entry-point name, or the answer itself) carries
+    noise: its class says so with ``noisy = True`` (DEM RVEs); such a material gets a stall
+    tolerance and an absolute stress tolerance by default."""
+    if isinstance(material, bool):
+        return material
+    return bool(getattr(load_material(material), "noisy", False))
+
+
+def default_settings(material: str | bool, **overrides: Any) -> NewtonSettings:
+    """The Newton settings of the commands for ``material`` (a name, or whether it is noisy:
+    :func:`is_noisy`).
 
     ``overrides`` are NewtonSettings fields; one given as None takes its default. The stall
     tolerance defaults to 2 × rtol for a noisy (DEM) material and to 0 (off) otherwise; so
     does the acceptance of a stalled residual on a small correction
     (:data:`NOISY_ACCEPT_CORRECTION`).
     """
+    noisy = is_noisy(material)
     values = dict(COMMAND_DEFAULTS)
     values.update({k: v for k, v in overrides.items() if v is not None})
     if "stall_rtol" not in values:
         rtol = values.get("rtol", NewtonSettings.rtol)
-        values["stall_rtol"] = 2 * rtol if material in NOISY_MATERIALS else 0.0
+        values["stall_rtol"] = 2 * rtol if noisy else 0.0
     if "accept_correction" not in values:
-        values["accept_correction"] = (NOISY_ACCEPT_CORRECTION if material in NOISY_MATERIALS
-                                       else 0.0)
+        values["accept_correction"] = NOISY_ACCEPT_CORRECTION if noisy else 0.0
     return NewtonSettings(**values)
 
 
-def default_stress_tol(material: str, confining: float) -> float:
+def default_stress_tol(material: str | bool, confining: float) -> float:
     """Absolute Newton tolerance as a stress error [Pa] (``run_biaxial(stress_tol=...)``).
 
     Wu et al.'s 0.005, taken of the confining stress, for a noisy (DEM) material: the floor
     below which DEM stress noise stalls Newton once a step's own load is small; 0 otherwise.
     """
-    return 5e-3 * confining if material in NOISY_MATERIALS else 0.0
+    return 5e-3 * confining if is_noisy(material) else 0.0

@@ -5,12 +5,14 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from granular_material.fem.material import MaterialResponse, PointStatus
 
-__all__ = ["LinearElastic", "LinearElasticParameters", "isotropic_tangent"]
+__all__ = ["LinearElastic", "LinearElasticParameters", "LinearElasticRunParameters",
+           "isotropic_tangent"]
 
 _I2 = np.eye(2)
 
@@ -45,6 +47,15 @@ class LinearElasticParameters:
         return e * nu / ((1 + nu) * (1 - 2 * nu)), e / (2 * (1 + nu))
 
 
+@dataclass(frozen=True, kw_only=True)
+class LinearElasticRunParameters:
+    """The material of a run specification (its initial stress is the run's confining
+    pressure): ``E`` Young's modulus [Pa], ``nu`` Poisson's ratio [-]."""
+
+    E: float = LinearElasticParameters.young
+    nu: float = LinearElasticParameters.poisson
+
+
 def isotropic_tangent(lam: float, mu: float) -> np.ndarray:
     """C_ijkl = λ δ_ij δ_kl + μ (δ_ik δ_jl + δ_il δ_jk) [Pa], shape (2, 2, 2, 2).
 
@@ -63,7 +74,12 @@ class LinearElastic:
 
     State per point: the committed total strain ε (n, 2, 2). ``evaluate(∇u)`` returns
     σ = σ0 I + C : (ε + sym ∇u) with the constant tangent C of :func:`isotropic_tangent`.
+    In a run specification its parameters are :class:`LinearElasticRunParameters`, and its
+    initial stress is the confining pressure's (``for_run``).
     """
+
+    #: the parameters of the material in a run specification
+    Parameters = LinearElasticRunParameters
 
     def __init__(
         self, young: float = 60.0e6, poisson: float = 0.3, initial_stress: float = 0.0
@@ -72,6 +88,13 @@ class LinearElastic:
         self._tangent = isotropic_tangent(*self.parameters.lame)
         self._strain = np.zeros((0, 2, 2))
         self._trial: np.ndarray | None = None
+
+    @staticmethod
+    def for_run(parameters: LinearElasticRunParameters, context: Any) -> LinearElastic:
+        """The material of a run: isotropic at the run's confining pressure (a
+        :class:`~granular_material.runs.context.RunContext`), not yet allocated."""
+        return LinearElastic(young=parameters.E, poisson=parameters.nu,
+                             initial_stress=-context.confining)
 
     @property
     def n_points(self) -> int:

@@ -1,8 +1,8 @@
 """Figs. 6–10 of Wu et al. (2025): the FEM × DEM runs and what is read from them.
 
-The single element (Fig. 6) and the 50 × 100 mm specimen (Figs. 7–10) are run by the
-``granular-material single-element`` and ``biaxial`` commands in a child process, with
-``--resume`` on their own folder: an interrupted reproduction continues them from their last
+The single element (Fig. 6) and the 50 × 100 mm specimen (Figs. 7–10) are run
+specifications run in this process (:func:`granular_material.runs.run`), resumed from their
+own folder's checkpoint: an interrupted reproduction continues them from their last
 checkpoint. Every Gauss point's RVE of the specimen has its pore space analysed every few
 load steps (``--track all``), so the three RVEs of Figs. 9–10 can be chosen afterwards from
 the run's own strain field (:func:`choose_points`).
@@ -12,10 +12,8 @@ from __future__ import annotations
 
 import json
 import math
-import signal
-import subprocess
-import sys
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -25,11 +23,12 @@ from granular_material.dem import DEMBatch, load_rve, save_rve
 from granular_material.procedures import biaxial_test, prepare_packing
 from granular_material.results import shear_band, write_csv
 from granular_material.results.compare import curve_errors, mean_curve
+from granular_material.runs import MaterialSpec, OutputSpec, ProblemSpec, RunSpec, run, save
 
 from .scales import ReproductionScale
 
 __all__ = ["FEMRunError", "band_crossing", "choose_points", "fractal_fits",
-           "point_histories", "run_command", "specimen_rves"]
+           "point_histories", "run_spec", "specimen_rves"]
 
 
 class FEMRunError(RuntimeError):
@@ -37,37 +36,41 @@ class FEMRunError(RuntimeError):
     command records and the report states)."""
 
 
-def run_command(arguments: list[str], log_path: Path) -> int:
-    """``granular-material ARGUMENTS`` in a child process, its output appended to
-    ``log_path``; its exit code. On Ctrl-C or SIGTERM here the child is stopped with
-    SIGTERM and waited for (it keeps its checkpoint), and the interrupt goes on."""
-    command = [sys.executable, "-m", "granular_material.cli", *arguments]
+def run_spec(spec: RunSpec, log_path: Path) -> int:
+    """Run ``spec`` in this process, continuing from the checkpoint in its output folder
+    where there is one; the spec (``run.toml`` beside the log) and the run's summary are
+    appended to ``log_path``. Returns the command's exit code (0, or 1 when Newton stopped
+    the run short); an interrupt (Ctrl-C, SIGTERM) that stopped the run is raised again
+    after its outputs are written (the checkpoint is kept)."""
     log_path.parent.mkdir(parents=True, exist_ok=True)
+    spec_path = log_path.with_name("run.toml")
+    save(spec, spec_path)
     with open(log_path, "a") as log:
-        log.write("$ granular-material " + " ".join(arguments) + "\n")
-        log.flush()
-        child = subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT)
-        try:
-            return child.wait()
-        except KeyboardInterrupt:
-            child.send_signal(signal.SIGTERM)
-            child.wait()
-            raise
+        log.write(f"# granular-material {spec.problem.test}, in this process: {spec_path}\n")
+    outcome = run(spec, resume=True)
+    with open(log_path, "a") as log:
+        log.write(json.dumps(outcome.summary, indent=1, default=str) + "\n")
+    if outcome.interrupt is not None:
+        raise outcome.interrupt
+    return 1 if outcome.summary["error"] else 0
 
 
-def _fem_arguments(scale: ReproductionScale, device: str) -> list[str]:
-    return ["--axial-strain", str(scale.fem_axial_strain), "--confining", str(scale.pressure),
-            "--device", device, "--no-progress"]
+def _spec(scale: ReproductionScale, device: str, folder: Path, problem: dict[str, Any],
+          material: dict[str, Any], **output: Any) -> RunSpec:
+    """A FEM run of the reproduction at ``scale`` into ``folder/run``."""
+    return RunSpec(problem=ProblemSpec(axial_strain=scale.fem_axial_strain,
+                                       confining=scale.pressure, **problem),
+                   material=MaterialSpec(name="dem", parameters=material),
+                   output=OutputSpec(out=folder / "run", **output), device=device)
 
 
 def run_element(scale: ReproductionScale, rve: Path, folder: Path, device: str) -> int:
     """Fig. 6: the single element (4 Gauss points, one RVE copied to each) beside the pure
-    DEM test of the same RVE, into ``folder/run``; the command's exit code."""
-    run = folder / "run"
-    return run_command(["single-element", "--material", "dem", "--rve", str(rve),
-                        "--steps", str(scale.element_steps), "--compare-dem",
-                        *_fem_arguments(scale, device), "--out", str(run),
-                        "--resume", str(run)], folder / "run.log")
+    DEM test of the same RVE, into ``folder/run``; the run's exit code."""
+    spec = _spec(scale, device, folder,
+                 {"test": "single-element", "steps": scale.element_steps},
+                 {"rve": rve, "compare_dem": True})
+    return run_spec(spec, folder / "run.log")
 
 
 def specimen_rves(scale: ReproductionScale, folder: Path, device: str) -> Path:
@@ -85,15 +88,13 @@ def specimen_rves(scale: ReproductionScale, folder: Path, device: str) -> Path:
 
 def run_specimen(scale: ReproductionScale, rves: Path, folder: Path, device: str) -> int:
     """Figs. 7–10: the biaxial specimen with smooth platens, every point's pore space
-    analysed every ``track_every`` steps, into ``folder/run``; the command's exit code."""
-    run = folder / "run"
-    nx, ny = scale.specimen_elements
-    return run_command(["biaxial", "--rve", str(rves), "--elements", str(nx), str(ny),
-                        "--steps", str(scale.specimen_steps), "--platens", "smooth",
-                        "--map-strain", str(scale.map_strain), "--track", "all",
-                        "--every", str(scale.track_every), "--postprocess", "pore-fractal",
-                        *_fem_arguments(scale, device), "--out", str(run),
-                        "--resume", str(run)], folder / "run.log")
+    analysed every ``track_every`` steps, into ``folder/run``; the run's exit code."""
+    spec = _spec(scale, device, folder,
+                 {"test": "biaxial", "elements": scale.specimen_elements,
+                  "steps": scale.specimen_steps, "platens": "smooth"},
+                 {"rve": rves}, map_strain=(scale.map_strain,), track=("all",),
+                 every=scale.track_every, postprocess=("pore-fractal",))
+    return run_spec(spec, folder / "run.log")
 
 
 def read_run(run: Path) -> tuple[pd.DataFrame, dict]:

@@ -27,6 +27,12 @@ from granular_material_skfem.parameters import (
     DEMMaterialParameters,
     in_process_backend,
 )
+from granular_material_skfem.run_parameters import (
+    DEMParameters,
+    check_run,
+    material_for_run,
+    run_summary,
+)
 
 from granular_material.dem import RVEData, load_rve
 from granular_material.fem.material import MaterialResponse, PointStatus
@@ -37,13 +43,27 @@ from granular_material.procedures.packing import (
 )
 
 if TYPE_CHECKING:
+    import pandas as pd
     from granular_material_skfem.mpi import MPIBackend
 
 __all__ = ["BACKENDS", "DEMMaterial", "DEMMaterialParameters", "in_process_backend"]
 
 class DEMMaterial:
     """The DEM material: owns one RVE batch, one RVE per Gauss point (batch-first), held in
-    this process or, with ``backend="mpi"``, in shards on the ranks of an MPI job."""
+    this process or, with ``backend="mpi"``, in shards on the ranks of an MPI job.
+
+    In a run specification its parameters are :class:`DEMParameters` (``Parameters``), and
+    ``check_run``, ``for_run`` and ``run_summary`` are its run hooks (see
+    :mod:`granular_material.runs.context`); its stress carries noise (``noisy``).
+    """
+
+    #: the parameters of the material in a run specification
+    Parameters = DEMParameters
+    #: DEM stress carries noise: the Newton defaults of noisy materials apply
+    noisy = True
+    check_run = staticmethod(check_run)
+    for_run = staticmethod(material_for_run)
+    run_summary = staticmethod(run_summary)
 
     def __init__(self, rve: str | Path | None = None, particles: int = 400, seed: int = 1,
                  pressure: float = 100.0e3, replicate: bool = False,
@@ -86,6 +106,19 @@ class DEMMaterial:
         if self.backend is None:
             raise RuntimeError("allocate() the DEM material first")
         return self.backend
+
+    def reference_curve(self, axial_strain: float, confining: float, device: str | None,
+                        progress: bool = False) -> pd.DataFrame:
+        """The drained biaxial test of RVE 0 in pure DEM, from its committed state, to
+        ``axial_strain`` [-] (compression positive) at ``confining`` [Pa]: the curve a
+        single element is compared with (one row per recorded DEM step)."""
+        from granular_material.dem import DEMBatch
+        from granular_material.procedures import biaxial_test
+
+        batch = DEMBatch(self.committed_rves().take([0]), device=device, shards=1)
+        curve = biaxial_test(batch, axial_strain=axial_strain, confining=confining,
+                             progress=progress)
+        return curve[curve["rve"] == 0].reset_index(drop=True)
 
     def committed_rves(self, points: np.ndarray | None = None) -> RVEData:
         """The committed RVE states, one per Gauss point or of the point indices ``points``

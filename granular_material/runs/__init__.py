@@ -1,0 +1,29 @@
+"""Runs as data: the typed run specification (:mod:`~granular_material.runs.spec`), its
+forms as dicts, JSON, TOML and flat option names (:mod:`~granular_material.runs.serial`),
+and :func:`run`, the one entry point of a FEM run (:mod:`~granular_material.runs.execute`).
+
+::
+
+    from granular_material.runs import MaterialSpec, ProblemSpec, RunSpec, run
+
+    spec = RunSpec(problem=ProblemSpec(test="single-element", steps=20, axial_strain=0.02),
+                   material=MaterialSpec(name="dem", parameters={"particles": 64}))
+    outcome = run(spec)
+    outcome.result.steps[["axial_strain", "stress_ratio"]]
+"""
+
+from granular_material.runs.context import RunContext
+from granular_material.runs.execute import RunOutcome, RunPlan, check, run
+from granular_material.runs.serial import from_dict, from_flat, load, save, to_dict, to_flat
+from granular_material.runs.spec import (
+    MaterialSpec,
+    NewtonSpec,
+    OutputSpec,
+    ProblemSpec,
+    RunSpec,
+    SpecError,
+)
+
+__all__ = ["MaterialSpec", "NewtonSpec", "OutputSpec", "ProblemSpec", "RunContext",
+           "RunOutcome", "RunPlan", "RunSpec", "SpecError", "check", "from_dict", "from_flat",
+           "load", "run", "save", "to_dict", "to_flat"]

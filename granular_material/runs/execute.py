@@ -1,0 +1,300 @@
+"""Run a :class:`~granular_material.runs.spec.RunSpec`: the library's one entry point for a
+FEM run, which the command line, scenes, studies and the reproduction all call.
+
+:func:`check` makes every check a run makes before any work (nothing is allocated, written
+or locked) and returns the :class:`RunPlan`; :func:`run` checks, then runs into the output
+folder (locked while it runs, checkpointed, resumable) and returns a :class:`RunOutcome`.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+
+from granular_material.checks import (
+    DISC_BYTES,
+    UsageError,
+    check_memory,
+    check_output_dir,
+    cleanup_on_rejection,
+)
+from granular_material.fem import (
+    BiaxialResult,
+    BiaxialSetup,
+    Material,
+    RunCheckpoint,
+    Tracking,
+    run_biaxial,
+)
+from granular_material.fem.runner import RunObserver
+from granular_material.results import (
+    BiaxialWriter,
+    band_summary,
+    find_peak,
+    run_summary,
+    write_csv,
+    write_json,
+    write_outputs,
+)
+from granular_material.results.lock import FolderLock
+from granular_material.runs.context import RunContext
+from granular_material.runs.resume import open_checkpoint, start_checkpoint
+from granular_material.runs.spec import FULL_SCALE, REDUCED_SCALE, RunSpec
+
+__all__ = ["RunOutcome", "RunPlan", "check", "run"]
+
+#: memory of one element of the mesh beside its RVEs, about [bytes]: its stiffness entries
+#: in assembly, its Gauss points' tables and tangents, with room for the solver
+_ELEMENT_BYTES = 16_384
+#: memory of one Gauss point's row of one load step, kept for the tables [bytes]
+_POINT_ROW_BYTES = 400
+
+
+@dataclass(frozen=True)
+class RunPlan:
+    """What a checked spec will run: the device chosen, the mesh, the material's context."""
+
+    spec: RunSpec
+    device: str
+    setup: BiaxialSetup
+    context: RunContext
+    discs: int
+    tracking: Tracking | None
+
+
+@dataclass
+class RunOutcome:
+    """What :func:`run` produced: the result, its summary (as ``summary.json``), and the
+    pure-DEM reference curve of a single element where the material gave one."""
+
+    result: BiaxialResult
+    summary: dict[str, Any]
+    reference: pd.DataFrame | None = None
+    plan: RunPlan | None = field(default=None, repr=False)
+
+    @property
+    def interrupt(self) -> KeyboardInterrupt | None:
+        """The interrupt that stopped the run early, if one did."""
+        return self.result.interrupt
+
+
+def _device(spec: RunSpec) -> str:
+    from granular_material.dem import resolve_device
+
+    return resolve_device(spec.device)
+
+
+def _tracking(spec: RunSpec, n_points: int) -> Tracking | None:
+    track = spec.output.track
+    if track is None:
+        return None
+    if not hasattr(spec.material.cls, "committed_rves"):
+        raise ValueError(f"--track needs --material dem (its Gauss points carry RVEs), not "
+                         f"{spec.material.name}")
+    tracking = Tracking.parse(spec.output.postprocessors(), track, spec.output.every)
+    tracking.check_points(n_points)
+    return tracking
+
+
+def _check_size(spec: RunSpec, setup: BiaxialSetup, discs: int) -> None:
+    """The mesh, its RVEs and the tables of every step fit in memory; a specimen has the 4
+    Gauss points its shear-band measures need."""
+    steps = spec.problem.steps
+    if spec.problem.test == "biaxial" and setup.n_points < 4:
+        raise UsageError(f"--element {setup.element} on --elements {setup.nx} {setup.ny} has "
+                         f"{setup.n_points} Gauss points; the shear-band measures of a "
+                         "biaxial run need at least 4 (more elements)")
+    needed = (float(setup.n_elements) * _ELEMENT_BYTES
+              + float(setup.n_points) * discs * DISC_BYTES
+              + float(setup.n_points) * (steps + 1) * _POINT_ROW_BYTES)
+    held = f" of {discs}-disc RVEs" if discs else ""
+    check_memory(needed, f"{setup.n_elements} {setup.element} elements ({setup.n_points} "
+                         f"Gauss points{held}) over {steps} load steps")
+
+
+def check(spec: RunSpec) -> RunPlan:
+    """Every check of the run before any work (its output folder, memory, the material's
+    inputs, tracked points); nothing is allocated or written. The plan of the run."""
+    check_output_dir(spec.output.out)
+    device = _device(spec)
+    elements, scale_discs = spec.problem.mesh(device)
+    setup = spec.problem.setup(elements)
+    context = RunContext(test=spec.problem.test, n_points=setup.n_points,
+                         confining=spec.problem.confining,
+                         axial_strain=spec.problem.axial_strain, steps=spec.problem.steps,
+                         scale_discs=scale_discs, device=device, shards=spec.shards,
+                         backend=spec.backend, progress=spec.output.progress,
+                         convergence=spec.newton.convergence)
+    cls = spec.material.cls
+    hook = getattr(cls, "check_run", None)
+    discs = hook(spec.material.parameters, context) if hook is not None else 0
+    _check_size(spec, setup, discs)
+    tracking = _tracking(spec, setup.n_points)
+    if hasattr(cls, "for_run"):  # the material's own checks of what it is built from
+        _built(spec, context)
+    return RunPlan(spec=spec, device=device, setup=setup, context=context, discs=discs,
+                   tracking=tracking)
+
+
+def _built(spec: RunSpec, context: RunContext) -> Material:
+    """The material of the run, not yet allocated."""
+    cls = spec.material.cls
+    if hasattr(cls, "for_run"):
+        return cls.for_run(spec.material.parameters, context)
+    return cls(**spec.material.values())
+
+
+def _scale_name(plan: RunPlan) -> str:
+    """The specimen scale that ran when mesh and discs are its own, else ``custom``."""
+    problem = plan.spec.problem
+    scale = problem.resolved_scale(plan.device)
+    preset = FULL_SCALE if scale == "full" else REDUCED_SCALE
+    elements = (plan.setup.nx, plan.setup.ny)
+    return scale if (elements, plan.discs) == (tuple(preset[0]), preset[1]) else "custom"
+
+
+@contextlib.contextmanager
+def _locked(out: Path | None) -> Iterator[None]:
+    """The output folder locked for the run (a second run into it is refused at once)."""
+    if out is None:
+        yield
+        return
+    lock = FolderLock(out)
+    lock.acquire()
+    try:
+        yield
+    finally:
+        lock.release()
+
+
+def run(spec: RunSpec, observer: RunObserver | None = None, *,
+        resume: bool = False) -> RunOutcome:
+    """Run ``spec``: check it (:func:`check`), lock and write its output folder as it goes
+    (tables, fields, figures, ``summary.json``; checkpoints every
+    ``output.checkpoint_every`` steps), and return the outcome. ``resume`` continues the run
+    whose checkpoint is in ``output.out`` (its spec must be this one, but for where and how
+    it reports; with no saved step it starts afresh). ``observer`` follows every committed
+    step as :class:`~granular_material.fem.runner.RunObserver`. A Newton failure or an
+    interrupt ends the run early with the steps so far (``outcome.result.error``,
+    ``outcome.interrupt``); bad input is a ``ValueError`` before any work."""
+    out = spec.output.out
+    if resume and out is None:
+        raise UsageError("a resumed run needs its output folder (output.out)")
+    check_output_dir(out)
+    with _locked(out):
+        checkpoint, saved = open_checkpoint(spec, resume)
+        plan = check(spec)
+        material = _built(spec, plan.context)
+        with cleanup_on_rejection(out), start_checkpoint(spec, checkpoint, saved):
+            if not saved:
+                material.allocate(plan.setup.n_points)
+            reference = _reference(material, plan, checkpoint)
+            outcome = _execute(plan, material, observer, checkpoint, saved)
+        outcome.reference = reference
+        _finish(plan, outcome)
+    return outcome
+
+
+def _reference(material: Any, plan: RunPlan, checkpoint: RunCheckpoint | None,
+               ) -> pd.DataFrame | None:
+    """A single element's pure-DEM curve, where its parameters ask for one: computed once
+    from the RVE before the first load step, kept in the checkpoint."""
+    if not getattr(plan.spec.material.parameters, "compare_dem", False):
+        return None
+    saved = None if checkpoint is None else checkpoint.load_table("pure_dem")
+    if saved is not None:
+        return saved
+    problem = plan.spec.problem
+    curve = material.reference_curve(problem.axial_strain, problem.confining, plan.device,
+                                     progress=plan.spec.output.progress)
+    if checkpoint is not None:
+        checkpoint.save_table("pure_dem", curve)
+    return curve
+
+
+def _execute(plan: RunPlan, material: Material, observer: RunObserver | None,
+             checkpoint: RunCheckpoint | None, resuming: bool) -> RunOutcome:
+    """The FEM run, written under the output folder as it goes; result and summary."""
+    spec = plan.spec
+    noisy = spec.material.noisy
+    t0 = time.perf_counter()
+    with contextlib.ExitStack() as stack:
+        writer = (stack.enter_context(BiaxialWriter(spec.output.out))
+                  if spec.output.out is not None else None)
+        observers = [o for o in (writer, observer) if o is not None]
+        result = run_biaxial(plan.setup, material, spec.problem.steps,
+                             spec.newton.settings(noisy), progress=spec.output.progress,
+                             observer=_Fanout(observers) if observers else None,
+                             stress_tol=spec.newton.stress_tolerance(
+                                 noisy, spec.problem.confining),
+                             tracking=plan.tracking, checkpoint=checkpoint, resume=resuming)
+    summary = run_summary(result, time.perf_counter() - t0)
+    summary["resumed_from_step"] = result.resumed_from
+    summary["preset"] = spec.preset
+    summary.update(element=plan.setup.element,
+                   points_per_element=plan.setup.points_per_element,
+                   convergence=spec.newton.convergence)
+    if plan.tracking is not None:
+        summary["tracked_rows"] = len(result.tracked)
+        summary["tracking_time_s"] = (float(result.tracked["seconds"].sum())
+                                      if len(result.tracked) else 0.0)
+    return RunOutcome(result=result, summary=summary, plan=plan)
+
+
+class _Fanout:
+    """Several run observers as one."""
+
+    def __init__(self, observers: list[RunObserver]) -> None:
+        self.observers = observers
+
+    def start(self, problem: Any) -> None:
+        for o in self.observers:
+            o.start(problem)
+
+    def record(self, *args: Any) -> None:
+        for o in self.observers:
+            o.record(*args)
+
+    def finish(self, result: BiaxialResult) -> None:
+        for o in self.observers:
+            o.finish(result)
+
+
+def _material_summary(plan: RunPlan) -> dict[str, Any]:
+    hook = getattr(plan.spec.material.cls, "run_summary", None)
+    return hook(plan.spec.material.parameters, plan.context) if hook is not None else {}
+
+
+def _finish(plan: RunPlan, outcome: RunOutcome) -> None:
+    """The summary's last entries, and the outputs and ``summary.json`` under the folder."""
+    spec, summary, result = plan.spec, outcome.summary, outcome.result
+    out = spec.output.out
+    if spec.problem.test == "biaxial":
+        summary.update(scale=_scale_name(plan), elements=[plan.setup.nx, plan.setup.ny],
+                       gauss_points=plan.setup.n_points, particles=plan.discs,
+                       device=plan.device)
+        summary.update(_material_summary(plan))
+        summary.update(band_summary(result, list(spec.output.map_strain),
+                                    summary["peak_stress_ratio"]))
+    else:
+        reference = outcome.reference
+        if reference is not None:
+            peak, ratio = find_peak(reference["axial_strain"].to_numpy(),
+                                    reference["stress_ratio"].to_numpy())
+            summary["dem_peak_stress_ratio"] = ratio
+            summary["dem_axial_strain_at_peak"] = float(reference["axial_strain"].iloc[peak])
+        summary.update({"rve_material": None, **_material_summary(plan)})
+    if out is not None:
+        write_outputs(result, out, map_strain=list(spec.output.map_strain),
+                      reference=outcome.reference)
+        if outcome.reference is not None:
+            write_csv(outcome.reference, Path(out) / "pure_dem.csv")
+        summary["out"] = str(out)
+        if Path(out).is_dir():
+            write_json(summary, Path(out) / "summary.json")

@@ -1,0 +1,121 @@
+"""A run's checkpoint and its spec: a fresh run records its spec there; a resumed one is
+checked against it field by field before anything in the folder is touched."""
+
+from __future__ import annotations
+
+import contextlib
+import sys
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+from granular_material.checks import RVE_MATERIAL_DEFAULTS, UsageError
+from granular_material.fem import CheckpointError, RunCheckpoint
+from granular_material.runs.serial import from_dict, from_flat, to_dict, to_flat
+from granular_material.runs.spec import RunSpec
+
+__all__ = ["open_checkpoint", "spec_differences", "start_checkpoint"]
+
+#: fields that may differ between a run and its resume: where it writes, how it reports and
+#: how often it saves, the CPU threads and the backend (neither changes a result)
+RESUME_FREE = frozenset({"out", "progress", "checkpoint_every", "shards", "backend"})
+#: options added after checkpoints were first written, with the value older runs had
+_ADDED_OPTIONS = {"element": "quad4", "quadrature": None, "convergence": "force",
+                  "formulation": "small-strain", "accept_correction": 0.0,
+                  **RVE_MATERIAL_DEFAULTS}
+#: options of older checkpoints' records that are no spec fields (the command line's own)
+_NOT_FIELDS = frozenset({"command", "resume", "json", "func"})
+
+
+def _saved_spec(record: dict[str, Any]) -> RunSpec:
+    """The spec a checkpoint's record was started with: the spec itself, or the options of
+    an older version's (every command-line option, those added since at their old value)."""
+    if "spec" in record:
+        return from_dict(record["spec"])
+    options = {**_ADDED_OPTIONS, **record}
+    options.setdefault("material", "dem")
+    options["test"] = options.get("command", "single-element")
+    flat = {k: v for k, v in options.items() if k not in _NOT_FIELDS and v is not None}
+    return from_flat(flat, strict=False)
+
+
+def _compared(spec: RunSpec) -> dict[str, Any]:
+    """The flat form of ``spec`` as a resume compares it: the post-processors of tracked
+    points resolved (None: every installed one), none without tracking."""
+    flat = to_flat(spec)
+    output = spec.output
+    flat["postprocess"] = None if output.track is None else list(output.postprocessors())
+    return flat
+
+
+def spec_differences(given: RunSpec, saved: RunSpec) -> list[str]:
+    """The fields (as ``--options``) of ``given`` that differ from ``saved``, but for those
+    a resume may change (:data:`RESUME_FREE`)."""
+    now, then = _compared(given), _compared(saved)
+    return [f"--{k.replace('_', '-')} {now.get(k)!r} (the run had {then.get(k)!r})"
+            for k in sorted(set(now) | set(then))
+            if k not in RESUME_FREE and now.get(k) != then.get(k)]
+
+
+def _check_record(spec: RunSpec, checkpoint: RunCheckpoint, folder: Path) -> None:
+    """The checkpoint in ``folder`` is of a run of ``spec`` (UsageError naming what
+    differs; nothing is changed)."""
+    try:
+        record = checkpoint.read_options()
+    except CheckpointError as exc:
+        raise UsageError(f"--resume {folder}: {exc}; nothing in the folder was "
+                         "changed") from None
+    command = record.get("command")
+    if command not in (None, spec.problem.test):
+        raise UsageError(f"--resume {folder} is a {command} run, not {spec.problem.test}")
+    differ = spec_differences(spec, _saved_spec(record))
+    if differ:
+        raise UsageError(f"--resume {folder}: give the options the run was started with; "
+                         f"these differ: {'; '.join(differ)} (nothing in the folder was "
+                         "changed)")
+
+
+def open_checkpoint(spec: RunSpec, resume: bool) -> tuple[RunCheckpoint | None, bool]:
+    """The run's checkpoint (None without an output folder) and whether the run resumes
+    from a saved state in it (checked whole first); else it starts afresh."""
+    out = spec.output.out
+    if out is None:
+        return None, False
+    checkpoint = RunCheckpoint(Path(out) / "checkpoint", every=spec.output.checkpoint_every)
+    if not resume:
+        return checkpoint, False
+    if not checkpoint.has_options():
+        if checkpoint.has_state():
+            raise UsageError(f"--resume {out}: {checkpoint.folder / 'options.json'} is "
+                             "missing, so the options the run was started with cannot be "
+                             "checked; nothing in the folder was changed")
+    else:
+        _check_record(spec, checkpoint, Path(out))
+    if not checkpoint.has_state():
+        print(f"granular-material {spec.problem.test}: {out} holds no saved step yet; the "
+              "run starts from the beginning", file=sys.stderr)
+        return checkpoint, False
+    try:  # read and checked whole before anything in the folder is touched
+        saved = checkpoint.verify()
+    except CheckpointError as exc:
+        raise UsageError(f"--resume {out}: {exc}; nothing in the folder was changed") from None
+    if saved.step > spec.problem.steps:
+        raise UsageError(f"--resume {out}: its checkpoint is of load step {saved.step}, past "
+                         f"--steps {spec.problem.steps}; nothing in the folder was changed")
+    return checkpoint, True
+
+
+@contextlib.contextmanager
+def start_checkpoint(spec: RunSpec, checkpoint: RunCheckpoint | None,
+                     resuming: bool) -> Iterator[None]:
+    """The block of a run: a fresh one first empties the checkpoint and records its spec;
+    input rejected in the block (``ValueError``) leaves no fresh checkpoint behind."""
+    if checkpoint is None or resuming:
+        yield
+        return
+    checkpoint.start({"command": spec.problem.test, "spec": to_dict(spec)})
+    try:
+        yield
+    except ValueError:
+        checkpoint.remove()
+        raise

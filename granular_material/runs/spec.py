@@ -1,0 +1,344 @@
+"""The run specification: what one FEM run is, typed and frozen, from the edge to the kernel.
+
+A :class:`RunSpec` gathers the problem (:class:`ProblemSpec`), the Newton settings
+(:class:`NewtonSpec`), the material (:class:`MaterialSpec`: an entry-point name and that
+material's own typed parameters), the outputs (:class:`OutputSpec`) and where it runs
+(device, CPU shards, backend). Every field has its default and its check here, once; a value
+that cannot run is a :class:`SpecError` naming the field. The command line, the scenes, the
+presets and the checkpoints all build one (:mod:`granular_material.runs.serial`), and
+:func:`granular_material.runs.run` runs it.
+
+Field names are unique across the sections, so a field is also known by its bare name (its
+*flat* name: ``axial_strain``), which is the command-line option (``--axial-strain``) and the
+scene key (``axial-strain``). Units are SI; strains and the axial strain compression positive.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field, fields, is_dataclass, replace
+from pathlib import Path
+from typing import Any
+
+from granular_material.fem.defaults import COMMAND_DEFAULTS
+from granular_material.fem.newton import NewtonSettings
+from granular_material.fem.problems import BiaxialSetup
+
+__all__ = ["BACKENDS", "FULL_SCALE", "REDUCED_SCALE", "TESTS", "MaterialSpec", "NewtonSpec",
+           "OutputSpec", "ProblemSpec", "RunSpec", "SpecError"]
+
+#: the tests a run specification describes: one element, or the biaxial specimen
+TESTS = ("single-element", "biaxial")
+#: the reduced CPU scale of the biaxial specimen: elements (nx, ny) and discs per RVE; 5 × 10
+#: is the coarsest mesh on which a band showed
+REDUCED_SCALE = ((5, 10), 64)
+#: the full scale (Wu et al. 2025): 10 × 15 Q4 elements, 600 Gauss points, 400-disc RVEs
+FULL_SCALE = ((10, 15), 400)
+#: where a material's points live: this process, or shards on the ranks of an MPI job
+BACKENDS = ("inprocess", "mpi")
+#: width and height [m] of each test's specimen when the spec names none
+_SIZES = {"single-element": (1.0, 1.0), "biaxial": (0.05, 0.10)}
+#: BiaxialSetup's field names that the spec calls otherwise
+_SETUP_NAMES = {"nx": "elements", "ny": "elements", "gauss": "quadrature"}
+
+
+class SpecError(ValueError):
+    """A value of a run specification that cannot run; ``field`` is its flat name."""
+
+    def __init__(self, name: str, message: str) -> None:
+        super().__init__(f"{name} {message}")
+        self.field = name
+        self.message = message
+
+
+def _at_least(name: str, value: Any, lowest: int) -> None:
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise SpecError(name, f"must be an integer >= {lowest}, got {value!r}")
+    if value < lowest:
+        raise SpecError(name, f"must be >= {lowest}, got {value!r}")
+
+
+def _one_of(name: str, value: Any, choices: tuple[Any, ...]) -> None:
+    if value not in choices:
+        raise SpecError(name, f"must be one of {', '.join(map(str, choices))}, got {value!r}")
+
+
+@dataclass(frozen=True, kw_only=True)
+class ProblemSpec:
+    """The boundary-value problem: a drained biaxial test, of one element or a specimen.
+
+    Attributes:
+        test: "single-element" (one element, 1 m × 1 m) or "biaxial" (the specimen).
+        axial_strain: final axial strain of the top platen, compression positive [-].
+        confining: lateral confining pressure [Pa], compression positive; also the
+            consolidation pressure of RVEs a run prepares.
+        steps: load steps to ``axial_strain``.
+        element: "quad4", "quad8", "quad9", "tri3" or "tri6".
+        quadrature: Gauss points per direction (per triangle: the rule's points); None: the
+            element's default.
+        width, height: specimen size [m]; None: 1 × 1 (single-element), 0.05 × 0.10
+            (biaxial).
+        elements: (nx, ny) elements of a biaxial specimen; None: those of ``scale``.
+        scale: "full" (Wu et al.'s 10 × 15 elements of 400-disc RVEs) or "reduced" (5 × 10 of
+            64 discs) for a biaxial specimen; None: full on CUDA, reduced on a CPU.
+        platens: "smooth" (platen nodes slide, one bottom node pinned) or "rough".
+    """
+
+    test: str
+    axial_strain: float = 0.1
+    confining: float = 100e3
+    steps: int = 100
+    element: str = "quad4"
+    quadrature: int | None = None
+    width: float | None = None
+    height: float | None = None
+    elements: tuple[int, int] | None = None
+    scale: str | None = None
+    platens: str = "smooth"
+
+    def __post_init__(self) -> None:
+        _one_of("test", self.test, TESTS)
+        if not (math.isfinite(self.confining) and self.confining > 0):
+            raise SpecError("confining", "must be a positive number of Pa (σxx is held at "
+                                         "−confining, σ1/σ3 divides by it), got "
+                                         f"{self.confining:g}")
+        _at_least("steps", self.steps, 1)
+        width, height = _SIZES[self.test]
+        object.__setattr__(self, "width", width if self.width is None else self.width)
+        object.__setattr__(self, "height", height if self.height is None else self.height)
+        if self.test == "single-element":
+            for name in ("elements", "scale"):
+                if getattr(self, name) is not None:
+                    raise SpecError(name, "is a biaxial specimen's; a single element has one")
+        if self.scale is not None:
+            _one_of("scale", self.scale, ("full", "reduced"))
+        if self.elements is not None:
+            object.__setattr__(self, "elements", tuple(self.elements))
+            if len(self.elements) != 2:
+                raise SpecError("elements", f"must be two counts (nx, ny), got {self.elements}")
+        self.setup(self.elements or (1, 1))  # the setup's own checks, named as fields here
+
+    def setup(self, elements: tuple[int, int]) -> BiaxialSetup:
+        """The FEM problem's setup on a mesh of ``elements`` (nx, ny); a value it refuses is
+        a SpecError naming the field of this spec."""
+        nx, ny = elements
+        try:
+            return BiaxialSetup(width=self.width, height=self.height, nx=nx, ny=ny,
+                                confining=self.confining, axial_strain=self.axial_strain,
+                                platens=self.platens, element=self.element,
+                                gauss=self.quadrature)
+        except ValueError as exc:
+            name, message = str(exc).split(" ", 1)
+            raise SpecError(_SETUP_NAMES.get(name, name), message) from None
+
+    def resolved_scale(self, device: str) -> str:
+        """The biaxial scale that runs on ``device``: the given one, else full on CUDA."""
+        return self.scale or ("full" if device.startswith("cuda") else "reduced")
+
+    def mesh(self, device: str) -> tuple[tuple[int, int], int | None]:
+        """(nx, ny) of the mesh on ``device`` and the discs per RVE of its scale (None for a
+        single element, whose discs are the material's)."""
+        if self.test == "single-element":
+            return (1, 1), None
+        (nx, ny), discs = FULL_SCALE if self.resolved_scale(device) == "full" else REDUCED_SCALE
+        return (self.elements or (nx, ny)), discs
+
+
+def _newton_default(name: str) -> Any:
+    """The commands' default of a NewtonSettings field (COMMAND_DEFAULTS, else the class's)."""
+    return COMMAND_DEFAULTS.get(name, getattr(NewtonSettings, name))
+
+
+@dataclass(frozen=True, kw_only=True)
+class NewtonSpec:
+    """The Newton solver of the run (:class:`~granular_material.fem.NewtonSettings`, with the
+    commands' defaults: :data:`~granular_material.fem.defaults.COMMAND_DEFAULTS`).
+
+    Attributes:
+        rtol: relative tolerance of the convergence test [-].
+        stress_tol: absolute tolerance as a stress error [Pa]; None: 0.005 × confining for
+            a noisy (DEM) material, else 0.
+        stall_rtol: accept a stalled residual below this [-]; None: 2 × rtol for a noisy
+            material, else 0 (off).
+        accept_correction: accept a stalled increment once ‖δu‖/‖Δu‖ is at most this [-];
+            None: 1e-2 for a noisy material, else 0 (off).
+        max_iterations, max_cutbacks, convergence, predictor, formulation, relaxation,
+        tangent_update, secant_min_change: as :class:`~granular_material.fem.NewtonSettings`.
+    """
+
+    rtol: float = _newton_default("rtol")
+    stress_tol: float | None = None
+    stall_rtol: float | None = None
+    accept_correction: float | None = None
+    max_iterations: int = _newton_default("max_iterations")
+    max_cutbacks: int = _newton_default("max_cutbacks")
+    convergence: str = _newton_default("convergence")
+    predictor: str = _newton_default("predictor")
+    formulation: str = _newton_default("formulation")
+    relaxation: str = _newton_default("relaxation")
+    tangent_update: str = _newton_default("tangent_update")
+    secant_min_change: float = _newton_default("secant_min_change")
+
+    def __post_init__(self) -> None:
+        if self.stress_tol is not None and not (math.isfinite(self.stress_tol)
+                                                and self.stress_tol >= 0):
+            raise SpecError("stress_tol", f"must be a stress >= 0 Pa, got {self.stress_tol:g}")
+        self.settings(noisy=False)
+
+    def settings(self, noisy: bool) -> NewtonSettings:
+        """The solver's settings for a material whose stress is ``noisy`` (DEM RVEs); a value
+        NewtonSettings refuses is a SpecError naming its field."""
+        from granular_material.fem.defaults import default_settings
+
+        values = {f.name: getattr(self, f.name) for f in fields(self) if f.name != "stress_tol"}
+        try:
+            return default_settings(noisy, **values)
+        except ValueError as exc:
+            name = str(exc).split(" ", 1)[0]
+            if name in values:
+                raise SpecError(name, str(exc).split(" ", 1)[1]) from None
+            raise
+
+    def stress_tolerance(self, noisy: bool, confining: float) -> float:
+        """The absolute tolerance [Pa] of the run."""
+        from granular_material.fem.defaults import default_stress_tol
+
+        return default_stress_tol(noisy, confining) if self.stress_tol is None else self.stress_tol
+
+
+@dataclass(frozen=True, kw_only=True)
+class MaterialSpec:
+    """The material at the Gauss points: an entry point of ``granular_material.materials``
+    and its own parameters (an instance of the material class's ``Parameters``, a frozen
+    dataclass, where it has one; else a mapping of keywords for its constructor).
+
+    Attributes:
+        name: the entry-point name ("dem", "linear-elastic", or a third party's).
+        parameters: the material's parameters; a mapping is turned into ``Parameters``.
+    """
+
+    name: str
+    parameters: Any = None
+
+    def __post_init__(self) -> None:
+        from granular_material.fem.material import load_material
+
+        try:
+            cls = load_material(self.name)
+        except ValueError as exc:
+            raise SpecError("material", str(exc)) from None
+        kind = getattr(cls, "Parameters", None)
+        given = self.parameters
+        if kind is None:
+            object.__setattr__(self, "parameters", dict(given or {}))
+            return
+        if isinstance(given, kind):
+            return
+        if given is not None and not isinstance(given, Mapping):
+            raise SpecError("material", f"parameters of {self.name} must be a "
+                                        f"{kind.__name__} or a mapping, got {type(given)}")
+        known = {f.name for f in fields(kind)}
+        unknown = sorted(set(given or {}) - known)
+        if unknown:
+            raise SpecError(unknown[0], f"is no parameter of the material {self.name} "
+                                        f"(it has {', '.join(sorted(known))})")
+        object.__setattr__(self, "parameters", kind(**dict(given or {})))
+
+    @property
+    def cls(self) -> type:
+        """The material class."""
+        from granular_material.fem.material import load_material
+
+        return load_material(self.name)
+
+    @property
+    def noisy(self) -> bool:
+        """Whether the material's stress carries noise (DEM RVEs): it gets the looser
+        Newton defaults of :class:`NewtonSpec`."""
+        return bool(getattr(self.cls, "noisy", False))
+
+    def values(self) -> dict[str, Any]:
+        """The parameters as a plain dict (flat names)."""
+        if is_dataclass(self.parameters):
+            return {f.name: getattr(self.parameters, f.name) for f in fields(self.parameters)}
+        return dict(self.parameters)
+
+
+@dataclass(frozen=True, kw_only=True)
+class OutputSpec:
+    """What the run writes and follows.
+
+    Attributes:
+        out: the output folder (tables, fields, figures, summary, checkpoint); None: none.
+        map_strain: axial strains of the displacement/shear-strain maps and band measures.
+        track: Gauss point ids (as text) or ("all",) whose RVEs are post-processed; None:
+            none.
+        every: with ``track``: every this many load steps.
+        postprocess: with ``track``: the post-processors; None: every installed one.
+        checkpoint_every: save the committed state every this many load steps (with out).
+        progress: show progress bars.
+    """
+
+    out: Path | None = None
+    map_strain: tuple[float, ...] = (0.02,)
+    track: tuple[str, ...] | None = None
+    every: int = 1
+    postprocess: tuple[str, ...] | None = None
+    checkpoint_every: int = 1
+    progress: bool = False
+
+    def __post_init__(self) -> None:
+        if self.out is not None:
+            object.__setattr__(self, "out", Path(self.out))
+        object.__setattr__(self, "map_strain", tuple(float(s) for s in self.map_strain))
+        if self.track is not None:
+            object.__setattr__(self, "track", tuple(str(t) for t in self.track))
+        if self.postprocess is not None:
+            object.__setattr__(self, "postprocess", tuple(self.postprocess))
+        _at_least("every", self.every, 1)
+        _at_least("checkpoint_every", self.checkpoint_every, 1)
+
+    def postprocessors(self) -> tuple[str, ...]:
+        """The post-processors of tracked points: the given ones, else every installed one."""
+        from granular_material.fem.tracking import available_postprocessors
+
+        return self.postprocess or tuple(available_postprocessors())
+
+
+@dataclass(frozen=True, kw_only=True)
+class RunSpec:
+    """One FEM run: problem, material, Newton settings, outputs and where it runs.
+
+    Attributes:
+        problem: the boundary-value problem.
+        material: the material at the Gauss points.
+        newton: the Newton solver.
+        output: what is written.
+        device: the DEM device, "cpu", "cuda" or "cuda:N"; None: CUDA where present.
+        shards: CPU threads (shards) of a DEM batch; None: one per core.
+        backend: "inprocess" or "mpi" (a material's points in shards on an MPI job's ranks).
+        preset: the name of the preset whose values the spec took (a record; the values
+            themselves are in the fields).
+    """
+
+    problem: ProblemSpec
+    material: MaterialSpec
+    newton: NewtonSpec = field(default_factory=NewtonSpec)
+    output: OutputSpec = field(default_factory=OutputSpec)
+    device: str | None = None
+    shards: int | None = None
+    backend: str = "inprocess"
+    preset: str | None = None
+
+    def __post_init__(self) -> None:
+        _one_of("backend", self.backend, BACKENDS)
+        if self.shards is not None:
+            _at_least("shards", self.shards, 1)
+        if self.backend != "inprocess" and not hasattr(self.material.cls, "launch"):
+            raise SpecError("backend", f"{self.backend} needs a material that runs on it "
+                                       f"(dem), not {self.material.name}")
+
+    def replace(self, **sections: Any) -> RunSpec:
+        """A copy with whole sections or run fields replaced (dataclasses.replace)."""
+        return replace(self, **sections)

@@ -1,0 +1,199 @@
+"""The DEM material in a run specification: its own parameters (:class:`DEMParameters`) and
+what a run asks of it before any work (checks, the discs it will hold, its summary) and to
+build it (:func:`material_for_run`). :class:`~granular_material_skfem.DEMMaterial` offers
+these as its ``Parameters`` and its run hooks."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, ClassVar
+
+from granular_material_skfem.backend import TANGENTS
+
+from granular_material.checks import (
+    RVE_MATERIAL_DEFAULTS,
+    UsageError,
+    packing_parameters,
+    rve_file_shape,
+)
+
+if TYPE_CHECKING:
+    from granular_material_skfem.material import DEMMaterial
+
+    from granular_material.procedures.packing import PackingParameters
+    from granular_material.runs.context import RunContext
+
+__all__ = ["DEFAULT_PARTICLES", "DEMParameters", "check_run", "material_for_run", "run_summary"]
+
+#: discs per prepared RVE where neither the spec nor the specimen's scale says
+DEFAULT_PARTICLES = 400
+#: largest strain of one DEM step while an RVE is driven along ∇u [-] (quasi-static)
+DEFAULT_STRAIN_PER_STEP = 1e-5
+#: cap on the DEM steps of one RVE path in one evaluation
+DEFAULT_MAX_DEM_STEPS = 10**6
+
+
+@dataclass(frozen=True, kw_only=True)
+class DEMParameters:
+    """The DEM material of a run (SI units, angles in rad).
+
+    Attributes:
+        rve: RVE file (one RVE, replicated, or one per Gauss point); None: prepare them.
+        particles: discs per prepared RVE; None: the specimen scale's, else 400.
+        seed: seed of the first prepared RVE (RVE p: seed + p).
+        independent: single element: four independent RVEs instead of one replicated.
+        compare_dem: single element: also the pure-DEM drained biaxial test of RVE 0.
+        tangent: objective, kruyt-rothenburg, perturbation or condensed.
+        perturbation: relative perturbation of ∇u of the perturbation tangent [-].
+        reuse_tol: strain under which a point keeps its last response [-]; 0: never.
+        reuse_correction: none or tangent (a reused response corrected to first order).
+        drive: restart (each iteration from the committed state) or continue.
+        max_strain_per_step: largest strain of one DEM step along ∇u [-].
+        max_dem_steps: cap on one RVE path's DEM steps in one iteration.
+        target_void_ratio … thickness: the material and packing of prepared RVEs (those of
+            ``granular-material prepare``; Wu et al. 2025, Table 1 by default).
+    """
+
+    #: the RVE tangents the material offers
+    tangents: ClassVar[tuple[str, ...]] = TANGENTS
+    #: discs per prepared RVE where neither the spec nor the specimen's scale says
+    default_particles: ClassVar[int] = DEFAULT_PARTICLES
+
+    rve: Path | None = None
+    particles: int | None = None
+    seed: int = 1
+    independent: bool = False
+    compare_dem: bool = False
+    tangent: str = "objective"
+    perturbation: float = 0.1
+    reuse_tol: float = 0.0
+    reuse_correction: str = "none"
+    drive: str = "restart"
+    max_strain_per_step: float = DEFAULT_STRAIN_PER_STEP
+    max_dem_steps: int = DEFAULT_MAX_DEM_STEPS
+    target_void_ratio: float | None = RVE_MATERIAL_DEFAULTS["target_void_ratio"]
+    radius_min: float = RVE_MATERIAL_DEFAULTS["radius_min"]
+    radius_max: float = RVE_MATERIAL_DEFAULTS["radius_max"]
+    law: str = RVE_MATERIAL_DEFAULTS["law"]
+    kn: float = RVE_MATERIAL_DEFAULTS["kn"]
+    kt: float = RVE_MATERIAL_DEFAULTS["kt"]
+    young: float = RVE_MATERIAL_DEFAULTS["young"]
+    kt_over_kn: float = RVE_MATERIAL_DEFAULTS["kt_over_kn"]
+    friction_angle: float = RVE_MATERIAL_DEFAULTS["friction_angle"]
+    damping: float = RVE_MATERIAL_DEFAULTS["damping"]
+    density: float = RVE_MATERIAL_DEFAULTS["density"]
+    thickness: float = RVE_MATERIAL_DEFAULTS["thickness"]
+
+    def __post_init__(self) -> None:
+        from granular_material.runs.spec import SpecError
+
+        if self.rve is not None:
+            object.__setattr__(self, "rve", Path(self.rve))
+        if self.tangent not in TANGENTS:
+            raise SpecError("tangent", f"must be one of {', '.join(TANGENTS)}, got "
+                                       f"{self.tangent!r}")
+        if not self.max_strain_per_step > 0:
+            raise SpecError("max_strain_per_step", "must be a positive strain, got "
+                                                   f"{self.max_strain_per_step!r}")
+
+    def rve_material_given(self) -> list[str]:
+        """The RVE material fields set to other than their defaults, as ``--options``."""
+        return [f"--{name.replace('_', '-')}" for name, default in RVE_MATERIAL_DEFAULTS.items()
+                if getattr(self, name) != default]
+
+
+def _particles(p: DEMParameters, context: RunContext) -> int:
+    """The discs per RVE the run holds: the file's, else the spec's, the scale's or 400."""
+    if p.rve is not None:
+        return rve_file_shape(p.rve)[1]
+    return p.particles or context.scale_discs or DEFAULT_PARTICLES
+
+
+def _replicate(p: DEMParameters, context: RunContext) -> bool:
+    """single-element: whether one RVE is copied to the element's points (else one each)."""
+    n_points = context.n_points
+    if context.test != "single-element":
+        return False
+    if p.rve is None:
+        return not p.independent
+    n_rve, _ = rve_file_shape(p.rve)
+    if n_rve == n_points:
+        return False
+    if n_rve != 1:
+        raise UsageError(f"--rve {p.rve} holds {n_rve} RVEs; single-element takes 1 "
+                         f"(replicated to the {n_points} Gauss points) or {n_points} (one per "
+                         "point)")
+    if p.independent:
+        raise UsageError(f"--independent needs {n_points} RVEs, --rve {p.rve} holds 1")
+    return True
+
+
+def _packing(p: DEMParameters, context: RunContext) -> PackingParameters | None:
+    """The material and packing of the RVEs the run prepares (None with an RVE file, which
+    carries its own: then no RVE material field may be set)."""
+    if p.rve is None:
+        return packing_parameters(p, _particles(p, context), context.confining, "--confining")
+    given = p.rve_material_given()
+    if given:
+        raise UsageError(f"{', '.join(given)} set{'s' if len(given) == 1 else ''} the "
+                         f"material of the RVEs a run prepares, but --rve {p.rve} carries its "
+                         "own (give them to `granular-material prepare` instead)")
+    return None
+
+
+def check_run(p: DEMParameters, context: RunContext) -> int:
+    """Before any work: the parameters can run in ``context``; the discs per Gauss point."""
+    if p.rve is not None and not p.rve.exists():
+        raise FileNotFoundError(f"--rve {p.rve} does not exist")
+    if p.reuse_tol > 0 and context.convergence == "displacement":
+        raise UsageError(f"--reuse-tol {p.reuse_tol:g} needs --convergence force (with "
+                         "--relaxation aitken, as measured): a reused RVE answers the same "
+                         "stress for any change of grad u below the tolerance, so the Newton "
+                         "corrections stall above --rtol and no increment passes the "
+                         "displacement test")
+    for name in ("independent", "compare_dem"):
+        if getattr(p, name) and context.test != "single-element":
+            raise UsageError(f"--{name.replace('_', '-')} is single-element's")
+    return _particles(p, context)
+
+
+def material_for_run(p: DEMParameters, context: RunContext) -> DEMMaterial:
+    """The DEM material of the run (not yet allocated), its inputs checked first."""
+    from granular_material_skfem.material import DEMMaterial
+
+    particles = _particles(p, context)
+    replicate = _replicate(p, context)
+    packing = _packing(p, context)
+    return DEMMaterial(rve=p.rve, particles=particles, seed=p.seed, pressure=context.confining,
+                       replicate=replicate, device=context.device, shards=context.shards,
+                       progress=context.progress, tangent=p.tangent,
+                       perturbation=p.perturbation, backend=context.backend, packing=packing,
+                       reuse_tol=p.reuse_tol, reuse_correction=p.reuse_correction,
+                       drive=p.drive, max_dem_steps=p.max_dem_steps,
+                       max_strain_per_step=p.max_strain_per_step)
+
+
+def run_summary(p: DEMParameters, context: RunContext) -> dict[str, Any]:
+    """What the run's summary says of the material: its RVEs' (``rve_material``), SI units,
+    angles in rad."""
+    packing = _packing(p, context)
+    if packing is None:
+        from granular_material.dem import load_rve
+
+        data = load_rve(p.rve)
+        meta, source, target = data.meta, str(p.rve), None
+        radii = (float(data.radius.min()), float(data.radius.max()))
+    else:
+        meta, source, target = packing.meta, "prepared", packing.target_void_ratio
+        radii = packing.radius_range
+    return {"rve_material": {
+        "source": source, "radius_min": radii[0], "radius_max": radii[1],
+        "target_void_ratio": target, "stiffness": dict(meta.stiffness),
+        "friction_angle": meta.friction_angle, "damping": meta.damping,
+        "density": meta.density, "thickness": meta.thickness}}
+
+
+def parameter_names() -> tuple[str, ...]:
+    """The flat names of :class:`DEMParameters`."""
+    return tuple(f.name for f in fields(DEMParameters))
