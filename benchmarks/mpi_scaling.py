@@ -102,8 +102,8 @@ def _evaluate_child(args: argparse.Namespace) -> int:
             material.revert()
         assert response is not None
         digest = hashlib.sha256(response.stress.tobytes() + response.tangent.tobytes())
-        result = {"times": times, "particle_steps": response.particle_steps,
-                  "dem_steps": response.dem_steps, "digest": digest.hexdigest()[:16]}
+        result = {"times": times, "particle_steps": response.costs["particle_steps"],
+                  "dem_steps": response.costs["dem_steps"], "digest": digest.hexdigest()[:16]}
         timings = getattr(material.backend, "timings", None)
         if timings:
             measured = timings[-args.repeats:]

@@ -18,6 +18,7 @@ from run_helpers import without_clock
 
 from granular_material.cli import main
 from granular_material.dem import save_rve
+from granular_material.fem.checkpoint import RunCheckpoint
 from granular_material.procedures import prepare_packing
 
 #: a 16-disc single element of three load steps: a second of DEM per run
@@ -84,6 +85,9 @@ DAMAGE = {
         "records", lambda r: r[0].update(bogus=1))), "unknown field(s) 'bogus'"),
     "record field missing": (STATE, lambda p: _rewrite(p, _edit_json(
         "records", lambda r: r[0].pop("step"))), "lacks the field(s) 'step'"),
+    "record costs not numbers": (STATE, lambda p: _rewrite(p, _edit_json(
+        "records", lambda r: r[0]["costs"].update(dem_steps="7"))),
+        "costs are not numbers by name"),
     "records not a list": (STATE, lambda p: _rewrite(p, lambda a: a.update(
         records=np.array("null"))), "records are not a list"),
     "step out of range": (STATE, lambda p: _rewrite(p, lambda a: a.update(step=np.array(7))),
@@ -198,6 +202,28 @@ def test_random_damage_is_refused_or_resumes_to_the_same_run(runs, tmp_path, cap
             _assert_same_run(runs, out)
             outcomes["resumed"] += 1
     assert outcomes["refused"] >= 6, outcomes
+
+
+def test_records_with_the_old_cost_fields_read_back_and_resume(runs, tmp_path, capsys):
+    """A checkpoint written before ``StepRecord.costs`` (its records hold dem_steps,
+    rve_evaluations and particle_steps as fields of their own) reads back with them in the
+    costs, and resumes to the run that never stopped."""
+    out = tmp_path / "run"
+    shutil.copytree(runs["reference"], out)
+    expected = [r.costs for r in RunCheckpoint(out / "checkpoint").verify().state.records]
+    assert expected and all(list(c) == ["dem_steps", "rve_evaluations", "particle_steps"]
+                            for c in expected)
+
+    def old_fields(records: list[dict]) -> None:
+        for record in records:
+            record.update(record.pop("costs"))
+
+    _rewrite(out / "checkpoint" / STATE, _edit_json("records", old_fields))
+    assert [r.costs for r in RunCheckpoint(out / "checkpoint").verify().state.records] == \
+        expected
+    code, err = _resume(runs, out, capsys)
+    assert code == 0, err
+    _assert_same_run(runs, out)
 
 
 def test_a_whole_checkpoint_still_resumes(runs, tmp_path, capsys):

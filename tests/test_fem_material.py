@@ -60,6 +60,23 @@ def test_response_checks_shapes():
     assert not bad.ok and bad.failed_points().tolist() == [0, 1]
 
 
+def test_response_costs_are_numbers_by_name():
+    """Costs are free-form (the material's names), default empty; NumPy scalars become
+    Python numbers, anything but a real number under a string is refused."""
+    arrays = (np.zeros((2, 2, 2)), np.zeros((2, 2, 2, 2, 2)), np.zeros(2, dtype=np.int8))
+    assert MaterialResponse(*arrays).costs == {}
+    costs = MaterialResponse(*arrays, costs={"calls": np.int64(3), "work": np.float32(0.5),
+                                             "steps": 7}).costs
+    assert costs == {"calls": 3, "work": 0.5, "steps": 7}
+    assert [type(v) for v in costs.values()] == [int, float, int]
+    for bad in ({"on": True}, {"x": "1"}, {"x": None}, {1: 2}):
+        with pytest.raises(ValueError, match="cost"):
+            MaterialResponse(*arrays, costs=bad)
+    elastic = LinearElastic()
+    elastic.allocate(2)
+    assert elastic.evaluate(np.zeros((2, 2, 2))).costs == {}  # a closed-form law counts none
+
+
 def test_linear_elastic_plane_strain_constants():
     # plane strain: σ_yy = E(1−ν)/((1+ν)(1−2ν)) ε_yy and σ_xx = Eν/((1+ν)(1−2ν)) ε_yy
     # for ε = ε_yy e_y ⊗ e_y (closed form of isotropic Hooke's law)

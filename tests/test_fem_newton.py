@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -21,6 +23,7 @@ from granular_material.fem import (
     run_biaxial,
 )
 from granular_material.fem.linear_elastic import isotropic_tangent
+from granular_material.fem.runner import COST_COLUMNS
 from granular_material.results import BiaxialWriter
 
 
@@ -182,6 +185,40 @@ def test_failed_points_trigger_cut_back():
     assert record.cutbacks >= 2
     assert solver.load_factor == 1.0
     np.testing.assert_allclose(solver.grad_u()[:, 1, 1], -0.01, rtol=1e-10)
+
+
+class _Costly(_FailsAbove):
+    """:class:`_FailsAbove` with costs of its own names: one call and 0.25 units of work an
+    evaluation (a failed one too), and 3 "dem_steps" an evaluation that fails."""
+
+    def evaluate(self, grad_u):
+        response = super().evaluate(grad_u)
+        costs = {"calls": np.int64(1), "work": 0.25}
+        if not response.ok:
+            costs["dem_steps"] = 3
+        return replace(response, costs=costs)
+
+
+def test_the_driver_sums_each_cost_and_the_table_carries_the_cost_columns():
+    """The driver knows no cost by name: each is summed over the evaluations of a step,
+    failed attempts included; the steps table carries COST_COLUMNS (0 where the material
+    reports none) and no column for the other names."""
+    setup = BiaxialSetup(width=1, height=1, nx=1, ny=1, confining=0.0, axial_strain=0.01)
+    result = run_biaxial(setup, _Costly(limit=3e-3), 2)
+    steps = result.steps.set_index("step")
+    for record in result.records:
+        assert record.cutbacks >= 1
+        assert record.costs == {"calls": record.iterations, "work": 0.25 * record.iterations,
+                                "dem_steps": 3 * record.cutbacks}
+        assert type(record.costs["calls"]) is int
+        row = steps.loc[record.step]
+        assert row["dem_steps"] == 3 * record.cutbacks
+        assert row["rve_evaluations"] == row["particle_steps"] == 0
+    assert list(result.steps.columns[11:15]) == ["iterations", *COST_COLUMNS]
+    assert "calls" not in result.steps and "work" not in result.steps
+    elastic = run_biaxial(setup, LinearElastic(), 1)
+    assert elastic.records[0].costs == {}
+    assert (elastic.steps[list(COST_COLUMNS)] == 0).all(axis=None)
 
 
 def test_full_scale_specimen_mesh_with_linear_elastic():

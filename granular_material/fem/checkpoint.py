@@ -55,6 +55,10 @@ _OPTIONS = "options.json"
 _MANIFEST_VERSION = 1
 #: the name of a material file (nothing else may be named by ``state.npz``)
 _MATERIAL_NAME = re.compile(r"material_\d{5,}\.npz")
+#: the cost fields a Newton record had of its own before its costs became one mapping
+#: (``StepRecord.costs``): the record of a checkpoint written then resumes with them moved
+#: into ``costs``
+_LEGACY_COSTS = ("dem_steps", "rve_evaluations", "particle_steps")
 #: the arrays ``state.npz`` must hold
 _STATE_ARRAYS = ("step", "material", "u", "load_factor", "run_start", "has_last",
                  "last_load", "last_du", "records", "response.stress", "response.tangent",
@@ -195,10 +199,14 @@ def _kind(value: Any) -> str:
 
 def _record(path: Path, record: Any) -> StepRecord:
     """A :class:`StepRecord` from its saved dictionary; CheckpointError naming an unknown or
-    missing field."""
+    missing field, or for costs that are not numbers by name. The cost fields of a record
+    saved before ``StepRecord.costs`` (:data:`_LEGACY_COSTS`) are moved into its costs."""
     if not isinstance(record, dict):
         raise CheckpointError(f"{path}: a Newton record is a {type(record).__name__}, not a "
                               "record")
+    if "costs" not in record and any(name in record for name in _LEGACY_COSTS):
+        costs = {name: record[name] for name in _LEGACY_COSTS if name in record}
+        record = {k: v for k, v in record.items() if k not in costs} | {"costs": costs}
     known = {f.name: f for f in fields(StepRecord)}
     unknown = sorted(set(record) - set(known))
     if unknown:
@@ -209,6 +217,10 @@ def _record(path: Path, record: Any) -> StepRecord:
     if missing:
         raise CheckpointError(f"{path}: a Newton record lacks the field(s) "
                               f"{', '.join(map(repr, missing))}")
+    costs = record.get("costs", {})
+    if not (isinstance(costs, dict) and all(
+            isinstance(v, int | float) and not isinstance(v, bool) for v in costs.values())):
+        raise CheckpointError(f"{path}: a Newton record's costs are not numbers by name")
     return StepRecord(**record)
 
 

@@ -58,22 +58,23 @@ class MaterialResponse:
         stress: Cauchy stress σ [Pa], tension positive, shape (n, 2, 2), float64.
         tangent: D_ijkl = ∂σ_ij/∂(∂u_k/∂x_l) [Pa], shape (n, 2, 2, 2, 2), float64.
         status: :class:`PointStatus` per point, shape (n,), int8.
-        dem_steps: DEM steps the evaluation ran (0 for closed-form laws).
-        rve_evaluations: RVE strain paths the evaluation ran (points not stepped, e.g.
-            reused, do not count).
-        particle_steps: disc-steps the evaluation ran (Σ steps × discs over the paths).
+        costs: what the evaluation cost, by name: numbers (int or float) whose names and
+            units are the material's (e.g. the DEM material reports ``dem_steps``,
+            ``rve_evaluations`` and ``particle_steps``); empty for a material that counts
+            nothing (e.g. a closed-form law). The Newton driver sums each name over the
+            evaluations of a load step (:attr:`~granular_material.fem.newton.StepRecord.costs`)
+            and knows none of them; NumPy scalars are stored as Python numbers.
         fields: further per-point scalars for output (e.g. ``void_ratio``), each shape (n,).
     """
 
     stress: np.ndarray
     tangent: np.ndarray
     status: np.ndarray
-    dem_steps: int = 0
-    rve_evaluations: int = 0
-    particle_steps: int = 0
+    costs: Mapping[str, int | float] = field(default_factory=dict)
     fields: Mapping[str, np.ndarray] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "costs", _costs(self.costs))
         n = self.stress.shape[0]
         if self.stress.shape != (n, 2, 2):
             raise ValueError(f"stress must have shape (n, 2, 2), got {self.stress.shape}")
@@ -99,6 +100,21 @@ class MaterialResponse:
         bad |= ~np.isfinite(self.stress).all(axis=(1, 2))
         bad |= ~np.isfinite(self.tangent).all(axis=(1, 2, 3, 4))
         return np.flatnonzero(bad)
+
+
+def _costs(costs: Mapping[str, Any]) -> dict[str, int | float]:
+    """``costs`` as a dict of names to Python ints and floats; ValueError for a name that is
+    not a string or a value that is not a real number (booleans included)."""
+    out: dict[str, int | float] = {}
+    for name, value in costs.items():
+        if not isinstance(name, str):
+            raise ValueError(f"a cost's name must be a string, got {name!r}")
+        if isinstance(value, np.generic):
+            value = value.item()
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise ValueError(f"cost {name!r} must be an int or a float, got {value!r}")
+        out[name] = value
+    return out
 
 
 @runtime_checkable

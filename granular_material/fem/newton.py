@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -168,10 +168,10 @@ class StepRecord:
         step: load step number, 1-based.
         load_factor: λ at the end of the step.
         iterations: material evaluations used, all attempts and sub-increments included.
-        dem_steps: DEM steps run by the material, all attempts included (0 for closed-form
-            laws).
-        rve_evaluations: RVE strain paths run, all attempts included.
-        particle_steps: DEM disc-steps run, all attempts included.
+        costs: the material's costs (:attr:`MaterialResponse.costs
+            <granular_material.fem.material.MaterialResponse.costs>`) of every evaluation,
+            all attempts and sub-increments included, summed name by name; a name no
+            evaluation reported is absent (empty for a material that counts nothing).
         cutbacks: how many times an increment of this step was halved.
         stalled: increments accepted on a stalled residual (``NewtonSettings.stall_rtol``)
             or on a small correction once the residual stalled
@@ -190,9 +190,7 @@ class StepRecord:
     step: int
     load_factor: float
     iterations: int = 0
-    dem_steps: int = 0
-    rve_evaluations: int = 0
-    particle_steps: int = 0
+    costs: dict[str, int | float] = field(default_factory=dict)
     cutbacks: int = 0
     stalled: int = 0
     residual_history: list[list[float]] = field(default_factory=list)
@@ -241,7 +239,7 @@ class _Attempt:
     f_int: np.ndarray | None
     history: list[float]
     iterations: int
-    cost: np.ndarray  # DEM steps, RVE paths, particle-steps
+    cost: dict[str, int | float]  # the material's costs, summed over the evaluations
     reason: str
     stalled: bool = False
     by: str = ""
@@ -251,6 +249,12 @@ class _Attempt:
 @BilinearForm
 def _mass(u, v, _):
     return u[0] * v[0] + u[1] * v[1]
+
+
+def _add_costs(total: dict[str, int | float], costs: Mapping[str, int | float]) -> None:
+    """Add ``costs`` to ``total`` name by name (a name new to ``total`` starts at 0)."""
+    for name, value in costs.items():
+        total[name] = total.get(name, 0) + value
 
 
 def _no_progress(history: list[float], window: int) -> bool:
@@ -386,7 +390,7 @@ class NewtonSolver:
             last_step, last_du = self._last
             du[interior] = (target - self.load_factor) / last_step * last_du[interior]
         history: list[float] = []
-        cost = np.zeros(3, dtype=np.int64)
+        cost: dict[str, int | float] = {}
         aitken = AitkenRelaxation() if s.relaxation == "aitken" else None
         corrections: list[float] = []
         by_displacement = s.convergence == "displacement"
@@ -399,8 +403,7 @@ class NewtonSolver:
             grad_step = gauss_points_grad(self.basis, du)
             grad_u = kin.material_gradient(grad_n, grad_step)
             response = self.material.evaluate(grad_u)
-            cost += (int(response.dem_steps), int(response.rve_evaluations),
-                     int(response.particle_steps))
+            _add_costs(cost, response.costs)
             if not response.ok:
                 bad = response.failed_points()
                 return _Attempt(False, du, None, None, history, it, cost,
@@ -466,9 +469,7 @@ class NewtonSolver:
             end = min(self.load_factor + increment, target)
             attempt = self._increment(end)
             record.iterations += attempt.iterations
-            record.dem_steps += int(attempt.cost[0])
-            record.rve_evaluations += int(attempt.cost[1])
-            record.particle_steps += int(attempt.cost[2])
+            _add_costs(record.costs, attempt.cost)
             record.residual_history.append(attempt.history)
             record.correction_history.append(attempt.corrections)
             if attempt.converged:
@@ -528,8 +529,7 @@ class NewtonSolver:
                 if on_step is not None:
                     on_step(self, record)
                 last = record.residual_history[-1][-1] if record.residual_history[-1] else 0.0
-                bar.set_postfix(it=record.iterations, cut=record.cutbacks,
-                                res=f"{last:.2g}", dem_steps=record.dem_steps,
-                                rves=record.rve_evaluations)
+                bar.set_postfix({"it": record.iterations, "cut": record.cutbacks,
+                                 "res": f"{last:.2g}", **record.costs})
                 bar.update()
         return self.records

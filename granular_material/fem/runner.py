@@ -10,9 +10,12 @@ Tables (tension positive unless the column says otherwise):
     [Pa] (averages over the Gauss points' current volumes of the Cauchy stress),
     volumetric_strain (small strain: tr ε volume average; finite strain: the specimen's area
     change A/A0 − 1; contraction negative), void_ratio (mean, NaN if
-    the material has none), iterations, dem_steps (DEM steps run: each evaluation's longest
-    RVE path, summed), rve_evaluations (RVE paths run), particle_steps (DEM disc-steps run),
-    cutbacks, stalled (increments accepted on a stalled residual), wall_time [s],
+    the material has none), iterations, the cost columns :data:`COST_COLUMNS` (the step's
+    :attr:`StepRecord.costs <granular_material.fem.newton.StepRecord.costs>` of those names,
+    0 for a name the material does not report: the DEM material's dem_steps (DEM steps run:
+    each evaluation's longest RVE path, summed), rve_evaluations (RVE paths run) and
+    particle_steps (DEM disc-steps run)), cutbacks, stalled (increments accepted on a
+    stalled residual), wall_time [s],
     residual_history (JSON list of lists of ‖R‖/‖R₀‖), converged_by (the test that accepted
     each increment of the step, joined by "+": force, force-atol, displacement or stall; empty
     for step 0), correction_history (JSON list of lists of ‖δu‖_L2/‖Δu‖_L2, one per
@@ -47,7 +50,13 @@ from granular_material.fem.newton import NewtonError, NewtonSettings, NewtonSolv
 from granular_material.fem.problems import BiaxialProblem, BiaxialSetup, build_biaxial
 from granular_material.fem.tracking import Tracking
 
-__all__ = ["BiaxialResult", "RunObserver", "run_biaxial"]
+__all__ = ["COST_COLUMNS", "BiaxialResult", "RunObserver", "run_biaxial"]
+
+#: the cost columns that every ``steps`` table carries, in this order, after
+#: ``iterations``: each is the step's ``StepRecord.costs`` entry of that name, 0 when the
+#: material does not report it (so the tables of every material have the same columns).
+#: Costs of other names stay in the records and make no column.
+COST_COLUMNS: tuple[str, ...] = ("dem_steps", "rve_evaluations", "particle_steps")
 
 
 class RunObserver(Protocol):
@@ -127,9 +136,7 @@ def _rows(solver: NewtonSolver, problem: BiaxialProblem, record: StepRecord | No
         "volumetric_strain": float(w_reference @ volumetric),
         "void_ratio": float(w @ fields["void_ratio"]) if "void_ratio" in fields else np.nan,
         "iterations": record.iterations if record else 0,
-        "dem_steps": record.dem_steps if record else 0,
-        "rve_evaluations": record.rve_evaluations if record else 0,
-        "particle_steps": record.particle_steps if record else 0,
+        **{name: record.costs.get(name, 0) if record else 0 for name in COST_COLUMNS},
         "cutbacks": record.cutbacks if record else 0,
         "stalled": record.stalled if record else 0,
         "wall_time": record.wall_time if record else 0.0,

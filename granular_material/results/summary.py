@@ -41,7 +41,11 @@ def summarize_biaxial(curve: pd.DataFrame) -> BiaxialSummary:
 
 
 def run_summary(result: BiaxialResult, wall: float) -> dict[str, Any]:
-    """The summary of a FEM biaxial run: peak, Newton cost, DEM steps, wall time [s], error."""
+    """The summary of a FEM biaxial run: peak, Newton cost, the material's costs (each cost
+    column of :data:`~granular_material.fem.runner.COST_COLUMNS` summed over the steps), wall
+    time [s], error."""
+    from granular_material.fem.runner import COST_COLUMNS  # a result means fem is loaded
+
     steps = result.steps
     peak, ratio = find_peak(steps["axial_strain"].to_numpy(), steps["stress_ratio"].to_numpy())
     done = steps[steps["step"] > 0]
@@ -55,9 +59,7 @@ def run_summary(result: BiaxialResult, wall: float) -> dict[str, Any]:
         "steps_completed": len(done),
         "cutbacks": int(done["cutbacks"].sum()),
         "stalled_increments": int(done["stalled"].sum()),
-        "dem_steps": int(done["dem_steps"].sum()),
-        "rve_evaluations": int(done["rve_evaluations"].sum()),
-        "particle_steps": int(done["particle_steps"].sum()),
+        **{name: int(done[name].sum()) for name in COST_COLUMNS},
         "wall_time_s": wall,
         "error": result.error,
     }

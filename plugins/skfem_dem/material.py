@@ -189,8 +189,10 @@ class DEMMaterial:
     def evaluate(self, grad_u: np.ndarray) -> MaterialResponse:
         """Symmetrised Love stress and the tangent for ∇u (n, 2, 2) since the commit.
 
-        ``dem_steps`` is the number of DEM steps run, ``rve_evaluations`` the RVE paths and
-        ``particle_steps`` the disc-steps; ``fields`` holds ``void_ratio``,
+        ``costs`` holds ``dem_steps`` (DEM steps run: the longest RVE path of each drive,
+        summed over the drives), ``rve_evaluations`` (RVE paths run; points not stepped,
+        e.g. reused, do not count) and ``particle_steps`` (disc-steps run, Σ steps × discs
+        over the paths); ``fields`` holds ``void_ratio``,
         ``coordination`` and ``stress_skew`` (σxy − σyx of the Love sum over 2 [Pa], what
         the symmetrisation removed). RVEs that blew up are reported with
         ``PointStatus.FAILED``.
@@ -210,8 +212,9 @@ class DEMMaterial:
         love = f64(h.stress)
         return MaterialResponse(
             stress=0.5 * (love + np.swapaxes(love, 1, 2)), tangent=f64(h.tangent),
-            status=status, dem_steps=ev.dem_steps, rve_evaluations=ev.rve_evaluations,
-            particle_steps=ev.particle_steps,
+            status=status,
+            costs={"dem_steps": ev.dem_steps, "rve_evaluations": ev.rve_evaluations,
+                   "particle_steps": ev.particle_steps},
             fields={"void_ratio": f64(h.void_ratio), "coordination": f64(h.coordination),
                     "stress_skew": 0.5 * (love[:, 0, 1] - love[:, 1, 0])},
         )
