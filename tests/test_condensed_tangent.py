@@ -13,7 +13,7 @@ from granular_material.dem.condensed import condensed_tangent, contact_network
 from granular_material.dem.homogenization import spin_tangent
 from granular_material.procedures import drive_grad_u, prepare_packing
 
-KN, KT = 3.0e6, 2.4e6  # N/m (DESIGN §5)
+KN, KT = 3.0e6, 2.4e6  # N/m (docs/design.md#wu-2025)
 THICKNESS = 0.1  # m
 SPIN = np.array([[0.0, -1.0], [1.0, 0.0]])
 

@@ -39,7 +39,8 @@ def test_two_disc_normal_force_is_kn_times_overlap(two_discs):
 
 
 def test_frictmat_stiffness_follows_radii(two_discs):
-    # DESIGN §5: kn = 2 E r1 r2 / (r1 + r2) = 3e6 N/m for two 5 mm discs, E = 6e8 Pa
+    # docs/design.md#guo-zhao-rve: kn = 2 E r1 r2 / (r1 + r2) = 3e6 N/m for two 5 mm discs,
+    # E = 6e8 Pa
     overlap = 1e-4
     data = two_discs((0.05, 0.1), (0.06 - overlap, 0.1), damping=0.0,
                      stiffness={"law": "frictmat", "young": 6e8, "kt_over_kn": 0.8})

@@ -117,7 +117,8 @@ def test_consolidated_packing_is_at_p0_and_love_stress_symmetric(small_rve_path)
     # at equilibrium the moment balance of every disc makes Love's stress symmetric
     assert abs(sigma[0, 1] - sigma[1, 0]) < 2e-3 * 100e3
     assert h.unbalanced_force[0] < 0.02
-    # dense, frictionless-prepared packing: e close to Guo & Zhao's 0.175 (DESIGN §5)
+    # dense, frictionless-prepared packing: e close to Guo & Zhao's 0.175
+    # (docs/design.md#yade-anchors)
     assert 0.12 < h.void_ratio[0] < 0.22
     assert 3.5 < h.coordination[0] < 4.6
 

@@ -1,9 +1,9 @@
 """The extremes matrix (issue 12, "Reliability"): each case names what it checks and asserts
 either a bounded, physically sensible result or a clear error raised before any work.
 
-Units SI, stress tension positive (DESIGN §3). The packings are small (12–64 discs) so that
-the whole matrix runs in about a minute on two CPU cores; the README's "Numerical extremes"
-table gives the outcomes measured with it.
+Units SI, stress tension positive (docs/design.md#conventions). The packings are small
+(12–64 discs) so that the whole matrix runs in about a minute on two CPU cores; the README's
+"Numerical extremes" table gives the outcomes measured with it.
 """
 
 from __future__ import annotations

@@ -222,7 +222,7 @@ def test_the_driver_sums_each_cost_and_the_table_carries_the_cost_columns():
 
 
 def test_full_scale_specimen_mesh_with_linear_elastic():
-    """Wu et al.'s specimen: 50 mm × 100 mm, 10 × 15 Q4, 600 Gauss points (DESIGN §5).
+    """Wu et al.'s specimen: 50 mm × 100 mm, 10 × 15 Q4, 600 Gauss points (docs/design.md#wu-2025).
 
     With a linear-elastic material the smooth-platen test stays homogeneous, so the platen
     stress is the plane-strain closed form p + E/(1−ν²) ε_a.

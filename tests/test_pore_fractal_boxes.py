@@ -38,8 +38,8 @@ def analytic_images() -> dict[str, np.ndarray]:
 
 @pytest.mark.parametrize("name", list(analytic_images()))
 def test_boxes_in_pixels_give_the_closed_forms_of_the_levels(name):
-    # the analytic checks of DESIGN §5 under boxes given in pixels: the same boxes as
-    # k = 1…8, so the same spectrum (the closed forms are checked on k in the other file)
+    # the analytic checks of docs/design.md#multifractal under boxes given in pixels: the same
+    # boxes as k = 1…8, so the same spectrum (the closed forms are checked on k in the other file)
     image = analytic_images()[name]
     by_level = multifractal_spectrum(image)
     by_pixels = multifractal_spectrum(image, box_px=dyadic(256, range(1, 9)))

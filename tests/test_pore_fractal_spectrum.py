@@ -1,4 +1,4 @@
-"""Multifractal spectrum against closed forms (DESIGN §5) and its invariants."""
+"""Multifractal spectrum against closed forms (docs/design.md#multifractal) and its invariants."""
 
 from __future__ import annotations
 
@@ -19,8 +19,9 @@ def cascade(weights: tuple[float, float, float, float], levels: int) -> np.ndarr
 
 
 def cascade_closed_form(weights, q: np.ndarray) -> dict[str, np.ndarray]:
-    """DESIGN §5: τ = −log₂ Σ p_jᑫ, α = −Σ p_jᑫ log₂ p_j / Σ p_jᑫ, f = qα − τ, D_q = τ/(q−1);
-    sums over the non-zero weights only (empty boxes are excluded for every q)."""
+    """docs/design.md#multifractal: τ = −log₂ Σ p_jᑫ, α = −Σ p_jᑫ log₂ p_j / Σ p_jᑫ,
+    f = qα − τ, D_q = τ/(q−1); sums over the non-zero weights only (empty boxes are excluded
+    for every q)."""
     p = np.asarray([w for w in weights if w > 0], dtype=np.float64)
     # log domain: p_jᑫ = exp(q ln p_j), scaled by its largest term
     log_w = q[:, None] * np.log(p)[None, :]
@@ -45,15 +46,15 @@ def assert_constant_spectrum(result, value: float) -> None:
 
 @pytest.mark.parametrize("n", [256, 768])
 def test_uniform_image_has_dimension_two(n):
-    # a uniform measure fills the plane: D_q = α = f = 2 (DESIGN §5); 768 = 3·256 is not a
-    # power of two and must work without padding
+    # a uniform measure fills the plane: D_q = α = f = 2 (docs/design.md#multifractal);
+    # 768 = 3·256 is not a power of two and must work without padding
     result = multifractal_spectrum(np.ones((n, n)))
     assert_constant_spectrum(result, 2.0)
     np.testing.assert_allclose(result.r2, 1.0, atol=1e-12)
 
 
 def test_one_pixel_row_has_dimension_one():
-    # the only non-zero pixels are one full row: a line, D = 1 (DESIGN §5)
+    # the only non-zero pixels are one full row: a line, D = 1 (docs/design.md#multifractal)
     image = np.zeros((256, 256))
     image[77] = 1.0
     assert_constant_spectrum(multifractal_spectrum(image), 1.0)
@@ -68,7 +69,8 @@ def test_single_pixel_has_dimension_zero():
 
 def test_dyadic_gasket_has_dimension_log2_3():
     # (x & y) == 0 is the dyadic Sierpiński gasket: 3 of 4 sub-boxes at every level, equal
-    # masses, so D_q = α = f = log₂ 3 for every q, negative q included (DESIGN §5)
+    # masses, so D_q = α = f = log₂ 3 for every q, negative q included
+    # (docs/design.md#multifractal)
     y, x = np.mgrid[:256, :256]
     result = multifractal_spectrum((x & y) == 0)
     assert_constant_spectrum(result, np.log2(3.0))

@@ -8,7 +8,7 @@ import pytest
 from granular_material_validation import metrics
 from granular_material_validation.engine_runner import voigt_tangent
 
-P0 = 1e5  # confining stress [Pa], as the biaxial test of DESIGN §5
+P0 = 1e5  # confining stress [Pa], as the biaxial test of docs/design.md#yade-anchors
 
 
 def biaxial_curve(peak: float = 2.9, strain_peak: float = 0.02, shift: float = 0.0,

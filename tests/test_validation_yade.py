@@ -48,8 +48,8 @@ def test_round_trip_through_yade_is_exact_and_kn_matches(tmp_path: Path, law: di
     """Export → YADE scene → back: every disc bit for bit; YADE's stress gives kn.
 
     One contact of overlap δ along x in a cell of area A and thickness t: Love's stress
-    σxx = −kn·δ·d/(A·t), d = r1 + r2 − δ; kn = 2E·r1·r2/(r1 + r2) for frictmat (DESIGN §5),
-    kn itself for the constant law.
+    σxx = −kn·δ·d/(A·t), d = r1 + r2 − δ; kn = 2E·r1·r2/(r1 + r2) for frictmat
+    (docs/design.md#guo-zhao-rve), kn itself for the constant law.
     """
     r1, r2, delta = 5e-3, 4e-3, 1e-5
     data = two_disc_rve(law, delta, r1, r2)
@@ -78,8 +78,9 @@ def test_round_trip_of_a_moving_packing_is_exact(tmp_path: Path) -> None:
 
 
 def test_guo_zhao_packing_matches_design_figures(guo_zhao_seed1) -> None:
-    """DESIGN §5, measured with Debian yade 2023.02a, seed 1: e0 = 0.175, cell 0.198 × 0.197 m,
-    coordination 4.16, isotropic 100 kPa (PeriTriaxController relStressTol 1e-3)."""
+    """docs/design.md#yade-anchors, measured with Debian yade 2023.02a, seed 1: e0 = 0.175,
+    cell 0.198 × 0.197 m, coordination 4.16, isotropic 100 kPa (PeriTriaxController
+    relStressTol 1e-3)."""
     _, data, info = guo_zhao_seed1
     assert data.n_disc == 400
     assert data.radius.min() >= 3e-3 and data.radius.max() <= 7e-3
@@ -95,8 +96,8 @@ def test_guo_zhao_packing_matches_design_figures(guo_zhao_seed1) -> None:
 
 
 def test_yade_biaxial_reproduces_design_anchors(guo_zhao_seed1, tmp_path: Path) -> None:
-    """DESIGN §5 (seed 1): peak σ1/σ3 = 2.90 near 2 % axial strain, largest contraction
-    εv = −0.45 % near 0.9 %. Run to 3 % here; σxx held at −100 kPa."""
+    """docs/design.md#yade-anchors (seed 1): peak σ1/σ3 = 2.90 near 2 % axial strain, largest
+    contraction εv = −0.45 % near 0.9 %. Run to 3 % here; σxx held at −100 kPa."""
     from granular_material_validation.metrics import PEAK_WINDOW, find_peak, stress_ratio
 
     rve, _, _ = guo_zhao_seed1
@@ -150,8 +151,9 @@ def test_yade_drive_kinematics_exact_and_shear2d(guo_zhao_seed1, tmp_path: Path)
 
 
 def test_yade_throughput_is_measured(guo_zhao_seed1) -> None:
-    """DESIGN §5: one YADE core ran 2.3–2.6e6 particle-steps/s on this RVE (2-core machine);
-    a loaded CI machine may be several times slower, so only the order of magnitude is held."""
+    """docs/design.md#yade-anchors: one YADE core ran 2.3–2.6e6 particle-steps/s on this RVE
+    (2-core machine); a loaded CI machine may be several times slower, so only the order of
+    magnitude is held."""
     rve, _, _ = guo_zhao_seed1
     rate = yade_runner.yade_throughput(rve, steps=2000)
     assert rate is not None and 1e5 < rate < 1e8

@@ -67,7 +67,7 @@ def test_wrap_keeps_inside_discs_bit_for_bit_and_shifts_the_others() -> None:
 
 
 def test_yade_total_velocity_becomes_the_fluctuation() -> None:
-    """YADE stores v = v' + L·x; the importer returns v' (DESIGN §3: fluctuation)."""
+    """YADE stores v = v' + L·x; the importer returns v' (docs/design.md#kinematics)."""
     data = grid_rve(seed=2)
     scene = yade_io.rve_to_scene(data)
     lg = np.array([[0.3, 0.1], [-0.05, -0.2]])

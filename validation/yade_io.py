@@ -1,4 +1,4 @@
-"""Exporter and importer between our RVE file (DESIGN §3) and a YADE scene file.
+"""Exporter and importer between our RVE file (docs/design.md#rve-file) and a YADE scene file.
 
 The scene file is a JSON object read by ``yade_scripts/scene_io.py`` inside YADE (Debian's
 python3, no numpy needed). JSON floats are written with ``repr`` and parsed back to the same

@@ -143,7 +143,8 @@ def yade_prepare_guo_zhao(out_rve: str | Path, seed: int = 1, particles: int = 4
                           pressure: float = 1e5, friction_angle: float = 0.5,
                           workdir: str | Path | None = None,
                           timeout: float = DEFAULT_TIMEOUT) -> tuple[RVEData, dict[str, Any]]:
-    """Guo & Zhao's RVE built by YADE (DESIGN §5), written to ``out_rve`` in our format.
+    """Guo & Zhao's RVE built by YADE (docs/design.md#guo-zhao-rve), written to ``out_rve`` in
+    our format.
 
     Returns the RVE data and YADE's preparation summary: ``stress`` (sxx, syy, sxy) [Pa],
     ``void_ratio``, ``coordination``, ``steps``, ``wall_s`` (consolidation only) and

@@ -62,7 +62,8 @@ def float_type(dtype: str) -> Any:
 
 
 def disc_mass(radius: np.ndarray, meta: RVEMeta) -> np.ndarray:
-    """Mass [kg] of discs of ``radius`` [m]: cylinders ρ·t·π·r² (DESIGN §3), same shape."""
+    """Mass [kg] of discs of ``radius`` [m]: cylinders ρ·t·π·r² (docs/design.md#units), same
+    shape."""
     return meta.density * meta.thickness * np.pi * np.asarray(radius, dtype=np.float64) ** 2
 
 

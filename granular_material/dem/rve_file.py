@@ -1,4 +1,4 @@
-"""The RVE file: a batch of periodic disc packings in one ``.npz`` (DESIGN §3).
+"""The RVE file: a batch of periodic disc packings in one ``.npz`` (docs/design.md#rve-file).
 
 The file is the exchange format between our engine, YADE and users. Arrays, all SI and
 float64, with the batch axis first:

@@ -1,4 +1,4 @@
-"""Guo & Zhao's RVE preparation (DESIGN §5), written for our scene format.
+"""Guo & Zhao's RVE preparation (docs/design.md#guo-zhao-rve), written for our scene format.
 
 Discs with radius uniform in [rMean(1 − fuzz), rMean(1 + fuzz)] are placed by YADE's
 ``SpherePack.makeCloud`` in a square periodic cell, consolidated without friction to an
