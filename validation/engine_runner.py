@@ -3,10 +3,13 @@
 The command line (``prepare``, ``biaxial-dem``, ``dem-drive``, ``single-element``) runs as a
 subprocess of this interpreter (``python -m granular_material.cli``), so its wall time is
 measured the same way as YADE's: the whole process, start-up included.
+:func:`biaxial_option_names` reads which options the ``biaxial`` command has from its
+parser, built in this process.
 """
 
 from __future__ import annotations
 
+import argparse
 import json
 import resource
 import subprocess
@@ -20,6 +23,8 @@ import pandas as pd
 
 __all__ = [
     "EngineError",
+    "biaxial_option_names",
+    "biaxial_options",
     "engine_available",
     "ours_biaxial",
     "ours_drive",
@@ -152,11 +157,27 @@ def ours_single_element(rve: str | Path, out_dir: str | Path, axial_strain: floa
     return curve.drop(columns=["residual_history"], errors="ignore"), result
 
 
+def _biaxial_parser() -> argparse.ArgumentParser:
+    """The parser of ``granular-material biaxial``, built in this process (nothing run)."""
+    from granular_material.cli import fem
+
+    parser = argparse.ArgumentParser(prog="granular-material")
+    subparsers = parser.add_subparsers(dest="command")
+    fem.register(subparsers)
+    return subparsers.choices["biaxial"]
+
+
+def biaxial_option_names() -> frozenset[str]:
+    """The option strings (``--element``, ``--convergence`` …) of ``granular-material
+    biaxial``, read from its parser in this process."""
+    return frozenset(s for action in _biaxial_parser()._actions
+                     for s in action.option_strings)
+
+
 def biaxial_options() -> str:
-    """The help text of ``granular-material biaxial`` (which options this engine has)."""
-    proc = subprocess.run([sys.executable, "-m", "granular_material.cli", "biaxial", "--help"],
-                          capture_output=True, text=True, timeout=120, check=False)
-    return proc.stdout
+    """The help text of ``granular-material biaxial`` (which options this engine has), from
+    its parser in this process."""
+    return _biaxial_parser().format_help()
 
 
 def ours_femxdem_biaxial(rve: str | Path, out_dir: str | Path,
