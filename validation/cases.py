@@ -144,7 +144,10 @@ class SeedRun:
     ``yade`` is the reference curve, ``ours`` the curve judged (our pure DEM, or our FEM
     single element), ``baseline`` the perturbed YADE run, ``curves`` further curves drawn
     in the plot (``ours_dem``: our pure-DEM biaxial beside the FEM element). Wall times
-    [s] are those of the whole subprocesses; ``yade_run_s`` is YADE's stepping alone.
+    [s]: ``yade_wall_s`` of YADE's whole subprocess (``yade_run_s``: its stepping alone);
+    ``ours_wall_s`` of our engine's call in this process for the pure-DEM runs (start-up
+    excluded), of the whole ``single-element`` subprocess for the FEM element (see
+    :mod:`granular_material_validation.engine_runner`).
     """
 
     seed: int

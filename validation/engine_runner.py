@@ -1,17 +1,37 @@
-"""Our engine's side of the cross-runs, through its command line (and its API for tangents).
+"""Our engine's side of the cross-runs: its DEM in this process, its FEM through the CLI.
 
-The command line (``prepare``, ``biaxial-dem``, ``dem-drive``, ``single-element``) runs as a
-subprocess of this interpreter (``python -m granular_material.cli``), so its wall time is
-measured the same way as YADE's: the whole process, start-up included.
+The DEM runs (:func:`ours_prepare`, :func:`ours_biaxial`, :func:`ours_drive`) call in this
+process the library functions that the commands ``prepare``, ``biaxial-dem`` and
+``dem-drive`` call (``prepare_packing`` and ``save_rve``; ``DEMBatch`` of ``load_rve`` and
+``biaxial_test``; ``drive_grad_u`` on ``path_increment``), with the commands' default
+options, and write the same RVE file or CSV table as the command, bit for bit; each returns
+the summary the command prints with ``--json``. Where the command would exit non-zero (bad
+input, a blow-up, a servo that lost σxx) :class:`EngineError` is raised instead, after
+writing what the command keeps. Their ``wall_s`` [s] and ``cpu_s`` [s]
+(``time.process_time``: this process, all its threads) measure the call alone: the
+interpreter's start-up and the imports are not in them, while the first DEM call of a
+process does include warp's initialisation and its kernels' loading. YADE's ``wall_s``
+(:mod:`granular_material_validation.yade_runner`) is its whole process, its own start-up
+included; its ``run_s`` is its stepping alone. :func:`ours_tangents` applies a ∇u path in
+this process too, the way ``dem-drive`` does, and reads the tangents on the way.
+
+The FEM × DEM runs (:func:`ours_single_element`, :func:`ours_femxdem_biaxial`) still run the
+command line (``single-element``, ``biaxial``) as a subprocess of this interpreter
+(``python -m granular_material.cli``); their ``wall_s`` is the whole process, start-up
+included, and ``cpu_s`` its CPU time. :func:`biaxial_option_names` reads which options the
+``biaxial`` command has from its parser, built in this process.
 """
 
 from __future__ import annotations
 
+import argparse
+import contextlib
 import json
 import resource
 import subprocess
 import sys
 import time
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -20,6 +40,8 @@ import pandas as pd
 
 __all__ = [
     "EngineError",
+    "biaxial_option_names",
+    "biaxial_options",
     "engine_available",
     "ours_biaxial",
     "ours_drive",
@@ -34,7 +56,8 @@ DEFAULT_TIMEOUT = 900.0
 
 
 class EngineError(RuntimeError):
-    """Our engine's command failed or timed out; the message holds the tail of its stderr."""
+    """Our engine's run failed: a command (the tail of its stderr in the message) failed or
+    timed out, or an in-process DEM run ended where its command would exit non-zero."""
 
 
 def engine_available() -> bool:
@@ -80,50 +103,235 @@ def _device(device: str | None) -> list[str]:
     return [] if device is None else ["--device", device]
 
 
+#: the exceptions of an engine call that the command reports with exit code 2 (bad input:
+#: ``UsageError``, ``ValueError``, ``OSError``) or 1 (``RuntimeError``, e.g. a blow-up)
+_FAILURES = (ValueError, RuntimeError, OSError)
+
+
+@contextlib.contextmanager
+def _engine_call(command: str, timing: dict[str, float]) -> Iterator[None]:
+    """Time the block (``wall_s``, ``cpu_s`` into ``timing``); the failures the command would
+    end on (:data:`_FAILURES`) are raised as :class:`EngineError` naming ``command``."""
+    cpu0 = time.process_time()
+    start = time.perf_counter()
+    try:
+        yield
+    except _FAILURES as exc:
+        raise EngineError(f"granular-material {command} (in process) failed: "
+                          f"{type(exc).__name__}: {exc}") from exc
+    finally:
+        timing["wall_s"] = time.perf_counter() - start
+        timing["cpu_s"] = time.process_time() - cpu0
+
+
+def _summary(report: dict[str, Any], timing: dict[str, float], command: str
+             ) -> dict[str, Any]:
+    """``report`` as the command's ``--json`` prints it (read back through JSON, ``error``
+    set), ``cpu_s`` and ``wall_s`` added; :class:`EngineError` when it has an ``error``."""
+    error = report.pop("error", None)
+    result = json.loads(json.dumps({**report, "error": error}, default=str))
+    if error is not None:
+        raise EngineError(f"granular-material {command} (in process) failed: {error}")
+    result["cpu_s"] = timing["cpu_s"]
+    result["wall_s"] = timing["wall_s"]
+    return result
+
+
+def _rve_zero(csv: str | Path) -> pd.DataFrame:
+    """The rows of RVE 0 of a CSV the command wrote, as read back from the file."""
+    frame = pd.read_csv(csv)
+    if "rve" in frame.columns:
+        frame = frame[frame["rve"] == 0].reset_index(drop=True)
+    return frame
+
+
 def ours_prepare(out: str | Path, particles: int = 400, seed: int = 1, pressure: float = 1e5,
                  device: str | None = None,
                  timeout: float = DEFAULT_TIMEOUT) -> dict[str, Any]:
-    """``granular-material prepare``: its JSON summary plus ``wall_s`` [s]."""
-    result, wall = _run(["prepare", "--particles", str(particles), "--seed", str(seed),
-                         "--pressure", repr(float(pressure)), "--out", str(out),
-                         *_device(device)], timeout)
-    result["wall_s"] = wall
-    return result
+    """``granular-material prepare`` in this process: one RVE of ``particles`` discs, the
+    command's default material and radii, consolidated to ``pressure`` [Pa], written to
+    ``out``; the command's JSON summary plus ``wall_s`` and ``cpu_s`` [s] of the call.
+
+    ``timeout`` is not enforced (kept for the callers of the former subprocess run).
+    """
+    from granular_material.cli.options import RVE_MATERIAL_DEFAULTS, scalar_or_list
+    from granular_material.dem import RVEMeta, save_rve
+    from granular_material.procedures import prepare_packing
+
+    del timeout
+    d = RVE_MATERIAL_DEFAULTS
+    # the options of add_rve_material_options at their defaults, as packing_parameters
+    # turns them into the packing's parameters
+    if d["law"] == "constant":
+        stiffness = {"law": "constant", "kn": d["kn"], "kt": d["kt"]}
+    else:
+        stiffness = {"law": "frictmat", "young": d["young"], "kt_over_kn": d["kt_over_kn"]}
+    meta = RVEMeta(thickness=d["thickness"], density=d["density"],
+                   friction_angle=d["friction_angle"], damping=d["damping"],
+                   stiffness=stiffness, seed=int(seed))
+    out = Path(out)
+    timing: dict[str, float] = {}
+    with _engine_call("prepare", timing):
+        batch = prepare_packing(
+            n_disc=int(particles), n_rve=1, seed=int(seed), pressure=float(pressure),
+            meta=meta, target_void_ratio=d["target_void_ratio"],
+            radius_range=(d["radius_min"], d["radius_max"]), device=device,
+            dtype="float64", progress=False)
+        h = batch.homogenize()
+        out.parent.mkdir(parents=True, exist_ok=True)
+        save_rve(out, batch.to_data())
+    report: dict[str, Any] = {
+        "void_ratio": scalar_or_list(h.void_ratio),
+        "mean_stress": scalar_or_list(h.mean_stress),
+        "coordination": scalar_or_list(h.coordination),
+        "cell": scalar_or_list(batch.cell()),
+        "particles": batch.n_disc,
+        "batch": batch.n_rve,
+        "timestep": scalar_or_list(batch.dt),
+        "warnings": [],  # only --target-void-ratio warns, not set here
+        "out": str(out),
+    }
+    return _summary(report, timing, "prepare")
 
 
 def ours_biaxial(rve: str | Path, out_csv: str | Path, axial_strain: float = 0.1,
                  confining: float = 1e5, strain_per_step: float = 1e-5,
                  record_every: int = 10, device: str | None = None,
                  timeout: float = DEFAULT_TIMEOUT) -> tuple[pd.DataFrame, dict[str, Any]]:
-    """``granular-material biaxial-dem`` on RVE 0: the curve and its JSON plus ``wall_s``."""
-    result, wall = _run(["biaxial-dem", str(rve), "--axial-strain", repr(float(axial_strain)),
-                         "--confining", repr(float(confining)),
-                         "--strain-per-step", repr(float(strain_per_step)),
-                         "--record-every", str(int(record_every)), "--out", str(out_csv),
-                         *_device(device)], timeout)
-    result["wall_s"] = wall
-    curve = pd.read_csv(out_csv)
-    if "rve" in curve.columns:
-        curve = curve[curve["rve"] == 0].reset_index(drop=True)
-    return curve, result
+    """``granular-material biaxial-dem`` in this process: ``biaxial_test`` of every RVE of
+    the file, the curve written to ``out_csv``; returns the rows of RVE 0 read back from it
+    and the command's JSON summary plus ``wall_s`` and ``cpu_s`` [s] of the call.
+
+    :class:`EngineError` (the CSV written) where the command exits 1: the servo did not
+    hold σxx (off by more than ``SERVO_FAIL`` in most records). ``timeout`` is not enforced.
+    """
+    from granular_material.cli.dem import SERVO_FAIL, SERVO_WARN
+    from granular_material.cli.options import DEFAULT_MAX_DEM_STEPS, scalar_or_list
+    from granular_material.dem import DEMBatch, load_rve
+    from granular_material.procedures import biaxial_test
+    from granular_material.procedures.element_tests import lateral_stress_error
+    from granular_material.results import summarize_biaxial, write_csv
+
+    del timeout
+    confining = float(confining)
+    out_csv = Path(out_csv)
+    timing: dict[str, float] = {}
+    with _engine_call("biaxial-dem", timing):
+        batch = DEMBatch(load_rve(rve), device=device, dtype="float64")
+        curve = biaxial_test(batch, axial_strain=float(axial_strain), confining=confining,
+                             strain_per_step=float(strain_per_step),
+                             record_every=int(record_every), progress=False,
+                             max_steps=DEFAULT_MAX_DEM_STEPS)
+        out_csv.parent.mkdir(parents=True, exist_ok=True)
+        write_csv(curve, out_csv)
+    summaries = [summarize_biaxial(g) for _, g in curve.groupby("rve")]
+    keys = ("peak_stress_ratio", "axial_strain_at_peak", "max_contraction", "final_void_ratio")
+    report: dict[str, Any] = {key: scalar_or_list(np.array([getattr(s, key) for s in summaries]))
+                              for key in keys}
+    held = lateral_stress_error(curve, confining)
+    report |= {"steps": int(curve["step"].max()),
+               "final_sxx": scalar_or_list(held["final_sxx"].to_numpy()),
+               "max_confining_error": scalar_or_list(held["max_error"].to_numpy())}
+    warnings: list[str] = []
+    lost = np.flatnonzero(held["median_error"].to_numpy() > SERVO_FAIL)
+    loose = np.flatnonzero(held["max_error"].to_numpy() > SERVO_WARN)
+    if lost.size:
+        report["error"] = (f"the servo did not hold σxx at −{confining:g} Pa, off by more than "
+                           f"{SERVO_FAIL:.0%} in most records of RVE(s) {lost.tolist()}")
+    elif loose.size:
+        warnings.append(f"σxx strayed from −{confining:g} Pa by more than {SERVO_WARN:.0%} in "
+                        f"some records of RVE(s) {loose.tolist()}")
+    report["warnings"] = warnings
+    report["out"] = str(out_csv)
+    result = _summary(report, timing, "biaxial-dem")
+    return _rve_zero(out_csv), result
 
 
 def ours_drive(rve: str | Path, out_csv: str | Path, grad_u: list[float], increments: int,
                device: str | None = None,
                timeout: float = DEFAULT_TIMEOUT) -> tuple[pd.DataFrame, dict[str, Any]]:
-    """``granular-material dem-drive`` on the file: rows of RVE 0, JSON plus ``wall_s``."""
+    """``granular-material dem-drive`` in this process: the total ∇u ``grad_u`` = [Gxx,
+    Gxy, Gyx, Gyy] in ``increments`` equal increments (``drive_grad_u`` on
+    ``path_increment``, at most 1e-5 strain a DEM step) on every RVE of the file, the path
+    written to ``out_csv``; returns the rows of RVE 0 read back from it and the command's
+    JSON summary plus ``wall_s`` and ``cpu_s`` [s] of the call.
+
+    :class:`EngineError` where the command refuses the path or exits 1 (a blow-up: the path
+    to the last finished increment is written first). ``timeout`` is not enforced.
+    """
+    from granular_material.cli.options import DEFAULT_MAX_DEM_STEPS, scalar_or_list
+    from granular_material.dem import DEMBatch, DEMInstabilityError, load_rve
+    from granular_material.procedures import drive_grad_u, path_increment, path_steps
+    from granular_material.results import write_csv
+
+    del timeout
     if len(grad_u) != 4 or increments < 1:
         raise ValueError(f"grad_u needs 4 numbers and increments >= 1, got {grad_u}, "
                          f"{increments}")
-    text = ",".join(repr(float(g)) for g in grad_u)
-    result, wall = _run(["dem-drive", str(rve), f"--grad-u={text}", "--increments",
-                         str(int(increments)), "--out", str(out_csv), *_device(device)],
-                        timeout)
-    result["wall_s"] = wall
-    path = pd.read_csv(out_csv)
-    if "rve" in path.columns:
-        path = path[path["rve"] == 0].reset_index(drop=True)
-    return path, result
+    grad = np.array([float(g) for g in grad_u]).reshape(2, 2)
+    n = int(increments)
+    max_strain_per_step = 1e-5  # dem-drive's --max-strain-per-step default
+    cap = DEFAULT_MAX_DEM_STEPS
+    out_csv = Path(out_csv)
+    rows: list[pd.DataFrame] = []
+    steps = 0
+    failure: DEMInstabilityError | None = None
+    timing: dict[str, float] = {}
+    with _engine_call("dem-drive", timing):
+        # dem-drive's check of the whole path against --max-dem-steps, before any work
+        planned = sum(int(path_steps(path_increment(grad, k, n)[None], max_strain_per_step,
+                                     max_steps=cap)[0]) for k in range(1, n + 1))
+        if planned > cap:
+            raise ValueError(f"grad_u {grad_u} needs {planned} DEM steps in {n} increments, "
+                             f"more than the {cap} of --max-dem-steps")
+        batch = DEMBatch(load_rve(rve), device=device, dtype="float64")
+        b = batch.n_rve
+
+        def record(increment: int) -> None:
+            h = batch.homogenize()
+            applied = grad * increment / n
+            rows.append(pd.DataFrame({
+                "rve": np.arange(b), "increment": increment,
+                "Gxx": applied[0, 0], "Gxy": applied[0, 1], "Gyx": applied[1, 0],
+                "Gyy": applied[1, 1],
+                "sxx": h.stress[:, 0, 0], "syy": h.stress[:, 1, 1],
+                "sxy": 0.5 * (h.stress[:, 0, 1] + h.stress[:, 1, 0]),
+                "void_ratio": h.void_ratio, "coordination": h.coordination,
+                "steps": steps,
+            }))
+
+        record(0)
+        try:
+            for inc in range(1, n + 1):
+                steps += drive_grad_u(batch, path_increment(grad, inc, n),
+                                      max_strain_per_step=max_strain_per_step,
+                                      max_steps=cap)
+                record(inc)
+        except DEMInstabilityError as exc:  # a blow-up or a collapse: keep the path to it
+            if isinstance(exc, ValueError):  # refused input (a cell made too thin)
+                raise
+            failure = exc
+        table = pd.concat(rows, ignore_index=True)
+        out_csv.parent.mkdir(parents=True, exist_ok=True)
+        write_csv(table, out_csv)
+    finished = int(table["increment"].max())
+    last = table[table["increment"] == finished]
+    report: dict[str, Any] = {
+        "sxx": scalar_or_list(last["sxx"].to_numpy()),
+        "syy": scalar_or_list(last["syy"].to_numpy()),
+        "sxy": scalar_or_list(last["sxy"].to_numpy()),
+        "void_ratio": scalar_or_list(last["void_ratio"].to_numpy()),
+        "coordination": scalar_or_list(last["coordination"].to_numpy()),
+        "steps": steps,
+        "warnings": [],
+        "out": str(out_csv),
+    }
+    if failure is not None:
+        report["error"] = (f"{failure} (in increment {finished + 1} of {n}; the path to "
+                           f"increment {finished} is kept)")
+    report["increments_completed"] = finished
+    result = _summary(report, timing, "dem-drive")
+    return _rve_zero(out_csv), result
 
 
 def ours_single_element(rve: str | Path, out_dir: str | Path, axial_strain: float = 0.1,
@@ -152,11 +360,27 @@ def ours_single_element(rve: str | Path, out_dir: str | Path, axial_strain: floa
     return curve.drop(columns=["residual_history"], errors="ignore"), result
 
 
+def _biaxial_parser() -> argparse.ArgumentParser:
+    """The parser of ``granular-material biaxial``, built in this process (nothing run)."""
+    from granular_material.cli import fem
+
+    parser = argparse.ArgumentParser(prog="granular-material")
+    subparsers = parser.add_subparsers(dest="command")
+    fem.register(subparsers)
+    return subparsers.choices["biaxial"]
+
+
+def biaxial_option_names() -> frozenset[str]:
+    """The option strings (``--element``, ``--convergence`` …) of ``granular-material
+    biaxial``, read from its parser in this process."""
+    return frozenset(s for action in _biaxial_parser()._actions
+                     for s in action.option_strings)
+
+
 def biaxial_options() -> str:
-    """The help text of ``granular-material biaxial`` (which options this engine has)."""
-    proc = subprocess.run([sys.executable, "-m", "granular_material.cli", "biaxial", "--help"],
-                          capture_output=True, text=True, timeout=120, check=False)
-    return proc.stdout
+    """The help text of ``granular-material biaxial`` (which options this engine has), from
+    its parser in this process."""
+    return _biaxial_parser().format_help()
 
 
 def ours_femxdem_biaxial(rve: str | Path, out_dir: str | Path,

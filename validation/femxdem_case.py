@@ -44,11 +44,11 @@ def ours_variants(elements: tuple[int, int] = (2, 4)) -> dict[str, list[str]]:
     small strain (where it has ``--formulation``) and on a mesh of twice the ``elements``
     each way."""
     variants = {"ours-defaults": []}
-    text = engine_runner.biaxial_options()
-    if "--element " in text and "--convergence" in text:
+    names = engine_runner.biaxial_option_names()
+    if "--element" in names and "--convergence" in names:
         variants["ours-as-gz"] = list(AS_GZ_OPTIONS)
         variants["ours-q9"] = ["--element", "quad9"]
-        if "--formulation" in text:
+        if "--formulation" in names:
             variants["ours-small-strain"] = [*AS_GZ_OPTIONS, "--formulation", "small-strain"]
         fine = [str(2 * int(elements[0])), str(2 * int(elements[1]))]
         variants["ours-fine"] = [*AS_GZ_OPTIONS, "--elements", *fine]

@@ -162,7 +162,11 @@ def write_report(entries: list[dict[str, Any]], out: str | Path,
         "and single element: 1 % less strain a step; ∇u paths: Guo & Zhao's shear2D "
         "kinematics and step count instead of F = I + ∇u). Single element: ours is the FEM "
         "× DEM element (`single-element --material dem`), our pure-DEM `biaxial-dem` of the "
-        "same RVE is listed beside it.",
+        "same RVE is listed beside it. Wall times: YADE's the whole `yade` process, its "
+        "start-up included; ours of the pure-DEM runs (`prepare`, `biaxial-dem`, "
+        "`dem-drive`) the engine's call in the validation's own process (the interpreter's "
+        "start-up and imports left out, warp's initialisation in the first call), ours of "
+        "the single element the whole `single-element` process.",
         "",
         "## Summary",
         "",
