@@ -70,9 +70,10 @@ def test_a_refused_run_raises_engine_error(tmp_path: Path) -> None:
     assert not (tmp_path / "few.npz").exists()
 
 
-def test_biaxial_options_are_read_without_a_process() -> None:
-    names = engine_runner.biaxial_option_names()
-    assert {"--element", "--convergence", "--formulation", "--rve"} <= names
-    assert "--element" in engine_runner.biaxial_options()
+def test_the_femxdem_variants_are_run_specs() -> None:
+    from granular_material.runs import from_flat
+
+    for fields in femxdem_case.ours_variants((1, 2)).values():
+        from_flat({"material": "dem", "test": "biaxial", **fields})
     assert set(femxdem_case.ours_variants((1, 2))) == {
         "ours-defaults", "ours-as-gz", "ours-q9", "ours-small-strain", "ours-fine"}

@@ -15,21 +15,16 @@ process does include warp's initialisation and its kernels' loading. YADE's ``wa
 included; its ``run_s`` is its stepping alone. :func:`ours_tangents` applies a ∇u path in
 this process too, the way ``dem-drive`` does, and reads the tangents on the way.
 
-The FEM × DEM runs (:func:`ours_single_element`, :func:`ours_femxdem_biaxial`) still run the
-command line (``single-element``, ``biaxial``) as a subprocess of this interpreter
-(``python -m granular_material.cli``); their ``wall_s`` is the whole process, start-up
-included, and ``cpu_s`` its CPU time. :func:`biaxial_option_names` reads which options the
-``biaxial`` command has from its parser, built in this process.
+The FEM × DEM runs (:func:`ours_single_element`, :func:`ours_femxdem_biaxial`) are run
+specifications run in this process (:func:`granular_material.runs.run`, what the
+``single-element`` and ``biaxial`` commands call); their ``wall_s`` and ``cpu_s`` are the
+call's, as the DEM runs'.
 """
 
 from __future__ import annotations
 
-import argparse
 import contextlib
 import json
-import resource
-import subprocess
-import sys
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -40,8 +35,6 @@ import pandas as pd
 
 __all__ = [
     "EngineError",
-    "biaxial_option_names",
-    "biaxial_options",
     "engine_available",
     "ours_biaxial",
     "ours_drive",
@@ -52,7 +45,6 @@ __all__ = [
     "voigt_tangent",
 ]
 
-DEFAULT_TIMEOUT = 900.0
 
 
 class EngineError(RuntimeError):
@@ -67,36 +59,6 @@ def engine_available() -> bool:
     except ImportError:
         return False
     return True
-
-
-def _children_cpu_s() -> float:
-    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return usage.ru_utime + usage.ru_stime
-
-
-def _run(args: list[str], timeout: float) -> tuple[dict[str, Any], float]:
-    """Run our command line; its JSON (with ``cpu_s``: the process's CPU time) and wall [s]."""
-    cmd = [sys.executable, "-m", "granular_material.cli", *args, "--json"]
-    cpu0 = _children_cpu_s()
-    start = time.perf_counter()
-    try:
-        proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, check=False,
-                              stdin=subprocess.DEVNULL)
-    except subprocess.TimeoutExpired:
-        raise EngineError(f"granular-material {args[0]} timed out after {timeout:g} s") from None
-    wall = time.perf_counter() - start
-    if proc.returncode != 0:
-        tail = "\n".join(proc.stderr.splitlines()[-20:])
-        raise EngineError(f"granular-material {' '.join(args)} failed (exit "
-                          f"{proc.returncode}):\n{tail}")
-    try:
-        result = json.loads(proc.stdout)
-    except json.JSONDecodeError as exc:
-        raise EngineError(f"granular-material {args[0]} printed no JSON: {exc}\n"
-                          f"{proc.stdout[-2000:]}") from None
-    if isinstance(result, dict):
-        result["cpu_s"] = _children_cpu_s() - cpu0
-    return result, wall
 
 
 def _device(device: str | None) -> list[str]:
@@ -146,19 +108,15 @@ def _rve_zero(csv: str | Path) -> pd.DataFrame:
 
 
 def ours_prepare(out: str | Path, particles: int = 400, seed: int = 1, pressure: float = 1e5,
-                 device: str | None = None,
-                 timeout: float = DEFAULT_TIMEOUT) -> dict[str, Any]:
+                 device: str | None = None) -> dict[str, Any]:
     """``granular-material prepare`` in this process: one RVE of ``particles`` discs, the
     command's default material and radii, consolidated to ``pressure`` [Pa], written to
     ``out``; the command's JSON summary plus ``wall_s`` and ``cpu_s`` [s] of the call.
-
-    ``timeout`` is not enforced (kept for the callers of the former subprocess run).
     """
     from granular_material.cli.options import RVE_MATERIAL_DEFAULTS, scalar_or_list
     from granular_material.dem import RVEMeta, save_rve
     from granular_material.procedures import prepare_packing
 
-    del timeout
     d = RVE_MATERIAL_DEFAULTS
     # the options of add_rve_material_options at their defaults, as packing_parameters
     # turns them into the packing's parameters
@@ -197,13 +155,13 @@ def ours_prepare(out: str | Path, particles: int = 400, seed: int = 1, pressure:
 def ours_biaxial(rve: str | Path, out_csv: str | Path, axial_strain: float = 0.1,
                  confining: float = 1e5, strain_per_step: float = 1e-5,
                  record_every: int = 10, device: str | None = None,
-                 timeout: float = DEFAULT_TIMEOUT) -> tuple[pd.DataFrame, dict[str, Any]]:
+                 ) -> tuple[pd.DataFrame, dict[str, Any]]:
     """``granular-material biaxial-dem`` in this process: ``biaxial_test`` of every RVE of
     the file, the curve written to ``out_csv``; returns the rows of RVE 0 read back from it
     and the command's JSON summary plus ``wall_s`` and ``cpu_s`` [s] of the call.
 
     :class:`EngineError` (the CSV written) where the command exits 1: the servo did not
-    hold σxx (off by more than ``SERVO_FAIL`` in most records). ``timeout`` is not enforced.
+    hold σxx (off by more than ``SERVO_FAIL`` in most records).
     """
     from granular_material.cli.dem import SERVO_FAIL, SERVO_WARN
     from granular_material.cli.options import DEFAULT_MAX_DEM_STEPS, scalar_or_list
@@ -212,7 +170,6 @@ def ours_biaxial(rve: str | Path, out_csv: str | Path, axial_strain: float = 0.1
     from granular_material.procedures.element_tests import lateral_stress_error
     from granular_material.results import summarize_biaxial, write_csv
 
-    del timeout
     confining = float(confining)
     out_csv = Path(out_csv)
     timing: dict[str, float] = {}
@@ -248,8 +205,7 @@ def ours_biaxial(rve: str | Path, out_csv: str | Path, axial_strain: float = 0.1
 
 
 def ours_drive(rve: str | Path, out_csv: str | Path, grad_u: list[float], increments: int,
-               device: str | None = None,
-               timeout: float = DEFAULT_TIMEOUT) -> tuple[pd.DataFrame, dict[str, Any]]:
+               device: str | None = None) -> tuple[pd.DataFrame, dict[str, Any]]:
     """``granular-material dem-drive`` in this process: the total ∇u ``grad_u`` = [Gxx,
     Gxy, Gyx, Gyy] in ``increments`` equal increments (``drive_grad_u`` on
     ``path_increment``, at most 1e-5 strain a DEM step) on every RVE of the file, the path
@@ -257,14 +213,13 @@ def ours_drive(rve: str | Path, out_csv: str | Path, grad_u: list[float], increm
     JSON summary plus ``wall_s`` and ``cpu_s`` [s] of the call.
 
     :class:`EngineError` where the command refuses the path or exits 1 (a blow-up: the path
-    to the last finished increment is written first). ``timeout`` is not enforced.
+    to the last finished increment is written first).
     """
     from granular_material.cli.options import DEFAULT_MAX_DEM_STEPS, scalar_or_list
     from granular_material.dem import DEMBatch, DEMInstabilityError, load_rve
     from granular_material.procedures import drive_grad_u, path_increment, path_steps
     from granular_material.results import write_csv
 
-    del timeout
     if len(grad_u) != 4 or increments < 1:
         raise ValueError(f"grad_u needs 4 numbers and increments >= 1, got {grad_u}, "
                          f"{increments}")
@@ -334,90 +289,82 @@ def ours_drive(rve: str | Path, out_csv: str | Path, grad_u: list[float], increm
     return _rve_zero(out_csv), result
 
 
+def _fem_run(flat: dict[str, Any]) -> dict[str, Any]:
+    """The FEM × DEM run of the flat spec fields ``flat`` in this process
+    (:func:`granular_material.runs.run`); its summary as ``--json`` prints it, plus
+    ``wall_s`` and ``cpu_s`` [s] of the call. A Newton failure raises :class:`EngineError`."""
+    from granular_material.runs import from_flat, run
+
+    spec = from_flat({"material": "dem", **flat})
+    cpu0, start = time.process_time(), time.perf_counter()
+    outcome = run(spec)
+    result = json.loads(json.dumps(outcome.summary, default=str))
+    result.update(wall_s=time.perf_counter() - start, cpu_s=time.process_time() - cpu0)
+    if outcome.interrupt is not None:
+        raise outcome.interrupt
+    if result.get("error"):
+        raise EngineError(f"granular-material {spec.problem.test} failed: {result['error']}")
+    return result
+
+
 def ours_single_element(rve: str | Path, out_dir: str | Path, axial_strain: float = 0.1,
                         confining: float = 1e5, steps: int = 100, device: str | None = None,
-                        timeout: float = DEFAULT_TIMEOUT) -> tuple[pd.DataFrame, dict[str, Any]]:
-    """``granular-material single-element --material dem`` on the RVE file (FEM × DEM).
+                        ) -> tuple[pd.DataFrame, dict[str, Any]]:
+    """The ``single-element`` run of the DEM material on the RVE file (FEM × DEM).
 
     One Q4 element, its four Gauss points each holding a copy of the RVE, loaded like the
     drained biaxial test: sides under ``confining`` [Pa] (compression positive), the top
     compressed to ``axial_strain`` (compression positive) in ``steps`` Newton load steps.
     Returns ``DIR/steps.csv`` (step 0 included: ``axial_strain``, ``sxx``, ``syy``, ``sxy``
-    [Pa] tension positive, volume averages over the Gauss points, ``volumetric_strain`` =
-    tr ε, ``void_ratio``, Newton ``iterations`` ...) and the command's JSON summary plus
-    ``wall_s`` [s] (the whole process). A Newton failure (exit 1) raises :class:`EngineError`.
+    [Pa] tension positive, volume averages over the Gauss points, ``volumetric_strain``,
+    ``void_ratio``, Newton ``iterations`` ...) and the run's summary plus ``wall_s`` and
+    ``cpu_s`` [s] (the call). A Newton failure raises :class:`EngineError`.
     """
     if steps < 1 or not axial_strain > 0:
         raise ValueError(f"steps must be >= 1 and axial_strain > 0, got {steps}, "
                          f"{axial_strain}")
     out_dir = Path(out_dir)
-    result, wall = _run(["single-element", "--material", "dem", "--rve", str(rve),
-                         "--axial-strain", repr(float(axial_strain)),
-                         "--confining", repr(float(confining)), "--steps", str(int(steps)),
-                         "--out", str(out_dir), "--no-progress", *_device(device)], timeout)
-    result["wall_s"] = wall
+    result = _fem_run({"test": "single-element", "rve": rve, "axial_strain": axial_strain,
+                       "confining": confining, "steps": steps, "out": out_dir,
+                       "device": device})
     curve = pd.read_csv(out_dir / "steps.csv")
     return curve.drop(columns=["residual_history"], errors="ignore"), result
-
-
-def _biaxial_parser() -> argparse.ArgumentParser:
-    """The parser of ``granular-material biaxial``, built in this process (nothing run)."""
-    from granular_material.cli import fem
-
-    parser = argparse.ArgumentParser(prog="granular-material")
-    subparsers = parser.add_subparsers(dest="command")
-    fem.register(subparsers)
-    return subparsers.choices["biaxial"]
-
-
-def biaxial_option_names() -> frozenset[str]:
-    """The option strings (``--element``, ``--convergence`` …) of ``granular-material
-    biaxial``, read from its parser in this process."""
-    return frozenset(s for action in _biaxial_parser()._actions
-                     for s in action.option_strings)
-
-
-def biaxial_options() -> str:
-    """The help text of ``granular-material biaxial`` (which options this engine has), from
-    its parser in this process."""
-    return _biaxial_parser().format_help()
 
 
 def ours_femxdem_biaxial(rve: str | Path, out_dir: str | Path,
                          elements: tuple[int, int] = (2, 4), axial_strain: float = 0.03,
                          steps: int = 30, confining: float = 1e5, width: float = 0.05,
-                         height: float = 0.1, extra: list[str] | None = None,
-                         device: str | None = None, timeout: float = 3600.0
+                         height: float = 0.1, extra: dict[str, Any] | None = None,
+                         device: str | None = None,
                          ) -> tuple[pd.DataFrame, pd.DataFrame, dict[str, Any]]:
-    """``granular-material biaxial`` with RVE 0 of ``rve`` copied to every Gauss point.
+    """The ``biaxial`` run of the DEM material with RVE 0 of ``rve`` at every Gauss point.
 
     Smooth platens, ``elements`` (nx, ny) on a ``width`` × ``height`` [m] specimen, ``steps``
     equal load steps to ``axial_strain`` (compression positive) at ``confining`` [Pa];
-    ``extra``: further options (element, Newton). Returns ``DIR/steps.csv`` (step 0
-    included; ``platen_stress``, ``stress_ratio``, volume-average ``sxx``, ``syy``, ``sxy``
-    [Pa] tension positive, ``volumetric_strain``, ``void_ratio``, ``iterations``,
-    ``particle_steps``, ``wall_time`` [s] ...), ``DIR/points.csv`` (Gauss-point states of
-    every step) and the JSON summary plus ``wall_s`` [s] (the whole process) and ``cpu_s``.
-    A finished run in ``DIR`` with the same arguments (``DIR/run.json``) is read back.
+    ``extra``: further run spec fields by their flat names (element, Newton settings; e.g.
+    ``{"element": "quad8"}``). Returns ``DIR/steps.csv`` (step 0 included;
+    ``platen_stress``, ``stress_ratio``, volume-average ``sxx``, ``syy``, ``sxy`` [Pa] tension
+    positive, ``volumetric_strain``, ``void_ratio``, ``iterations``, ``particle_steps``,
+    ``wall_time`` [s] ...), ``DIR/points.csv`` (Gauss-point states of every step) and the
+    summary plus ``wall_s`` and ``cpu_s`` [s] (the call). A finished run in ``DIR`` of the
+    same spec (``DIR/run.json``) is read back.
     """
     if steps < 1 or not axial_strain > 0:
         raise ValueError(f"steps must be >= 1 and axial_strain > 0, got {steps}, "
                          f"{axial_strain}")
     out_dir = Path(out_dir)
-    args = ["biaxial", "--rve", str(rve), "--elements", str(int(elements[0])),
-            str(int(elements[1])), "--width", repr(float(width)), "--height",
-            repr(float(height)), "--platens", "smooth", "--axial-strain",
-            repr(float(axial_strain)), "--steps", str(int(steps)), "--confining",
-            repr(float(confining)), "--out", str(out_dir), "--no-progress", *(extra or []),
-            *_device(device)]
+    flat = {"test": "biaxial", "rve": str(rve), "elements": [int(n) for n in elements],
+            "width": float(width), "height": float(height), "platens": "smooth",
+            "axial_strain": float(axial_strain), "steps": int(steps),
+            "confining": float(confining), "out": str(out_dir), "device": device,
+            **(extra or {})}
     done = out_dir / "run.json"
     cached = json.loads(done.read_text()) if done.is_file() else {}
-    if cached.get("args") == args:
+    if cached.get("spec") == flat:
         result = cached["result"]
     else:
-        result, wall = _run(args, timeout)
-        result["wall_s"] = wall
-        done.write_text(json.dumps({"args": args, "result": result}, indent=1))
+        result = _fem_run(flat)
+        done.write_text(json.dumps({"spec": flat, "result": result}, indent=1))
     curve = pd.read_csv(out_dir / "steps.csv").drop(columns=["residual_history"],
                                                     errors="ignore")
     return curve, pd.read_csv(out_dir / "points.csv"), result

@@ -24,11 +24,11 @@ import numpy as np
 import pandas as pd
 from granular_material_validation import engine_runner, guo_zhao_runner, metrics
 
-__all__ = ["AS_GZ_OPTIONS", "BAND_STRAINS", "PERTURBATION", "band_measures", "cost_figures",
+__all__ = ["AS_GZ", "BAND_STRAINS", "PERTURBATION", "band_measures", "cost_figures",
            "field_comparison", "ours_variants", "run_femxdem_seed", "shear_strain"]
 
-#: our options that reproduce Guo & Zhao's element and convergence test
-AS_GZ_OPTIONS = ["--element", "quad8", "--convergence", "displacement", "--rtol", "1e-2"]
+#: our run spec fields (flat names) that reproduce Guo & Zhao's element and convergence test
+AS_GZ = {"element": "quad8", "convergence": "displacement", "rtol": 1e-2}
 #: the chaos baseline's strain a load step, relative to the case's
 PERTURBATION = 0.99
 
@@ -38,21 +38,14 @@ PERTURBATION = 0.99
 BAND_STRAINS = (0.016, 0.02, 0.022, 0.025)
 
 
-def ours_variants(elements: tuple[int, int] = (2, 4)) -> dict[str, list[str]]:
-    """Our runs of the case and their extra options: defaults; as Guo & Zhao where our
-    ``biaxial`` command has ``--element`` and ``--convergence``; with 9-node elements, in
-    small strain (where it has ``--formulation``) and on a mesh of twice the ``elements``
-    each way."""
-    variants = {"ours-defaults": []}
-    names = engine_runner.biaxial_option_names()
-    if "--element" in names and "--convergence" in names:
-        variants["ours-as-gz"] = list(AS_GZ_OPTIONS)
-        variants["ours-q9"] = ["--element", "quad9"]
-        if "--formulation" in names:
-            variants["ours-small-strain"] = [*AS_GZ_OPTIONS, "--formulation", "small-strain"]
-        fine = [str(2 * int(elements[0])), str(2 * int(elements[1]))]
-        variants["ours-fine"] = [*AS_GZ_OPTIONS, "--elements", *fine]
-    return variants
+def ours_variants(elements: tuple[int, int] = (2, 4)) -> dict[str, dict[str, Any]]:
+    """Our runs of the case and the run spec fields (flat names) each sets: defaults; as
+    Guo & Zhao (their element and convergence test); with 9-node elements; in small strain;
+    and on a mesh of twice the ``elements`` each way."""
+    fine = [2 * int(elements[0]), 2 * int(elements[1])]
+    return {"ours-defaults": {}, "ours-as-gz": dict(AS_GZ), "ours-q9": {"element": "quad9"},
+            "ours-small-strain": {**AS_GZ, "formulation": "small-strain"},
+            "ours-fine": {**AS_GZ, "elements": fine}}
 
 
 def band_measures(curve: pd.DataFrame, points: pd.DataFrame,

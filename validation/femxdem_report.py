@@ -150,8 +150,8 @@ def _band_rows(e: dict[str, Any]) -> list[str]:
     options = seed.get("options", {})
     for name, b in bands.items():
         c = cost.get(name, {})
-        opts = "their biaxialSmooth.py" if name == "guo-zhao" else (
-            " ".join(options.get(name, [])) or "defaults")
+        opts = ("their biaxialSmooth.py" if name == "guo-zhao"
+                else _as_options(options.get(name, {})) or "defaults")
         lines.append(
             f"| {name} | {opts} | "
             + " / ".join(_f(v, ".3f") for v in b["ratio"][1:]) + " | "
@@ -178,6 +178,19 @@ def _field_rows(e: dict[str, Any]) -> list[str]:
                 f"{d['syy_rms_kpa']:.1f} / {d['syy_max_kpa']:.1f} | "
                 f"{d['void_ratio_rms']:.4f} | {_f(d['gamma_correlation'], '.2f')} |")
     return lines
+
+
+def _as_options(fields: dict[str, Any] | list[str]) -> str:
+    """A run's spec fields (flat names) as the command-line options that set them (a list:
+    the options themselves, as older summaries hold them)."""
+    if isinstance(fields, list):
+        return " ".join(fields)
+    words = []
+    for name, value in fields.items():
+        values = value if isinstance(value, list) else [value]
+        words += [f"--{name.replace('_', '-')}", *(f"{v:g}" if isinstance(v, float) else str(v)
+                                                    for v in values)]
+    return " ".join(words)
 
 
 def section_lines(e: dict[str, Any], out: Path) -> list[str]:
