@@ -39,12 +39,6 @@ import numpy as np
 import pandas as pd
 
 from granular_material.dem import DEMBatch, RVEData, critical_timestep, load_rve, save_rve
-from granular_material.fem import (
-    BiaxialSetup,
-    create_material,
-    default_settings,
-    run_biaxial,
-)
 from granular_material.procedures import biaxial_test, prepare_packing, progress_bar
 from granular_material.procedures.element_tests import biaxial_steps
 from granular_material.results import band_summary, write_csv
@@ -54,6 +48,8 @@ from granular_material.results.compare import (
     markdown_table,
     mean_curve,
 )
+from granular_material.runs import from_flat
+from granular_material.runs import run as run_spec
 
 __all__ = ["PRESETS", "REFERENCE", "SCALES", "Knob", "StudyScale", "plan_runs", "recommend",
            "run_trade_study"]
@@ -300,12 +296,10 @@ class _Runner:
                      axial_strain=1e-4, confining=self.scale.confining,
                      strain_per_step=2e-5, record_every=5)
         if dtype == "float64":
-            setup = BiaxialSetup(width=1.0, height=1.0, nx=1, ny=1,
-                                 confining=self.scale.confining, axial_strain=1e-3)
-            material = create_material("dem", rve=self.single(min(self.scale.discs)),
-                                       replicate=True, device=self.device)
-            material.allocate(setup.n_points)
-            run_biaxial(setup, material, 2, default_settings("dem"))
+            run_spec(from_flat({"test": "single-element", "material": "dem", "steps": 2,
+                           "axial_strain": 1e-3, "confining": self.scale.confining,
+                           "rve": self.single(min(self.scale.discs)),
+                           "device": self.device}))
         self._warm.add(dtype)
 
     def _dem(self, s: dict[str, Any]) -> RunResult:
@@ -326,29 +320,29 @@ class _Runner:
         return RunResult(curve, wall, total * data.n_rve * data.n_disc,
                          extra={"inertial_number": inertial, "timestep_s": dt})
 
-    def _fem(self, s: dict[str, Any], setup: BiaxialSetup, steps: int,
-             rve: Path | None, replicate: bool) -> RunResult:
+    def _fem(self, s: dict[str, Any], problem: dict[str, Any], rve: Path | None) -> RunResult:
+        """The FEM run of the study's settings ``s``: a run spec of ``problem`` (flat
+        fields) on the RVE file ``rve`` (one RVE, copied to every point) or, without one,
+        packings prepared from the study's first seed, run by :func:`run`."""
         predictor, relaxation = s["acceleration"].split("/")
-        tangent_update = "secant" if s["tangent"] == "secant" else "none"
-        tangent = "objective" if s["tangent"] == "secant" else s["tangent"]
-        material = create_material("dem", rve=rve, particles=s["discs"],
-                                   seed=self.scale.seeds[0], pressure=self.scale.confining,
-                                   replicate=replicate, device=self.device, tangent=tangent,
-                                   reuse_tol=s["reuse_tol"])
-        material.allocate(setup.n_points)
+        secant = s["tangent"] == "secant"
         # the knobs are those of the force test (rtol of ‖R‖/‖R₀‖, the stress floor, reuse)
-        settings = default_settings("dem", convergence="force", max_iterations=25,
-                                    rtol=s["rtol"], predictor=predictor,
-                                    relaxation=relaxation, tangent_update=tangent_update)
+        spec = from_flat({
+            **problem, "material": "dem", "confining": self.scale.confining,
+            "axial_strain": self.scale.axial_strain, "rve": rve, "particles": s["discs"],
+            "seed": self.scale.seeds[0], "tangent": "objective" if secant else s["tangent"],
+            "reuse_tol": s["reuse_tol"], "convergence": "force", "max_iterations": 25,
+            "rtol": s["rtol"], "predictor": predictor, "relaxation": relaxation,
+            "tangent_update": "secant" if secant else "none",
+            "stress_tol": s["stress_floor"] * self.scale.confining, "device": self.device})
         started = time.perf_counter()
-        result = run_biaxial(setup, material, steps, settings,
-                             stress_tol=s["stress_floor"] * self.scale.confining)
+        result = run_spec(spec).result
         wall = time.perf_counter() - started
         if result.interrupt is not None:  # not a measurement: stop the study here
             raise result.interrupt
         done = result.steps[result.steps["step"] > 0]
         extra = {}
-        if setup.n_points > 4:
+        if result.problem.setup.n_points > 4:
             band = band_summary(result, [self.scale.axial_strain], 1.0)
             extra["band_inclination_deg"] = band.get("shear_band_final", {}).get(
                 "inclination_deg", math.nan)
@@ -356,19 +350,14 @@ class _Runner:
                          int(done["iterations"].sum()), result.error, extra)
 
     def _element(self, s: dict[str, Any]) -> RunResult:
-        setup = BiaxialSetup(width=1.0, height=1.0, nx=1, ny=1,
-                             confining=self.scale.confining,
-                             axial_strain=self.scale.axial_strain)
-        return self._fem(s, setup, self.scale.element_steps,
-                         self.single(s["discs"], s.get("noise", 0.0)), True)
+        return self._fem(s, {"test": "single-element", "steps": self.scale.element_steps},
+                         self.single(s["discs"], s.get("noise", 0.0)))
 
     def _specimen(self, s: dict[str, Any]) -> RunResult:
         nx, ny = (int(v) for v in s["mesh"].split("x"))
-        setup = BiaxialSetup(nx=nx, ny=ny, confining=self.scale.confining,
-                             axial_strain=self.scale.axial_strain)
-        if self.scale.mesh_replicate:
-            return self._fem(s, setup, self.scale.mesh_steps, self.single(s["discs"]), True)
-        return self._fem(s, setup, self.scale.mesh_steps, None, False)
+        problem = {"test": "biaxial", "elements": (nx, ny), "steps": self.scale.mesh_steps}
+        return self._fem(s, problem,
+                         self.single(s["discs"]) if self.scale.mesh_replicate else None)
 
 
 def _jiggled(data: RVEData, noise: float) -> RVEData:
