@@ -213,3 +213,36 @@ def test_check_and_run_refuse_the_same_bad_scene(name, tmp_path, capsys):
 def test_every_example_scene_passes_check(scene, capsys):
     assert main(["run", str(EXAMPLES / scene), "--check"]) == 0
     assert capsys.readouterr().out.startswith("granular-material ")
+
+
+# -- a spec file is a scene; a spec is a command line ----------------------------------------
+def test_a_spec_s_command_line_makes_the_same_spec():
+    import shlex
+
+    from granular_material.cli import build_parser
+    from granular_material.cli.fem import command_line, spec_from_args
+
+    spec = from_flat({"test": "biaxial", "material": "dem", "elements": (3, 6), "steps": 7,
+                      "element": "quad8", "rtol": 0.02, "tangent": "condensed",
+                      "track": ("all",), "map_strain": (0.01, 0.03), "kn": 2e6,
+                      "device": "cpu", "progress": False, "out": Path("somewhere")})
+    words = shlex.split(command_line(spec))[1:]
+    assert spec_from_args(build_parser().parse_args([*words, "--no-progress"])) == spec
+    element = _elastic(steps=2)
+    words = shlex.split(command_line(element))[1:]
+    assert spec_from_args(build_parser().parse_args([*words, "--no-progress"])) == element
+
+
+def test_a_saved_spec_runs_as_a_scene(tmp_path, capsys):
+    spec = _elastic(steps=2, axial_strain=0.01)
+    save(spec, tmp_path / "spec.toml")
+    assert main(["run", str(tmp_path / "spec.toml"), "--check"]) == 0
+    assert capsys.readouterr().out.startswith("granular-material single-element --material "
+                                              "linear-elastic")
+    assert main(["run", str(tmp_path / "spec.toml"), "--out", str(tmp_path / "run")]) == 0
+    steps = pd.read_csv(tmp_path / "run" / "steps.csv")
+    assert len(steps) == 3
+    (tmp_path / "bad.toml").write_text(
+        to_toml(spec).replace("steps = 2", "steps = 0"))
+    assert main(["run", str(tmp_path / "bad.toml"), "--check"]) == 2
+    assert "bad.toml, line" in capsys.readouterr().err

@@ -5,6 +5,7 @@ specification they make of them (:func:`spec_from_args`) and its report; the run
 from __future__ import annotations
 
 import argparse
+import shlex
 import sys
 from collections.abc import Callable
 from pathlib import Path
@@ -29,11 +30,12 @@ from granular_material.cli.options import (
 from granular_material.fem import available_postprocessors, load_material
 from granular_material.fem.kinematics import FORMULATIONS
 from granular_material.fem.linear_elastic import LinearElasticRunParameters
-from granular_material.runs import OutputSpec, RunSpec, SpecError, from_flat, run
+from granular_material.runs import OutputSpec, RunSpec, SpecError, from_flat, run, to_flat
 from granular_material.runs.presets import PRESET_NAMES, preset_fields
 from granular_material.runs.spec import NewtonSpec, ProblemSpec
 
-__all__ = ["register", "run_biaxial_command", "run_single_element", "spec_from_args"]
+__all__ = ["command_line", "register", "report", "run_biaxial_command", "run_single_element",
+           "spec_from_args"]
 
 #: the defaults the options show: those of the run specification's fields
 _NEWTON = NewtonSpec()
@@ -316,8 +318,8 @@ def spec_from_args(args: argparse.Namespace) -> RunSpec:
         raise UsageError(f"{_flag(exc.field)} {exc.message}") from None
 
 
-def _report(args: argparse.Namespace, summary: dict[str, Any],
-            interrupt: KeyboardInterrupt | None = None) -> int:
+def report(args: argparse.Namespace, summary: dict[str, Any],
+           interrupt: KeyboardInterrupt | None = None) -> int:
     """Print the summary; the exit code: 0, 1 when the run stopped short, 130/143 when
     Ctrl-C or SIGTERM (``interrupt``) stopped it."""
     emit(args, summary)
@@ -333,6 +335,31 @@ def _report(args: argparse.Namespace, summary: dict[str, Any],
     return 0
 
 
+def command_line(spec: RunSpec) -> str:
+    """The command line of ``spec``: its command and an option for every field not at the
+    command's default (the spec's own defaults where the command has no option)."""
+    test = spec.problem.test
+    parser = _PARSERS[test]
+    dests = {a.dest: a for a in parser._actions if a.option_strings}
+    words = ["granular-material", test]
+    flat = to_flat(spec)
+    material = flat.pop("material")
+    if material != DEFAULT_MATERIAL:
+        words += ["--material", material]
+    defaults = to_flat(from_flat({"test": test, "material": material}))
+    for name, value in flat.items():
+        action = dests.get(name)
+        if action is None or value == defaults.get(name) or value is None:
+            continue
+        if action.nargs == 0:  # a flag
+            words += [action.option_strings[-1]] if value else []
+            continue
+        flag = next(o for o in action.option_strings if o.startswith("--"))
+        values = value if isinstance(value, list) else [value]
+        words += [flag, *(str(v) for v in values)]
+    return shlex.join(words)
+
+
 def _check_resume_folder(args: argparse.Namespace) -> None:
     """``--resume DIR`` continues in DIR: an ``--out`` naming another folder is refused."""
     if args.resume is None or args.out is None:
@@ -346,7 +373,7 @@ def _command(args: argparse.Namespace) -> int:
     _check_resume_folder(args)
     spec = spec_from_args(args)
     outcome = run(spec, resume=args.resume is not None)
-    return _report(args, outcome.summary, outcome.interrupt)
+    return report(args, outcome.summary, outcome.interrupt)
 
 
 def _on_backend(args: argparse.Namespace, command: Callable[[argparse.Namespace], int]) -> int:

@@ -540,8 +540,45 @@ def check_scene(scene: Scene) -> None:
         raise UsageError(_located(scene, str(exc))) from exc
 
 
+def _spec_error(path: Path, text: str, exc: ValueError) -> UsageError:
+    """A run spec file's refusal, with the line of the field it names (where one is)."""
+    name = getattr(exc, "field", None)
+    pattern = re.compile(rf"^\s*{re.escape(name)}\s*=") if name else None
+    for number, line in enumerate(text.splitlines(), start=1):
+        if pattern is not None and pattern.match(line):
+            return UsageError(f"{path}, line {number}: {exc}")
+    return UsageError(f"{path}: {exc}")
+
+
+def _run_spec_file(path: Path, text: str, data: dict[str, Any],
+                   args: argparse.Namespace) -> int:
+    """``run SPEC.toml``: a run specification in its nested form (``[problem]``,
+    ``[material]``, ...; what :func:`granular_material.runs.save` writes) checked whole, then
+    run (``--check``: only checked, and shown as a command line)."""
+    from dataclasses import replace
+
+    from granular_material.cli.fem import command_line, report
+    from granular_material.runs import check, from_dict, run
+
+    try:
+        spec = from_dict(data)
+        if args.out is not None:
+            spec = spec.replace(output=replace(spec.output, out=args.out))
+        check(spec)
+    except ValueError as exc:
+        raise _spec_error(path, text, exc) from exc
+    if args.check:
+        print(command_line(spec))
+        return 0
+    outcome = run(spec, resume=args.resume)
+    return report(argparse.Namespace(json=False), outcome.summary, outcome.interrupt)
+
+
 def _run_command(parsers: Mapping[str, argparse.ArgumentParser], args: argparse.Namespace,
                  ) -> int:
+    text, data = _read(Path(args.scene))
+    if isinstance(data.get("problem"), dict):
+        return _run_spec_file(Path(args.scene), text, data, args)
     scene = load_scene(args.scene, parsers, out=args.out, resume=args.resume)
     if args.check:
         check_scene(scene)
@@ -571,7 +608,13 @@ The scene is checked whole before anything runs: an unknown key, a wrong type or
 a missing required key exits with code 2, naming the key and its line, and writes
 nothing. Paths in a scene are relative to its folder. The run folder (--out, else
 the scene's `out`, else the scene's name in the current folder) gets the scene as
-scene.toml, the command's tables, figures and fields, and summary.json.""",
+scene.toml, the command's tables, figures and fields, and summary.json.
+
+A file with a [problem] table is a run specification instead (the nested form
+that granular_material.runs.save writes and a run's checkpoint keeps): its
+[problem], [material] (name, [material.parameters]), [newton] and [output]
+tables hold the spec's fields by their Python names; it is checked whole and run
+as it is (--out overrides its output.out).""",
     )
     p.add_argument("scene", type=Path, help="the scene file (.toml)")
     p.add_argument("--out", type=Path, default=None, metavar="DIR",
