@@ -316,15 +316,47 @@ class NewtonSolver:
         self._run_start = 0.0
         self._last: tuple[float, np.ndarray] | None = None  # last converged (Δλ, Δu)
         self.records: list[StepRecord] = []
-        # initial stress and tangent of the committed state (∇u = 0)
-        self.response = material.evaluate(np.zeros((n_points, 2, 2)))
-        material.revert()
-        if not self.response.ok:
-            raise RuntimeError(
-                f"material fails in its initial state at points {self.response.failed_points()}"
-            )
-        self.f_int = internal_force(basis, self.response.stress)
+        # the committed state's stress and tangent (∇u = 0 until a step or a resume sets
+        # them), read from the material when first asked for (:meth:`_initial`)
+        self._response: MaterialResponse | None = None
+        self._f_int: np.ndarray | None = None
         self._mass_matrix = None
+
+    def _initial(self) -> None:
+        """The material's stress and tangent in its committed state (∇u = 0), asked of it
+        once, when the solver first needs them; RuntimeError naming the points where it
+        fails."""
+        n_points = self.material.n_points
+        response = self.material.evaluate(np.zeros((n_points, 2, 2)))
+        self.material.revert()
+        if not response.ok:
+            raise RuntimeError(
+                f"material fails in its initial state at points {response.failed_points()}"
+            )
+        self._response = response
+        self._f_int = internal_force(self.basis, response.stress)
+
+    @property
+    def response(self) -> MaterialResponse:
+        """The material's response in the committed state (stress, tangent, fields)."""
+        if self._response is None:
+            self._initial()
+        return self._response
+
+    @response.setter
+    def response(self, value: MaterialResponse) -> None:
+        self._response = value
+
+    @property
+    def f_int(self) -> np.ndarray:
+        """Internal force [N/m] of the committed state, shape (ndofs,)."""
+        if self._f_int is None:
+            self._initial()
+        return self._f_int
+
+    @f_int.setter
+    def f_int(self, value: np.ndarray) -> None:
+        self._f_int = value
 
     def _external(self, load_factor: float, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(u_D, f_ext) at ``load_factor`` with the displacement ``u`` [m] (a follower load
