@@ -465,7 +465,10 @@ def test_a_checkpoint_from_before_the_element_options_resumes(tmp_path, capsys):
     assert main([*argv, "--out", str(out)]) == 0
     first = json.loads(capsys.readouterr().out)
     options = out / "checkpoint" / "options.json"
-    saved = json.loads(options.read_text())
+    from granular_material.runs import from_dict, to_flat
+
+    record = json.loads(options.read_text())  # then: the command's options, flat
+    saved = {"command": record["command"], **to_flat(from_dict(record["spec"]))}
     for key in ("element", "quadrature", "convergence"):
         saved.pop(key)
     options.write_text(json.dumps(saved))

@@ -159,18 +159,77 @@ def _rows(solver: NewtonSolver, problem: BiaxialProblem, record: StepRecord | No
     return row, points
 
 
+class _Collector:
+    """The tables of a run as its steps commit: kept here, shown to the observer, saved in
+    the checkpoint (with the committed state when one is due), tracked points analysed."""
+
+    def __init__(self, problem: BiaxialProblem, material: Material, n_steps: int,
+                 observer: RunObserver | None, tracking: Tracking | None,
+                 checkpoint: RunCheckpoint | None,
+                 on_step: Callable[[NewtonSolver, StepRecord, pd.DataFrame], None] | None,
+                 ) -> None:
+        self.problem, self.material, self.n_steps = problem, material, n_steps
+        self.observer, self.tracking, self.checkpoint = observer, tracking, checkpoint
+        self.on_step = on_step
+        self.rows: list[dict[str, Any]] = []
+        self.tables: list[pd.DataFrame] = []
+        self.displacements: list[np.ndarray] = []
+        self.tracked: list[pd.DataFrame] = []
+
+    def keep(self, row: dict[str, Any], points: pd.DataFrame, u: np.ndarray,
+             tracked: pd.DataFrame | None) -> None:
+        """One committed step's row, Gauss-point table, displacement and tracked rows."""
+        self.rows.append(row)
+        self.tables.append(points)
+        self.displacements.append(u.copy())
+        if tracked is not None:
+            self.tracked.append(tracked)
+        if self.observer is not None:
+            self.observer.record(row, points, u, tracked)
+
+    def collect(self, solver: NewtonSolver, record: StepRecord | None) -> None:
+        """The step ``solver`` has just committed (``record`` None: the initial state)."""
+        row, points = _rows(solver, self.problem, record)
+        tracked = None
+        n_points = self.problem.setup.n_points
+        if self.tracking is not None and self.tracking.due(row["step"]):
+            tracked = self.tracking.rows(self.material, row["step"], row["axial_strain"],
+                                         n_points)
+        self.keep(row, points, solver.u, tracked)
+        if self.checkpoint is not None:
+            self.checkpoint.save_step(row, points, solver.u, tracked)
+            if self.checkpoint.due(row["step"], self.n_steps):
+                self.checkpoint.save_state(row["step"], solver, self.material)
+        if self.on_step is not None and record is not None:
+            self.on_step(solver, record, points)
+
+    def result(self, solver: NewtonSolver, error: str | None, saved: SavedRun | None,
+               interrupt: KeyboardInterrupt | None) -> BiaxialResult:
+        """What the run produced."""
+        return BiaxialResult(
+            problem=self.problem, steps=pd.DataFrame(self.rows),
+            points=pd.concat(self.tables, ignore_index=True),
+            displacements=np.array(self.displacements), records=list(solver.records),
+            error=error,
+            tracked=(pd.concat(self.tracked, ignore_index=True) if self.tracked
+                     else pd.DataFrame()),
+            resumed_from=None if saved is None else saved.step, interrupt=interrupt,
+        )
+
+
 def run_biaxial(
     setup: BiaxialSetup,
     material: Material,
     n_steps: int,
     settings: NewtonSettings | None = None,
-    progress: bool = False,
-    on_step: Callable[[NewtonSolver, StepRecord, pd.DataFrame], None] | None = None,
-    observer: RunObserver | None = None,
+    *,
     stress_tol: float = 0.0,
+    observer: RunObserver | None = None,
     tracking: Tracking | None = None,
     checkpoint: RunCheckpoint | None = None,
     resume: bool = False,
+    progress: bool = False,
+    on_step: Callable[[NewtonSolver, StepRecord, pd.DataFrame], None] | None = None,
 ) -> BiaxialResult:
     """Drive ``material`` through a drained biaxial test in ``n_steps`` load steps.
 
@@ -206,56 +265,26 @@ def run_biaxial(
     solver = NewtonSolver(problem.basis, material, problem.loading, settings)
     if saved is not None:
         solver.resume(saved.state)
-    rows, tables, disps, tracked = [], [], [], []
+    steps = _Collector(problem, material, n_steps, observer, tracking, checkpoint, on_step)
     if observer is not None:
         observer.start(problem)
-
-    def keep(row: dict[str, Any], points: pd.DataFrame, u: np.ndarray,
-             step_tracked: pd.DataFrame | None) -> None:
-        rows.append(row)
-        tables.append(points)
-        disps.append(u.copy())
-        if step_tracked is not None:
-            tracked.append(step_tracked)
-        if observer is not None:
-            observer.record(row, points, u, step_tracked)
-
-    def collect(solver: NewtonSolver, record: StepRecord | None) -> None:
-        row, points = _rows(solver, problem, record)
-        step_tracked = None
-        if tracking is not None and tracking.due(row["step"]):
-            step_tracked = tracking.rows(material, row["step"], row["axial_strain"],
-                                         setup.n_points)
-        keep(row, points, solver.u, step_tracked)
-        if checkpoint is not None:
-            checkpoint.save_step(row, points, solver.u, step_tracked)
-            if checkpoint.due(row["step"], n_steps):
-                checkpoint.save_state(row["step"], solver, material)
-        if on_step is not None and record is not None:
-            on_step(solver, record, points)
-
     error = None
     interrupt = None
     try:
         if saved is None:
-            collect(solver, None)
+            steps.collect(solver, None)
         else:
             for step in saved.steps:
-                keep(step.row, step.points, step.u, step.tracked)
-        solver.run(n_steps, on_step=collect, progress=progress,
+                steps.keep(step.row, step.points, step.u, step.tracked)
+        solver.run(n_steps, on_step=steps.collect, progress=progress,
                    description=f"biaxial {setup.nx}x{setup.ny}",
                    done=0 if saved is None else saved.step)
     except NewtonError as exc:
         error = str(exc)
     except KeyboardInterrupt as exc:
-        error = f"interrupted after load step {len(rows) - 1} of {n_steps}"
+        error = f"interrupted after load step {len(steps.rows) - 1} of {n_steps}"
         interrupt = exc
-    result = BiaxialResult(
-        problem=problem, steps=pd.DataFrame(rows), points=pd.concat(tables, ignore_index=True),
-        displacements=np.array(disps), records=list(solver.records), error=error,
-        tracked=pd.concat(tracked, ignore_index=True) if tracked else pd.DataFrame(),
-        resumed_from=None if saved is None else saved.step, interrupt=interrupt,
-    )
+    result = steps.result(solver, error, saved, interrupt)
     if observer is not None:
         observer.finish(result)
     return result
