@@ -17,8 +17,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import difflib
-import json
 import re
 import shlex
 import sys
@@ -28,13 +26,22 @@ from pathlib import Path
 from typing import Any
 
 from granular_material.cli.options import UsageError, check_output_dir, reports_to
+from granular_material.cli.scene_keys import (
+    command_parsers,
+    convert,
+    help_of,
+    kind_of,
+    scene_keys,
+    suggest,
+)
+from granular_material.cli.scene_toml import Where, flatten, line_of, read_toml, toml_repr
 from granular_material.results import write_json
 from granular_material.results.lock import FolderLock
 
 if sys.version_info >= (3, 11):
-    import tomllib
+    pass
 else:  # Python 3.10
-    import tomli as tomllib
+    pass
 
 __all__ = ["TESTS", "Scene", "check_scene", "command_parsers", "load_scene", "register",
            "run_scene", "scene_keys"]
@@ -79,223 +86,8 @@ class Scene:
         return shlex.join(["granular-material", self.test, *self.argv])
 
 
-# -- the schema, read from the parsers -------------------------------------------------------
-def command_parsers() -> dict[str, argparse.ArgumentParser]:
-    """The sub-command parsers of ``granular-material`` (plugins included), by name."""
-    from granular_material.cli import build_parser
-
-    for action in build_parser()._actions:
-        if isinstance(action, argparse._SubParsersAction):
-            return dict(action.choices)
-    raise RuntimeError("granular-material has no sub-commands")
-
-
-def _key_name(action: argparse.Action) -> str:
-    """The scene key of an option: its first long option without the dashes (``--axial-strain``
-    → ``axial-strain``); of a positional argument, its name."""
-    for option in action.option_strings:
-        if option.startswith("--"):
-            return option[2:]
-    return action.dest
-
-
-def scene_keys(parser: argparse.ArgumentParser) -> dict[str, argparse.Action]:
-    """Every scene key of the command ``parser`` with its action (``help`` left out; the
-    options of :data:`_NOT_KEYS` included, they are refused with advice)."""
-    return {_key_name(a): a for a in parser._actions
-            if not isinstance(a, (argparse._HelpAction, argparse._VersionAction))}
-
-
-def _kind(action: argparse.Action) -> str:
-    """What TOML value an option takes: ``flag`` (a boolean), ``integer``, ``number``,
-    ``path`` or ``text`` (a string), found by probing the parser's own ``type``."""
-    if action.nargs == 0:
-        return "flag"
-    if action.type is None:
-        return "text"
-    try:
-        probe = action.type("1")
-    except (argparse.ArgumentTypeError, ValueError, TypeError):
-        return "text"
-    if isinstance(probe, bool):
-        return "text"
-    if isinstance(probe, int):
-        return "integer"
-    if isinstance(probe, float):
-        return "number"
-    if isinstance(probe, Path):
-        return "path"
-    return "text"
-
-
-# -- where a key is written ------------------------------------------------------------------
-_PART = r"(?:[A-Za-z0-9_-]+|\"(?:[^\"\\]|\\.)*\"|'[^']*')"
-_KEY_LINE = re.compile(rf"^\s*({_PART}(?:\s*\.\s*{_PART})*)\s*=")
-_HEADER_LINE = re.compile(rf"^\s*\[\[?\s*({_PART}(?:\s*\.\s*{_PART})*)\s*\]")
-
-
-def _parts(dotted: str) -> tuple[str, ...]:
-    """The keys of a dotted TOML key (quoted ones decoded as TOML decodes them)."""
-    parts = []
-    for part in re.findall(_PART, dotted):
-        if part[0] in "\"'":
-            try:
-                part = next(iter(tomllib.loads(f"{part} = 0")))
-            except tomllib.TOMLDecodeError:
-                part = part[1:-1]
-        parts.append(part)
-    return tuple(parts)
-
-
-def _line_of(text: str, path: tuple[str, ...]) -> int | None:
-    """The line (from 1) where the key ``path`` (table names, then the key) is set, or its
-    table's header when ``path`` names a table; None when it cannot be found."""
-    table: tuple[str, ...] = ()
-    for number, line in enumerate(text.splitlines(), start=1):
-        header = _HEADER_LINE.match(line)
-        if header:
-            table = _parts(header.group(1))
-            if table == path:
-                return number
-            continue
-        key = _KEY_LINE.match(line)
-        if key and table + _parts(key.group(1)) == path:
-            return number
-    return None
-
-
-class _Where:
-    """Messages about one scene file, each with the line of the key it names."""
-
-    def __init__(self, path: Path, text: str) -> None:
-        self.path, self.text = path, text
-
-    def error(self, key_path: tuple[str, ...], message: str) -> UsageError:
-        line = _line_of(self.text, key_path) if key_path else None
-        at = f"{self.path}, line {line}" if line else f"{self.path}"
-        return UsageError(f"{at}: {message}")
-
-
-# -- one value --------------------------------------------------------------------------------
-def _toml_repr(value: Any) -> str:
-    """``value`` as TOML writes it (for messages)."""
-    if isinstance(value, list):
-        return "[" + ", ".join(_toml_repr(v) for v in value) + "]"
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, str):
-        return json.dumps(value, ensure_ascii=False)
-    return repr(value)
-
-
-def _item_text(key: str, kind: str, action: argparse.Action, value: Any) -> str:
-    """One TOML item as the command-line text the parser converts (ValueError: wrong type)."""
-    if kind in ("integer", "number"):
-        wanted = "an integer" if kind == "integer" else "a number"
-        numeric = isinstance(value, int) or (kind == "number" and isinstance(value, float))
-        if isinstance(value, bool) or not numeric:
-            hint = (" (values are SI numbers, without unit names)" if isinstance(value, str)
-                    else "")
-            raise ValueError(f"'{key}' takes {wanted}, got {_toml_repr(value)}{hint}")
-        return repr(value)
-    if isinstance(value, str):
-        return value
-    if kind == "text" and action.type is None and isinstance(value, int) \
-            and not isinstance(value, bool):
-        return str(value)  # e.g. Gauss point ids of track
-    raise ValueError(f"'{key}' takes a string, got {_toml_repr(value)}")
-
-
-def _convert(key: str, kind: str, action: argparse.Action, value: Any) -> tuple[Any, list[str]]:
-    """A TOML value of the option ``action`` → (the parsed value, its command-line words);
-    ValueError (naming ``key``) where the parser would refuse it."""
-    nargs = action.nargs
-    if kind == "flag":
-        if not isinstance(value, bool):
-            raise ValueError(f"'{key}' is a switch: true or false, got {_toml_repr(value)}")
-        if isinstance(action, argparse.BooleanOptionalAction):
-            return value, [f"--{key}" if value else f"--no-{key}"]
-        return (action.const, [f"--{key}"]) if value else (action.default, [])
-    if nargs in (None, "?"):
-        if isinstance(value, (list, dict)):
-            raise ValueError(f"'{key}' takes one value, got {_toml_repr(value)}")
-        items = [value]
-    else:
-        items = value if isinstance(value, list) else [value]
-        if isinstance(nargs, int) and len(items) != nargs:
-            raise ValueError(f"'{key}' takes a list of {nargs} values, got {_toml_repr(value)}")
-        if not items:
-            raise ValueError(f"'{key}' takes at least one value, got []")
-    texts = [_item_text(key, kind, action, item) for item in items]
-    parsed = []
-    for text in texts:
-        try:
-            one = action.type(text) if action.type is not None else text
-        except (argparse.ArgumentTypeError, ValueError, TypeError) as exc:
-            raise ValueError(f"'{key}': {exc}") from None
-        if action.choices is not None and one not in action.choices:
-            raise ValueError(f"'{key}' must be one of {', '.join(map(str, action.choices))}; "
-                             f"got {_toml_repr(text)}")
-        parsed.append(one)
-    result = parsed[0] if nargs in (None, "?") else parsed
-    if not action.option_strings:  # a positional argument
-        return result, texts
-    if len(texts) == 1 and nargs in (None, "?") and texts[0].startswith("-"):
-        return result, [f"--{key}={texts[0]}"]
-    return result, [f"--{key}", *texts]
-
-
-def _help(action: argparse.Action) -> str:
-    text = " ".join((action.help or "").split()).replace("%%", "%")
-    return f" ({text})" if text else ""
-
-
 # -- the scene --------------------------------------------------------------------------------
-def _read(path: Path) -> tuple[str, dict[str, Any]]:
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise UsageError(f"scene {path} does not exist") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise UsageError(f"scene {path} cannot be read: {exc}") from None
-    try:
-        return text, tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        found = re.search(r"line (\d+)", str(exc))
-        shown = ""
-        if found:
-            lines = text.splitlines()
-            number = int(found.group(1))
-            if 1 <= number <= len(lines):
-                shown = f": {lines[number - 1].strip()}"
-        line = f", line {found.group(1)}" if found else ""
-        raise UsageError(f"{path}{line}: not valid TOML ({exc}){shown}") from None
-
-
-def _flatten(data: dict[str, Any], where: _Where) -> list[tuple[tuple[str, ...], Any]]:
-    """(key path, value) of every key; tables only group keys, one level deep."""
-    entries: list[tuple[tuple[str, ...], Any]] = []
-    for name, value in data.items():
-        if isinstance(value, list) and value and all(isinstance(v, dict) for v in value):
-            raise where.error((name,), f"[[{name}]]: a scene describes one run; write one "
-                                       "scene per run")
-        if not isinstance(value, dict):
-            entries.append(((name,), value))
-            continue
-        for key, item in value.items():
-            if isinstance(item, dict):
-                raise where.error((name, key), f"[{name}.{key}]: tables only group keys, "
-                                               "one level deep")
-            entries.append(((name, key), item))
-    return entries
-
-
-def _suggest(name: str, known: list[str]) -> str:
-    close = difflib.get_close_matches(name, known, n=3)
-    return f" (did you mean {' or '.join(repr(c) for c in close)}?)" if close else ""
-
-
-def _test_of(entries: list[tuple[tuple[str, ...], Any]], where: _Where,
+def _test_of(entries: list[tuple[tuple[str, ...], Any]], where: Where,
              parsers: Mapping[str, argparse.ArgumentParser]) -> str:
     tests = [t for t in TESTS if t in parsers]
     given = [(p, v) for p, v in entries if p[-1] == "test"]
@@ -306,9 +98,9 @@ def _test_of(entries: list[tuple[tuple[str, ...], Any]], where: _Where,
         raise where.error(given[1][0], "'test' is given twice")
     path, value = given[0]
     if not isinstance(value, str) or value not in tests:
-        hint = _suggest(value, tests) if isinstance(value, str) else ""
+        hint = suggest(value, tests) if isinstance(value, str) else ""
         raise where.error(path, f"'test' must be one of {', '.join(tests)}; got "
-                                f"{_toml_repr(value)}{hint}")
+                                f"{toml_repr(value)}{hint}")
     return value
 
 
@@ -319,9 +111,9 @@ def load_scene(path: Path, parsers: Mapping[str, argparse.ArgumentParser] | None
     it from its checkpoint. Reads input files' existence only; writes nothing."""
     path = Path(path)
     parsers = command_parsers() if parsers is None else parsers
-    text, data = _read(path)
-    where = _Where(path, text)
-    entries = _flatten(data, where)
+    text, data = read_toml(path)
+    where = Where(path, text)
+    entries = flatten(data, where)
     test = _test_of(entries, where, parsers)
     parser = parsers[test]
     keys = scene_keys(parser)
@@ -335,12 +127,12 @@ def load_scene(path: Path, parsers: Mapping[str, argparse.ArgumentParser] | None
         key = name if name in keys else aliases.get(name)
         if key is None:
             raise where.error(key_path, f"unknown key '{name}': not an option of {test}"
-                                        f"{_suggest(name, sorted(keys))}; its keys are the "
+                                        f"{suggest(name, sorted(keys))}; its keys are the "
                                         f"options of `granular-material {test} --help`")
         if key in _NOT_KEYS:
             raise where.error(key_path, f"'{name}' is not a scene key: {_NOT_KEYS[key]}")
         if key in seen:
-            first = _line_of(text, seen[key])
+            first = line_of(text, seen[key])
             raise where.error(key_path, f"'{key}' is given twice"
                                         + (f" (first on line {first})" if first else ""))
         seen[key] = key_path
@@ -357,11 +149,11 @@ def load_scene(path: Path, parsers: Mapping[str, argparse.ArgumentParser] | None
         if key == "out":
             continue
         action = keys[key]
-        kind = _kind(action)
+        kind = kind_of(action)
         try:
-            parsed, words = _convert(key, kind, action, given[key_path])
+            parsed, words = convert(key, kind, action, given[key_path])
         except ValueError as exc:
-            raise where.error(key_path, f"{exc}{_help(action)}") from None
+            raise where.error(key_path, f"{exc}{help_of(action)}") from None
         if kind == "path":
             if key in _RUN_FOLDER_KEYS:
                 parsed = run_dir / Path(parsed).expanduser()
@@ -376,7 +168,7 @@ def load_scene(path: Path, parsers: Mapping[str, argparse.ArgumentParser] | None
 
     for key, action in keys.items():
         if action.required and action.dest not in values:
-            raise where.error((), f"missing key '{key}': {test} needs it{_help(action)}")
+            raise where.error((), f"missing key '{key}': {test} needs it{help_of(action)}")
     # files the run writes: inside the run folder, where the scene names none
     for key, name in _DEFAULT_FILES.get(test, {}).items():
         if keys[key].dest not in values:
@@ -396,7 +188,7 @@ def load_scene(path: Path, parsers: Mapping[str, argparse.ArgumentParser] | None
     for dest, value in values.items():
         setattr(namespace, dest, value)
     namespace.command = test
-    lines = {key: _line_of(text, key_path) for key, key_path in seen.items()}
+    lines = {key: line_of(text, key_path) for key, key_path in seen.items()}
     return Scene(path=path, test=test, namespace=namespace, run_dir=run_dir,
                  argv=positional + options,
                  lines={key: line for key, line in lines.items() if line is not None})
@@ -408,13 +200,13 @@ def _word(path: Path) -> str:
     return "./" + text if text.startswith("-") else text
 
 
-def _run_folder(where: _Where, key_path: tuple[str, ...] | None, action: argparse.Action,
+def _run_folder(where: Where, key_path: tuple[str, ...] | None, action: argparse.Action,
                 value: Any, folder: Path, out: Path | None) -> Path:
     """The run folder: ``out`` (``run --out``), else the scene's ``out`` (relative to its
     folder), else the scene's name in the current folder; checked to be writable."""
     if key_path is not None:
         try:
-            parsed, _ = _convert("out", "path", action, value)
+            parsed, _ = convert("out", "path", action, value)
         except ValueError as exc:
             raise where.error(key_path, f"{exc} (the run folder)") from None
     if out is not None:
@@ -576,7 +368,7 @@ def _run_spec_file(path: Path, text: str, data: dict[str, Any],
 
 def _run_command(parsers: Mapping[str, argparse.ArgumentParser], args: argparse.Namespace,
                  ) -> int:
-    text, data = _read(Path(args.scene))
+    text, data = read_toml(Path(args.scene))
     if isinstance(data.get("problem"), dict):
         return _run_spec_file(Path(args.scene), text, data, args)
     scene = load_scene(args.scene, parsers, out=args.out, resume=args.resume)
