@@ -289,7 +289,7 @@ def _finish(plan: RunPlan, outcome: RunOutcome) -> None:
                                     reference["stress_ratio"].to_numpy())
             summary["dem_peak_stress_ratio"] = ratio
             summary["dem_axial_strain_at_peak"] = float(reference["axial_strain"].iloc[peak])
-        summary.update({"rve_material": None, **_material_summary(plan)})
+        summary.update(_material_summary(plan))
     if out is not None:
         write_outputs(result, out, map_strain=list(spec.output.map_strain),
                       reference=outcome.reference)
