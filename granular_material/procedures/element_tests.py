@@ -9,10 +9,19 @@ import numpy as np
 import pandas as pd
 
 from granular_material.dem import DEMBatch
+from granular_material.procedures.packing import DEFAULT_PRESSURE
 from granular_material.procedures.progress import progress_bar
 from granular_material.procedures.servo import CONTROL_STRAIN, CONTROL_STRESS, servo_steps
+from granular_material.procedures.strain_path import DEFAULT_STRAIN_PER_STEP, STEP_LIMIT
 
-__all__ = ["BiaxialInterrupted", "biaxial_steps", "biaxial_test", "lateral_stress_error"]
+__all__ = ["DEFAULT_AXIAL_STRAIN", "DEFAULT_RECORD_EVERY", "BiaxialInterrupted", "biaxial_steps",
+           "biaxial_test", "lateral_stress_error"]
+
+#: final axial strain of a drained biaxial test [-], engineering, compression positive (Wu et
+#: al. 2025 load their specimens to 10 %)
+DEFAULT_AXIAL_STRAIN = 0.1
+#: DEM steps between the recorded rows of :func:`biaxial_test`
+DEFAULT_RECORD_EVERY = 100
 
 
 class BiaxialInterrupted(KeyboardInterrupt):
@@ -29,9 +38,10 @@ class BiaxialInterrupted(KeyboardInterrupt):
 
 def biaxial_steps(axial_strain: float, strain_per_step: float) -> int:
     """DEM steps of :func:`biaxial_test`: ``ceil(−ln(1 − ε_a)/strain_per_step)`` (ε_a
-    engineering, compression positive); ``ValueError`` past 10¹⁵ (no longer an integer)."""
+    engineering, compression positive); ``ValueError`` past
+    :data:`~granular_material.procedures.strain_path.STEP_LIMIT` (no longer an integer)."""
     total = math.ceil(-math.log1p(-axial_strain) / strain_per_step)
-    if total > 10**15:
+    if total > STEP_LIMIT:
         raise ValueError(f"axial_strain {axial_strain!r} at strain_per_step "
                          f"{strain_per_step!r} needs {total:.4g} DEM steps, more than 1e15")
     return total
@@ -54,10 +64,10 @@ def lateral_stress_error(curve: pd.DataFrame, confining: float) -> pd.DataFrame:
 
 def biaxial_test(
     batch: DEMBatch,
-    axial_strain: float = 0.1,
-    confining: float = 100.0e3,
-    strain_per_step: float = 1.0e-5,
-    record_every: int = 100,
+    axial_strain: float = DEFAULT_AXIAL_STRAIN,
+    confining: float = DEFAULT_PRESSURE,
+    strain_per_step: float = DEFAULT_STRAIN_PER_STEP,
+    record_every: int = DEFAULT_RECORD_EVERY,
     gain: float = 0.5,
     progress: bool = False,
     max_steps: int | None = None,

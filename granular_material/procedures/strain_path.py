@@ -15,6 +15,9 @@ from granular_material.dem.loading import expm_2x2
 from granular_material.dem.model import cell_heights
 
 __all__ = [
+    "DEFAULT_MAX_DEM_STEPS",
+    "DEFAULT_STRAIN_PER_STEP",
+    "STEP_LIMIT",
     "CellTooThinError",
     "RVECollapseError",
     "drive_grad_u",
@@ -25,6 +28,21 @@ __all__ = [
     "path_steps",
 ]
 
+
+#: largest strain of one DEM step [-] (Guo & Zhao 2014), the quasi-static criterion of every
+#: strain path and element test: an RVE driven along ∇u, the axial strain of a biaxial test
+DEFAULT_STRAIN_PER_STEP = 1.0e-5
+
+#: default cap on the DEM steps of one run of the DEM (a path, a test): 10⁶ steps is about 100
+#: times the default biaxial test (1.05 × 10⁴ steps to 10 % at 1e-5 a step) or a path of
+#: |∇u| = 10 at 1e-5 a step; one 64-disc RVE runs about 4 × 10³ steps/s on one CPU core (a
+#: 400-disc one about six times fewer), so the cap is minutes to half an hour of work: far
+#: past any run a typo would start on purpose, well short of the 10⁷ – 10³⁰⁰ steps a
+#: mistyped strain asks for.
+DEFAULT_MAX_DEM_STEPS = 10**6
+
+#: the most DEM steps one path or test may take: beyond it a float64 count is no longer exact
+STEP_LIMIT = 10**15
 
 #: points along a path at which :func:`drive_grad_u` checks the cell's heights beforehand
 PATH_CHECKS = 32
@@ -167,10 +185,6 @@ def path_increment(grad_u: np.ndarray, k: int, increments: int) -> np.ndarray:
     return f_next @ np.linalg.inv(f_now) - np.eye(2)
 
 
-#: the most DEM steps one path may take: beyond it a float64 count is no longer exact
-_STEP_LIMIT = 10**15
-
-
 def _wanted_steps(grad_u: np.ndarray, max_strain_per_step: float,
                   min_steps: int) -> np.ndarray:
     """Uncapped step counts ``max(ceil(max|∇u_b| / max_strain_per_step), min_steps)``, float."""
@@ -185,17 +199,17 @@ def _wanted_steps(grad_u: np.ndarray, max_strain_per_step: float,
 
 
 def _cap(max_steps: int | None) -> int:
-    return _STEP_LIMIT if max_steps is None else min(int(max_steps), _STEP_LIMIT)
+    return STEP_LIMIT if max_steps is None else min(int(max_steps), STEP_LIMIT)
 
 
-def over_step_cap(grad_u: np.ndarray, max_strain_per_step: float = 1.0e-5,
+def over_step_cap(grad_u: np.ndarray, max_strain_per_step: float = DEFAULT_STRAIN_PER_STEP,
                   min_steps: int = 2, max_steps: int | None = None) -> np.ndarray:
     """Which RVEs' paths to ∇u (B, 2, 2) would need more than ``max_steps`` DEM steps (or
     more than 10¹⁵, where the count stops being an integer), shape (B,), bool."""
     return _wanted_steps(grad_u, max_strain_per_step, min_steps) > _cap(max_steps)
 
 
-def path_steps(grad_u: np.ndarray, max_strain_per_step: float = 1.0e-5,
+def path_steps(grad_u: np.ndarray, max_strain_per_step: float = DEFAULT_STRAIN_PER_STEP,
                min_steps: int = 2, max_steps: int | None = None) -> np.ndarray:
     """DEM steps of each RVE's path to ∇u (B, 2, 2): ``max(ceil(max|∇u_b| / max_strain_per_step),
     min_steps)``, shape (B,), int64.
@@ -219,7 +233,7 @@ def path_steps(grad_u: np.ndarray, max_strain_per_step: float = 1.0e-5,
 def drive_grad_u(
     batch: DEMBatch,
     grad_u: np.ndarray,
-    max_strain_per_step: float = 1.0e-5,
+    max_strain_per_step: float = DEFAULT_STRAIN_PER_STEP,
     min_steps: int = 2,
     active: np.ndarray | None = None,
     max_steps: int | None = None,
