@@ -39,6 +39,10 @@ import numpy as np
 import pandas as pd
 from granular_material_validation import engine_runner, metrics, yade_runner
 
+from granular_material.procedures.element_tests import DEFAULT_AXIAL_STRAIN
+from granular_material.procedures.packing import DEFAULT_DISCS, DEFAULT_PRESSURE
+from granular_material.procedures.strain_path import DEFAULT_STRAIN_PER_STEP
+
 __all__ = ["CASES", "KINDS", "RULES", "Case", "SeedRun", "case_checks", "run_case",
            "shear_stress_figures", "summarise_case"]
 
@@ -76,9 +80,9 @@ class Case:
     kind: str
     source: str
     seeds: tuple[int, ...] = (1, 2, 3)
-    particles: int = 400
-    pressure: float = 1e5
-    axial_strain: float = 0.1
+    particles: int = DEFAULT_DISCS
+    pressure: float = DEFAULT_PRESSURE
+    axial_strain: float = DEFAULT_AXIAL_STRAIN
     steps: int = 100
     grad_u: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
     increments: int = 1
@@ -133,8 +137,8 @@ CASES: dict[str, Case] = {c.name: c for c in (
 )}
 
 
-# YADE's own sensitivity: the biaxial test rerun at 1 % less strain a step than 1e-5
-PERTURBED_STRAIN_PER_STEP = 0.99e-5
+# YADE's own sensitivity: the biaxial test rerun at 1 % less strain a step than the default
+PERTURBED_STRAIN_PER_STEP = 0.99 * DEFAULT_STRAIN_PER_STEP
 
 
 @dataclass

@@ -34,6 +34,19 @@ from granular_material.cli.options import (
     scalar_or_list,
     warn,
 )
+from granular_material.procedures.element_tests import (
+    DEFAULT_AXIAL_STRAIN,
+    DEFAULT_RECORD_EVERY,
+)
+from granular_material.procedures.packing import (
+    DEFAULT_DISCS,
+    DEFAULT_PRESSURE,
+    DEFAULT_RADIUS_RANGE,
+    MAX_OVERLAP,
+    VOID_RATIO_TOLERANCE,
+    min_discs,
+)
+from granular_material.procedures.strain_path import DEFAULT_STRAIN_PER_STEP
 
 if TYPE_CHECKING:
     from granular_material.dem import DEMBatch as DEMBatchType
@@ -102,8 +115,6 @@ def _rve_list(indices: np.ndarray, values: np.ndarray, fmt: str) -> str:
 def _run_prepare(args: argparse.Namespace) -> int:
     from granular_material.dem import save_rve
     from granular_material.procedures import prepare_packing
-    from granular_material.procedures.packing import VOID_RATIO_TOLERANCE
-
     check_output_file(args.out)
     packing = packing_parameters(args, args.particles, args.pressure)
     check_memory(float(args.batch) * args.particles * DISC_BYTES,
@@ -222,6 +233,8 @@ def _run_biaxial(args: argparse.Namespace) -> int:
 # -- dem-drive -----------------------------------------------------------------------------
 #: the fewest DEM steps one increment of dem-drive takes (drive_grad_u's min_steps)
 _MIN_INCREMENT_STEPS = 2
+#: the increments of dem-drive by default
+_INCREMENTS = 10
 
 
 def _drive_plan(args: argparse.Namespace) -> list[int]:
@@ -346,17 +359,20 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "prepare", help="generate and consolidate periodic RVE packings",
         description="Random discs in a periodic cell, frictionless isotropic consolidation "
         "to --pressure, then friction set and re-equilibrated; written as an RVE file. "
-        "Exit code 1 (no file) when the void ratio ends more than 0.005 above "
+        f"Exit code 1 (no file) when the void ratio ends more than {VOID_RATIO_TOLERANCE:g} above "
         "--target-void-ratio; a warning when it ends above it by less.",
     )
-    p.add_argument("--particles", type=positive_int, default=400,
-                   help="discs per RVE (400; at least 12 for 3–7 mm radii, so the cell stays "
-                        "wider than twice the contact cut-off)")
+    r_min, r_max = DEFAULT_RADIUS_RANGE
+    p.add_argument("--particles", type=positive_int, default=DEFAULT_DISCS,
+                   help=f"discs per RVE ({DEFAULT_DISCS}; at least {min_discs()} for "
+                        f"{r_min * 1e3:g}–{r_max * 1e3:g} mm radii, so the cell stays wider "
+                        "than twice the contact cut-off)")
     p.add_argument("--seed", type=int, default=1, help="random seed; RVE b uses seed + b (1)")
-    p.add_argument("--pressure", type=positive, default=100e3,
-                   help="isotropic consolidation pressure [Pa] (100e3; at most "
-                        "0.05·kn/thickness, or 0.05·young·radius-min/thickness for frictmat, "
-                        "so contacts overlap under 10 %% of the radius)")
+    p.add_argument("--pressure", type=positive, default=DEFAULT_PRESSURE,
+                   help=f"isotropic consolidation pressure [Pa] ({DEFAULT_PRESSURE:g}; at most "
+                        f"{MAX_OVERLAP / 2:g}·kn/thickness, or {MAX_OVERLAP / 2:g}·young·"
+                        "radius-min/thickness for frictmat, so contacts overlap under "
+                        f"{MAX_OVERLAP:.0%}% of the radius)")
     p.add_argument("--batch", type=positive_int, default=1, help="number of RVEs B (1)")
     add_out(p, "RVE file (rve.npz)", default=Path("rve.npz"))
     add_rve_material_options(p)
@@ -369,14 +385,18 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "CSV columns: rve, step, axial_strain (compression positive), lateral_strain, "
         "volumetric_strain, sxx, syy, sxy [Pa, tension positive], stress_ratio, void_ratio, "
         "coordination. Exit code 1 (the final σxx in the message) when the servo kept σxx "
-        "more than 5 % off in most records; a warning where it strayed more than 2 %.",
+        f"more than {SERVO_FAIL:.0%} off in most records; a warning where it strayed more "
+        f"than {SERVO_WARN:.0%}.",
     )
     p.add_argument("rve", type=Path, help="RVE file (.npz)")
-    p.add_argument("--axial-strain", type=positive, default=0.1, help="final strain (0.1)")
-    p.add_argument("--confining", type=positive, default=100e3, help="[Pa] (100e3)")
-    p.add_argument("--strain-per-step", type=positive, default=1e-5, help="(1e-5)")
-    p.add_argument("--record-every", type=positive_int, default=100,
-                   help="steps between CSV rows (100)")
+    p.add_argument("--axial-strain", type=positive, default=DEFAULT_AXIAL_STRAIN,
+                   help=f"final strain ({DEFAULT_AXIAL_STRAIN:g})")
+    p.add_argument("--confining", type=positive, default=DEFAULT_PRESSURE,
+                   help=f"[Pa] ({DEFAULT_PRESSURE:g})")
+    p.add_argument("--strain-per-step", type=positive, default=DEFAULT_STRAIN_PER_STEP,
+                   help=f"({DEFAULT_STRAIN_PER_STEP:g})")
+    p.add_argument("--record-every", type=positive_int, default=DEFAULT_RECORD_EVERY,
+                   help=f"steps between CSV rows ({DEFAULT_RECORD_EVERY})")
     add_max_dem_steps(p, "the test")
     add_out(p, "CSV of the curve(s)")
     p.add_argument("--plot", type=Path, default=None, help="PNG of σ1/σ3 and εv vs εa")
@@ -393,8 +413,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("rve", type=Path, help="RVE file (.npz)")
     p.add_argument("--grad-u", type=_grad_u, required=True, metavar="Gxx,Gxy,Gyx,Gyy",
                    help="total displacement gradient ∂u_i/∂x_j")
-    p.add_argument("--increments", type=positive_int, default=10, help="K (10)")
-    p.add_argument("--max-strain-per-step", type=positive, default=1e-5, help="(1e-5)")
+    p.add_argument("--increments", type=positive_int, default=_INCREMENTS,
+                   help=f"K ({_INCREMENTS})")
+    p.add_argument("--max-strain-per-step", type=positive, default=DEFAULT_STRAIN_PER_STEP,
+                   help=f"({DEFAULT_STRAIN_PER_STEP:g})")
     add_max_dem_steps(p, "the whole path (all increments)")
     add_out(p, "CSV of the path")
     _add_run_options(p)
