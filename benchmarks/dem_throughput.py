@@ -339,9 +339,10 @@ def main(argv: list[str] | None = None) -> pd.DataFrame | None:
     wp.config.quiet = True
     from tqdm.auto import tqdm
 
-    from granular_material.dem import save_rve
+    from granular_material.dem import resolve_device, save_rve
     from granular_material.procedures import prepare_packing
 
+    args.device = resolve_device(args.device)  # chosen here once; the workers are told it
     with tempfile.TemporaryDirectory() as scratch:
         scratch = Path(scratch)
         rve_path = scratch / "benchmark_rve.npz"

@@ -83,11 +83,18 @@ def _add_run_options(parser: argparse.ArgumentParser) -> None:
     add_json(parser)
 
 
+def _device(args: argparse.Namespace) -> str:
+    """The command's DEM device, chosen here once: ``--device``, else CUDA when present."""
+    from granular_material.dem import resolve_device
+
+    return resolve_device(args.device)
+
+
 def _load_batch(args: argparse.Namespace) -> DEMBatchType:
     from granular_material.dem import DEMBatch, load_rve
 
     data = load_rve(args.rve)
-    return DEMBatch(data, device=args.device, dtype=args.dtype)
+    return DEMBatch(data, device=_device(args), dtype=args.dtype)
 
 
 def _finish(args: argparse.Namespace, report: dict[str, Any], error: str | None,
@@ -122,7 +129,7 @@ def _run_prepare(args: argparse.Namespace) -> int:
     batch = prepare_packing(
         n_disc=args.particles, n_rve=args.batch, seed=args.seed, pressure=args.pressure,
         meta=packing.meta, target_void_ratio=packing.target_void_ratio,
-        radius_range=packing.radius_range, device=args.device, dtype=args.dtype,
+        radius_range=packing.radius_range, device=_device(args), dtype=args.dtype,
         progress=progress_enabled(args),
     )
     h = batch.homogenize()
