@@ -217,7 +217,7 @@ def ours_drive(rve: str | Path, out_csv: str | Path, grad_u: list[float], increm
     """
     from granular_material.cli.options import scalar_or_list
     from granular_material.dem import DEMBatch, DEMInstabilityError, load_rve
-    from granular_material.procedures import drive_grad_u, path_increment, path_steps
+    from granular_material.procedures import drive_grad_u, path_increment, plan_path
     from granular_material.results import write_csv
 
     if len(grad_u) != 4 or increments < 1:
@@ -233,12 +233,8 @@ def ours_drive(rve: str | Path, out_csv: str | Path, grad_u: list[float], increm
     failure: DEMInstabilityError | None = None
     timing: dict[str, float] = {}
     with _engine_call("dem-drive", timing):
-        # dem-drive's check of the whole path against --max-dem-steps, before any work
-        planned = sum(int(path_steps(path_increment(grad, k, n)[None], max_strain_per_step,
-                                     max_steps=cap)[0]) for k in range(1, n + 1))
-        if planned > cap:
-            raise ValueError(f"grad_u {grad_u} needs {planned} DEM steps in {n} increments, "
-                             f"more than the {cap} of --max-dem-steps")
+        # dem-drive's checks of the whole path (--max-dem-steps among them), before any work
+        plan_path(grad, n, max_strain_per_step, cap)
         batch = DEMBatch(load_rve(rve), device=device, dtype="float64")
         b = batch.n_rve
 

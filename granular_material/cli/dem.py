@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -165,29 +164,27 @@ def _run_prepare(args: argparse.Namespace) -> int:
 
 
 # -- biaxial-dem ---------------------------------------------------------------------------
+#: how the checks of biaxial_test name its values: by the command's options
+_BIAXIAL_OPTIONS = {"axial_strain": "--axial-strain", "confining": "--confining",
+                    "strain_per_step": "--strain-per-step", "max_steps": "--max-dem-steps"}
+
+
 def _run_biaxial(args: argparse.Namespace) -> int:
     from granular_material.procedures import biaxial_test
     from granular_material.procedures.element_tests import (
         BiaxialInterrupted,
-        biaxial_steps,
+        check_biaxial,
         lateral_stress_error,
     )
     from granular_material.results import plot_biaxial_curves, summarize_biaxial, write_csv
 
     check_output_file(args.out)
     check_figure_file(args.plot, "--plot", {"--out": args.out})
-    if args.axial_strain >= 0.9:
-        raise UsageError(f"--axial-strain must be below 0.9, got {args.axial_strain:g}")
     try:
-        total: float = biaxial_steps(args.axial_strain, args.strain_per_step)
-    except ValueError:
-        total = math.inf
-    if total > args.max_dem_steps:
-        raise UsageError(
-            f"--axial-strain {args.axial_strain:g} at --strain-per-step "
-            f"{args.strain_per_step:g} needs {total:.4g} DEM steps, more than --max-dem-steps "
-            f"{args.max_dem_steps}; raise --max-dem-steps or --strain-per-step"
-        )
+        check_biaxial(args.axial_strain, args.confining, args.strain_per_step,
+                      args.max_dem_steps, names=_BIAXIAL_OPTIONS)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
     batch = _load_batch(args)
     interrupt = None
     try:
@@ -238,8 +235,9 @@ def _run_biaxial(args: argparse.Namespace) -> int:
 
 
 # -- dem-drive -----------------------------------------------------------------------------
-#: the fewest DEM steps one increment of dem-drive takes (drive_grad_u's min_steps)
-_MIN_INCREMENT_STEPS = 2
+#: how the checks of a path name its values: by the command's options
+_PATH_OPTIONS = {"grad_u": "--grad-u", "increments": "--increments",
+                 "max_strain_per_step": "--max-strain-per-step", "max_steps": "--max-dem-steps"}
 #: the increments of dem-drive by default
 _INCREMENTS = 10
 
@@ -247,42 +245,13 @@ _INCREMENTS = 10
 def _drive_plan(args: argparse.Namespace) -> list[int]:
     """DEM steps of each increment of ``dem-drive``, checked against --max-dem-steps before
     any work (UsageError naming the options)."""
-    from granular_material.procedures import has_real_logarithm, path_increment, path_steps
+    from granular_material.procedures import plan_path
 
-    cap = args.max_dem_steps
-    shown = ",".join(f"{v:g}" for v in args.grad_u.ravel())
-    n = args.increments
-    if n * _MIN_INCREMENT_STEPS > cap:  # before a loop over them: 10⁷ would take minutes
-        raise UsageError(f"--increments {n} needs at least {n * _MIN_INCREMENT_STEPS} DEM "
-                         f"steps ({_MIN_INCREMENT_STEPS} an increment), more than "
-                         f"--max-dem-steps {cap}; use fewer --increments")
-    plan = []
-    for k in range(1, n + 1):
-        det = float(np.linalg.det(np.eye(2) + args.grad_u * k / n))
-        if not det > 0:
-            raise UsageError(f"--grad-u {shown} inverts the cell at increment {k} of {n}: "
-                             f"det(I + {k}/{n}·∇u) = {det:.4g} <= 0")
-        increment = path_increment(args.grad_u, k, n)[None]
-        try:
-            plan.append(int(path_steps(increment, args.max_strain_per_step,
-                                       max_steps=cap)[0]))
-        except ValueError:
-            wanted = float(np.abs(increment).max()) / args.max_strain_per_step
-            raise UsageError(
-                f"--grad-u {shown} needs more than --max-dem-steps {cap} DEM steps: increment "
-                f"{k} of {n} alone takes {wanted:.4g} at --max-strain-per-step "
-                f"{args.max_strain_per_step:g}; raise --max-dem-steps or --max-strain-per-step"
-            ) from None
-        if not has_real_logarithm(np.eye(2) + increment)[0]:
-            raise UsageError(f"increment {k} of {n} of --grad-u {shown} has no real logarithm "
-                             "(it turns the cell by half a turn or more); use more --increments")
-    if sum(plan) > cap:
-        raise UsageError(
-            f"--grad-u {shown} needs {sum(plan)} DEM steps in {n} increments at "
-            f"--max-strain-per-step {args.max_strain_per_step:g}, more than --max-dem-steps "
-            f"{cap}; raise --max-dem-steps or --max-strain-per-step"
-        )
-    return plan
+    try:
+        return plan_path(args.grad_u, args.increments, args.max_strain_per_step,
+                         args.max_dem_steps, names=_PATH_OPTIONS)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
 
 
 def _run_drive(args: argparse.Namespace) -> int:

@@ -14,8 +14,8 @@ from granular_material.procedures.servo import consolidate
 
 __all__ = ["DEFAULT_DISCS", "DEFAULT_PRESSURE", "DEFAULT_RADIUS_RANGE", "MAX_OVERLAP",
            "MIN_OVERLAP", "PACKING_NAMES", "VOID_RATIO_TOLERANCE", "PackingParameters",
-           "check_packing", "check_radius_range", "max_pressure", "min_discs", "min_pressure",
-           "prepare_packing", "random_gas", "smallest_normal_stiffness",
+           "check_packing", "check_radius_range", "given_as", "max_pressure", "min_discs",
+           "min_pressure", "prepare_packing", "random_gas", "smallest_normal_stiffness",
            "typical_normal_stiffness"]
 
 #: (r_min, r_max) [m] of the uniform disc radii: Wu et al. (2025) Table 1; Guo & Zhao rMean
@@ -121,9 +121,11 @@ PACKING_NAMES = {"radius_range": ("r_min", "r_max"), "n_disc": "n_disc",
                  "pressure": "pressure", "stiffness": "kn"}
 
 
-def _given(name: str, value: float) -> str:
-    """A value as its message names it: ``--option 5`` for an option, else ``name = 5``."""
-    return f"{name} {value:g}" if name.startswith("-") else f"{name} = {value:g}"
+def given_as(name: str, value: float) -> str:
+    """A value as a message names it: ``--option 5`` for a command-line option, else
+    ``name = 5`` (a keyword of a library call); integers whole, floats as ``:g``."""
+    shown = f"{value:g}" if isinstance(value, float) else str(value)
+    return f"{name} {shown}" if name.startswith("-") else f"{name} = {shown}"
 
 
 def check_radius_range(radius_range: tuple[float, float],
@@ -135,7 +137,7 @@ def check_radius_range(radius_range: tuple[float, float],
         return
     low, high = names
     if math.isfinite(r_max) and 0 < r_max < r_min:
-        raise ValueError(f"{_given(low, r_min)} exceeds {_given(high, r_max)} [m]")
+        raise ValueError(f"{given_as(low, r_min)} exceeds {given_as(high, r_max)} [m]")
     raise ValueError(f"the radii must satisfy 0 < {low} <= {high} [m], finite, got "
                      f"{r_min!r}, {r_max!r}")
 
@@ -157,12 +159,12 @@ def check_packing(n_disc: int, pressure: float, meta: RVEMeta,
     fewest = min_discs(radius_range)
     if n_disc < fewest:
         raise ValueError(
-            f"{_given(names['n_disc'], n_disc)} is too few: with radii {r_min:g}–{r_max:g} m "
+            f"{given_as(names['n_disc'], n_disc)} is too few for radii {r_min:g}–{r_max:g} m: "
             f"the consolidated cell must stay wider than twice the contact cut-off "
             f"(2·r_max + skin; the engine sees one periodic image of each pair), which takes "
             f"at least {fewest} discs"
         )
-    pressure_given = _given(names["pressure"], pressure)
+    pressure_given = given_as(names["pressure"], pressure)
     highest = max_pressure(meta, radius_range)
     if pressure > highest:
         overlap = 2 * pressure * meta.thickness / smallest_normal_stiffness(meta, radius_range)
@@ -191,7 +193,7 @@ def check_packing(n_disc: int, pressure: float, meta: RVEMeta,
             raise ValueError(
                 f"dtype float32 cannot resolve contacts overlapping about {overlap:.3g} m "
                 f"({pressure_given} Pa) in a cell about {side:.3g} m across "
-                f"({_given(names['n_disc'], n_disc)}): float32 positions are "
+                f"({given_as(names['n_disc'], n_disc)}): float32 positions are "
                 f"{2.0**-24 * side:.3g} m apart, {share:.2%} of the overlap (at most "
                 f"{FLOAT32_MAX_RESOLUTION:.1%}); use float64, a higher pressure or fewer discs"
             )
