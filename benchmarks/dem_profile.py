@@ -50,10 +50,11 @@ def profile(rve: Path, n_rve: int, steps: int, dtype: str, repeats: int) -> dict
 
     wp.config.quiet = True
     from granular_material.dem import DEMBatch, load_rve
+    from granular_material.procedures.strain_path import DEFAULT_STRAIN_PER_STEP
 
     batch = DEMBatch(load_rve(rve).replicate(n_rve), device="cpu", dtype=dtype, shards=1)
     shear = np.zeros((n_rve, 2, 2))
-    shear[:, 0, 1] = 1e-5 / batch.dt
+    shear[:, 0, 1] = DEFAULT_STRAIN_PER_STEP / batch.dt
     batch.set_affine(shear)
     batch.run(100)  # warm-up: kernels loaded, lists built, graph captured
     # a thread steps its shards (of at most CPU_SHARD_DISCS discs) one after the other

@@ -73,11 +73,12 @@ def measure(rve: Path, n_rve: int, seconds: float, device: str | None, dtype: st
 
     wp.config.quiet = True
     from granular_material.dem import DEMBatch, load_rve
+    from granular_material.procedures.strain_path import DEFAULT_STRAIN_PER_STEP
 
     batch = DEMBatch(load_rve(rve).replicate(n_rve), device=device, dtype=dtype,
                      shards=shards)
     shear = np.zeros((batch.n_rve, 2, 2))
-    shear[:, 0, 1] = 1e-5 / batch.dt  # 1e-5 strain a step
+    shear[:, 0, 1] = DEFAULT_STRAIN_PER_STEP / batch.dt  # 1e-5 strain a step
     batch.set_affine(shear)
     batch.run(20)  # warm-up: kernels loaded, lists built
     t0 = time.perf_counter()
@@ -114,12 +115,13 @@ def measure_physics(rve: Path, n_rve: int, seconds: float, repeats: int, device:
     wp.config.quiet = True
     from granular_material.dem import DEMBatch, load_rve
     from granular_material.dem.kernels import StepFeatures
+    from granular_material.procedures.strain_path import DEFAULT_STRAIN_PER_STEP
 
     data = load_rve(rve).replicate(n_rve)
     data = replace(data, meta=replace(data.meta, friction_angle=0.0, damping=0.0))
     batch = DEMBatch(data, device=device, dtype=dtype, shards=shards)
     shear = np.zeros((batch.n_rve, 2, 2))
-    shear[:, 0, 1] = 1e-5 / batch.dt
+    shear[:, 0, 1] = DEFAULT_STRAIN_PER_STEP / batch.dt
     batch.set_affine(shear)
 
     def use(name: str) -> float:
@@ -337,9 +339,10 @@ def main(argv: list[str] | None = None) -> pd.DataFrame | None:
     wp.config.quiet = True
     from tqdm.auto import tqdm
 
-    from granular_material.dem import save_rve
+    from granular_material.dem import resolve_device, save_rve
     from granular_material.procedures import prepare_packing
 
+    args.device = resolve_device(args.device)  # chosen here once; the workers are told it
     with tempfile.TemporaryDirectory() as scratch:
         scratch = Path(scratch)
         rve_path = scratch / "benchmark_rve.npz"

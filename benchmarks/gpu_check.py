@@ -75,6 +75,7 @@ def agreement(out: Path, device: str = "cuda", reference: str = "cpu", n_rve: in
     wp.config.quiet = True
     from granular_material.dem import DEMBatch, load_rve, save_rve
     from granular_material.procedures import drive_grad_u, prepare_packing
+    from granular_material.procedures.packing import DEFAULT_PRESSURE
     from granular_material.results import write_csv, write_json
 
     out.mkdir(parents=True, exist_ok=True)
@@ -83,7 +84,7 @@ def agreement(out: Path, device: str = "cuda", reference: str = "cpu", n_rve: in
                          "particles": particles, "strain": strain, "dtypes": {}}
     with tempfile.TemporaryDirectory() as scratch:
         path = Path(scratch) / "rve.npz"
-        save_rve(path, prepare_packing(n_disc=particles, seed=1, pressure=100e3,
+        save_rve(path, prepare_packing(n_disc=particles, seed=1, pressure=DEFAULT_PRESSURE,
                                        device=reference).to_data().select(0))
         data = load_rve(path).replicate(n_rve)
         for dtype in dtypes:

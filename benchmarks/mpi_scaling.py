@@ -277,10 +277,11 @@ def main(argv: list[str] | None = None) -> dict[str, pd.DataFrame] | None:
         sys.exit(_exchange_child(args))
     from granular_material.dem import save_rve
     from granular_material.procedures import prepare_packing
+    from granular_material.procedures.packing import DEFAULT_PRESSURE
 
     with tempfile.TemporaryDirectory() as tmp:
         rve = Path(tmp) / "rve.npz"
-        save_rve(rve, prepare_packing(n_disc=args.particles, seed=1, pressure=100e3,
+        save_rve(rve, prepare_packing(n_disc=args.particles, seed=1, pressure=DEFAULT_PRESSURE,
                                       device=args.device).to_data())
         table, runs = _measure(args, rve)
     exchange = {str(r): _child("exchange", args, r, repeats=max(args.repeats, 20))

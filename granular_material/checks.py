@@ -12,15 +12,22 @@ import contextlib
 import os
 import re
 from collections.abc import Iterator
+from importlib.metadata import entry_points
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
-if TYPE_CHECKING:
-    from granular_material.procedures.packing import PackingParameters
+from granular_material.dem.rve_file import FRICTMAT_STIFFNESS, RVEMeta
+from granular_material.procedures.packing import (
+    DEFAULT_RADIUS_RANGE,
+    PackingParameters,
+    check_packing,
+    check_radius_range,
+)
 
 __all__ = ["DISC_BYTES", "MEMORY_LIMIT", "RVE_MATERIAL_DEFAULTS", "UsageError",
            "available_memory", "check_memory", "check_output_dir", "check_output_file",
-           "cleanup_on_rejection", "make_parents", "packing_parameters", "rve_file_shape"]
+           "cleanup_on_rejection", "entry_point_names", "load_entry_point", "make_parents",
+           "packing_parameters", "rve_file_shape", "rve_material_given"]
 
 
 class UsageError(ValueError):
@@ -114,6 +121,23 @@ def check_output_dir(path: Path | None, option: str = "--out") -> None:
     _writable_folder(path, option, path)
 
 
+def entry_point_names(group: str) -> list[str]:
+    """The names registered in the entry-point group ``group`` (materials, post-processors,
+    commands), sorted."""
+    return sorted({ep.name for ep in entry_points(group=group)})
+
+
+def load_entry_point(group: str, name: str, what: str) -> Any:
+    """What is registered under ``name`` in the entry-point group ``group``, loaded; a
+    ``UsageError`` naming ``what`` it is (``material``, ``post-processor``) and the choices
+    installed when nothing is."""
+    matches = [ep for ep in entry_points(group=group) if ep.name == name]
+    if not matches:
+        choices = ", ".join(entry_point_names(group)) or "none installed"
+        raise UsageError(f"{what} {name!r} is not registered; available: {choices}")
+    return matches[0].load()
+
+
 @contextlib.contextmanager
 def cleanup_on_rejection(folder: Path | None) -> Iterator[None]:
     """Folders the block makes at and above the output folder ``folder`` (None: none) are
@@ -152,13 +176,27 @@ def rve_file_shape(path: Path, option: str = "--rve") -> tuple[int, int]:
     return data.n_rve, data.n_disc
 
 
-#: the options of :func:`add_rve_material_options`, by ``dest``, with their defaults (those of
-#: ``RVEMeta`` and of the packing: Wu et al. 2025, Table 1)
-RVE_MATERIAL_DEFAULTS: dict[str, Any] = {
-    "target_void_ratio": None, "radius_min": 3e-3, "radius_max": 7e-3, "law": "constant",
-    "kn": 3e6, "kt": 2.4e6, "young": 6e8, "kt_over_kn": 0.8, "friction_angle": 0.5,
-    "damping": 0.1, "density": 2650.0, "thickness": 0.1,
-}
+def _rve_material_defaults() -> dict[str, Any]:
+    """The options of :func:`add_rve_material_options`, by ``dest``, with their defaults:
+    those of :class:`~granular_material.dem.RVEMeta`, its contact laws and the packing
+    (Wu et al. 2025, Table 1)."""
+    meta = RVEMeta()
+    r_min, r_max = DEFAULT_RADIUS_RANGE
+    frictmat = {k: v for k, v in FRICTMAT_STIFFNESS.items() if k != "law"}
+    return {"target_void_ratio": None, "radius_min": r_min, "radius_max": r_max,
+            **meta.stiffness, **frictmat, "friction_angle": meta.friction_angle,
+            "damping": meta.damping, "density": meta.density, "thickness": meta.thickness}
+
+
+#: the options of :func:`add_rve_material_options`, by ``dest``, with their defaults
+RVE_MATERIAL_DEFAULTS: dict[str, Any] = _rve_material_defaults()
+
+
+def rve_material_given(values: Any) -> list[str]:
+    """The RVE material options (:data:`RVE_MATERIAL_DEFAULTS`) that ``values`` (parsed
+    options, or a material's parameters) sets to other than their defaults, as ``--names``."""
+    return [f"--{dest.replace('_', '-')}" for dest, default in RVE_MATERIAL_DEFAULTS.items()
+            if getattr(values, dest) != default]
 
 
 def _option_named(message: str) -> str:
@@ -168,25 +206,23 @@ def _option_named(message: str) -> str:
                   lambda m: "--" + m.group(1).replace("_", "-"), message)
 
 
+#: how :func:`packing_parameters` names the values of a packing: by their options
+_PACKING_OPTIONS = {"radius_range": ("--radius-min", "--radius-max"), "n_disc": "--particles",
+                    "stiffness": "--kn / --young"}
+
+
 def packing_parameters(args: Any, particles: int, pressure: float,
                        pressure_option: str = "--pressure") -> PackingParameters:
     """The options of :func:`add_rve_material_options` in ``args`` as the parameters of a
     packing of ``particles`` discs consolidated to ``pressure`` [Pa] (set by
-    ``pressure_option``), checked before any work: ``UsageError`` naming the option when the
-    radii, the contact law, the discs or the pressure cannot make a packing."""
-    from granular_material.dem import RVEMeta
-    from granular_material.procedures.packing import (
-        MAX_OVERLAP,
-        PackingParameters,
-        max_pressure,
-        min_discs,
-        min_pressure,
-        smallest_normal_stiffness,
-    )
-
-    if args.radius_min > args.radius_max:
-        raise UsageError(f"--radius-min {args.radius_min} exceeds --radius-max "
-                         f"{args.radius_max}")
+    ``pressure_option``), checked before any work (the checks of
+    :func:`~granular_material.procedures.packing.check_packing`): ``UsageError`` naming the
+    option when the radii, the contact law, the discs or the pressure cannot make a packing."""
+    radius_range = (args.radius_min, args.radius_max)
+    try:
+        check_radius_range(radius_range, _PACKING_OPTIONS["radius_range"])
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
     if args.law == "constant":
         stiffness = {"law": "constant", "kn": args.kn, "kt": args.kt}
     else:
@@ -198,32 +234,10 @@ def packing_parameters(args: Any, particles: int, pressure: float,
         meta.validate()
     except ValueError as exc:
         raise UsageError(_option_named(str(exc))) from None
-    radius_range = (args.radius_min, args.radius_max)
-    fewest = min_discs(radius_range)
-    if particles < fewest:
-        raise UsageError(
-            f"--particles {particles} is too few: with radii {args.radius_min:g}–"
-            f"{args.radius_max:g} m the consolidated cell must stay wider than twice the "
-            f"contact cut-off (2·r_max + skin; the engine sees one periodic image of each "
-            f"pair), which takes at least {fewest} discs"
-        )
-    # the estimated overlap of a contact as a share of the radius, 2·p·t/kn
-    overlap = 2 * pressure * args.thickness / smallest_normal_stiffness(meta, radius_range)
-    lowest = min_pressure(meta, radius_range)
-    if pressure < lowest:
-        raise UsageError(
-            f"{pressure_option} {pressure:g} Pa is too low for these stiffnesses: the "
-            f"contacts would overlap by about {overlap:.2g} of their radius, below which the "
-            f"consolidation servo does not settle a packing; at least {lowest:.4g} Pa (or a "
-            "softer --kn / --young)"
-        )
-    highest = max_pressure(meta, radius_range)
-    if pressure > highest:
-        raise UsageError(
-            f"{pressure_option} {pressure:g} Pa would press the discs about {overlap:.0%} of "
-            f"their radius into each other (2·p·thickness/kn); the linear contact law holds "
-            f"to {MAX_OVERLAP:.0%} (the void space is gone near 20%): at most "
-            f"{highest:.4g} Pa with these stiffnesses (or stiffer --kn / --young)"
-        )
+    try:
+        check_packing(particles, pressure, meta, radius_range,
+                      names={**_PACKING_OPTIONS, "pressure": pressure_option})
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
     return PackingParameters(meta=meta, radius_range=radius_range,
                              target_void_ratio=args.target_void_ratio)

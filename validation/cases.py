@@ -39,6 +39,10 @@ import numpy as np
 import pandas as pd
 from granular_material_validation import engine_runner, metrics, yade_runner
 
+from granular_material.procedures.element_tests import DEFAULT_AXIAL_STRAIN
+from granular_material.procedures.packing import DEFAULT_DISCS, DEFAULT_PRESSURE
+from granular_material.procedures.strain_path import DEFAULT_STRAIN_PER_STEP
+
 __all__ = ["CASES", "KINDS", "RULES", "Case", "SeedRun", "case_checks", "run_case",
            "shear_stress_figures", "summarise_case"]
 
@@ -76,9 +80,9 @@ class Case:
     kind: str
     source: str
     seeds: tuple[int, ...] = (1, 2, 3)
-    particles: int = 400
-    pressure: float = 1e5
-    axial_strain: float = 0.1
+    particles: int = DEFAULT_DISCS
+    pressure: float = DEFAULT_PRESSURE
+    axial_strain: float = DEFAULT_AXIAL_STRAIN
     steps: int = 100
     grad_u: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
     increments: int = 1
@@ -133,8 +137,8 @@ CASES: dict[str, Case] = {c.name: c for c in (
 )}
 
 
-# YADE's own sensitivity: the biaxial test rerun at 1 % less strain a step than 1e-5
-PERTURBED_STRAIN_PER_STEP = 0.99e-5
+# YADE's own sensitivity: the biaxial test rerun at 1 % less strain a step than the default
+PERTURBED_STRAIN_PER_STEP = 0.99 * DEFAULT_STRAIN_PER_STEP
 
 
 @dataclass
@@ -170,7 +174,7 @@ class SeedRun:
                 **self.extra}
 
 
-def _packing(case: Case, seed: int, out: Path, device: str | None) -> tuple[Path, dict]:
+def _packing(case: Case, seed: int, out: Path, device: str) -> tuple[Path, dict]:
     """The RVE file of ``seed`` for ``case`` (cached under ``out/packings``)."""
     folder = out / "packings"
     folder.mkdir(parents=True, exist_ok=True)
@@ -199,7 +203,9 @@ def _path_strain(frame: pd.DataFrame, case: Case) -> pd.DataFrame:
     return frame
 
 
-def _run_seed(case: Case, seed: int, out: Path, device: str | None) -> SeedRun:
+def _run_seed(case: Case, seed: int, out: Path, device: str, tangent_device: str) -> SeedRun:
+    """One seed of ``case``: our engine on ``device``, the tangents (drive cases that
+    compare them) on ``tangent_device``."""
     rve, prep = _packing(case, seed, out, device)
     work = out / "runs" / case.name / f"seed{seed}"
     work.mkdir(parents=True, exist_ok=True)
@@ -264,7 +270,7 @@ def _run_seed(case: Case, seed: int, out: Path, device: str | None) -> SeedRun:
             "steps_exact": int(ysum["steps"]), "steps_shear2d": int(gsum["steps"]),
             "steps_ours": int(ours["steps"].iloc[-1])}
         if case.tangent_at:
-            extra["tangents"] = _compare_tangents(case, rve, yade, device)
+            extra["tangents"] = _compare_tangents(case, rve, yade, tangent_device)
     comparison = metrics.compare_curves(yade, ours, strain=case.strain_label)
     yade.to_csv(work / "yade_curve.csv", index=False)
     ours.to_csv(work / "ours_curve.csv", index=False)
@@ -294,10 +300,9 @@ def shear_stress_figures(yade: pd.DataFrame, fem: pd.DataFrame) -> dict[str, flo
 
 
 def _compare_tangents(case: Case, rve: Path, yade: pd.DataFrame,
-                      device: str | None) -> list[dict[str, Any]]:
+                      device: str) -> list[dict[str, Any]]:
     ours = engine_runner.ours_tangents(rve, list(case.grad_u), case.increments,
-                                       list(case.tangent_at),
-                                       device="cpu" if device is None else device)
+                                       list(case.tangent_at), device=device)
     rows = []
     names = [f"D_{a}_{b}" for a in ("xx", "yy", "xy") for b in ("xx", "yy", "xy")]
     for k in case.tangent_at:
@@ -340,9 +345,16 @@ def run_case(case: Case, out: str | Path, device: str | None = None) -> dict[str
     ``baseline_checks`` and ``baseline_seeds_passing`` (the same for perturbed YADE),
     ``passed``, wall times [s] and, under the key
     ``_runs``, the :class:`SeedRun` objects for the plots.
+
+    ``device``: our engine's; None: CUDA when present, else the CPU (the tangents of a drive
+    case are compared on the CPU unless a device is named). Chosen here, once.
     """
+    from granular_material.dem import resolve_device
+
+    tangent_device = "cpu" if device is None else device
+    device = resolve_device(device)
     out = Path(out)
-    runs = [_run_seed(case, seed, out, device) for seed in case.seeds]
+    runs = [_run_seed(case, seed, out, device, tangent_device) for seed in case.seeds]
     return summarise_case(case, runs)
 
 

@@ -33,6 +33,10 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from granular_material.procedures.element_tests import DEFAULT_AXIAL_STRAIN
+from granular_material.procedures.packing import DEFAULT_DISCS, DEFAULT_PRESSURE
+from granular_material.procedures.strain_path import DEFAULT_MAX_DEM_STEPS, DEFAULT_STRAIN_PER_STEP
+
 __all__ = [
     "EngineError",
     "engine_available",
@@ -59,10 +63,6 @@ def engine_available() -> bool:
     except ImportError:
         return False
     return True
-
-
-def _device(device: str | None) -> list[str]:
-    return [] if device is None else ["--device", device]
 
 
 #: the exceptions of an engine call that the command reports with exit code 2 (bad input:
@@ -107,34 +107,32 @@ def _rve_zero(csv: str | Path) -> pd.DataFrame:
     return frame
 
 
-def ours_prepare(out: str | Path, particles: int = 400, seed: int = 1, pressure: float = 1e5,
-                 device: str | None = None) -> dict[str, Any]:
+def ours_prepare(out: str | Path, particles: int = DEFAULT_DISCS, seed: int = 1,
+                 pressure: float = DEFAULT_PRESSURE, device: str | None = None,
+                 ) -> dict[str, Any]:
     """``granular-material prepare`` in this process: one RVE of ``particles`` discs, the
     command's default material and radii, consolidated to ``pressure`` [Pa], written to
     ``out``; the command's JSON summary plus ``wall_s`` and ``cpu_s`` [s] of the call.
     """
-    from granular_material.cli.options import RVE_MATERIAL_DEFAULTS, scalar_or_list
-    from granular_material.dem import RVEMeta, save_rve
+    from types import SimpleNamespace
+
+    from granular_material.checks import RVE_MATERIAL_DEFAULTS, packing_parameters
+    from granular_material.cli.options import scalar_or_list
+    from granular_material.dem import save_rve
     from granular_material.procedures import prepare_packing
 
-    d = RVE_MATERIAL_DEFAULTS
-    # the options of add_rve_material_options at their defaults, as packing_parameters
-    # turns them into the packing's parameters
-    if d["law"] == "constant":
-        stiffness = {"law": "constant", "kn": d["kn"], "kt": d["kt"]}
-    else:
-        stiffness = {"law": "frictmat", "young": d["young"], "kt_over_kn": d["kt_over_kn"]}
-    meta = RVEMeta(thickness=d["thickness"], density=d["density"],
-                   friction_angle=d["friction_angle"], damping=d["damping"],
-                   stiffness=stiffness, seed=int(seed))
     out = Path(out)
     timing: dict[str, float] = {}
     with _engine_call("prepare", timing):
+        # the options of add_rve_material_options at their defaults, made into the
+        # packing's parameters (and checked) as the command does
+        options = SimpleNamespace(**RVE_MATERIAL_DEFAULTS, seed=int(seed))
+        packing = packing_parameters(options, int(particles), float(pressure))
         batch = prepare_packing(
             n_disc=int(particles), n_rve=1, seed=int(seed), pressure=float(pressure),
-            meta=meta, target_void_ratio=d["target_void_ratio"],
-            radius_range=(d["radius_min"], d["radius_max"]), device=device,
-            dtype="float64", progress=False)
+            meta=packing.meta, target_void_ratio=packing.target_void_ratio,
+            radius_range=packing.radius_range, device=device, dtype="float64",
+            progress=False)
         h = batch.homogenize()
         out.parent.mkdir(parents=True, exist_ok=True)
         save_rve(out, batch.to_data())
@@ -152,8 +150,10 @@ def ours_prepare(out: str | Path, particles: int = 400, seed: int = 1, pressure:
     return _summary(report, timing, "prepare")
 
 
-def ours_biaxial(rve: str | Path, out_csv: str | Path, axial_strain: float = 0.1,
-                 confining: float = 1e5, strain_per_step: float = 1e-5,
+def ours_biaxial(rve: str | Path, out_csv: str | Path,
+                 axial_strain: float = DEFAULT_AXIAL_STRAIN,
+                 confining: float = DEFAULT_PRESSURE,
+                 strain_per_step: float = DEFAULT_STRAIN_PER_STEP,
                  record_every: int = 10, device: str | None = None,
                  ) -> tuple[pd.DataFrame, dict[str, Any]]:
     """``granular-material biaxial-dem`` in this process: ``biaxial_test`` of every RVE of
@@ -164,7 +164,7 @@ def ours_biaxial(rve: str | Path, out_csv: str | Path, axial_strain: float = 0.1
     hold σxx (off by more than ``SERVO_FAIL`` in most records).
     """
     from granular_material.cli.dem import SERVO_FAIL, SERVO_WARN
-    from granular_material.cli.options import DEFAULT_MAX_DEM_STEPS, scalar_or_list
+    from granular_material.cli.options import scalar_or_list
     from granular_material.dem import DEMBatch, load_rve
     from granular_material.procedures import biaxial_test
     from granular_material.procedures.element_tests import lateral_stress_error
@@ -215,9 +215,9 @@ def ours_drive(rve: str | Path, out_csv: str | Path, grad_u: list[float], increm
     :class:`EngineError` where the command refuses the path or exits 1 (a blow-up: the path
     to the last finished increment is written first).
     """
-    from granular_material.cli.options import DEFAULT_MAX_DEM_STEPS, scalar_or_list
+    from granular_material.cli.options import scalar_or_list
     from granular_material.dem import DEMBatch, DEMInstabilityError, load_rve
-    from granular_material.procedures import drive_grad_u, path_increment, path_steps
+    from granular_material.procedures import drive_grad_u, path_increment, plan_path
     from granular_material.results import write_csv
 
     if len(grad_u) != 4 or increments < 1:
@@ -225,7 +225,7 @@ def ours_drive(rve: str | Path, out_csv: str | Path, grad_u: list[float], increm
                          f"{increments}")
     grad = np.array([float(g) for g in grad_u]).reshape(2, 2)
     n = int(increments)
-    max_strain_per_step = 1e-5  # dem-drive's --max-strain-per-step default
+    max_strain_per_step = DEFAULT_STRAIN_PER_STEP  # dem-drive's --max-strain-per-step
     cap = DEFAULT_MAX_DEM_STEPS
     out_csv = Path(out_csv)
     rows: list[pd.DataFrame] = []
@@ -233,12 +233,8 @@ def ours_drive(rve: str | Path, out_csv: str | Path, grad_u: list[float], increm
     failure: DEMInstabilityError | None = None
     timing: dict[str, float] = {}
     with _engine_call("dem-drive", timing):
-        # dem-drive's check of the whole path against --max-dem-steps, before any work
-        planned = sum(int(path_steps(path_increment(grad, k, n)[None], max_strain_per_step,
-                                     max_steps=cap)[0]) for k in range(1, n + 1))
-        if planned > cap:
-            raise ValueError(f"grad_u {grad_u} needs {planned} DEM steps in {n} increments, "
-                             f"more than the {cap} of --max-dem-steps")
+        # dem-drive's checks of the whole path (--max-dem-steps among them), before any work
+        plan_path(grad, n, max_strain_per_step, cap)
         batch = DEMBatch(load_rve(rve), device=device, dtype="float64")
         b = batch.n_rve
 
@@ -307,8 +303,10 @@ def _fem_run(flat: dict[str, Any]) -> dict[str, Any]:
     return result
 
 
-def ours_single_element(rve: str | Path, out_dir: str | Path, axial_strain: float = 0.1,
-                        confining: float = 1e5, steps: int = 100, device: str | None = None,
+def ours_single_element(rve: str | Path, out_dir: str | Path,
+                        axial_strain: float = DEFAULT_AXIAL_STRAIN,
+                        confining: float = DEFAULT_PRESSURE, steps: int = 100,
+                        device: str | None = None,
                         ) -> tuple[pd.DataFrame, dict[str, Any]]:
     """The ``single-element`` run of the DEM material on the RVE file (FEM × DEM).
 
@@ -333,7 +331,8 @@ def ours_single_element(rve: str | Path, out_dir: str | Path, axial_strain: floa
 
 def ours_femxdem_biaxial(rve: str | Path, out_dir: str | Path,
                          elements: tuple[int, int] = (2, 4), axial_strain: float = 0.03,
-                         steps: int = 30, confining: float = 1e5, width: float = 0.05,
+                         steps: int = 30, confining: float = DEFAULT_PRESSURE,
+                         width: float = 0.05,
                          height: float = 0.1, extra: dict[str, Any] | None = None,
                          device: str | None = None,
                          ) -> tuple[pd.DataFrame, pd.DataFrame, dict[str, Any]]:

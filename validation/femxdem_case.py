@@ -164,7 +164,7 @@ def _ratio_at(curve: pd.DataFrame, strain: float) -> float | None:
 
 
 def run_femxdem_seed(case: Any, seed: int, rve: Path, prep: dict[str, Any], work: Path,
-                     device: str | None) -> dict[str, Any]:
+                     device: str) -> dict[str, Any]:
     """Run one seed of a ``femxdem`` case in both codes; the pieces of its ``SeedRun``.
 
     Returns ``yade`` (their curve), ``ours`` (the curve judged), ``baseline`` (their code at

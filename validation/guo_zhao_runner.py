@@ -39,6 +39,8 @@ from granular_material_validation.yade_runner import (
     run_script,
 )
 
+from granular_material.procedures.packing import DEFAULT_PRESSURE
+
 __all__ = ["EXAMPLE_PATCHES", "MODULE_PATCHES", "EscriptNotFoundError", "find_escript",
            "find_femxdem", "finish_run", "gauss_fields", "group_cpu_s", "guo_zhao_available",
            "guo_zhao_biaxial", "patch_example"]
@@ -207,7 +209,8 @@ def _children_cpu_s() -> float:
 
 
 def guo_zhao_biaxial(rve: str | Path, workdir: str | Path, elements: tuple[int, int] = (2, 4),
-                     steps: int = 30, strain_per_step: float = 1e-3, confining: float = 1e5,
+                     steps: int = 30, strain_per_step: float = 1e-3,
+                     confining: float = DEFAULT_PRESSURE,
                      width: float = 0.05, height: float = 0.1, processes: int = 2,
                      timeout: float = 7200.0) -> tuple[pd.DataFrame, dict[str, Any]]:
     """Guo & Zhao's ``biaxialSmooth.py`` on RVE 0 of ``rve`` copied to every Gauss point.

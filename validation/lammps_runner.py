@@ -41,6 +41,7 @@ from pathlib import Path
 import numpy as np
 
 from granular_material.dem.rve_file import RVEData, load_rve
+from granular_material.procedures.strain_path import DEFAULT_STRAIN_PER_STEP
 
 __all__ = [
     "LammpsError",
@@ -177,7 +178,8 @@ run {steps}
 _LOOP = re.compile(r"Loop time of ([0-9.eE+-]+) on (\d+) procs for (\d+) steps with (\d+) atoms")
 
 
-def run_lammps(rve_path: str | Path, steps: int, shear_strain_per_step: float = 1e-5,
+def run_lammps(rve_path: str | Path, steps: int,
+               shear_strain_per_step: float = DEFAULT_STRAIN_PER_STEP,
                every: int = 0, timeout: float = DEFAULT_TIMEOUT) -> LammpsRun:
     """Shear RVE 0 of ``rve_path`` in LAMMPS on one core for ``steps`` steps of the RVE's
     time step, ``shear_strain_per_step`` a step, with our engine's skin (a quarter of the
@@ -224,7 +226,7 @@ def run_lammps(rve_path: str | Path, steps: int, shear_strain_per_step: float = 
 
 
 def engine_stress_path(rve_path: str | Path, steps: int, every: int,
-                       shear_strain_per_step: float = 1e-5,
+                       shear_strain_per_step: float = DEFAULT_STRAIN_PER_STEP,
                        dtype: str = "float64") -> tuple[np.ndarray, np.ndarray]:
     """Our engine's stress path (steps (S,), σ [Pa] (S, 2, 2)) of RVE 0 of ``rve_path``
     sheared as :func:`run_lammps` shears it, on one CPU thread."""

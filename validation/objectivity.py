@@ -21,6 +21,7 @@ from granular_material_validation.yade_runner import DEFAULT_TIMEOUT, _workdir, 
 from granular_material.dem import DEMBatch
 from granular_material.dem.rve_file import RVEData, load_rve
 from granular_material.procedures import drive_grad_u
+from granular_material.procedures.strain_path import DEFAULT_STRAIN_PER_STEP
 
 __all__ = ["engine_rotation", "rotation", "rotation_defect", "yade_rotation"]
 
@@ -42,7 +43,8 @@ def rotation_defect(stress0: np.ndarray, stress1: np.ndarray, theta: float,
     return float(np.linalg.norm(back - np.asarray(stress0)) / p0)
 
 
-def engine_rotation(rve: str | Path | RVEData, theta: float, max_strain_per_step: float = 1e-5,
+def engine_rotation(rve: str | Path | RVEData, theta: float,
+                    max_strain_per_step: float = DEFAULT_STRAIN_PER_STEP,
                     friction_angle: float | None = None,
                     device: str | None = "cpu") -> tuple[float, int]:
     """Our engine: (defect [-], steps) of rotating RVE 0 rigidly by θ [rad].
@@ -101,7 +103,8 @@ def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("rve")
     parser.add_argument("--angles", type=float, nargs="+", default=[0.15, 1.0, 0.9 * math.pi])
-    parser.add_argument("--strain-per-step", type=float, nargs="+", default=[1e-5])
+    parser.add_argument("--strain-per-step", type=float, nargs="+",
+                        default=[DEFAULT_STRAIN_PER_STEP])
     parser.add_argument("--frictionless", action="store_true")
     parser.add_argument("--yade", action="store_true")
     args = parser.parse_args(argv)

@@ -9,6 +9,7 @@ from typing import Any
 
 from granular_material_validation import femxdem_report, metrics
 
+from granular_material.procedures.strain_path import DEFAULT_STRAIN_PER_STEP
 from granular_material.results import pyplot
 
 __all__ = ["json_entries", "plot_case", "write_report"]
@@ -218,7 +219,8 @@ def write_report(entries: list[dict[str, Any]], out: str | Path,
                 k = r["yade_perturbed_vs_yade"]
                 lines.append(
                     f"  - chaos baseline, YADE at {k['strain_per_step']:.3g} strain a step "
-                    f"against YADE at 1e-05: pre-peak Δσ {_pct(k['pre_peak_diff'])}, peak "
+                    f"against YADE at {DEFAULT_STRAIN_PER_STEP:g}: pre-peak Δσ "
+                    f"{_pct(k['pre_peak_diff'])}, peak "
                     f"σ1/σ3 {_pct(k['peak_ratio_diff'])}, strain at peak "
                     f"{_pct(k['strain_at_peak_diff'])}, post-peak {_pct(k['post_peak_diff'])}")
             if "shear2d_vs_exact_yade" in r:

@@ -21,6 +21,9 @@ import pandas as pd
 from granular_material_validation.yade_io import export_rve, import_scene
 
 from granular_material.dem.rve_file import RVEData
+from granular_material.procedures.element_tests import DEFAULT_AXIAL_STRAIN
+from granular_material.procedures.packing import DEFAULT_PRESSURE
+from granular_material.procedures.strain_path import DEFAULT_STRAIN_PER_STEP
 
 __all__ = [
     "SCRIPTS",
@@ -140,7 +143,7 @@ def _workdir(workdir: str | Path | None, prefix: str) -> Path:
 
 
 def yade_prepare_guo_zhao(out_rve: str | Path, seed: int = 1, particles: int = 400,
-                          pressure: float = 1e5, friction_angle: float = 0.5,
+                          pressure: float = DEFAULT_PRESSURE, friction_angle: float = 0.5,
                           workdir: str | Path | None = None,
                           timeout: float = DEFAULT_TIMEOUT) -> tuple[RVEData, dict[str, Any]]:
     """Guo & Zhao's RVE built by YADE (docs/design.md#guo-zhao-rve), written to ``out_rve`` in
@@ -179,8 +182,9 @@ def yade_round_trip(rve: str | Path | RVEData, workdir: str | Path | None = None
     return import_scene(out), (float(stress[0]), float(stress[1]), float(stress[2]))
 
 
-def yade_biaxial(rve: str | Path | RVEData, axial_strain: float = 0.1,
-                 confining: float = 1e5, strain_per_step: float = 1e-5,
+def yade_biaxial(rve: str | Path | RVEData, axial_strain: float = DEFAULT_AXIAL_STRAIN,
+                 confining: float = DEFAULT_PRESSURE,
+                 strain_per_step: float = DEFAULT_STRAIN_PER_STEP,
                  record_strain: float = 1e-4, workdir: str | Path | None = None,
                  timeout: float = DEFAULT_TIMEOUT) -> tuple[pd.DataFrame, dict[str, Any]]:
     """YADE's drained biaxial test of RVE 0: the curve (see ``biaxial.py``) and its timings.

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -34,6 +33,19 @@ from granular_material.cli.options import (
     scalar_or_list,
     warn,
 )
+from granular_material.procedures.element_tests import (
+    DEFAULT_AXIAL_STRAIN,
+    DEFAULT_RECORD_EVERY,
+)
+from granular_material.procedures.packing import (
+    DEFAULT_DISCS,
+    DEFAULT_PRESSURE,
+    DEFAULT_RADIUS_RANGE,
+    MAX_OVERLAP,
+    VOID_RATIO_TOLERANCE,
+    min_discs,
+)
+from granular_material.procedures.strain_path import DEFAULT_STRAIN_PER_STEP
 
 if TYPE_CHECKING:
     from granular_material.dem import DEMBatch as DEMBatchType
@@ -70,11 +82,18 @@ def _add_run_options(parser: argparse.ArgumentParser) -> None:
     add_json(parser)
 
 
+def _device(args: argparse.Namespace) -> str:
+    """The command's DEM device, chosen here once: ``--device``, else CUDA when present."""
+    from granular_material.dem import resolve_device
+
+    return resolve_device(args.device)
+
+
 def _load_batch(args: argparse.Namespace) -> DEMBatchType:
     from granular_material.dem import DEMBatch, load_rve
 
     data = load_rve(args.rve)
-    return DEMBatch(data, device=args.device, dtype=args.dtype)
+    return DEMBatch(data, device=_device(args), dtype=args.dtype)
 
 
 def _finish(args: argparse.Namespace, report: dict[str, Any], error: str | None,
@@ -102,8 +121,6 @@ def _rve_list(indices: np.ndarray, values: np.ndarray, fmt: str) -> str:
 def _run_prepare(args: argparse.Namespace) -> int:
     from granular_material.dem import save_rve
     from granular_material.procedures import prepare_packing
-    from granular_material.procedures.packing import VOID_RATIO_TOLERANCE
-
     check_output_file(args.out)
     packing = packing_parameters(args, args.particles, args.pressure)
     check_memory(float(args.batch) * args.particles * DISC_BYTES,
@@ -111,7 +128,7 @@ def _run_prepare(args: argparse.Namespace) -> int:
     batch = prepare_packing(
         n_disc=args.particles, n_rve=args.batch, seed=args.seed, pressure=args.pressure,
         meta=packing.meta, target_void_ratio=packing.target_void_ratio,
-        radius_range=packing.radius_range, device=args.device, dtype=args.dtype,
+        radius_range=packing.radius_range, device=_device(args), dtype=args.dtype,
         progress=progress_enabled(args),
     )
     h = batch.homogenize()
@@ -147,29 +164,27 @@ def _run_prepare(args: argparse.Namespace) -> int:
 
 
 # -- biaxial-dem ---------------------------------------------------------------------------
+#: how the checks of biaxial_test name its values: by the command's options
+_BIAXIAL_OPTIONS = {"axial_strain": "--axial-strain", "confining": "--confining",
+                    "strain_per_step": "--strain-per-step", "max_steps": "--max-dem-steps"}
+
+
 def _run_biaxial(args: argparse.Namespace) -> int:
     from granular_material.procedures import biaxial_test
     from granular_material.procedures.element_tests import (
         BiaxialInterrupted,
-        biaxial_steps,
+        check_biaxial,
         lateral_stress_error,
     )
     from granular_material.results import plot_biaxial_curves, summarize_biaxial, write_csv
 
     check_output_file(args.out)
     check_figure_file(args.plot, "--plot", {"--out": args.out})
-    if args.axial_strain >= 0.9:
-        raise UsageError(f"--axial-strain must be below 0.9, got {args.axial_strain:g}")
     try:
-        total: float = biaxial_steps(args.axial_strain, args.strain_per_step)
-    except ValueError:
-        total = math.inf
-    if total > args.max_dem_steps:
-        raise UsageError(
-            f"--axial-strain {args.axial_strain:g} at --strain-per-step "
-            f"{args.strain_per_step:g} needs {total:.4g} DEM steps, more than --max-dem-steps "
-            f"{args.max_dem_steps}; raise --max-dem-steps or --strain-per-step"
-        )
+        check_biaxial(args.axial_strain, args.confining, args.strain_per_step,
+                      args.max_dem_steps, names=_BIAXIAL_OPTIONS)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
     batch = _load_batch(args)
     interrupt = None
     try:
@@ -220,49 +235,23 @@ def _run_biaxial(args: argparse.Namespace) -> int:
 
 
 # -- dem-drive -----------------------------------------------------------------------------
-#: the fewest DEM steps one increment of dem-drive takes (drive_grad_u's min_steps)
-_MIN_INCREMENT_STEPS = 2
+#: how the checks of a path name its values: by the command's options
+_PATH_OPTIONS = {"grad_u": "--grad-u", "increments": "--increments",
+                 "max_strain_per_step": "--max-strain-per-step", "max_steps": "--max-dem-steps"}
+#: the increments of dem-drive by default
+_INCREMENTS = 10
 
 
 def _drive_plan(args: argparse.Namespace) -> list[int]:
     """DEM steps of each increment of ``dem-drive``, checked against --max-dem-steps before
     any work (UsageError naming the options)."""
-    from granular_material.procedures import has_real_logarithm, path_increment, path_steps
+    from granular_material.procedures import plan_path
 
-    cap = args.max_dem_steps
-    shown = ",".join(f"{v:g}" for v in args.grad_u.ravel())
-    n = args.increments
-    if n * _MIN_INCREMENT_STEPS > cap:  # before a loop over them: 10⁷ would take minutes
-        raise UsageError(f"--increments {n} needs at least {n * _MIN_INCREMENT_STEPS} DEM "
-                         f"steps ({_MIN_INCREMENT_STEPS} an increment), more than "
-                         f"--max-dem-steps {cap}; use fewer --increments")
-    plan = []
-    for k in range(1, n + 1):
-        det = float(np.linalg.det(np.eye(2) + args.grad_u * k / n))
-        if not det > 0:
-            raise UsageError(f"--grad-u {shown} inverts the cell at increment {k} of {n}: "
-                             f"det(I + {k}/{n}·∇u) = {det:.4g} <= 0")
-        increment = path_increment(args.grad_u, k, n)[None]
-        try:
-            plan.append(int(path_steps(increment, args.max_strain_per_step,
-                                       max_steps=cap)[0]))
-        except ValueError:
-            wanted = float(np.abs(increment).max()) / args.max_strain_per_step
-            raise UsageError(
-                f"--grad-u {shown} needs more than --max-dem-steps {cap} DEM steps: increment "
-                f"{k} of {n} alone takes {wanted:.4g} at --max-strain-per-step "
-                f"{args.max_strain_per_step:g}; raise --max-dem-steps or --max-strain-per-step"
-            ) from None
-        if not has_real_logarithm(np.eye(2) + increment)[0]:
-            raise UsageError(f"increment {k} of {n} of --grad-u {shown} has no real logarithm "
-                             "(it turns the cell by half a turn or more); use more --increments")
-    if sum(plan) > cap:
-        raise UsageError(
-            f"--grad-u {shown} needs {sum(plan)} DEM steps in {n} increments at "
-            f"--max-strain-per-step {args.max_strain_per_step:g}, more than --max-dem-steps "
-            f"{cap}; raise --max-dem-steps or --max-strain-per-step"
-        )
-    return plan
+    try:
+        return plan_path(args.grad_u, args.increments, args.max_strain_per_step,
+                         args.max_dem_steps, names=_PATH_OPTIONS)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
 
 
 def _run_drive(args: argparse.Namespace) -> int:
@@ -346,17 +335,20 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "prepare", help="generate and consolidate periodic RVE packings",
         description="Random discs in a periodic cell, frictionless isotropic consolidation "
         "to --pressure, then friction set and re-equilibrated; written as an RVE file. "
-        "Exit code 1 (no file) when the void ratio ends more than 0.005 above "
+        f"Exit code 1 (no file) when the void ratio ends more than {VOID_RATIO_TOLERANCE:g} above "
         "--target-void-ratio; a warning when it ends above it by less.",
     )
-    p.add_argument("--particles", type=positive_int, default=400,
-                   help="discs per RVE (400; at least 12 for 3–7 mm radii, so the cell stays "
-                        "wider than twice the contact cut-off)")
+    r_min, r_max = DEFAULT_RADIUS_RANGE
+    p.add_argument("--particles", type=positive_int, default=DEFAULT_DISCS,
+                   help=f"discs per RVE ({DEFAULT_DISCS}; at least {min_discs()} for "
+                        f"{r_min * 1e3:g}–{r_max * 1e3:g} mm radii, so the cell stays wider "
+                        "than twice the contact cut-off)")
     p.add_argument("--seed", type=int, default=1, help="random seed; RVE b uses seed + b (1)")
-    p.add_argument("--pressure", type=positive, default=100e3,
-                   help="isotropic consolidation pressure [Pa] (100e3; at most "
-                        "0.05·kn/thickness, or 0.05·young·radius-min/thickness for frictmat, "
-                        "so contacts overlap under 10 %% of the radius)")
+    p.add_argument("--pressure", type=positive, default=DEFAULT_PRESSURE,
+                   help=f"isotropic consolidation pressure [Pa] ({DEFAULT_PRESSURE:g}; at most "
+                        f"{MAX_OVERLAP / 2:g}·kn/thickness, or {MAX_OVERLAP / 2:g}·young·"
+                        "radius-min/thickness for frictmat, so contacts overlap under "
+                        f"{MAX_OVERLAP:.0%}% of the radius)")
     p.add_argument("--batch", type=positive_int, default=1, help="number of RVEs B (1)")
     add_out(p, "RVE file (rve.npz)", default=Path("rve.npz"))
     add_rve_material_options(p)
@@ -369,14 +361,18 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "CSV columns: rve, step, axial_strain (compression positive), lateral_strain, "
         "volumetric_strain, sxx, syy, sxy [Pa, tension positive], stress_ratio, void_ratio, "
         "coordination. Exit code 1 (the final σxx in the message) when the servo kept σxx "
-        "more than 5 % off in most records; a warning where it strayed more than 2 %.",
+        f"more than {SERVO_FAIL:.0%} off in most records; a warning where it strayed more "
+        f"than {SERVO_WARN:.0%}.",
     )
     p.add_argument("rve", type=Path, help="RVE file (.npz)")
-    p.add_argument("--axial-strain", type=positive, default=0.1, help="final strain (0.1)")
-    p.add_argument("--confining", type=positive, default=100e3, help="[Pa] (100e3)")
-    p.add_argument("--strain-per-step", type=positive, default=1e-5, help="(1e-5)")
-    p.add_argument("--record-every", type=positive_int, default=100,
-                   help="steps between CSV rows (100)")
+    p.add_argument("--axial-strain", type=positive, default=DEFAULT_AXIAL_STRAIN,
+                   help=f"final strain ({DEFAULT_AXIAL_STRAIN:g})")
+    p.add_argument("--confining", type=positive, default=DEFAULT_PRESSURE,
+                   help=f"[Pa] ({DEFAULT_PRESSURE:g})")
+    p.add_argument("--strain-per-step", type=positive, default=DEFAULT_STRAIN_PER_STEP,
+                   help=f"({DEFAULT_STRAIN_PER_STEP:g})")
+    p.add_argument("--record-every", type=positive_int, default=DEFAULT_RECORD_EVERY,
+                   help=f"steps between CSV rows ({DEFAULT_RECORD_EVERY})")
     add_max_dem_steps(p, "the test")
     add_out(p, "CSV of the curve(s)")
     p.add_argument("--plot", type=Path, default=None, help="PNG of σ1/σ3 and εv vs εa")
@@ -393,8 +389,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("rve", type=Path, help="RVE file (.npz)")
     p.add_argument("--grad-u", type=_grad_u, required=True, metavar="Gxx,Gxy,Gyx,Gyy",
                    help="total displacement gradient ∂u_i/∂x_j")
-    p.add_argument("--increments", type=positive_int, default=10, help="K (10)")
-    p.add_argument("--max-strain-per-step", type=positive, default=1e-5, help="(1e-5)")
+    p.add_argument("--increments", type=positive_int, default=_INCREMENTS,
+                   help=f"K ({_INCREMENTS})")
+    p.add_argument("--max-strain-per-step", type=positive, default=DEFAULT_STRAIN_PER_STEP,
+                   help=f"({DEFAULT_STRAIN_PER_STEP:g})")
     add_max_dem_steps(p, "the whole path (all increments)")
     add_out(p, "CSV of the path")
     _add_run_options(p)

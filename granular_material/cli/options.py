@@ -28,7 +28,9 @@ from granular_material.checks import (
     make_parents,
     packing_parameters,
     rve_file_shape,
+    rve_material_given,
 )
+from granular_material.procedures.strain_path import DEFAULT_MAX_DEM_STEPS
 
 __all__ = [
     "DEFAULT_MAX_DEM_STEPS",
@@ -64,14 +66,6 @@ __all__ = [
     "stop_signals_as_interrupt",
     "warn",
 ]
-
-#: default ``--max-dem-steps`` of the DEM commands: 10⁶ steps is about 100 times the default
-#: biaxial test (1.05 × 10⁴ steps to 10 % at 1e-5 a step) or a path of |∇u| = 10 at 1e-5 a step;
-#: one 64-disc RVE runs about 4 × 10³ steps/s on one CPU core (a 400-disc one about six times
-#: fewer), so the cap is minutes to half an hour of work: far past any run a typo would start
-#: on purpose, well short of the 10⁷ – 10³⁰⁰ steps a mistyped strain asks for.
-DEFAULT_MAX_DEM_STEPS = 1_000_000
-
 
 class Terminated(KeyboardInterrupt):
     """SIGTERM (a batch scheduler's or ``timeout``'s stop) or SIGHUP (a closed terminal or
@@ -203,9 +197,10 @@ def add_device(parser: argparse.ArgumentParser, what: str = "warp device") -> No
 
 def add_element(parser: argparse.ArgumentParser) -> None:
     """``--element`` and ``--quadrature`` of the FEM commands (a group of their own)."""
+    from granular_material.fem.problems import ELEMENTS
+
     g = parser.add_argument_group("finite elements")
-    g.add_argument("--element", choices=("quad4", "quad8", "quad9", "tri3", "tri6"),
-                   default="quad4",
+    g.add_argument("--element", choices=tuple(ELEMENTS), default="quad4",
                    help="quad4: bilinear, 4 nodes, 2x2 Gauss points (full; default); quad8: "
                         "serendipity, 8 nodes (midside nodes), 2x2 Gauss points: REDUCED "
                         "integration (full is 3x3), as in Guo & Zhao's FEMxDEM biaxial: "
@@ -225,7 +220,9 @@ def add_element(parser: argparse.ArgumentParser) -> None:
 
 def add_convergence(group: Any, default: str = "force", rtol: float = 0.005) -> None:
     """``--convergence`` of the FEM commands' Newton solver, in ``group``."""
-    group.add_argument("--convergence", choices=("force", "displacement"), default=default,
+    from granular_material.fem.newton import CONVERGENCE_TESTS
+
+    group.add_argument("--convergence", choices=CONVERGENCE_TESTS, default=default,
                        help=f"Newton convergence test (default {default}). force: "
                             "||R||/||R0|| <= --rtol, or ||R|| below the --stress-tol floor; "
                             "displacement (Guo & Zhao): ||du||/||Du|| <= --rtol, du the Newton "
@@ -239,7 +236,9 @@ def add_convergence(group: Any, default: str = "force", rtol: float = 0.005) -> 
 
 def add_dtype(parser: argparse.ArgumentParser) -> None:
     """``--dtype float64|float32`` of the DEM."""
-    parser.add_argument("--dtype", choices=["float64", "float32"], default="float64",
+    from granular_material.dem.kernels import DTYPES
+
+    parser.add_argument("--dtype", choices=DTYPES, default="float64",
                         help="floating-point precision of the DEM (default: float64)")
 
 
@@ -259,11 +258,14 @@ def add_out(parser: argparse.ArgumentParser, help: str, default: Path | None = N
     parser.add_argument("--out", type=Path, default=default, help=help)
 
 
-def add_max_dem_steps(parser: argparse.ArgumentParser, what: str) -> None:
-    """``--max-dem-steps N``: the most DEM steps ``what`` may take, checked before work."""
-    parser.add_argument("--max-dem-steps", type=positive_int, default=DEFAULT_MAX_DEM_STEPS,
-                        help=f"the most DEM steps {what} may take; a run needing more is "
-                             f"refused before it starts (default {DEFAULT_MAX_DEM_STEPS:.0e})")
+def add_max_dem_steps(parser: argparse.ArgumentParser | argparse._ArgumentGroup, what: str,
+                      default: int = DEFAULT_MAX_DEM_STEPS, help: str | None = None) -> None:
+    """``--max-dem-steps N`` (an integer >= 1; :data:`DEFAULT_MAX_DEM_STEPS` unless
+    ``default`` says): the most DEM steps ``what`` may take, checked before work (or
+    ``help``, the whole help text, where the caller says it otherwise)."""
+    parser.add_argument("--max-dem-steps", type=positive_int, default=default,
+                        help=help or f"the most DEM steps {what} may take; a run needing more "
+                                     f"is refused before it starts (default {default:.0e})")
 
 
 def add_rve_material_options(parser: argparse.ArgumentParser | argparse._ArgumentGroup,
@@ -275,34 +277,27 @@ def add_rve_material_options(parser: argparse.ArgumentParser | argparse._Argumen
     parser.add_argument("--target-void-ratio", type=positive, default=d["target_void_ratio"],
                         help="first compress the gas to this 2D void ratio (Wu et al.: 0.18)")
     parser.add_argument("--radius-min", type=positive, default=d["radius_min"],
-                        help="[m] (3e-3)")
+                        help=f"[m] ({d['radius_min']:g})")
     parser.add_argument("--radius-max", type=positive, default=d["radius_max"],
-                        help="[m] (7e-3)")
+                        help=f"[m] ({d['radius_max']:g})")
     parser.add_argument("--law", choices=["constant", "frictmat"], default=d["law"],
                         help="contact stiffness law (constant: Wu et al. Table 1)")
     parser.add_argument("--kn", type=positive, default=d["kn"],
-                        help="normal stiffness [N/m] (3e6)")
+                        help=f"normal stiffness [N/m] ({d['kn']:g})")
     parser.add_argument("--kt", type=positive, default=d["kt"],
-                        help="tangential stiffness [N/m]")
+                        help=f"tangential stiffness [N/m] ({d['kt']:g})")
     parser.add_argument("--young", type=positive, default=d["young"],
-                        help="FrictMat Young's modulus [Pa] for --law frictmat (6e8)")
+                        help=f"FrictMat Young's modulus [Pa] for --law frictmat ({d['young']:g})")
     parser.add_argument("--kt-over-kn", type=positive, default=d["kt_over_kn"],
-                        help="FrictMat kt/kn (0.8)")
+                        help=f"FrictMat kt/kn ({d['kt_over_kn']:g})")
     parser.add_argument("--friction-angle", type=float, default=d["friction_angle"],
-                        help="[rad] (0.5)")
+                        help=f"[rad] ({d['friction_angle']:g})")
     parser.add_argument("--damping", type=float, default=d["damping"],
-                        help="local damping (0.1)")
+                        help=f"local damping ({d['damping']:g})")
     parser.add_argument("--density", type=positive, default=d["density"],
-                        help="[kg/m³] (2650)")
+                        help=f"[kg/m³] ({d['density']:g})")
     parser.add_argument("--thickness", type=positive, default=d["thickness"],
-                        help="disc thickness [m] (0.1)")
-
-
-def rve_material_given(args: argparse.Namespace) -> list[str]:
-    """The options of :func:`add_rve_material_options` that ``args`` sets to other than their
-    defaults, as ``--names``."""
-    return [f"--{dest.replace('_', '-')}" for dest, default in RVE_MATERIAL_DEFAULTS.items()
-            if getattr(args, dest) != default]
+                        help=f"disc thickness [m] ({d['thickness']:g})")
 
 
 def progress_enabled(args: argparse.Namespace) -> bool:

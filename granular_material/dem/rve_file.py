@@ -31,8 +31,10 @@ from scipy.spatial import cKDTree
 from granular_material.filesafe import write_whole
 
 __all__ = [
+    "CONSTANT_STIFFNESS",
     "CONTACT_HISTORY_KEYS",
     "FORMAT_VERSION",
+    "FRICTMAT_STIFFNESS",
     "RVEData",
     "RVEFileError",
     "RVEMeta",
@@ -45,6 +47,11 @@ _CORE_KEYS = ("radius", "position", "cell", "velocity", "angular_velocity", "met
 _BATCH_ARRAYS = ("radius", "position", "cell", "velocity", "angular_velocity")
 #: meta keys every file must give (a missing one is an error, never a silent default)
 REQUIRED_META_KEYS = ("thickness", "density", "friction_angle", "damping", "stiffness")
+#: the contact law of an RVE whose meta names none: constant stiffnesses [N/m] (Wu et al.
+#: 2025, Table 1)
+CONSTANT_STIFFNESS: dict[str, Any] = {"law": "constant", "kn": 3.0e6, "kt": 2.4e6}
+#: the FrictMat contact law's defaults (YADE, Guo & Zhao): Young's modulus [Pa], kt/kn [-]
+FRICTMAT_STIFFNESS: dict[str, Any] = {"law": "frictmat", "young": 6.0e8, "kt_over_kn": 0.8}
 #: the further arrays of a resumable file (the engine's contact history, see
 #: :data:`granular_material.dem.state.HISTORY_KEYS`): all of them or none
 CONTACT_HISTORY_KEYS = (
@@ -96,9 +103,7 @@ class RVEMeta:
     density: float = 2650.0
     friction_angle: float = 0.5
     damping: float = 0.1
-    stiffness: dict[str, Any] = field(
-        default_factory=lambda: {"law": "constant", "kn": 3.0e6, "kt": 2.4e6}
-    )
+    stiffness: dict[str, Any] = field(default_factory=lambda: dict(CONSTANT_STIFFNESS))
     seed: int | None = None
     timestep: float | None = None
 

@@ -13,10 +13,11 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from importlib.metadata import entry_points
 from typing import Any, Protocol
 
 import pandas as pd
+
+from granular_material.checks import entry_point_names, load_entry_point
 
 __all__ = [
     "POSTPROCESSOR_GROUP",
@@ -42,16 +43,12 @@ class TrackedMaterial(Protocol):
 
 def available_postprocessors() -> list[str]:
     """Names registered in the ``granular_material.postprocessors`` entry-point group."""
-    return sorted({ep.name for ep in entry_points(group=POSTPROCESSOR_GROUP)})
+    return entry_point_names(POSTPROCESSOR_GROUP)
 
 
 def load_postprocessor(name: str) -> PostProcessor:
     """The post-processor registered under ``name``; ``ValueError`` naming the choices."""
-    matches = [ep for ep in entry_points(group=POSTPROCESSOR_GROUP) if ep.name == name]
-    if not matches:
-        choices = ", ".join(available_postprocessors()) or "none installed"
-        raise ValueError(f"post-processor {name!r} is not registered; available: {choices}")
-    return matches[0].load()
+    return load_entry_point(POSTPROCESSOR_GROUP, name, "post-processor")
 
 
 @dataclass(frozen=True)

@@ -14,6 +14,7 @@ from granular_material.procedures.strain_path import (
     over_step_cap,
     path_increment,
     path_steps,
+    plan_path,
 )
 
 __all__ = [
@@ -27,6 +28,7 @@ __all__ = [
     "over_step_cap",
     "path_increment",
     "path_steps",
+    "plan_path",
     "prepare_packing",
     "progress_bar",
     "random_gas",

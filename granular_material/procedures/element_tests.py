@@ -9,10 +9,26 @@ import numpy as np
 import pandas as pd
 
 from granular_material.dem import DEMBatch
+from granular_material.procedures.packing import DEFAULT_PRESSURE, given_as
 from granular_material.procedures.progress import progress_bar
 from granular_material.procedures.servo import CONTROL_STRAIN, CONTROL_STRESS, servo_steps
+from granular_material.procedures.strain_path import DEFAULT_STRAIN_PER_STEP, STEP_LIMIT
 
-__all__ = ["BiaxialInterrupted", "biaxial_steps", "biaxial_test", "lateral_stress_error"]
+__all__ = ["BIAXIAL_NAMES", "DEFAULT_AXIAL_STRAIN", "DEFAULT_RECORD_EVERY", "MAX_AXIAL_STRAIN",
+           "BiaxialInterrupted", "biaxial_steps", "biaxial_test", "check_biaxial",
+           "lateral_stress_error"]
+
+#: final axial strain of a drained biaxial test [-], engineering, compression positive (Wu et
+#: al. 2025 load their specimens to 10 %)
+DEFAULT_AXIAL_STRAIN = 0.1
+#: DEM steps between the recorded rows of :func:`biaxial_test`
+DEFAULT_RECORD_EVERY = 100
+#: a biaxial test's final axial strain stays below this [-] (the cell would be crushed flat)
+MAX_AXIAL_STRAIN = 0.9
+#: how :func:`check_biaxial` names the values in its messages by default (a library
+#: caller's keywords); the command line names its options instead
+BIAXIAL_NAMES = {"axial_strain": "axial_strain", "confining": "confining",
+                 "strain_per_step": "strain_per_step", "max_steps": "max_steps"}
 
 
 class BiaxialInterrupted(KeyboardInterrupt):
@@ -29,12 +45,43 @@ class BiaxialInterrupted(KeyboardInterrupt):
 
 def biaxial_steps(axial_strain: float, strain_per_step: float) -> int:
     """DEM steps of :func:`biaxial_test`: ``ceil(−ln(1 − ε_a)/strain_per_step)`` (ε_a
-    engineering, compression positive); ``ValueError`` past 10¹⁵ (no longer an integer)."""
+    engineering, compression positive); ``ValueError`` past
+    :data:`~granular_material.procedures.strain_path.STEP_LIMIT` (no longer an integer)."""
     total = math.ceil(-math.log1p(-axial_strain) / strain_per_step)
-    if total > 10**15:
+    if total > STEP_LIMIT:
         raise ValueError(f"axial_strain {axial_strain!r} at strain_per_step "
                          f"{strain_per_step!r} needs {total:.4g} DEM steps, more than 1e15")
     return total
+
+
+def check_biaxial(axial_strain: float, confining: float, strain_per_step: float,
+                  max_steps: int | None = None, names: dict[str, str] | None = None) -> int:
+    """The one check of a drained biaxial test's settings, before any step: ``ValueError``
+    naming the value (as ``names`` does: :data:`BIAXIAL_NAMES` where it gives none) when a
+    strain, the pressure or the step is not a positive number, the axial strain reaches
+    :data:`MAX_AXIAL_STRAIN`, or the test needs more than ``max_steps`` DEM steps (None: no
+    cap but :func:`biaxial_steps`'). Returns the test's DEM steps."""
+    names = {**BIAXIAL_NAMES, **(names or {})}
+    for key, value in (("axial_strain", axial_strain), ("confining", confining),
+                       ("strain_per_step", strain_per_step)):
+        if not (math.isfinite(value) and value > 0):
+            raise ValueError(f"{names[key]} must be a positive number, got {value!r}")
+    if axial_strain >= MAX_AXIAL_STRAIN:
+        raise ValueError(f"{names['axial_strain']} must be below {MAX_AXIAL_STRAIN:g}, got "
+                         f"{axial_strain:g}")
+    if max_steps is None:
+        return biaxial_steps(axial_strain, strain_per_step)
+    try:
+        total: float = biaxial_steps(axial_strain, strain_per_step)
+    except ValueError:  # past the integer limit: more than any cap
+        total = math.inf
+    if total > max_steps:
+        raise ValueError(
+            f"{given_as(names['axial_strain'], axial_strain)} at "
+            f"{given_as(names['strain_per_step'], strain_per_step)} needs {total:.4g} DEM "
+            f"steps, more than {given_as(names['max_steps'], max_steps)}; raise "
+            f"{names['max_steps']} or {names['strain_per_step']}")
+    return int(total)
 
 
 def lateral_stress_error(curve: pd.DataFrame, confining: float) -> pd.DataFrame:
@@ -54,10 +101,10 @@ def lateral_stress_error(curve: pd.DataFrame, confining: float) -> pd.DataFrame:
 
 def biaxial_test(
     batch: DEMBatch,
-    axial_strain: float = 0.1,
-    confining: float = 100.0e3,
-    strain_per_step: float = 1.0e-5,
-    record_every: int = 100,
+    axial_strain: float = DEFAULT_AXIAL_STRAIN,
+    confining: float = DEFAULT_PRESSURE,
+    strain_per_step: float = DEFAULT_STRAIN_PER_STEP,
+    record_every: int = DEFAULT_RECORD_EVERY,
     gain: float = 0.5,
     progress: bool = False,
     max_steps: int | None = None,
@@ -84,17 +131,8 @@ def biaxial_test(
         ``sxx``, ``syy``, ``sxy`` [Pa] (tension positive), ``stress_ratio`` σ1/σ3 = syy/sxx,
         ``void_ratio``, ``coordination``.
     """
-    for name, value in (("axial_strain", axial_strain), ("confining", confining),
-                        ("strain_per_step", strain_per_step)):
-        if not (math.isfinite(value) and value > 0):
-            raise ValueError(f"{name} must be a positive number, got {value!r}")
-    if axial_strain >= 0.9:
-        raise ValueError(f"axial_strain must be below 0.9, got {axial_strain!r}")
     # n equal logarithmic steps ending exactly at the requested engineering strain
-    total = biaxial_steps(axial_strain, strain_per_step)
-    if max_steps is not None and total > max_steps:
-        raise ValueError(f"axial_strain {axial_strain:g} at strain_per_step {strain_per_step:g}"
-                         f" needs {total} DEM steps, more than max_steps = {max_steps}")
+    total = check_biaxial(axial_strain, confining, strain_per_step, max_steps)
     b = batch.n_rve
     cell0 = batch.cell()
     area0 = np.linalg.det(cell0)

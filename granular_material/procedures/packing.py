@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 
@@ -11,11 +12,20 @@ from granular_material.dem import DEMBatch, RVEData, RVEMeta
 from granular_material.dem.model import FLOAT32_MAX_RESOLUTION, SKIN_FRACTION
 from granular_material.procedures.servo import consolidate
 
-__all__ = ["MAX_OVERLAP", "MIN_OVERLAP", "VOID_RATIO_TOLERANCE", "PackingParameters",
-           "max_pressure", "min_discs", "min_pressure", "prepare_packing", "random_gas",
-           "smallest_normal_stiffness", "typical_normal_stiffness"]
+__all__ = ["DEFAULT_DISCS", "DEFAULT_PRESSURE", "DEFAULT_RADIUS_RANGE", "MAX_OVERLAP",
+           "MIN_OVERLAP", "PACKING_NAMES", "VOID_RATIO_TOLERANCE", "PackingParameters",
+           "check_packing", "check_radius_range", "given_as", "max_pressure", "min_discs",
+           "min_pressure", "prepare_packing", "random_gas", "smallest_normal_stiffness",
+           "typical_normal_stiffness"]
 
-DEFAULT_RADIUS_RANGE = (3.0e-3, 7.0e-3)  # Wu et al. (2025) Table 1; Guo & Zhao rMean 5 mm ± 40 %
+#: (r_min, r_max) [m] of the uniform disc radii: Wu et al. (2025) Table 1; Guo & Zhao rMean
+#: 5 mm ± 40 %
+DEFAULT_RADIUS_RANGE = (3.0e-3, 7.0e-3)
+#: isotropic consolidation pressure p0 of a packing [Pa] (Wu et al. 2025: 100 kPa), and the
+#: confining pressure the RVEs are then tested and run at
+DEFAULT_PRESSURE = 100.0e3
+#: discs per prepared RVE (Wu et al. 2025, Guo & Zhao 2014: 400)
+DEFAULT_DISCS = 400
 
 #: solid fraction of the densest consolidated packing :func:`min_discs` allows for (e = 0.11;
 #: random frictionless disc packings consolidate to 0.84–0.86, pressure adds a little)
@@ -54,10 +64,7 @@ class PackingParameters:
 
     def __post_init__(self) -> None:
         self.meta.validate()
-        r_min, r_max = self.radius_range
-        if not (0 < r_min <= r_max and math.isfinite(r_max)):
-            raise ValueError(f"radius_range must satisfy 0 < r_min <= r_max [m], got "
-                             f"{self.radius_range!r}")
+        check_radius_range(self.radius_range)
         e0 = self.target_void_ratio
         if e0 is not None and not (math.isfinite(e0) and e0 > 0):
             raise ValueError(f"target_void_ratio must be a positive number or None, got {e0!r}")
@@ -108,38 +115,74 @@ def max_pressure(meta: RVEMeta, radius_range: tuple[float, float] = DEFAULT_RADI
     return MAX_OVERLAP * smallest_normal_stiffness(meta, radius_range) / (2.0 * meta.thickness)
 
 
-def _check_limits(n_disc: int, pressure: float, meta: RVEMeta,
-                  radius_range: tuple[float, float], dtype: str = "float64") -> None:
-    """``ValueError`` naming the limit when the packing cannot be prepared."""
+#: how the checks of a packing name its values in their messages, by default (a library
+#: caller's keywords); the command line names its options instead (:func:`check_packing`)
+PACKING_NAMES = {"radius_range": ("r_min", "r_max"), "n_disc": "n_disc",
+                 "pressure": "pressure", "stiffness": "kn"}
+
+
+def given_as(name: str, value: float) -> str:
+    """A value as a message names it: ``--option 5`` for a command-line option, else
+    ``name = 5`` (a keyword of a library call); integers whole, floats as ``:g``."""
+    shown = f"{value:g}" if isinstance(value, float) else str(value)
+    return f"{name} {shown}" if name.startswith("-") else f"{name} = {shown}"
+
+
+def check_radius_range(radius_range: tuple[float, float],
+                       names: tuple[str, str] = PACKING_NAMES["radius_range"]) -> None:
+    """``ValueError`` unless the radii [m] satisfy 0 < r_min <= r_max, finite; ``names``:
+    what sets r_min and r_max, for the message."""
     r_min, r_max = radius_range
-    if not (0 < r_min <= r_max and math.isfinite(r_max)):
-        raise ValueError(f"radius_range must satisfy 0 < r_min <= r_max, got {radius_range!r}")
+    if 0 < r_min <= r_max and math.isfinite(r_max):
+        return
+    low, high = names
+    if math.isfinite(r_max) and 0 < r_max < r_min:
+        raise ValueError(f"{given_as(low, r_min)} exceeds {given_as(high, r_max)} [m]")
+    raise ValueError(f"the radii must satisfy 0 < {low} <= {high} [m], finite, got "
+                     f"{r_min!r}, {r_max!r}")
+
+
+def check_packing(n_disc: int, pressure: float, meta: RVEMeta,
+                  radius_range: tuple[float, float] = DEFAULT_RADIUS_RANGE,
+                  dtype: str = "float64", names: dict[str, Any] | None = None) -> None:
+    """``ValueError`` before any work when ``n_disc`` discs of ``meta`` with radii in
+    ``radius_range`` cannot be consolidated to ``pressure`` [Pa]: the radii, too few discs
+    (:func:`min_discs`), a pressure outside [:func:`min_pressure`, :func:`max_pressure`],
+    overlaps float32 cannot resolve. The messages name the values as ``names`` does
+    (:data:`PACKING_NAMES` where it gives none)."""
+    names = {**PACKING_NAMES, **(names or {})}
+    check_radius_range(radius_range, names["radius_range"])
+    r_min, r_max = radius_range
     if not (math.isfinite(pressure) and pressure > 0):
-        raise ValueError(f"pressure must be a positive number [Pa], got {pressure!r}")
+        raise ValueError(f"{names['pressure']} must be a positive number [Pa], got "
+                         f"{pressure!r}")
     fewest = min_discs(radius_range)
     if n_disc < fewest:
         raise ValueError(
-            f"n_disc = {n_disc} is too few for radii {radius_range[0]:g}–{radius_range[1]:g} m: "
+            f"{given_as(names['n_disc'], n_disc)} is too few for radii {r_min:g}–{r_max:g} m: "
             f"the consolidated cell must stay wider than twice the contact cut-off "
-            f"(2·r_max + skin), which takes at least {fewest} discs"
+            f"(2·r_max + skin; the engine sees one periodic image of each pair), which takes "
+            f"at least {fewest} discs"
         )
+    pressure_given = given_as(names["pressure"], pressure)
     highest = max_pressure(meta, radius_range)
     if pressure > highest:
+        overlap = 2 * pressure * meta.thickness / smallest_normal_stiffness(meta, radius_range)
         raise ValueError(
-            f"pressure = {pressure:g} Pa overlaps the contacts by about "
-            f"{2 * pressure * meta.thickness / smallest_normal_stiffness(meta, radius_range):.0%}"
-            f" of the radius (2·p·t/kn); the linear contact law holds to "
-            f"{MAX_OVERLAP:.0%}: at most {highest:.4g} Pa with these stiffnesses"
+            f"{pressure_given} Pa would press the discs about {overlap:.0%} of their radius "
+            f"into each other (2·p·thickness/kn); the linear contact law holds to "
+            f"{MAX_OVERLAP:.0%} (the void space is gone near 20%): at most {highest:.4g} Pa "
+            f"with these stiffnesses (or a stiffer {names['stiffness']})"
         )
     lowest = min_pressure(meta, radius_range)
     kn = typical_normal_stiffness(meta, radius_range)
     if pressure < lowest:
         raise ValueError(
-            f"pressure = {pressure:g} Pa overlaps the contacts by only about "
-            f"{2 * pressure * meta.thickness / kn:.2g} of the radius (2·p·t/kn with kn = "
-            f"{kn:.4g} N/m); below {MIN_OVERLAP:g} the consolidation servo does not settle "
-            f"the packing (24–400-disc ones stopped after 400 000 steps): at least "
-            f"{lowest:.4g} Pa with these stiffnesses, or a softer kn"
+            f"{pressure_given} Pa is too low for these stiffnesses: the contacts would "
+            f"overlap by about {2 * pressure * meta.thickness / kn:.2g} of their radius "
+            f"(2·p·t/kn with kn = {kn:.4g} N/m), below {MIN_OVERLAP:g} of which the "
+            f"consolidation servo does not settle a packing (24–400-disc ones stopped after "
+            f"400 000 steps): at least {lowest:.4g} Pa (or a softer {names['stiffness']})"
         )
     if dtype == "float32":
         mean_square = (r_min**2 + r_min * r_max + r_max**2) / 3.0
@@ -149,10 +192,10 @@ def _check_limits(n_disc: int, pressure: float, meta: RVEMeta,
         if share > FLOAT32_MAX_RESOLUTION:
             raise ValueError(
                 f"dtype float32 cannot resolve contacts overlapping about {overlap:.3g} m "
-                f"(pressure = {pressure:g} Pa) in a cell about {side:.3g} m across "
-                f"(n_disc = {n_disc}): float32 positions are {2.0**-24 * side:.3g} m apart, "
-                f"{share:.2%} of the overlap (at most {FLOAT32_MAX_RESOLUTION:.1%}); use "
-                f"float64, a higher pressure or fewer discs"
+                f"({pressure_given} Pa) in a cell about {side:.3g} m across "
+                f"({given_as(names['n_disc'], n_disc)}): float32 positions are "
+                f"{2.0**-24 * side:.3g} m apart, {share:.2%} of the overlap (at most "
+                f"{FLOAT32_MAX_RESOLUTION:.1%}); use float64, a higher pressure or fewer discs"
             )
 
 
@@ -179,7 +222,7 @@ def _place_discs(radius: np.ndarray, side: float, rng: np.random.Generator) -> n
 
 
 def random_gas(
-    n_disc: int = 400,
+    n_disc: int = DEFAULT_DISCS,
     n_rve: int = 1,
     seed: int = 1,
     radius_range: tuple[float, float] = DEFAULT_RADIUS_RANGE,
@@ -195,9 +238,8 @@ def random_gas(
         raise ValueError(f"n_disc must be >= 2, got {n_disc}")
     if n_rve < 1:
         raise ValueError(f"n_rve must be >= 1, got {n_rve}")
+    check_radius_range(radius_range)
     r_min, r_max = radius_range
-    if not (0 < r_min <= r_max and math.isfinite(r_max)):
-        raise ValueError(f"radius_range must satisfy 0 < r_min <= r_max, got {radius_range!r}")
     if not 0 < solid_fraction <= 0.5:
         raise ValueError(f"solid_fraction must lie in (0, 0.5], got {solid_fraction!r}")
     meta = meta or RVEMeta()
@@ -240,10 +282,10 @@ def _check_drawn_radii(n_disc: int, n_rve: int, seed: int,
 
 
 def prepare_packing(
-    n_disc: int = 400,
+    n_disc: int = DEFAULT_DISCS,
     n_rve: int = 1,
     seed: int = 1,
-    pressure: float = 100.0e3,
+    pressure: float = DEFAULT_PRESSURE,
     meta: RVEMeta | None = None,
     target_void_ratio: float | None = None,
     radius_range: tuple[float, float] = DEFAULT_RADIUS_RANGE,
@@ -268,7 +310,7 @@ def prepare_packing(
     """
     meta = meta or RVEMeta()
     meta.validate()
-    _check_limits(n_disc, pressure, meta, radius_range, dtype)
+    check_packing(n_disc, pressure, meta, radius_range, dtype)
     _check_drawn_radii(n_disc, n_rve, seed, radius_range)
     gas = random_gas(n_disc, n_rve, seed, radius_range, meta=replace(meta, friction_angle=0.0))
     batch = DEMBatch(gas, device=device, dtype=dtype, shards=shards)

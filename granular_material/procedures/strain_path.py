@@ -13,8 +13,14 @@ import numpy as np
 from granular_material.dem import DEMBatch, DEMInstabilityError
 from granular_material.dem.loading import expm_2x2
 from granular_material.dem.model import cell_heights
+from granular_material.procedures.packing import given_as
 
 __all__ = [
+    "DEFAULT_MAX_DEM_STEPS",
+    "DEFAULT_MIN_STEPS",
+    "DEFAULT_STRAIN_PER_STEP",
+    "PATH_NAMES",
+    "STEP_LIMIT",
     "CellTooThinError",
     "RVECollapseError",
     "drive_grad_u",
@@ -23,8 +29,27 @@ __all__ = [
     "over_step_cap",
     "path_increment",
     "path_steps",
+    "plan_path",
 ]
 
+
+#: largest strain of one DEM step [-] (Guo & Zhao 2014), the quasi-static criterion of every
+#: strain path and element test: an RVE driven along ∇u, the axial strain of a biaxial test
+DEFAULT_STRAIN_PER_STEP = 1.0e-5
+
+#: default cap on the DEM steps of one run of the DEM (a path, a test): 10⁶ steps is about 100
+#: times the default biaxial test (1.05 × 10⁴ steps to 10 % at 1e-5 a step) or a path of
+#: |∇u| = 10 at 1e-5 a step; one 64-disc RVE runs about 4 × 10³ steps/s on one CPU core (a
+#: 400-disc one about six times fewer), so the cap is minutes to half an hour of work: far
+#: past any run a typo would start on purpose, well short of the 10⁷ – 10³⁰⁰ steps a
+#: mistyped strain asks for.
+DEFAULT_MAX_DEM_STEPS = 10**6
+
+#: the fewest DEM steps of a path (its increments: the velocity gradient is then resolved)
+DEFAULT_MIN_STEPS = 2
+
+#: the most DEM steps one path or test may take: beyond it a float64 count is no longer exact
+STEP_LIMIT = 10**15
 
 #: points along a path at which :func:`drive_grad_u` checks the cell's heights beforehand
 PATH_CHECKS = 32
@@ -167,10 +192,6 @@ def path_increment(grad_u: np.ndarray, k: int, increments: int) -> np.ndarray:
     return f_next @ np.linalg.inv(f_now) - np.eye(2)
 
 
-#: the most DEM steps one path may take: beyond it a float64 count is no longer exact
-_STEP_LIMIT = 10**15
-
-
 def _wanted_steps(grad_u: np.ndarray, max_strain_per_step: float,
                   min_steps: int) -> np.ndarray:
     """Uncapped step counts ``max(ceil(max|∇u_b| / max_strain_per_step), min_steps)``, float."""
@@ -185,18 +206,18 @@ def _wanted_steps(grad_u: np.ndarray, max_strain_per_step: float,
 
 
 def _cap(max_steps: int | None) -> int:
-    return _STEP_LIMIT if max_steps is None else min(int(max_steps), _STEP_LIMIT)
+    return STEP_LIMIT if max_steps is None else min(int(max_steps), STEP_LIMIT)
 
 
-def over_step_cap(grad_u: np.ndarray, max_strain_per_step: float = 1.0e-5,
-                  min_steps: int = 2, max_steps: int | None = None) -> np.ndarray:
+def over_step_cap(grad_u: np.ndarray, max_strain_per_step: float = DEFAULT_STRAIN_PER_STEP,
+                  min_steps: int = DEFAULT_MIN_STEPS, max_steps: int | None = None) -> np.ndarray:
     """Which RVEs' paths to ∇u (B, 2, 2) would need more than ``max_steps`` DEM steps (or
     more than 10¹⁵, where the count stops being an integer), shape (B,), bool."""
     return _wanted_steps(grad_u, max_strain_per_step, min_steps) > _cap(max_steps)
 
 
-def path_steps(grad_u: np.ndarray, max_strain_per_step: float = 1.0e-5,
-               min_steps: int = 2, max_steps: int | None = None) -> np.ndarray:
+def path_steps(grad_u: np.ndarray, max_strain_per_step: float = DEFAULT_STRAIN_PER_STEP,
+               min_steps: int = DEFAULT_MIN_STEPS, max_steps: int | None = None) -> np.ndarray:
     """DEM steps of each RVE's path to ∇u (B, 2, 2): ``max(ceil(max|∇u_b| / max_strain_per_step),
     min_steps)``, shape (B,), int64.
 
@@ -216,11 +237,63 @@ def path_steps(grad_u: np.ndarray, max_strain_per_step: float = 1.0e-5,
     return wanted.astype(np.int64)
 
 
+#: how :func:`plan_path` names the values in its messages by default (a library caller's
+#: keywords); the command line names its options instead
+PATH_NAMES = {"grad_u": "grad_u", "increments": "increments",
+              "max_strain_per_step": "max_strain_per_step", "max_steps": "max_steps"}
+
+
+def plan_path(grad_u: np.ndarray, increments: int,
+              max_strain_per_step: float = DEFAULT_STRAIN_PER_STEP,
+              max_steps: int = DEFAULT_MAX_DEM_STEPS, min_steps: int = DEFAULT_MIN_STEPS,
+              names: dict[str, str] | None = None) -> list[int]:
+    """The DEM steps of each of the ``increments`` equal increments of the path to ∇u (2, 2)
+    (:func:`path_increment`, each driven by :func:`drive_grad_u`), checked before any work:
+    ``ValueError`` naming the values (as ``names`` does: :data:`PATH_NAMES` where it gives
+    none) when an increment inverts the cell or has no real logarithm, or the path needs
+    more than ``max_steps`` DEM steps in all."""
+    names = {**PATH_NAMES, **(names or {})}
+    g = np.asarray(grad_u, dtype=np.float64)
+    grad = given_as(names["grad_u"], ",".join(f"{v:g}" for v in g.ravel()))
+    cap = given_as(names["max_steps"], max_steps)
+    per_step = given_as(names["max_strain_per_step"], max_strain_per_step)
+    n = increments
+    if n * min_steps > max_steps:  # before a loop over them: 10⁷ would take minutes
+        raise ValueError(f"{given_as(names['increments'], n)} needs at least {n * min_steps} "
+                         f"DEM steps ({min_steps} an increment), more than {cap}; use fewer "
+                         f"{names['increments']}")
+    plan = []
+    for k in range(1, n + 1):
+        det = float(np.linalg.det(np.eye(2) + g * k / n))
+        if not det > 0:
+            raise ValueError(f"{grad} inverts the cell at increment {k} of {n}: "
+                             f"det(I + {k}/{n}·∇u) = {det:.4g} <= 0")
+        increment = path_increment(g, k, n)[None]
+        try:
+            plan.append(int(path_steps(increment, max_strain_per_step, min_steps,
+                                       max_steps)[0]))
+        except ValueError:
+            wanted = float(np.abs(increment).max()) / max_strain_per_step
+            raise ValueError(
+                f"{grad} needs more than {cap} DEM steps: increment {k} of {n} alone takes "
+                f"{wanted:.4g} at {per_step}; raise {names['max_steps']} or "
+                f"{names['max_strain_per_step']}") from None
+        if not has_real_logarithm(np.eye(2) + increment)[0]:
+            raise ValueError(f"increment {k} of {n} of {grad} has no real logarithm (it turns "
+                             f"the cell by half a turn or more); use more "
+                             f"{names['increments']}")
+    if sum(plan) > max_steps:
+        raise ValueError(f"{grad} needs {sum(plan)} DEM steps in {n} increments at "
+                         f"{per_step}, more than {cap}; raise {names['max_steps']} or "
+                         f"{names['max_strain_per_step']}")
+    return plan
+
+
 def drive_grad_u(
     batch: DEMBatch,
     grad_u: np.ndarray,
-    max_strain_per_step: float = 1.0e-5,
-    min_steps: int = 2,
+    max_strain_per_step: float = DEFAULT_STRAIN_PER_STEP,
+    min_steps: int = DEFAULT_MIN_STEPS,
     active: np.ndarray | None = None,
     max_steps: int | None = None,
 ) -> int:

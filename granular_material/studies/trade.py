@@ -41,6 +41,7 @@ import pandas as pd
 from granular_material.dem import DEMBatch, RVEData, critical_timestep, load_rve, save_rve
 from granular_material.procedures import biaxial_test, prepare_packing, progress_bar
 from granular_material.procedures.element_tests import biaxial_steps
+from granular_material.procedures.packing import DEFAULT_PRESSURE
 from granular_material.results import band_summary, write_csv
 from granular_material.results.compare import (
     ERROR_COLUMNS,
@@ -96,7 +97,7 @@ class StudyScale:
     meshes: tuple[tuple[int, int], ...]
     mesh_discs: int
     mesh_steps: int
-    confining: float = 100.0e3
+    confining: float = DEFAULT_PRESSURE
     records: int = 100
     mesh_replicate: bool = False
 

@@ -151,21 +151,25 @@ def register_size_study(subparsers: argparse._SubParsersAction) -> None:
                     "tables and figures under OUT/rve-size and OUT/size-biaxial (the first "
                     "two parts of `reproduce wu2025`). A rerun continues where it stopped.",
     )
-    p.add_argument("--discs", type=positive_int, nargs="+",
-                   default=[side * side for side in range(10, 31, 2)],
+    cpu = SCALES["cpu"]  # the study is the cpu scale's, at the sizes given
+    p.add_argument("--discs", type=positive_int, nargs="+", default=list(cpu.sizes),
                    help="RVE sizes [discs] (default 10², 12², …, 30²)")
-    p.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3, 4, 5],
-                   help="consecutive seeds, one packing each per size (default 1 2 3 4 5)")
+    p.add_argument("--seeds", type=int, nargs="+", default=list(cpu.seeds),
+                   help="consecutive seeds, one packing each per size (default "
+                        f"{' '.join(map(str, cpu.seeds))})")
     p.add_argument("--biaxial-discs", type=positive_int, nargs="+", default=None,
                    help="sizes whose RVEs get a drained biaxial test (default: every size)")
-    p.add_argument("--target-void-ratio", type=positive, default=0.18,
-                   help="void ratio the random gas is compacted to (default 0.18, Wu et al.)")
-    p.add_argument("--pressure", type=positive, default=100.0e3,
-                   help="consolidation and confining pressure [Pa] (default 100e3)")
-    p.add_argument("--axial-strain", type=positive, default=0.1,
-                   help="final axial strain of the biaxial tests (default 0.1)")
-    p.add_argument("--strain-per-step", type=positive, default=1.0e-5,
-                   help="axial strain per DEM step of the biaxial tests (default 1e-5)")
+    p.add_argument("--target-void-ratio", type=positive, default=cpu.void_ratio,
+                   help="void ratio the random gas is compacted to (default "
+                        f"{cpu.void_ratio:g}, Wu et al.)")
+    p.add_argument("--pressure", type=positive, default=cpu.pressure,
+                   help=f"consolidation and confining pressure [Pa] (default {cpu.pressure:g})")
+    p.add_argument("--axial-strain", type=positive, default=cpu.dem_axial_strain,
+                   help="final axial strain of the biaxial tests (default "
+                        f"{cpu.dem_axial_strain:g})")
+    p.add_argument("--strain-per-step", type=positive, default=cpu.dem_strain_per_step,
+                   help="axial strain per DEM step of the biaxial tests (default "
+                        f"{cpu.dem_strain_per_step:g})")
     p.add_argument("--out", type=Path, default=Path("rve-size-study"),
                    help="output folder (default ./rve-size-study)")
     add_device(p, "DEM device")

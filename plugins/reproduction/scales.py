@@ -10,6 +10,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 
+from granular_material.procedures.element_tests import DEFAULT_AXIAL_STRAIN
+from granular_material.procedures.packing import DEFAULT_PRESSURE
+from granular_material.procedures.strain_path import DEFAULT_STRAIN_PER_STEP
+
 __all__ = ["SCALES", "ReproductionScale"]
 
 
@@ -63,7 +67,7 @@ class ReproductionScale:
     repeats: int = 3
     resolution_discs: int = 400
     void_ratio: float = 0.18
-    pressure: float = 100.0e3
+    pressure: float = DEFAULT_PRESSURE
 
     def __post_init__(self) -> None:
         for name in ("biaxial_sizes", "speedup_sizes"):
@@ -88,8 +92,9 @@ SCALES: dict[str, ReproductionScale] = {
     ),
     "cpu": ReproductionScale(
         name="cpu", sizes=tuple(side * side for side in range(10, 31, 2)),
-        seeds=(1, 2, 3, 4, 5), biaxial_sizes=(100, 256, 400, 676, 900), dem_axial_strain=0.1,
-        dem_strain_per_step=1.0e-5, element_discs=400, element_steps=50,
+        seeds=(1, 2, 3, 4, 5), biaxial_sizes=(100, 256, 400, 676, 900),
+        dem_axial_strain=DEFAULT_AXIAL_STRAIN, dem_strain_per_step=DEFAULT_STRAIN_PER_STEP,
+        element_discs=400, element_steps=50,
         specimen_elements=(5, 10), specimen_discs=100, specimen_steps=50,
         fem_axial_strain=0.05, map_strain=0.02, track_every=5, speedup_sizes=(100, 400, 900),
         speedup_batches=(1, 2, 4, 8, 16, 32, 64), speedup_steps=500, yade_steps=2000,

@@ -20,6 +20,7 @@ import pandas as pd
 
 from granular_material.dem import DEMBatch, RVEData, load_rve
 from granular_material.procedures import progress_bar
+from granular_material.procedures.strain_path import DEFAULT_STRAIN_PER_STEP
 
 from .scales import ReproductionScale
 
@@ -34,7 +35,7 @@ def step_time(data: RVEData, steps: int, device: str, shards: int | None = None)
     warm-up of 20 steps (kernels loaded, lists built)."""
     batch = DEMBatch(data, device=device, shards=shards)
     shear = np.zeros((batch.n_rve, 2, 2))
-    shear[:, 0, 1] = 1.0e-5 / batch.dt
+    shear[:, 0, 1] = DEFAULT_STRAIN_PER_STEP / batch.dt
     batch.set_affine(shear)
     batch.run(20)
     started = time.perf_counter()
