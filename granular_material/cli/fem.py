@@ -18,6 +18,7 @@ from granular_material.cli.options import (
     add_device,
     add_element,
     add_json,
+    add_max_dem_steps,
     add_out,
     add_progress,
     add_rve_material_options,
@@ -27,12 +28,13 @@ from granular_material.cli.options import (
     positive_int,
     progress_enabled,
 )
-from granular_material.fem import available_postprocessors, load_material
+from granular_material.fem import available_materials, available_postprocessors, load_material
 from granular_material.fem.kinematics import FORMULATIONS
 from granular_material.fem.linear_elastic import LinearElasticRunParameters
+from granular_material.fem.problems import PLATENS
 from granular_material.runs import OutputSpec, RunSpec, SpecError, from_flat, run, to_flat
 from granular_material.runs.presets import PRESET_NAMES, preset_fields
-from granular_material.runs.spec import NewtonSpec, ProblemSpec
+from granular_material.runs.spec import SCALES, NewtonSpec, ProblemSpec
 
 __all__ = ["command_line", "register", "report", "run_biaxial_command", "run_single_element",
            "spec_from_args"]
@@ -125,11 +127,14 @@ def _dem_arguments(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--max-strain-per-step", type=positive, default=_DEM.max_strain_per_step,
                    metavar="STRAIN",
                    help="largest strain of one DEM step while an RVE is driven along grad u "
-                        "(the quasi-static criterion; see the trade study; default 1e-5)")
-    g.add_argument("--max-dem-steps", type=positive_int, default=_DEM.max_dem_steps,
-                   help="cap on the DEM steps of one RVE's path in one Newton iteration: an "
-                        "iterate that needs more is an error naming the point (default 1e6, "
-                        "a strain of 10 at 1e-5 a step)")
+                        "(the quasi-static criterion; see the trade study; default "
+                        f"{_DEM.max_strain_per_step:g})")
+    add_max_dem_steps(g, "one RVE's path", default=_DEM.max_dem_steps,
+                      help="cap on the DEM steps of one RVE's path in one Newton iteration: an "
+                           "iterate that needs more is an error naming the point (default "
+                           f"{_DEM.max_dem_steps:.0e}, a strain of "
+                           f"{_DEM.max_dem_steps * _DEM.max_strain_per_step:g} at "
+                           f"{_DEM.max_strain_per_step:g} a step)")
     g.add_argument("--track", nargs="+", default=None, metavar="POINT",
                    help="Gauss point ids (or 'all') whose RVEs the post-processors analyse; "
                         "results in tracked.csv")
@@ -157,7 +162,7 @@ def _common_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--confining", type=float, default=_PROBLEM["confining"],
                         help="lateral confining pressure [Pa], compression positive; also "
                              "the consolidation pressure of the RVEs a dem run prepares "
-                             "(default 100e3)")
+                             f"(default {_PROBLEM['confining']:g})")
     parser.add_argument("--steps", type=int, default=_PROBLEM["steps"],
                         help=f"load steps (default {_PROBLEM['steps']})")
     add_out(parser, "output folder: steps.csv, points.csv, fields.xdmf, summary.json, figures")
@@ -204,7 +209,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                     "--confining of the RVE material options. Stresses tension positive in "
                     "tables; plots compression positive.",
     )
-    p.add_argument("--material", choices=("dem", "linear-elastic"), default="dem",
+    p.add_argument("--material", choices=available_materials(), default=DEFAULT_MATERIAL,
                    help="material at the Gauss points (default dem)")
     p.add_argument("--E", type=float, default=_ELASTIC.E,
                    help=f"linear-elastic: Young's modulus [Pa] (default {_ELASTIC.E:g})")
@@ -237,7 +242,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                     "--scale full is Wu et al.'s 10x15 elements with 400-disc RVEs; "
                     "--scale reduced (5x10 elements, 64 discs) runs on a CPU.",
     )
-    b.add_argument("--scale", choices=("full", "reduced"), default=None,
+    b.add_argument("--scale", choices=SCALES, default=None,
                    help="preset mesh and RVE size (default: full on CUDA, reduced on CPU)")
     b.add_argument("--elements", type=int, nargs=2, metavar=("NX", "NY"), default=None,
                    help="elements across the width and along the height (overrides --scale)")
@@ -250,7 +255,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="specimen width [m] (default 0.05)")
     b.add_argument("--height", type=float, default=None,
                    help="specimen height [m] (default 0.10)")
-    b.add_argument("--platens", choices=("smooth", "rough"), default="smooth",
+    b.add_argument("--platens", choices=PLATENS, default=PLATENS[0],
                    help="smooth: platen nodes slide freely, one bottom node pinned (default); "
                         "rough: no platen node moves sideways")
     _common_arguments(b)

@@ -53,8 +53,9 @@ from skfem import (
 
 from granular_material.fem.layout import to_points
 from granular_material.fem.loading import Loading
+from granular_material.procedures.packing import DEFAULT_PRESSURE
 
-__all__ = ["DEFAULT_GAUSS", "ELEMENTS", "TRIANGLES", "TRIANGLE_RULES", "BiaxialProblem",
+__all__ = ["DEFAULT_GAUSS", "ELEMENTS", "PLATENS", "TRIANGLES", "TRIANGLE_RULES", "BiaxialProblem",
            "BiaxialSetup", "build_biaxial", "element_of"]
 
 #: the elements a problem may be meshed with: name → scikit-fem element (scalar)
@@ -64,6 +65,8 @@ ELEMENTS = {"quad4": ElementQuad1, "quad8": ElementQuadS2, "quad9": ElementQuad2
 TRIANGLES = frozenset({"tri3", "tri6"})
 #: Gauss points of each element by default, per direction (quadrilaterals) or per triangle:
 #: full integration for quad4, quad9, tri3 and tri6, reduced (2 × 2, Guo & Zhao) for quad8
+#: the platens of a specimen: smooth (its nodes slide, one bottom node pinned) or rough
+PLATENS = ("smooth", "rough")
 DEFAULT_GAUSS = {"quad4": 2, "quad8": 2, "quad9": 3, "tri3": 1, "tri6": 3}
 #: the triangle rules: points per triangle → scikit-fem intorder (1: the centroid, by hand)
 TRIANGLE_RULES = {1: 1, 3: 2, 6: 4, 7: 5, 12: 6}
@@ -98,7 +101,7 @@ class BiaxialSetup:
     height: float = 0.10
     nx: int = 10
     ny: int = 15
-    confining: float = 100.0e3
+    confining: float = DEFAULT_PRESSURE
     axial_strain: float = 0.10
     platens: str = "smooth"
     element: str = "quad4"
@@ -117,7 +120,7 @@ class BiaxialSetup:
                                          or not 1 <= self.gauss <= 10):
             raise ValueError(f"gauss must be an integer in [1, 10] (points per direction), "
                              f"got {self.gauss!r}")
-        if self.platens not in ("smooth", "rough"):
+        if self.platens not in PLATENS:
             raise ValueError(f"platens must be 'smooth' or 'rough', got {self.platens!r}")
         for name in ("width", "height"):
             value = getattr(self, name)

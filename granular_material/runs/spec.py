@@ -24,9 +24,11 @@ from typing import Any
 from granular_material.fem.defaults import COMMAND_DEFAULTS
 from granular_material.fem.newton import NewtonSettings
 from granular_material.fem.problems import BiaxialSetup
+from granular_material.procedures.element_tests import DEFAULT_AXIAL_STRAIN
+from granular_material.procedures.packing import DEFAULT_DISCS, DEFAULT_PRESSURE
 
-__all__ = ["BACKENDS", "FULL_SCALE", "REDUCED_SCALE", "TESTS", "MaterialSpec", "NewtonSpec",
-           "OutputSpec", "ProblemSpec", "RunSpec", "SpecError"]
+__all__ = ["BACKENDS", "FULL_SCALE", "REDUCED_SCALE", "SCALES", "TESTS", "MaterialSpec",
+           "NewtonSpec", "OutputSpec", "ProblemSpec", "RunSpec", "SpecError"]
 
 #: the tests a run specification describes: one element, or the biaxial specimen
 TESTS = ("single-element", "biaxial")
@@ -34,7 +36,9 @@ TESTS = ("single-element", "biaxial")
 #: is the coarsest mesh on which a band showed
 REDUCED_SCALE = ((5, 10), 64)
 #: the full scale (Wu et al. 2025): 10 × 15 Q4 elements, 600 Gauss points, 400-disc RVEs
-FULL_SCALE = ((10, 15), 400)
+FULL_SCALE = ((10, 15), DEFAULT_DISCS)
+#: the scales of a biaxial specimen
+SCALES = ("full", "reduced")
 #: where a material's points live: this process, or shards on the ranks of an MPI job
 BACKENDS = ("inprocess", "mpi")
 #: width and height [m] of each test's specimen when the spec names none
@@ -86,8 +90,8 @@ class ProblemSpec:
     """
 
     test: str
-    axial_strain: float = 0.1
-    confining: float = 100e3
+    axial_strain: float = DEFAULT_AXIAL_STRAIN
+    confining: float = DEFAULT_PRESSURE
     steps: int = 100
     element: str = "quad4"
     quadrature: int | None = None
@@ -112,7 +116,7 @@ class ProblemSpec:
                 if getattr(self, name) is not None:
                     raise SpecError(name, "is a biaxial specimen's; a single element has one")
         if self.scale is not None:
-            _one_of("scale", self.scale, ("full", "reduced"))
+            _one_of("scale", self.scale, SCALES)
         if self.elements is not None:
             object.__setattr__(self, "elements", tuple(self.elements))
             if len(self.elements) != 2:
