@@ -216,8 +216,8 @@ def ours_drive(rve: str | Path, out_csv: str | Path, grad_u: list[float], increm
     to the last finished increment is written first).
     """
     from granular_material.cli.options import scalar_or_list
-    from granular_material.dem import DEMBatch, DEMInstabilityError, load_rve
-    from granular_material.procedures import drive_grad_u, path_increment, plan_path
+    from granular_material.dem import DEMBatch, load_rve
+    from granular_material.procedures import drive_path, plan_path
     from granular_material.results import write_csv
 
     if len(grad_u) != 4 or increments < 1:
@@ -228,41 +228,16 @@ def ours_drive(rve: str | Path, out_csv: str | Path, grad_u: list[float], increm
     max_strain_per_step = DEFAULT_STRAIN_PER_STEP  # dem-drive's --max-strain-per-step
     cap = DEFAULT_MAX_DEM_STEPS
     out_csv = Path(out_csv)
-    rows: list[pd.DataFrame] = []
-    steps = 0
-    failure: DEMInstabilityError | None = None
     timing: dict[str, float] = {}
     with _engine_call("dem-drive", timing):
         # dem-drive's checks of the whole path (--max-dem-steps among them), before any work
         plan_path(grad, n, max_strain_per_step, cap)
         batch = DEMBatch(load_rve(rve), device=device, dtype="float64")
-        b = batch.n_rve
-
-        def record(increment: int) -> None:
-            h = batch.homogenize()
-            applied = grad * increment / n
-            rows.append(pd.DataFrame({
-                "rve": np.arange(b), "increment": increment,
-                "Gxx": applied[0, 0], "Gxy": applied[0, 1], "Gyx": applied[1, 0],
-                "Gyy": applied[1, 1],
-                "sxx": h.stress[:, 0, 0], "syy": h.stress[:, 1, 1],
-                "sxy": 0.5 * (h.stress[:, 0, 1] + h.stress[:, 1, 0]),
-                "void_ratio": h.void_ratio, "coordination": h.coordination,
-                "steps": steps,
-            }))
-
-        record(0)
-        try:
-            for inc in range(1, n + 1):
-                steps += drive_grad_u(batch, path_increment(grad, inc, n),
-                                      max_strain_per_step=max_strain_per_step,
-                                      max_steps=cap)
-                record(inc)
-        except DEMInstabilityError as exc:  # a blow-up or a collapse: keep the path to it
-            if isinstance(exc, ValueError):  # refused input (a cell made too thin)
-                raise
-            failure = exc
-        table = pd.concat(rows, ignore_index=True)
+        path = drive_path(batch, grad, n, max_strain_per_step=max_strain_per_step,
+                          max_steps=cap)
+        if path.interrupt is not None:
+            raise path.interrupt
+        table, steps, failure = path.table, path.steps, path.failure
         out_csv.parent.mkdir(parents=True, exist_ok=True)
         write_csv(table, out_csv)
     finished = int(table["increment"].max())

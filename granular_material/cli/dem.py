@@ -8,7 +8,6 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import pandas as pd
 
 from granular_material.cli.options import (
     DISC_BYTES,
@@ -255,53 +254,22 @@ def _drive_plan(args: argparse.Namespace) -> list[int]:
 
 
 def _run_drive(args: argparse.Namespace) -> int:
-    from granular_material.dem import DEMInstabilityError
-    from granular_material.procedures import drive_grad_u, path_increment, progress_bar
+    from granular_material.procedures import drive_path, progress_bar
     from granular_material.results import write_csv
 
     check_output_file(args.out)
     plan = _drive_plan(args)
     batch = _load_batch(args)
-    grad = args.grad_u
-    b = batch.n_rve
-    rows = []
-    steps = 0
-
-    def record(increment: int) -> None:
-        h = batch.homogenize()
-        applied = grad * increment / args.increments
-        rows.append(pd.DataFrame({
-            "rve": np.arange(b), "increment": increment,
-            "Gxx": applied[0, 0], "Gxy": applied[0, 1], "Gyx": applied[1, 0],
-            "Gyy": applied[1, 1],
-            "sxx": h.stress[:, 0, 0], "syy": h.stress[:, 1, 1],
-            "sxy": 0.5 * (h.stress[:, 0, 1] + h.stress[:, 1, 0]),
-            "void_ratio": h.void_ratio, "coordination": h.coordination,
-            "steps": steps,
-        }))
-
-    record(0)
-    interrupt = None
-    failure: DEMInstabilityError | None = None
     # the bar counts DEM steps (what takes the time), moved at the end of each increment
     with progress_bar(sum(plan), "dem-drive", progress_enabled(args)) as bar:
-        try:
-            for inc in range(1, args.increments + 1):
-                step_grad = path_increment(grad, inc, args.increments)
-                done = drive_grad_u(batch, step_grad,
-                                    max_strain_per_step=args.max_strain_per_step,
-                                    max_steps=args.max_dem_steps)
-                steps += done
-                record(inc)
-                bar.update(done)
-                bar.set_postfix(increment=f"{inc}/{args.increments}")
-        except KeyboardInterrupt as exc:  # keep and write the increments finished before it
-            interrupt = exc
-        except DEMInstabilityError as exc:  # a blow-up or a collapse: keep the path to it
-            if isinstance(exc, ValueError):  # refused input (a cell made too thin)
-                raise
-            failure = exc
-    table = pd.concat(rows, ignore_index=True)
+        def advance(increment: int, steps: int) -> None:
+            bar.update(steps)
+            bar.set_postfix(increment=f"{increment}/{args.increments}")
+
+        path = drive_path(batch, args.grad_u, args.increments,
+                          max_strain_per_step=args.max_strain_per_step,
+                          max_steps=args.max_dem_steps, after_increment=advance)
+    table, steps, interrupt, failure = path.table, path.steps, path.interrupt, path.failure
     if args.out:
         make_parents(args.out)
         write_csv(table, args.out)

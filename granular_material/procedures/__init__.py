@@ -4,6 +4,7 @@ independently), and :func:`progress_bar`, the one progress bar every layer uses.
 
 from granular_material.procedures.element_tests import biaxial_test
 from granular_material.procedures.packing import PackingParameters, prepare_packing, random_gas
+from granular_material.procedures.path_test import DrivenPath, drive_path
 from granular_material.procedures.progress import progress_bar
 from granular_material.procedures.servo import consolidate, servo_steps
 from granular_material.procedures.strain_path import (
@@ -19,11 +20,13 @@ from granular_material.procedures.strain_path import (
 
 __all__ = [
     "CellTooThinError",
+    "DrivenPath",
     "PackingParameters",
     "RVECollapseError",
     "biaxial_test",
     "consolidate",
     "drive_grad_u",
+    "drive_path",
     "has_real_logarithm",
     "over_step_cap",
     "path_increment",
