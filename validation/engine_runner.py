@@ -215,7 +215,6 @@ def ours_drive(rve: str | Path, out_csv: str | Path, grad_u: list[float], increm
     :class:`EngineError` where the command refuses the path or exits 1 (a blow-up: the path
     to the last finished increment is written first).
     """
-    from granular_material.cli.options import scalar_or_list
     from granular_material.dem import DEMBatch, load_rve
     from granular_material.procedures import drive_path, plan_path
     from granular_material.results import write_csv
@@ -237,24 +236,13 @@ def ours_drive(rve: str | Path, out_csv: str | Path, grad_u: list[float], increm
                           max_steps=cap)
         if path.interrupt is not None:
             raise path.interrupt
-        table, steps, failure = path.table, path.steps, path.failure
         out_csv.parent.mkdir(parents=True, exist_ok=True)
-        write_csv(table, out_csv)
-    finished = int(table["increment"].max())
-    last = table[table["increment"] == finished]
-    report: dict[str, Any] = {
-        "sxx": scalar_or_list(last["sxx"].to_numpy()),
-        "syy": scalar_or_list(last["syy"].to_numpy()),
-        "sxy": scalar_or_list(last["sxy"].to_numpy()),
-        "void_ratio": scalar_or_list(last["void_ratio"].to_numpy()),
-        "coordination": scalar_or_list(last["coordination"].to_numpy()),
-        "steps": steps,
-        "warnings": [],
-        "out": str(out_csv),
-    }
-    if failure is not None:
-        report["error"] = (f"{failure} (in increment {finished + 1} of {n}; the path to "
-                           f"increment {finished} is kept)")
+        write_csv(path.table, out_csv)
+    report: dict[str, Any] = {**path.summary(), "warnings": [], "out": str(out_csv)}
+    error = path.failure_message(n)
+    if error is not None:
+        report["error"] = error
+    finished = path.finished
     report["increments_completed"] = finished
     result = _summary(report, timing, "dem-drive")
     return _rve_zero(out_csv), result

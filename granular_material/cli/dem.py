@@ -269,27 +269,14 @@ def _run_drive(args: argparse.Namespace) -> int:
         path = drive_path(batch, args.grad_u, args.increments,
                           max_strain_per_step=args.max_strain_per_step,
                           max_steps=args.max_dem_steps, after_increment=advance)
-    table, steps, interrupt, failure = path.table, path.steps, path.interrupt, path.failure
     if args.out:
         make_parents(args.out)
-        write_csv(table, args.out)
-    finished = int(table["increment"].max())
-    last = table[table["increment"] == finished]
-    report: dict[str, Any] = {
-        "sxx": scalar_or_list(last["sxx"].to_numpy()),
-        "syy": scalar_or_list(last["syy"].to_numpy()),
-        "sxy": scalar_or_list(last["sxy"].to_numpy()),
-        "void_ratio": scalar_or_list(last["void_ratio"].to_numpy()),
-        "coordination": scalar_or_list(last["coordination"].to_numpy()),
-        "steps": steps,
-        "warnings": [],
-    }
+        write_csv(path.table, args.out)
+    report: dict[str, Any] = {**path.summary(), "warnings": []}
     if args.out:
         report["out"] = str(args.out)
-    error = None
-    if failure is not None:
-        error = (f"{failure} (in increment {finished + 1} of {args.increments}; the path to "
-                 f"increment {finished} is kept)")
+    error = path.failure_message(args.increments)
+    finished, interrupt = path.finished, path.interrupt
     if interrupt is not None:
         error = (f"interrupted after increment {finished} of {args.increments}: the path to "
                  "it is kept")

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -37,6 +38,27 @@ class DrivenPath:
     def finished(self) -> int:
         """The last increment recorded."""
         return int(self.table["increment"].max())
+
+    def summary(self) -> dict[str, Any]:
+        """The state after the last recorded increment (a value per RVE, the value itself for
+        one RVE): Love ``sxx``, ``syy``, ``sxy`` [Pa], ``void_ratio``, ``coordination``, and
+        the DEM ``steps`` run."""
+        last = self.table[self.table["increment"] == self.finished]
+
+        def batch(name: str) -> Any:
+            values = last[name].tolist()
+            return values[0] if len(values) == 1 else values
+
+        return {**{name: batch(name) for name in
+                   ("sxx", "syy", "sxy", "void_ratio", "coordination")},
+                "steps": self.steps}
+
+    def failure_message(self, increments: int) -> str | None:
+        """Why the path of ``increments`` stopped short (a blow-up or collapse), or None."""
+        if self.failure is None:
+            return None
+        return (f"{self.failure} (in increment {self.finished + 1} of {increments}; the path "
+                f"to increment {self.finished} is kept)")
 
 
 def drive_path(batch: DEMBatch, grad_u: np.ndarray, increments: int,
