@@ -9,7 +9,8 @@ Usage::
 
 One RVE file (``--particles`` discs, seed 1, 100 kPa, one RVE per Gauss point) is prepared
 and every variant runs the drained biaxial specimen (or, with ``--elements 1 1``, the single
-element) from it, each in a fresh process, the variants taking turns ``--repeats`` times.
+element) from it, each a run spec run in a fresh process (``granular-material run
+SPEC.toml``), the variants taking turns ``--repeats`` times.
 The table (``stepping.csv`` and ``stepping.md`` under ``--out``) holds, per variant, over
 the load steps every run completed: the median wall time of those steps, the counts (Newton
 iterations, RVE paths, DEM particle-steps), the ratios to the exact run, and the errors
@@ -26,36 +27,52 @@ import subprocess
 import sys
 import tempfile
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
 
+from granular_material.dem import save_rve
+from granular_material.procedures import prepare_packing
 from granular_material.results.compare import markdown_table
 
-#: the variants: name -> options of the FEM commands
-VARIANTS = {
-    "exact": ["--drive", "restart", "--reuse-tol", "0"],
-    "reuse-1e-6": ["--drive", "restart", "--reuse-tol", "1e-6"],
-    "reuse-3e-6-tangent": ["--drive", "restart", "--reuse-tol", "3e-6",
-                           "--reuse-correction", "tangent"],
-    "continue": ["--drive", "continue", "--reuse-tol", "0"],
-    "continue-reuse-1e-6": ["--drive", "continue", "--reuse-tol", "1e-6"],
+#: the variants: name -> the run spec fields (flat names) each sets
+VARIANTS: dict[str, dict[str, Any]] = {
+    "exact": {"drive": "restart", "reuse_tol": 0.0},
+    "reuse-1e-6": {"drive": "restart", "reuse_tol": 1e-6},
+    "reuse-3e-6-tangent": {"drive": "restart", "reuse_tol": 3e-6,
+                           "reuse_correction": "tangent"},
+    "continue": {"drive": "continue", "reuse_tol": 0.0},
+    "continue-reuse-1e-6": {"drive": "continue", "reuse_tol": 1e-6},
 }
+#: the Newton settings of every run (the force test: reuse needs it)
+NEWTON = {"convergence": "force", "max_iterations": 60, "max_cutbacks": 8}
+
+
+def _options(fields: dict[str, Any]) -> str:
+    """Spec fields as ``name=value`` words (the table's ``options`` column)."""
+    return " ".join(f"{k}={v}" for k, v in fields.items())
 
 
 def _run(rve: Path, out: Path, elements: tuple[int, int], steps: int, axial_strain: float,
-         options: list[str], newton: list[str]) -> dict:
-    """One FEM run in a fresh process; its JSON summary and steps table."""
-    command = "single-element" if elements == (1, 1) else "biaxial"
-    argv = [sys.executable, "-m", "granular_material.cli", command, "--rve", str(rve),
-            "--steps", str(steps), "--axial-strain", str(axial_strain), "--out", str(out),
-            "--no-progress", "--json", *newton, *options]
-    if command == "biaxial":
-        argv += ["--elements", *map(str, elements), "--map-strain", "0.02"]
-    done = subprocess.run(argv, capture_output=True, text=True)
-    if done.returncode not in (0, 1) or not done.stdout.strip():
-        raise RuntimeError(f"{' '.join(argv)} failed ({done.returncode}): {done.stderr[-2000:]}")
-    summary = json.loads(done.stdout)
+         fields: dict[str, Any]) -> dict:
+    """One FEM run in a fresh process (``granular-material run SPEC.toml``: its own start-up,
+    none of the variant before it in memory); its summary and steps table."""
+    from granular_material.runs import from_flat, save
+
+    problem = ({"test": "single-element"} if elements == (1, 1) else
+               {"test": "biaxial", "elements": elements, "map_strain": (0.02,)})
+    spec = from_flat({**problem, "material": "dem", "rve": rve, "steps": steps,
+                      "axial_strain": axial_strain, "out": out, "progress": False,
+                      **NEWTON, **fields})
+    spec_file = out.with_suffix(".toml")
+    save(spec, spec_file)
+    done = subprocess.run([sys.executable, "-m", "granular_material.cli", "run",
+                           str(spec_file)], capture_output=True, text=True)
+    if done.returncode not in (0, 1) or not (out / "summary.json").is_file():
+        raise RuntimeError(f"the run of {spec_file} failed ({done.returncode}): "
+                           f"{done.stderr[-2000:]}")
+    summary = json.loads((out / "summary.json").read_text())
     summary["table"] = pd.read_csv(out / "steps.csv")
     return summary
 
@@ -91,9 +108,6 @@ def main(argv: list[str] | None = None) -> pd.DataFrame:
     parser.add_argument("--repeats", type=int, default=1)
     parser.add_argument("--variants", default=",".join(VARIANTS),
                         help=f"comma-separated, from {', '.join(VARIANTS)}; exact comes first")
-    parser.add_argument("--newton", default="--convergence force --max-iterations 60 "
-                                            "--max-cutbacks 8",
-                        help="Newton options of every run (default: %(default)s)")
     parser.add_argument("--out", type=Path, default=Path("out/stepping"))
     args = parser.parse_args(argv)
     names = [v for v in args.variants.split(",") if v]
@@ -106,16 +120,13 @@ def main(argv: list[str] | None = None) -> pd.DataFrame:
     args.out.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory() as tmp:
         rve = Path(tmp) / "rves.npz"
-        subprocess.run([sys.executable, "-m", "granular_material.cli", "prepare",
-                        "--particles", str(args.particles), "--batch", str(points),
-                        "--seed", "1", "--out", str(rve), "--no-progress"],
-                       check=True, capture_output=True)
+        save_rve(rve, prepare_packing(n_disc=args.particles, n_rve=points, seed=1).to_data())
         runs: dict[str, list[dict]] = {n: [] for n in names}
         for repeat in range(args.repeats):
             for name in names:
                 out = Path(tmp) / f"{name}-{repeat}"
                 runs[name].append(_run(rve, out, elements, args.steps, args.axial_strain,
-                                       VARIANTS[name], args.newton.split()))
+                                       VARIANTS[name]))
                 print(f"{name} #{repeat + 1}: {runs[name][-1]['wall_time_s']:.1f} s",
                       file=sys.stderr)
     exact = runs["exact"][0]
@@ -124,7 +135,7 @@ def main(argv: list[str] | None = None) -> pd.DataFrame:
     for name in names:
         first = runs[name][0]
         done = first["table"].iloc[1:common + 1]
-        row = {"variant": name, "options": " ".join(VARIANTS[name]),
+        row = {"variant": name, "options": _options({**NEWTON, **VARIANTS[name]}),
                "wall_s": float(np.median([r["table"]["wall_time"].iloc[1:common + 1].sum()
                                           for r in runs[name]])),
                "newton_iterations": int(done["iterations"].sum()),
