@@ -50,6 +50,9 @@ __all__ = [
 
 #: the Newton convergence tests (NewtonSettings.convergence)
 CONVERGENCE_TESTS = ("force", "displacement")
+#: prefix of the costs that count failed points by reason (``failed:max_dem_steps``: the
+#: points of the step's evaluations that failed for that reason, each evaluation counted)
+FAILED_COST = "failed:"
 
 
 @dataclass(frozen=True)
@@ -172,6 +175,9 @@ class StepRecord:
             <granular_material.fem.material.MaterialResponse.costs>`) of every evaluation,
             all attempts and sub-increments included, summed name by name; a name no
             evaluation reported is absent (empty for a material that counts nothing).
+            Failed evaluations add ``failed:<reason>`` (:data:`FAILED_COST`): the points
+            that failed for that reason (:class:`~granular_material.fem.material.FailureReason`),
+            summed over the evaluations.
         cutbacks: how many times an increment of this step was halved.
         stalled: increments accepted on a stalled residual (``NewtonSettings.stall_rtol``)
             or on a small correction once the residual stalled
@@ -406,8 +412,11 @@ class NewtonSolver:
             _add_costs(cost, response.costs)
             if not response.ok:
                 bad = response.failed_points()
+                counts = response.failure_counts()
+                _add_costs(cost, {f"{FAILED_COST}{name}": k for name, k in counts.items()})
+                why = ", ".join(f"{name}: {k}" for name, k in counts.items())
                 return _Attempt(False, du, None, None, history, it, cost,
-                                f"material failed at points {bad[:8].tolist()}")
+                                f"material failed at points {bad[:8].tolist()} ({why})")
             grad_total = grad_n + grad_step
             f_int = internal_force(self.basis, kin.assembled_stress(response.stress,
                                                                     grad_total))

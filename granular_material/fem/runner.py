@@ -46,7 +46,13 @@ import pandas as pd
 from granular_material.fem.checkpoint import RunCheckpoint, SavedRun
 from granular_material.fem.layout import to_points
 from granular_material.fem.material import Material
-from granular_material.fem.newton import NewtonError, NewtonSettings, NewtonSolver, StepRecord
+from granular_material.fem.newton import (
+    FAILED_COST,
+    NewtonError,
+    NewtonSettings,
+    NewtonSolver,
+    StepRecord,
+)
 from granular_material.fem.problems import BiaxialProblem, BiaxialSetup, build_biaxial
 from granular_material.fem.tracking import Tracking
 
@@ -95,6 +101,10 @@ class BiaxialResult:
         resumed_from: the load step of the checkpoint the run was resumed from, or None.
         interrupt: the ``KeyboardInterrupt`` (Ctrl-C, or SIGTERM where the caller maps it
             to one) that stopped the run, or None.
+        failures: failed point-evaluations by reason over the run, the step that did not
+            converge included (the ``failed:<reason>`` costs of the records; empty when no
+            point failed). A failed point never reaches ``points``: a step commits only when
+            every point succeeded.
     """
 
     problem: BiaxialProblem
@@ -106,6 +116,7 @@ class BiaxialResult:
     tracked: pd.DataFrame = field(default_factory=pd.DataFrame)
     resumed_from: int | None = None
     interrupt: KeyboardInterrupt | None = None
+    failures: dict[str, int] = field(default_factory=dict)
 
     def row_nearest(self, axial_strain: float) -> int:
         """Row of ``steps`` (and of ``displacements``) whose axial strain [-] is nearest."""
@@ -157,6 +168,17 @@ def _rows(solver: NewtonSolver, problem: BiaxialProblem, record: StepRecord | No
         **fields,
     })
     return row, points
+
+
+def _failures(records: list[StepRecord]) -> dict[str, int]:
+    """Failed point-evaluations by reason over ``records``."""
+    out: dict[str, int] = {}
+    for record in records:
+        for name, value in record.costs.items():
+            if name.startswith(FAILED_COST):
+                reason = name[len(FAILED_COST):]
+                out[reason] = out.get(reason, 0) + int(value)
+    return dict(sorted(out.items()))
 
 
 def run_biaxial(
@@ -236,6 +258,7 @@ def run_biaxial(
 
     error = None
     interrupt = None
+    unfinished: list[StepRecord] = []  # the record of the step a NewtonError stopped
     try:
         if saved is None:
             collect(solver, None)
@@ -247,6 +270,7 @@ def run_biaxial(
                    done=0 if saved is None else saved.step)
     except NewtonError as exc:
         error = str(exc)
+        unfinished = exc.records[len(solver.records):]
     except KeyboardInterrupt as exc:
         error = f"interrupted after load step {len(rows) - 1} of {n_steps}"
         interrupt = exc
@@ -255,6 +279,7 @@ def run_biaxial(
         displacements=np.array(disps), records=list(solver.records), error=error,
         tracked=pd.concat(tracked, ignore_index=True) if tracked else pd.DataFrame(),
         resumed_from=None if saved is None else saved.step, interrupt=interrupt,
+        failures=_failures([*solver.records, *unfinished]),
     )
     if observer is not None:
         observer.finish(result)
