@@ -55,6 +55,16 @@ def _configure_warp(wp: ModuleType) -> None:
         config.quiet = not _verbose
 
 
+def _configuring(exec_module: Any) -> Any:
+    """``exec_module`` followed by :func:`_configure_warp` of the module it executed."""
+
+    def exec_and_configure(module: ModuleType) -> None:
+        exec_module(module)
+        _configure_warp(module)
+
+    return exec_and_configure
+
+
 class _WarpImportHook(importlib.abc.MetaPathFinder):
     """Configures warp (:func:`_configure_warp`) as soon as its module has been executed,
     before any kernel is loaded or the runtime initialised (which is when warp prints)."""
@@ -68,14 +78,8 @@ class _WarpImportHook(importlib.abc.MetaPathFinder):
                 continue
             spec = finder.find_spec(fullname, path, target)
             if spec is not None and spec.loader is not None:
-                loader = spec.loader
-                exec_module = loader.exec_module
-
-                def exec_and_configure(module: ModuleType) -> None:
-                    exec_module(module)
-                    _configure_warp(module)
-
-                loader.exec_module = exec_and_configure  # type: ignore[method-assign]
+                spec.loader.exec_module = _configuring(  # type: ignore[method-assign]
+                    spec.loader.exec_module)
                 return spec
         return None
 
