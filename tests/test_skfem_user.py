@@ -186,3 +186,15 @@ def test_warp_is_silent_unless_asked():
         timeout=300)
     assert quiet.returncode == loud.returncode == 0, quiet.stderr + loud.stderr
     assert "initialized" not in quiet.stdout and "initialized" in loud.stdout
+
+
+def test_isotropic_start_removes_the_shear_stress_of_the_packing():
+    raw = DEMMaterial(particles=24, seed=1, device="cpu", replicate=True)
+    raw.allocate(1)
+    iso = DEMMaterial(particles=24, seed=1, device="cpu", replicate=True, isotropic=True)
+    iso.allocate(1)
+    zero = np.zeros((1, 2, 2))
+    before, after = raw.response(zero).stress[0], iso.response(zero).stress[0]
+    assert abs(after[0, 1]) <= 1e3 < abs(before[0, 1])  # |σxy| under 1 % of 100 kPa
+    np.testing.assert_allclose(np.diag(after), [-100e3, -100e3], atol=1.5e3)
+    np.testing.assert_array_equal(iso.committed_grad_u, zero)
