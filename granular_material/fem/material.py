@@ -123,7 +123,10 @@ class MaterialResponse:
 
     Attributes:
         stress: Cauchy stress σ [Pa], tension positive, shape (n, 2, 2), float64.
-        tangent: D_ijkl = ∂σ_ij/∂(∂u_k/∂x_l) [Pa], shape (n, 2, 2, 2, 2), float64.
+        tangent: D_ijkl = ∂σ_ij/∂(∂u_k/∂x_l) [Pa], shape (n, 2, 2, 2, 2), float64; ∇u on
+            the configuration of the last commit; D_ijkl = D_jikl, but in general
+            D_ijkl ≠ D_ijlk (no second minor symmetry: see the module docstring for
+            Voigt/Mandel users).
         status: :class:`PointStatus` per point, shape (n,), int8.
         costs: what the evaluation cost, by name: numbers (int or float) whose names and
             units are the material's (e.g. the DEM material reports ``dem_steps``,

@@ -46,13 +46,7 @@ import pandas as pd
 from granular_material.fem.checkpoint import RunCheckpoint, SavedRun
 from granular_material.fem.layout import to_points
 from granular_material.fem.material import Material
-from granular_material.fem.newton import (
-    FAILED_COST,
-    NewtonError,
-    NewtonSettings,
-    NewtonSolver,
-    StepRecord,
-)
+from granular_material.fem.newton import NewtonError, NewtonSettings, NewtonSolver, StepRecord
 from granular_material.fem.problems import BiaxialProblem, BiaxialSetup, build_biaxial
 from granular_material.fem.tracking import Tracking
 
@@ -102,8 +96,8 @@ class BiaxialResult:
         interrupt: the ``KeyboardInterrupt`` (Ctrl-C, or SIGTERM where the caller maps it
             to one) that stopped the run, or None.
         failures: failed point-evaluations by reason over the run, the step that did not
-            converge included (the ``failed:<reason>`` costs of the records; empty when no
-            point failed). A failed point never reaches ``points``: a step commits only when
+            converge included (the records' ``failures`` summed; empty when no point
+            failed). A failed point never reaches ``points``: a step commits only when
             every point succeeded.
     """
 
@@ -174,10 +168,8 @@ def _failures(records: list[StepRecord]) -> dict[str, int]:
     """Failed point-evaluations by reason over ``records``."""
     out: dict[str, int] = {}
     for record in records:
-        for name, value in record.costs.items():
-            if name.startswith(FAILED_COST):
-                reason = name[len(FAILED_COST):]
-                out[reason] = out.get(reason, 0) + int(value)
+        for reason, count in record.failures.items():
+            out[reason] = out.get(reason, 0) + int(count)
     return dict(sorted(out.items()))
 
 

@@ -25,6 +25,8 @@ keeps the protocol's increment.
 
 from __future__ import annotations
 
+import os
+import sys
 import warnings
 from collections.abc import Callable
 from dataclasses import replace
@@ -62,8 +64,8 @@ if TYPE_CHECKING:
     import pandas as pd
     from granular_material_skfem.mpi import MPIBackend
 
-__all__ = ["BACKENDS", "DEMMaterial", "DEMMaterialParameters", "UnconfinedWarning",
-           "in_process_backend"]
+__all__ = ["BACKENDS", "UNCONFINED_FRACTION", "DEMMaterial", "DEMMaterialParameters",
+           "UnconfinedWarning", "in_process_backend"]
 
 #: a point whose mean pressure −tr σ / 2 falls below this fraction of the material's
 #: confining pressure has lost its confinement (:class:`UnconfinedWarning`)
@@ -78,6 +80,19 @@ class UnconfinedWarning(UserWarning):
     stress-free gas of discs (zero stress, zero stiffness) and a Newton loop "converges" to
     nothing. Confine the specimen (a pressure on its boundary, as
     ``examples/skfem_material_swap.py`` does) or load RVEs prepared at a pressure."""
+
+
+def _user_stacklevel() -> int:
+    """The ``stacklevel`` of a warning issued by the caller of this function that points at
+    the first frame outside granular_material and this plugin (the user's line)."""
+    import granular_material
+
+    roots = (os.path.dirname(granular_material.__file__) + os.sep,
+             os.path.dirname(__file__) + os.sep)
+    frame, level = sys._getframe(1), 1
+    while frame is not None and frame.f_code.co_filename.startswith(roots):
+        frame, level = frame.f_back, level + 1
+    return level
 
 
 def _sym(stress: np.ndarray) -> np.ndarray:
@@ -170,7 +185,7 @@ class DEMMaterial(ScikitFemInterface):
                 raise ValueError("give confining (pressure is its deprecated name), not both")
             warnings.warn("DEMMaterial(pressure=...) is deprecated: call it confining= (the "
                           "run specification's and the command line's name)",
-                          DeprecationWarning, stacklevel=2)
+                          DeprecationWarning, stacklevel=_user_stacklevel())
             confining = pressure
         if confining is None:
             confining = 100.0e3
@@ -452,7 +467,7 @@ class DEMMaterial(ScikitFemInterface):
                 f"e.g. {pressure[loose[0]]:.3g} Pa at point {loose[0]}): an unconfined RVE "
                 "relaxes into a stress-free gas of discs. Apply a confining pressure on the "
                 "boundary of the specimen (see docs/guide/scikit-fem.md)",
-                UnconfinedWarning, stacklevel=3)
+                UnconfinedWarning, stacklevel=_user_stacklevel())
 
     def commit(self) -> None:
         """The RVE states of the last evaluation become the committed states (and its total
