@@ -6,6 +6,85 @@ Floors, bottom up, each importing only from those below it:
 :mod:`granular_material.fem` (material protocol, Newton driver, problems, runner),
 :mod:`granular_material.results` (tables, writers, plots, localisation, summaries),
 :mod:`granular_material.cli` (the ``granular-material`` command line).
+
+warp is silent in the library: its start-up banner ("Warp 1.x initialized ...") and its
+module-load lines ("Module ... load on device 'cpu' took ...") go to stdout, so importing
+this package keeps warp at log level WARNING, whenever warp is imported (before or after this
+package). Opt in with :func:`verbose` (``granular_material.verbose(True)``) or the
+environment variable ``GRANULAR_MATERIAL_VERBOSE=1``; warp's warnings and errors are always
+shown.
 """
 
+from __future__ import annotations
+
+import importlib.abc
+import importlib.machinery
+import os
+import sys
+from types import ModuleType
+from typing import Any
+
 __version__ = "0.1.0"
+__all__ = ["__version__", "verbose"]
+
+#: environment variable that, set to 1 (true, yes), lets warp print its banner and loads
+VERBOSE_VARIABLE = "GRANULAR_MATERIAL_VERBOSE"
+
+_verbose = os.environ.get(VERBOSE_VARIABLE, "").strip().lower() in ("1", "true", "yes", "on")
+
+
+def verbose(on: bool = True) -> bool:
+    """Let warp print its banner and module-load lines (``on=True``) or silence them again
+    (``False``, the default state of the library); returns the previous setting. Takes effect
+    at once if warp is loaded, else when it is."""
+    global _verbose
+    previous, _verbose = _verbose, bool(on)
+    if "warp" in sys.modules:
+        _configure_warp(sys.modules["warp"])
+    return previous
+
+
+def _configure_warp(wp: ModuleType) -> None:
+    """warp's log level as :func:`verbose` says (INFO when verbose, else WARNING)."""
+    config = getattr(wp, "config", None)
+    if config is None:
+        return
+    if hasattr(wp, "LOG_WARNING"):  # warp >= 1.10
+        config.log_level = getattr(wp, "LOG_INFO", 20) if _verbose else wp.LOG_WARNING
+    else:  # older warp
+        config.quiet = not _verbose
+
+
+def _configuring(exec_module: Any) -> Any:
+    """``exec_module`` followed by :func:`_configure_warp` of the module it executed."""
+
+    def exec_and_configure(module: ModuleType) -> None:
+        exec_module(module)
+        _configure_warp(module)
+
+    return exec_and_configure
+
+
+class _WarpImportHook(importlib.abc.MetaPathFinder):
+    """Configures warp (:func:`_configure_warp`) as soon as its module has been executed,
+    before any kernel is loaded or the runtime initialised (which is when warp prints)."""
+
+    def find_spec(self, fullname: str, path: Any, target: Any = None
+                  ) -> importlib.machinery.ModuleSpec | None:
+        if fullname != "warp":
+            return None
+        for finder in sys.meta_path:
+            if finder is self or not hasattr(finder, "find_spec"):
+                continue
+            spec = finder.find_spec(fullname, path, target)
+            if spec is not None and spec.loader is not None:
+                spec.loader.exec_module = _configuring(  # type: ignore[method-assign]
+                    spec.loader.exec_module)
+                return spec
+        return None
+
+
+if "warp" in sys.modules:
+    _configure_warp(sys.modules["warp"])
+elif not any(isinstance(f, _WarpImportHook) for f in sys.meta_path):
+    sys.meta_path.insert(0, _WarpImportHook())

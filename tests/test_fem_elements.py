@@ -380,7 +380,7 @@ def test_quad8_dem_run_resumes_to_the_same_result(tmp_path):
     tol = default_stress_tol("dem", P)
 
     def material():
-        return create_material("dem", particles=16, seed=2, pressure=P, device="cpu",
+        return create_material("dem", particles=16, seed=2, confining=P, device="cpu",
                                replicate=False)
 
     whole = material()

@@ -171,11 +171,12 @@ def test_rows_carry_every_homogenised_field_exactly(small_rve_path):
     batch = DEMBatch(load_rve(small_rve_path).replicate(3), device="cpu", shards=1)
     drive_grad_u(batch, np.array([[1e-4, 0.0], [0.0, -2e-4]]))
     h = batch.homogenize()
-    failed = np.array([False, True, False])
-    rows = _pack(h, failed)
+    failed = np.array([False, True, True])
+    rows = _pack(h, failed, np.array(["", "max_dem_steps", "blow_up"], dtype=object))
     assert rows.shape == (3, ROW) and rows.dtype == np.float64 and ROW == 31
-    back, back_failed = _unpack(rows)
+    back, back_failed, reasons = _unpack(rows)
     np.testing.assert_array_equal(back_failed, failed)
+    assert reasons.tolist() == ["", "max_dem_steps", "blow_up"]
     for f in fields(Homogenized):
         mine, theirs = getattr(back, f.name), np.asarray(getattr(h, f.name))
         assert mine.dtype == theirs.dtype and mine.shape == theirs.shape, f.name

@@ -196,5 +196,8 @@ def test_perturbation_tangent_stops_at_the_first_dem_run_that_fails(small_rve_pa
     monkeypatch.setattr("granular_material_skfem.backend.drive_grad_u", blow_up)
     response = material.evaluate(np.repeat(GRAD[:1], 2, axis=0))
     assert len(calls) == 1 and not response.ok
-    assert response.status.tolist() == [PointStatus.OK, PointStatus.FAILED]
+    # the whole batch went back to its committed state: RVE 1 blew up, RVE 0 is aborted
+    assert response.status.tolist() == [PointStatus.FAILED, PointStatus.FAILED]
+    assert response.reasons.tolist() == ["aborted", "blow_up"]
+    assert np.isfinite(response.stress).all()  # the committed stress, not NaN
     assert response.costs["dem_steps"] == 0

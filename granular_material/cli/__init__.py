@@ -17,15 +17,40 @@ import signal
 import sys
 import warnings
 from importlib.metadata import entry_points
+from typing import Any
 
 from granular_material import __version__
-from granular_material.cli.options import (
-    UsageError,
-    interrupt_exit_code,
-    stop_signals_as_interrupt,
-)
 
 __all__ = ["UsageError", "build_parser", "entry", "main", "quiet_warp"]
+
+#: the one-line help of every command, in the order of ``granular-material --help``: what
+#: the top-level help shows without importing the commands (numpy, warp, scikit-fem,
+#: matplotlib, scipy.stats, the plugins); tests check it against the full parser. A plugin
+#: command missing here is listed by its entry point's name with a generic line.
+COMMAND_HELP: dict[str, str] = {
+    "prepare": "generate and consolidate periodic RVE packings",
+    "biaxial-dem": "drained biaxial test of the RVE(s) of a file",
+    "dem-drive": "apply a displacement gradient to the RVE(s) of a file",
+    "single-element": "one element (Q4, 4 Gauss points, unless --element) in a drained "
+                      "biaxial test",
+    "biaxial": "biaxial specimen (50 mm x 100 mm) of DEM Gauss points",
+    "run": "run the scene of a TOML file into one folder",
+    "trade-study": "speed against accuracy: every knob against a reference run",
+    "fractal": "pore image and multifractal spectrum (D0, alpha0) of an RVE file",
+    "reproduce": "rerun a paper's study: each claim beside our measurement",
+    "rve-size-study": "how many discs an RVE needs: pore spectra and biaxial tests by size",
+    "validate-yade": "cross-validate the DEM against YADE (needs Debian's yade)",
+}
+_CORE = ("prepare", "biaxial-dem", "dem-drive", "single-element", "biaxial", "run",
+         "trade-study")
+
+
+def __getattr__(name: str) -> Any:  # UsageError, imported only when asked for (it is heavy)
+    if name == "UsageError":
+        from granular_material.cli.options import UsageError
+
+        return UsageError
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def _register_plugins(subparsers: argparse._SubParsersAction) -> None:
@@ -48,14 +73,38 @@ def quiet_warp() -> None:
         wp.config.quiet = True
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The full argument parser, plugin commands included."""
+def _top_parser() -> tuple[argparse.ArgumentParser, argparse._SubParsersAction]:
     parser = argparse.ArgumentParser(
         prog="granular-material",
         description="Multiscale FEM x DEM simulation of granular geomaterials.",
     )
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    return parser, subparsers
+
+
+def command_parser() -> argparse.ArgumentParser:
+    """The top-level parser alone (commands listed with their one-line help, no options),
+    built without importing any command: what ``granular-material --help``, ``--version``
+    and a missing command use."""
+    parser, subparsers = _top_parser()
+    plugins = [ep.name for ep in entry_points(group="granular_material.commands")]
+    names = [n for n in COMMAND_HELP if n in _CORE or n in plugins]
+    names += sorted(n for n in plugins if n not in COMMAND_HELP)
+    for name in names:
+        subparsers.add_parser(name, help=COMMAND_HELP.get(
+            name, f"a plugin command (granular-material {name} --help)"))
+    return parser
+
+
+def _names_a_command(argv: list[str]) -> bool:
+    """Whether ``argv`` reaches a command (a first argument that is not an option)."""
+    return bool(argv) and not argv[0].startswith("-")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The full argument parser, plugin commands included."""
+    parser, subparsers = _top_parser()
     from granular_material.cli import dem, fem, scene, study  # here: quiet_warp imports light
 
     dem.register(subparsers)
@@ -68,6 +117,12 @@ def build_parser() -> argparse.ArgumentParser:
 
 #: exit codes of a command stopped by a signal (SIGHUP, Ctrl-C, SIGTERM)
 _STOPPED_CODES = frozenset({128 + 1, 128 + 2, 128 + 15})
+
+
+def _usage_error() -> type[Exception]:
+    from granular_material.cli.options import UsageError
+
+    return UsageError
 
 
 def entry() -> None:
@@ -86,6 +141,11 @@ def entry() -> None:
 def main(argv: list[str] | None = None) -> int:
     """Run the command line; returns the exit code (2 for bad input, 1 for a failed run,
     130/143 for a run stopped by Ctrl-C/SIGTERM)."""
+    from granular_material.cli.options import interrupt_exit_code, stop_signals_as_interrupt
+
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if not _names_a_command(argv):  # --help, --version or nothing: no command to import
+        command_parser().parse_args(argv)
     quiet_warp()  # keep stdout clean for --json
     parser = build_parser()
     args = parser.parse_args(argv)
@@ -99,7 +159,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"granular-material {args.command}: {what} before its outputs "
                   "were complete", file=sys.stderr)
             return code
-        except (UsageError, ValueError, OSError) as exc:
+        except (_usage_error(), ValueError, OSError) as exc:
             print(f"granular-material {args.command}: error: {exc}", file=sys.stderr)
             return 2
         except RuntimeError as exc:  # e.g. DEMInstabilityError naming the RVEs

@@ -13,13 +13,17 @@ from granular_material.fem.defaults import (
     default_settings,
     default_stress_tol,
 )
-from granular_material.fem.layout import to_points, to_quadrature
+from granular_material.fem.layout import Layout, grad_points, to_points, to_quadrature
 from granular_material.fem.linear_elastic import LinearElastic, LinearElasticParameters
 from granular_material.fem.loading import Loading
 from granular_material.fem.material import (
+    MEASURES,
+    FailureReason,
     Material,
     MaterialResponse,
     PointStatus,
+    QuadratureResponse,
+    ScikitFemInterface,
     available_materials,
     create_material,
     load_material,
@@ -40,11 +44,14 @@ from granular_material.fem.tracking import (
 )
 
 __all__ = [
+    "MEASURES",
     "BiaxialProblem",
     "BiaxialResult",
     "BiaxialSetup",
     "CheckpointError",
     "CommittedState",
+    "FailureReason",
+    "Layout",
     "LinearElastic",
     "LinearElasticParameters",
     "Loading",
@@ -54,9 +61,11 @@ __all__ = [
     "NewtonSettings",
     "NewtonSolver",
     "PointStatus",
+    "QuadratureResponse",
     "RunCheckpoint",
     "RunObserver",
     "SavedRun",
+    "ScikitFemInterface",
     "StepRecord",
     "Tracking",
     "available_materials",
@@ -65,6 +74,7 @@ __all__ = [
     "create_material",
     "default_settings",
     "default_stress_tol",
+    "grad_points",
     "load_material",
     "load_postprocessor",
     "run_biaxial",

@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from granular_material.fem.material import MaterialResponse, PointStatus
+from granular_material.fem.material import MaterialResponse, PointStatus, ScikitFemInterface
 
 __all__ = ["LinearElastic", "LinearElasticParameters", "LinearElasticRunParameters",
            "isotropic_tangent"]
@@ -69,21 +69,45 @@ def isotropic_tangent(lam: float, mu: float) -> np.ndarray:
     )
 
 
-class LinearElastic:
+class LinearElastic(ScikitFemInterface):
     """Isotropic, plane-strain linear elastic material (small strain).
 
-    State per point: the committed total strain ε (n, 2, 2). ``evaluate(∇u)`` returns
-    σ = σ0 I + C : (ε + sym ∇u) with the constant tangent C of :func:`isotropic_tangent`.
-    In a run specification its parameters are :class:`LinearElasticRunParameters`, and its
-    initial stress is the confining pressure's (``for_run``).
+    State per point: the committed total strain ε (n, 2, 2). ``evaluate(∇u)`` (the protocol:
+    ∇u since the last commit) returns σ = σ0 I + C : (ε + sym ∇u) with the constant tangent C
+    of :func:`isotropic_tangent`; ``response(∇u)`` takes the *total* ∇u (or
+    ``measure="increment"``) in batch-first or scikit-fem's quadrature-last layout, or a
+    ``DiscreteField``, and answers in that layout (see
+    :class:`~granular_material.fem.material.ScikitFemInterface`).
+
+    Kinematics: ∇u = ∂u_k/∂x_l on the configuration of the last commit (small strain: the
+    reference one); σ is the Cauchy stress [Pa], tension positive; the tangent
+    D_ijkl = ∂σ_ij/∂(∂u_k/∂x_l) = C_ijkl [Pa] has every symmetry (major and both minor), so
+    its Voigt/Mandel 3 × 3 form is exact (a rotation costs nothing: small strain).
+
+    Names: the run specification and the command line call the moduli ``E`` and ``nu``
+    (:class:`LinearElasticRunParameters`, ``--E``/``--nu``); this class calls them
+    ``young`` and ``poisson`` (scikit-fem's ``lame_parameters`` convention) and also accepts
+    ``E=`` and ``nu=`` as keywords. The spec's confining pressure P becomes
+    ``initial_stress=-P`` (tension positive) in :meth:`for_run`.
+
+    Args:
+        young: Young's modulus E [Pa], > 0 (default 60 MPa); ``E`` is the same.
+        poisson: Poisson's ratio ν [-], in (−1, 0.5) (default 0.3); ``nu`` is the same.
+        initial_stress: isotropic stress σ0 at zero strain [Pa], tension positive (e.g.
+            ``-100e3`` for a specimen consolidated to 100 kPa; default 0).
     """
 
     #: the parameters of the material in a run specification
     Parameters = LinearElasticRunParameters
 
     def __init__(
-        self, young: float = 60.0e6, poisson: float = 0.3, initial_stress: float = 0.0
+        self, young: float = 60.0e6, poisson: float = 0.3, initial_stress: float = 0.0,
+        *, E: float | None = None, nu: float | None = None,
     ) -> None:
+        if E is not None:
+            young = E
+        if nu is not None:
+            poisson = nu
         self.parameters = LinearElasticParameters(young, poisson, initial_stress)
         self._tangent = isotropic_tangent(*self.parameters.lame)
         self._strain = np.zeros((0, 2, 2))
@@ -112,10 +136,13 @@ class LinearElastic:
             raise ValueError(f"n_points must be >= 1, got {n_points}")
         self._strain = np.zeros((n_points, 2, 2))
         self._trial = None
+        self._track_allocate(n_points)
 
     def evaluate(self, grad_u: np.ndarray) -> MaterialResponse:
-        """σ [Pa] (n, 2, 2) and C [Pa] (n, 2, 2, 2, 2) for ∇u (n, 2, 2) since the commit."""
+        """σ [Pa] (n, 2, 2) and C [Pa] (n, 2, 2, 2, 2) for ∇u [-] (n, 2, 2) since the
+        commit (the increment; ``response`` takes totals)."""
         grad_u = _check_grad(grad_u, self.n_points)
+        self._track_evaluate(grad_u)
         strain = self._strain + 0.5 * (grad_u + np.swapaxes(grad_u, 1, 2))
         stress = np.einsum("ijkl,nkl->nij", self._tangent, strain)
         stress += self.parameters.initial_stress * _I2
@@ -132,17 +159,19 @@ class LinearElastic:
         if self._trial is None:
             raise RuntimeError("commit() needs an evaluate() since the last commit/revert")
         self._strain, self._trial = self._trial, None
+        self._track_commit()
 
     def revert(self) -> None:
         """Drop the trial strain."""
         self._trial = None
+        self._track_revert()
 
     def checkpoint(self, path: str | Path) -> None:
-        """Write the committed strain and the parameters to ``path`` (.npz)."""
+        """Write the committed strain, total ∇u and the parameters to ``path`` (.npz)."""
         p = self.parameters
         with open(path, "wb") as fh:
             np.savez(fh, strain=self._strain, young=p.young, poisson=p.poisson,
-                     initial_stress=p.initial_stress)
+                     initial_stress=p.initial_stress, grad_u=self.committed_grad_u)
 
     def restore(self, path: str | Path) -> None:
         """Read a checkpoint; its parameters must match this material's."""
@@ -154,6 +183,9 @@ class LinearElastic:
                 raise ValueError(f"{path}: checkpoint parameters {saved} differ from "
                                  f"{self.parameters}")
             self._strain = np.array(data["strain"], dtype=np.float64)
+            self._track_allocate(self._strain.shape[0])
+            if "grad_u" in data:  # checkpoints before the total form hold none
+                self._committed_grad = np.array(data["grad_u"], dtype=np.float64)
         self._trial = None
 
 
@@ -162,5 +194,9 @@ def _check_grad(grad_u: np.ndarray, n: int) -> np.ndarray:
     if n == 0:
         raise RuntimeError("allocate() the material before evaluate()")
     if grad_u.shape != (n, 2, 2):
-        raise ValueError(f"grad_u must have shape ({n}, 2, 2), got {grad_u.shape}")
+        raise ValueError(
+            f"evaluate() takes grad_u batch-first, shape ({n}, 2, 2) (the increment since the "
+            f"commit), got {grad_u.shape}; response() also takes scikit-fem's quadrature-last "
+            "(2, 2, nelems, nqp) or a DiscreteField (or convert with "
+            "granular_material.fem.to_points / to_quadrature)")
     return grad_u

@@ -185,6 +185,10 @@ class StepRecord:
             accept_correction).
         correction_history: ‖δu‖_L2 / ‖Δu‖_L2 of every Newton correction, one list per
             attempt (recorded whatever the test; the predictor is not a correction).
+        failures: points whose evaluation failed, by reason
+            (:class:`~granular_material.fem.material.FailureReason` values, e.g.
+            ``{"max_dem_steps": 4}``), summed over the failed evaluations of the step;
+            empty when none failed.
     """
 
     step: int
@@ -197,6 +201,7 @@ class StepRecord:
     wall_time: float = 0.0
     converged_by: list[str] = field(default_factory=list)
     correction_history: list[list[float]] = field(default_factory=list)
+    failures: dict[str, int] = field(default_factory=dict)
 
 
 @dataclass
@@ -244,6 +249,7 @@ class _Attempt:
     stalled: bool = False
     by: str = ""
     corrections: list[float] = field(default_factory=list)
+    failures: dict[str, int] = field(default_factory=dict)  # failed points by reason
 
 
 @BilinearForm
@@ -438,8 +444,11 @@ class NewtonSolver:
             _add_costs(cost, response.costs)
             if not response.ok:
                 bad = response.failed_points()
+                counts = response.failure_counts()
+                why = ", ".join(f"{name}: {k}" for name, k in counts.items())
                 return _Attempt(False, du, None, None, history, it, cost,
-                                f"material failed at points {bad[:8].tolist()}")
+                                f"material failed at points {bad[:8].tolist()} ({why})",
+                                failures=counts)
             grad_total = grad_n + grad_step
             f_int = internal_force(self.basis, kin.assembled_stress(response.stress,
                                                                     grad_total))
@@ -502,6 +511,7 @@ class NewtonSolver:
             attempt = self._increment(end)
             record.iterations += attempt.iterations
             _add_costs(record.costs, attempt.cost)
+            _add_costs(record.failures, attempt.failures)  # type: ignore[arg-type]
             record.residual_history.append(attempt.history)
             record.correction_history.append(attempt.corrections)
             if attempt.converged:

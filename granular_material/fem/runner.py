@@ -95,6 +95,10 @@ class BiaxialResult:
         resumed_from: the load step of the checkpoint the run was resumed from, or None.
         interrupt: the ``KeyboardInterrupt`` (Ctrl-C, or SIGTERM where the caller maps it
             to one) that stopped the run, or None.
+        failures: failed point-evaluations by reason over the run, the step that did not
+            converge included (the records' ``failures`` summed; empty when no point
+            failed). A failed point never reaches ``points``: a step commits only when
+            every point succeeded.
     """
 
     problem: BiaxialProblem
@@ -106,6 +110,7 @@ class BiaxialResult:
     tracked: pd.DataFrame = field(default_factory=pd.DataFrame)
     resumed_from: int | None = None
     interrupt: KeyboardInterrupt | None = None
+    failures: dict[str, int] = field(default_factory=dict)
 
     def row_nearest(self, axial_strain: float) -> int:
         """Row of ``steps`` (and of ``displacements``) whose axial strain [-] is nearest."""
@@ -159,6 +164,15 @@ def _rows(solver: NewtonSolver, problem: BiaxialProblem, record: StepRecord | No
     return row, points
 
 
+def _failures(records: list[StepRecord]) -> dict[str, int]:
+    """Failed point-evaluations by reason over ``records``."""
+    out: dict[str, int] = {}
+    for record in records:
+        for reason, count in record.failures.items():
+            out[reason] = out.get(reason, 0) + int(count)
+    return dict(sorted(out.items()))
+
+
 class _Collector:
     """The tables of a run as its steps commit: kept here, shown to the observer, saved in
     the checkpoint (with the committed state when one is due), tracked points analysed."""
@@ -204,8 +218,10 @@ class _Collector:
             self.on_step(solver, record, points)
 
     def result(self, solver: NewtonSolver, error: str | None, saved: SavedRun | None,
-               interrupt: KeyboardInterrupt | None) -> BiaxialResult:
-        """What the run produced."""
+               interrupt: KeyboardInterrupt | None,
+               unfinished: list[StepRecord]) -> BiaxialResult:
+        """What the run produced (``unfinished``: the records of the step a Newton failure
+        stopped, whose failed points count too)."""
         return BiaxialResult(
             problem=self.problem, steps=pd.DataFrame(self.rows),
             points=pd.concat(self.tables, ignore_index=True),
@@ -214,6 +230,7 @@ class _Collector:
             tracked=(pd.concat(self.tracked, ignore_index=True) if self.tracked
                      else pd.DataFrame()),
             resumed_from=None if saved is None else saved.step, interrupt=interrupt,
+            failures=_failures([*solver.records, *unfinished]),
         )
 
 
@@ -270,6 +287,7 @@ def run_biaxial(
         observer.start(problem)
     error = None
     interrupt = None
+    unfinished: list[StepRecord] = []  # the record of the step a NewtonError stopped
     try:
         if saved is None:
             steps.collect(solver, None)
@@ -281,10 +299,11 @@ def run_biaxial(
                    done=0 if saved is None else saved.step)
     except NewtonError as exc:
         error = str(exc)
+        unfinished = exc.records[len(solver.records):]
     except KeyboardInterrupt as exc:
         error = f"interrupted after load step {len(steps.rows) - 1} of {n_steps}"
         interrupt = exc
-    result = steps.result(solver, error, saved, interrupt)
+    result = steps.result(solver, error, saved, interrupt, unfinished)
     if observer is not None:
         observer.finish(result)
     return result

@@ -42,8 +42,10 @@ def summarize_biaxial(curve: pd.DataFrame) -> BiaxialSummary:
 
 def run_summary(result: BiaxialResult, wall: float) -> dict[str, Any]:
     """The summary of a FEM biaxial run: peak, Newton cost, the material's costs (each cost
-    column of :data:`~granular_material.fem.runner.COST_COLUMNS` summed over the steps), wall
-    time [s], error."""
+    column of :data:`~granular_material.fem.runner.COST_COLUMNS` summed over the steps), the
+    failed point-evaluations by reason (``failed_points``, e.g. ``{"max_dem_steps": 4}``:
+    points whose evaluation failed and cut an increment back, the step that stopped the run
+    included; empty when none failed), wall time [s], error."""
     from granular_material.fem.runner import COST_COLUMNS  # a result means fem is loaded
 
     steps = result.steps
@@ -59,6 +61,7 @@ def run_summary(result: BiaxialResult, wall: float) -> dict[str, Any]:
         "steps_completed": len(done),
         "cutbacks": int(done["cutbacks"].sum()),
         "stalled_increments": int(done["stalled"].sum()),
+        "failed_points": dict(getattr(result, "failures", {})),
         **{name: int(done[name].sum()) for name in COST_COLUMNS},
         "wall_time_s": wall,
         "error": result.error,

@@ -20,6 +20,7 @@ import numpy as np
 from granular_material.dem import DEMBatch, DEMInstabilityError, Homogenized, RVEData, save_rve
 from granular_material.dem.condensed import condensed_tangent
 from granular_material.dem.homogenization import objective_tangent, spin_tangent
+from granular_material.fem.material import FailureReason
 from granular_material.procedures import (
     drive_grad_u,
     has_real_logarithm,
@@ -36,6 +37,7 @@ __all__ = [
     "InProcessBackend",
     "check_driving",
     "check_reuse",
+    "instability_reason",
 ]
 
 #: the RVEs' tangents: the objective one (symmetric Kruyt–Rothenburg plus the stress's spin,
@@ -96,6 +98,8 @@ class Evaluation:
             completed, in order (the totals above are their sums, DEM steps included).
         complete: False when a drive blew up: the batch is then back in its committed state
             and the response is NaN throughout.
+        reasons: why each failed RVE failed, shape (B,), str (:class:`FailureReason`
+            values, "" where it did not); None: "failed" where ``failed``.
     """
 
     homogenized: Homogenized
@@ -105,6 +109,34 @@ class Evaluation:
     particle_steps: int = 0
     drives: tuple[tuple[int, int, int], ...] = ()
     complete: bool = True
+    reasons: np.ndarray | None = None
+
+    def failure_reasons(self) -> np.ndarray:
+        """:attr:`reasons`, or "failed" where ``failed`` when the backend gave none."""
+        if self.reasons is not None:
+            return np.asarray(self.reasons, dtype=object)
+        reasons = np.full(len(self.failed), "", dtype=object)
+        reasons[np.asarray(self.failed, dtype=bool)] = FailureReason.FAILED.value
+        return reasons
+
+
+#: the DEM's messages (:class:`~granular_material.dem.DEMInstabilityError`) by the words that
+#: tell them apart, most telling first, and the reason each gives a point
+_INSTABILITIES = (("non-finite", FailureReason.BLOW_UP),
+                  ("cell became too small", FailureReason.CELL_TOO_THIN),
+                  ("overflowed", FailureReason.OVERCOMPRESSED),
+                  ("coincide", FailureReason.COINCIDENT))
+
+
+def instability_reason(messages: list[str]) -> FailureReason:
+    """The reason of the RVEs of a :class:`~granular_material.dem.DEMInstabilityError`: the
+    first of its messages, in the order blow-up, cell too thin, overcompressed, coincident
+    discs (the DEM reports the messages of the batch together, not one per RVE)."""
+    text = " ".join(messages)
+    for words, reason in _INSTABILITIES:
+        if words in text:
+            return reason
+    return FailureReason.BLOW_UP
 
 
 def _nan_like(h: Homogenized) -> Homogenized:
@@ -216,6 +248,8 @@ class InProcessBackend:
         #: response of each RVE's current state (None until measured), and the committed one
         self._current: Homogenized | None = None
         self._committed_response: Homogenized | None = None
+        #: why each RVE failed in the current evaluation ("" where it did not)
+        self._reasons = np.full(b, "", dtype=object)
 
     @property
     def n_rve(self) -> int:
@@ -230,9 +264,13 @@ class InProcessBackend:
         ``max_steps`` DEM steps, in ``failed``. Returns the cost (DEM
         steps, RVE paths, particle-steps), or None when the batch did not come through (all
         RVEs are then back in their committed state)."""
-        failed |= moving & ~has_real_logarithm(np.eye(2) + grad_u)
-        failed |= moving & over_step_cap(grad_u, self.max_strain_per_step, self.min_steps,
-                                         self.max_steps)
+        inverted = moving & ~has_real_logarithm(np.eye(2) + grad_u)
+        self._mark(inverted & ~failed, FailureReason.CELL_INVERTED)
+        failed |= inverted
+        capped = moving & over_step_cap(grad_u, self.max_strain_per_step, self.min_steps,
+                                        self.max_steps)
+        self._mark(capped & ~failed, FailureReason.MAX_DEM_STEPS)
+        failed |= capped
         moving = moving & ~failed
         if restart:
             self.batch.restore(self._committed, None if moving.all() else moving)
@@ -247,10 +285,18 @@ class InProcessBackend:
                                      active=None if moving.all() else moving,
                                      max_steps=self.max_steps)
         except DEMInstabilityError as exc:
-            failed[np.asarray(exc.rve, dtype=int)] = True
+            blown = np.zeros_like(failed)
+            blown[np.asarray(exc.rve, dtype=int)] = True
+            self._mark(blown & ~failed, instability_reason(exc.reasons))
+            failed |= blown
             self._back_to_committed()
             return None
         return dem_steps, int(moving.sum()), int(steps[moving].sum()) * self.batch.n_disc
+
+    def _mark(self, where: np.ndarray, reason: FailureReason) -> None:
+        """Record ``reason`` for the RVEs ``where`` (those of this evaluation's failures)."""
+        if where.any():
+            self._reasons[where] = reason.value
 
     def _back_to_committed(self) -> None:
         self.batch.restore(self._committed)
@@ -287,6 +333,8 @@ class InProcessBackend:
         it, the others reused (see the class docstring); homogenised results."""
         self._trial = False
         finite = np.isfinite(grad_u).all(axis=(1, 2))
+        self._reasons = np.full(self.n_rve, "", dtype=object)
+        self._mark(~finite, FailureReason.NON_FINITE_INPUT)
         grad_u = np.where(finite[:, None, None], grad_u, 0.0)
         # with no lag this is grad_u exactly (the lag is exactly zero where no RVE was reused)
         target = grad_u + self.lag + grad_u @ self.lag
@@ -318,7 +366,7 @@ class InProcessBackend:
         if cost is None:
             h = self._current if self._current is not None else self.batch.homogenize()
             return Evaluation(_nan_like(h), failed, *_totals(drives), drives=tuple(drives),
-                              complete=False)
+                              complete=False, reasons=self._reasons.copy())
         drives.append(cost)
         moved = moving & ~failed
         new = self._measure(moved)
@@ -336,7 +384,7 @@ class InProcessBackend:
         self._target = target
         self._trial = True
         return Evaluation(self._response(new, target), failed, *_totals(drives),
-                          drives=tuple(drives))
+                          drives=tuple(drives), reasons=self._reasons.copy())
 
     def _response(self, current: Homogenized, target: np.ndarray) -> Homogenized:
         """What the RVEs answer for ``target``: their current response, reused RVEs'

@@ -11,17 +11,30 @@ eqs. 5–6) applied to sym ∇u plus the stress's rotation by the spin.
 ∇u is the displacement gradient since the last commit, measured on the configuration the
 RVE was committed in (the FEM's updated-Lagrangian formulation hands over exactly that; see
 :mod:`granular_material.fem.kinematics`); the stress is the Cauchy stress of the deformed
-RVE, the tangent D_ijkl = ∂σ_ij/∂(∂u_k/∂x_l) on that configuration.
+RVE, the tangent D_ijkl = ∂σ_ij/∂(∂u_k/∂x_l) on that configuration. D has the first minor
+symmetry (D_ijkl = D_jikl: σ is symmetrised) but not the second (D_ijkl ≠ D_ijlk): the spin
+term responds to skw ∇u. Keep the full (2, 2, 2, 2) tangent; a Voigt/Mandel 3 × 3 user
+takes ½ (D_ijkl + D_ijlk) and loses the stress's rotation (see
+:mod:`granular_material.fem.material`).
+
+A scikit-fem user calls :meth:`DEMMaterial.response` with the *total* ∇u, in scikit-fem's
+quadrature-last layout if they like (see
+:class:`~granular_material.fem.material.ScikitFemInterface`); :meth:`DEMMaterial.evaluate`
+keeps the protocol's increment.
 """
 
 from __future__ import annotations
 
+import os
+import sys
+import warnings
 from collections.abc import Callable
+from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
-from granular_material_skfem.backend import InProcessBackend
+from granular_material_skfem.backend import Evaluation, InProcessBackend
 from granular_material_skfem.parameters import (
     BACKENDS,
     DEMMaterialParameters,
@@ -34,8 +47,13 @@ from granular_material_skfem.run_parameters import (
     run_summary,
 )
 
-from granular_material.dem import RVEData, load_rve
-from granular_material.fem.material import MaterialResponse, PointStatus
+from granular_material.dem import RVEData, load_rve, save_rve
+from granular_material.fem.material import (
+    FailureReason,
+    MaterialResponse,
+    PointStatus,
+    ScikitFemInterface,
+)
 from granular_material.procedures.packing import (
     VOID_RATIO_TOLERANCE,
     PackingParameters,
@@ -46,9 +64,42 @@ if TYPE_CHECKING:
     import pandas as pd
     from granular_material_skfem.mpi import MPIBackend
 
-__all__ = ["BACKENDS", "DEMMaterial", "DEMMaterialParameters", "in_process_backend"]
+__all__ = ["BACKENDS", "UNCONFINED_FRACTION", "DEMMaterial", "DEMMaterialParameters",
+           "UnconfinedWarning", "in_process_backend"]
 
-class DEMMaterial:
+#: a point whose mean pressure −tr σ / 2 falls below this fraction of the material's
+#: confining pressure has lost its confinement (:class:`UnconfinedWarning`)
+UNCONFINED_FRACTION = 0.01
+#: the checkpoint's array of the committed total ∇u (a ``backend_*`` array: the RVE states
+#: of a checkpoint are read without it)
+_GRAD_KEY = "backend_material_grad_u"
+
+
+class UnconfinedWarning(UserWarning):
+    """A DEM RVE has (nearly) no confining stress: with none, a granular RVE relaxes into a
+    stress-free gas of discs (zero stress, zero stiffness) and a Newton loop "converges" to
+    nothing. Confine the specimen (a pressure on its boundary, as
+    ``examples/skfem_material_swap.py`` does) or load RVEs prepared at a pressure."""
+
+
+def _user_stacklevel() -> int:
+    """The ``stacklevel`` of a warning issued by the caller of this function that points at
+    the first frame outside granular_material and this plugin (the user's line)."""
+    import granular_material
+
+    roots = (os.path.dirname(granular_material.__file__) + os.sep,
+             os.path.dirname(__file__) + os.sep)
+    frame, level = sys._getframe(1), 1
+    while frame is not None and frame.f_code.co_filename.startswith(roots):
+        frame, level = frame.f_back, level + 1
+    return level
+
+
+def _sym(stress: np.ndarray) -> np.ndarray:
+    return 0.5 * (stress + np.swapaxes(stress, 1, 2))
+
+
+class DEMMaterial(ScikitFemInterface):
     """The DEM material: owns one RVE batch, one RVE per Gauss point (batch-first), held in
     this process or, with ``backend="mpi"``, in shards on the ranks of an MPI job.
 
@@ -66,22 +117,96 @@ class DEMMaterial:
     run_summary = staticmethod(run_summary)
 
     def __init__(self, rve: str | Path | None = None, particles: int = 400, seed: int = 1,
-                 pressure: float = 100.0e3, replicate: bool = False,
+                 pressure: float | None = None, replicate: bool = False,
                  device: str | None = None, max_strain_per_step: float = 1.0e-5,
                  min_steps: int = 2, shards: int | None = None,
                  progress: bool = False, tangent: str = "objective",
                  perturbation: float = 0.1, reuse_tol: float = 0.0,
                  reuse_correction: str = "none", drive: str = "restart",
                  max_dem_steps: int | None = None, backend: str = "inprocess",
-                 packing: PackingParameters | None = None) -> None:
+                 packing: PackingParameters | None = None, *,
+                 confining: float | None = None, isotropic: bool = False) -> None:
+        """A DEM material (not yet allocated: :meth:`allocate` prepares or loads the RVEs).
+
+        SI units throughout (m, N, Pa, kg, s; angles in rad); strains are dimensionless.
+
+        Args:
+            rve: RVE file (``.npz``, see ``granular-material prepare``) holding one RVE
+                (copied to every Gauss point) or one per Gauss point; None (default):
+                prepare packings at ``confining``.
+            particles: discs per prepared RVE (ignored with ``rve``); default 400, at least
+                12 for the default 3–7 mm radii. The spec's ``particles``.
+            seed: seed of the first prepared RVE; RVE p uses ``seed + p``. The spec's
+                ``seed``.
+            pressure: deprecated name of ``confining`` (a DeprecationWarning).
+            replicate: True: one RVE (prepared with ``seed``, or the file's first) copied to
+                every Gauss point; False (default): one independent RVE per point. The
+                command line's ``single-element`` replicates one RVE unless
+                ``--independent``; ``biaxial`` never does.
+            device: "cpu", "cuda", "cuda:N" or None (CUDA when present).
+            max_strain_per_step: largest strain [-] of one DEM step along ∇u (default 1e-5,
+                Guo & Zhao); the spec's ``max_strain_per_step``.
+            min_steps: fewest DEM steps of one evaluation (default 2).
+            shards: CPU threads of the batch (None: one per core).
+            progress: show a progress bar while packings are prepared.
+            tangent: "objective" (default), "kruyt-rothenburg", "perturbation" or
+                "condensed" (see :class:`DEMMaterialParameters`); the spec's ``tangent``.
+            perturbation: relative perturbation of ∇u [-] of the "perturbation" tangent.
+            reuse_tol: strain [-] under which a point keeps its last response (0: never).
+            reuse_correction: "none" or "tangent".
+            drive: "restart" (default: every evaluation from the committed state) or
+                "continue".
+            max_dem_steps: cap on one RVE path's DEM steps in one evaluation; a point over it
+                fails with reason ``max_dem_steps`` (None: no cap; the run specification's
+                default is 10⁶).
+            backend: "inprocess" (default) or "mpi".
+            packing: the material and packing of prepared RVEs (contact law, friction,
+                damping, density, thickness, radii, target void ratio):
+                :class:`~granular_material.procedures.packing.PackingParameters`, whose
+                ``meta`` is an :class:`~granular_material.dem.RVEMeta`; default Wu et al.
+                2025, Table 1. The run specification spells the same fields flat
+                (``kn``, ``kt``, ``friction_angle``, ...: :class:`DEMParameters`).
+            confining: isotropic pressure [Pa], > 0, compression positive, at which
+                prepared RVEs are consolidated (default 100 kPa); the run specification's
+                and the command line's ``confining``. It is also the scale of the
+                :class:`UnconfinedWarning`. An RVE file carries its own stress.
+            isotropic: after :meth:`allocate`, relax every RVE to the isotropic stress
+                −confining I (:meth:`make_isotropic`): a packing consolidated by a normal
+                stress servo keeps a shear stress (σxy ≈ −14 kPa for 64 discs, −7.7 kPa for
+                400, seed 1, at 100 kPa); relaxed, |σxy| < 1 % of confining. Default False
+                (the prepared state as it is, what the command line runs).
+
+        The keywords follow the run specification (:class:`DEMParameters`, the command
+        line's ``--option`` of the same name) where both have the setting; ``pressure`` was
+        this class's name for ``confining`` and still works, with a DeprecationWarning.
+        """
+        if pressure is not None:
+            if confining is not None:
+                raise ValueError("give confining (pressure is its deprecated name), not both")
+            warnings.warn("DEMMaterial(pressure=...) is deprecated: call it confining= (the "
+                          "run specification's and the command line's name)",
+                          DeprecationWarning, stacklevel=_user_stacklevel())
+            confining = pressure
+        if confining is None:
+            confining = 100.0e3
         self.parameters = DEMMaterialParameters(
-            None if rve is None else str(rve), particles, seed, pressure, replicate, device,
+            None if rve is None else str(rve), particles, seed, confining, replicate, device,
             max_strain_per_step, min_steps, shards, tangent, perturbation, reuse_tol,
             reuse_correction, drive, max_dem_steps, backend,
             PackingParameters() if packing is None else packing,
         )
         self.progress = progress
+        self.isotropic = bool(isotropic)
         self.backend: InProcessBackend | MPIBackend | None = None
+        #: the response of the committed state (None until known: a commit, or a failure)
+        self._committed_response: MaterialResponse | None = None
+        self._last_response: MaterialResponse | None = None
+        self._warned_unconfined = False
+
+    @property
+    def confining(self) -> float:
+        """Consolidation pressure of prepared RVEs [Pa], compression positive."""
+        return self.parameters.pressure
 
     @staticmethod
     def launch(backend: str, main: Callable[[], int]) -> int:
@@ -160,6 +285,55 @@ class DEMMaterial:
         else:
             data = self._prepare(n_points, p.seed)
         self.backend = self._backend(data)
+        self._reset_state(n_points)
+        if self.isotropic:
+            self.make_isotropic()
+
+    def make_isotropic(self, tol: float = 0.01, max_iterations: int = 30) -> int:
+        """Relax every committed RVE to the isotropic stress −``confining`` I and commit it.
+
+        A packing consolidated by a servo on its normal stresses keeps a shear stress (e.g.
+        σxy ≈ −14 kPa at ∇u = 0 for 64 discs, seed 1, at 100 kPa): each RVE is driven by the
+        symmetric ∇u that cancels σ + p I (Newton on the symmetric part of the tangent,
+        every iteration from the committed state) until every component is within
+        ``tol`` · p, and that state is committed as the new reference: ``committed_grad_u``
+        is zero again (the strain of the relaxation is not the specimen's). Returns the
+        iterations used; ``RuntimeError`` when ``max_iterations`` do not reach ``tol`` or a
+        point fails. Cost: a few evaluations of ~10⁻³ strain (a few hundred DEM steps).
+        """
+        n = self._allocated().n_rve
+        p = self.confining
+        target = -p * np.eye(2)
+        grad = np.zeros((n, 2, 2))
+        index = ((0, 0), (1, 1), (0, 1))  # xx, yy, xy of σ and of sym ∇u
+        for iteration in range(1, max_iterations + 1):
+            r = self.evaluate(grad)
+            if not r.ok:
+                self.revert()
+                raise RuntimeError(f"make_isotropic: points failed {r.failure_counts()}")
+            error = r.stress - target
+            if np.abs(error).max() <= tol * p:
+                self.commit()
+                self._committed_grad = np.zeros((n, 2, 2))
+                return iteration
+            d = r.tangent
+            a = np.empty((n, 3, 3))
+            for row, (i, j) in enumerate(index):
+                for col, (k, m) in enumerate(index):
+                    a[:, row, col] = d[:, i, j, k, m] + (d[:, i, j, m, k] if k != m else 0.0)
+            rhs = -np.stack([error[:, i, j] for i, j in index], axis=1)
+            step = np.linalg.solve(a, rhs[..., None])[..., 0]
+            grad[:, 0, 0] += step[:, 0]
+            grad[:, 1, 1] += step[:, 1]
+            grad[:, 0, 1] += step[:, 2]
+            grad[:, 1, 0] += step[:, 2]
+        self.revert()
+        raise RuntimeError(f"make_isotropic: the stress is {np.abs(error).max():.3g} Pa from "
+                           f"isotropic after {max_iterations} iterations (tol {tol * p:.3g} Pa)")
+
+    def _reset_state(self, n_points: int) -> None:
+        self._track_allocate(n_points)
+        self._committed_response = self._last_response = None
 
     def _prepare(self, n_rve: int, seed: int) -> RVEData:
         """``n_rve`` packings of the parameters' material (seeds seed, seed + 1, …);
@@ -189,53 +363,138 @@ class DEMMaterial:
     def evaluate(self, grad_u: np.ndarray) -> MaterialResponse:
         """Symmetrised Love stress and the tangent for ∇u (n, 2, 2) since the commit.
 
+        The protocol's evaluation: ∇u [-] is the *increment* ∂Δu_k/∂x_l since the last
+        commit, batch-first, on the configuration of the last commit (``response`` takes the
+        total, and scikit-fem's layout). Stress: Cauchy σ [Pa], tension positive;
+        tangent: D_ijkl = ∂σ_ij/∂(∂u_k/∂x_l) [Pa], no second minor symmetry.
+
         ``costs`` holds ``dem_steps`` (DEM steps run: the longest RVE path of each drive,
         summed over the drives), ``rve_evaluations`` (RVE paths run; points not stepped,
         e.g. reused, do not count) and ``particle_steps`` (disc-steps run, Σ steps × discs
         over the paths); ``fields`` holds ``void_ratio``,
         ``coordination`` and ``stress_skew`` (σxy − σyx of the Love sum over 2 [Pa], what
-        the symmetrisation removed). RVEs that blew up are reported with
-        ``PointStatus.FAILED``.
+        the symmetrisation removed). A point that fails has ``PointStatus.FAILED``, a reason
+        in ``reasons`` (:class:`~granular_material.fem.material.FailureReason`:
+        ``max_dem_steps``, ``cell_inverted``, ``cell_too_thin``, ``blow_up``,
+        ``overcompressed``, ``coincident_discs``, ``non_finite_input``; ``aborted`` for
+        the other points when an RVE of the batch blew up, which sends the whole batch back
+        to its committed state), and the stress, tangent and fields of its committed state
+        (never NaN). A :class:`UnconfinedWarning` is issued (once) when a point's mean
+        pressure falls below 1 % of ``confining``.
         """
         if self.backend is None:
             raise RuntimeError("allocate() the DEM material before evaluate()")
         grad_u = np.asarray(grad_u, dtype=np.float64)
         if grad_u.shape != (self.n_points, 2, 2):
-            raise ValueError(f"grad_u must have shape ({self.n_points}, 2, 2), got {grad_u.shape}")
+            raise ValueError(
+                f"evaluate() takes grad_u batch-first, shape ({self.n_points}, 2, 2) (the "
+                f"increment since the commit), got {grad_u.shape}; response() also takes "
+                "scikit-fem's quadrature-last (2, 2, nelems, nqp) or a DiscreteField (or "
+                "convert with granular_material.fem.to_points / to_quadrature)")
+        self._track_evaluate(grad_u)
         ev = self.backend.evaluate(grad_u)
+        response = self._response_of(ev)
+        self._last_response = response
+        self._check_confinement(response)
+        return response
+
+    def _response_of(self, ev: Evaluation) -> MaterialResponse:
+        """The material response of a backend's evaluation; failed points (all points of an
+        incomplete one) get their committed state's response and a reason."""
         h = ev.homogenized
-        status = np.where(ev.failed, PointStatus.FAILED, PointStatus.OK).astype(np.int8)
+        reasons = ev.failure_reasons()
+        failed = np.asarray(ev.failed, dtype=bool).copy()
+        if not ev.complete:
+            reasons[~failed] = FailureReason.ABORTED.value
+            failed[:] = True
+        status = np.where(failed, PointStatus.FAILED, PointStatus.OK).astype(np.int8)
 
         def f64(values: np.ndarray) -> np.ndarray:
             return np.asarray(values, dtype=np.float64)
 
         love = f64(h.stress)
+        stress, tangent = _sym(love), f64(h.tangent).copy()
+        fields = {"void_ratio": f64(h.void_ratio).copy(),
+                  "coordination": f64(h.coordination).copy(),
+                  "stress_skew": 0.5 * (love[:, 0, 1] - love[:, 1, 0])}
+        if failed.any():
+            committed = self._committed()
+            stress[failed] = committed.stress[failed]
+            tangent[failed] = committed.tangent[failed]
+            for name, values in fields.items():
+                values[failed] = np.asarray(committed.fields[name])[failed]
         return MaterialResponse(
-            stress=0.5 * (love + np.swapaxes(love, 1, 2)), tangent=f64(h.tangent),
-            status=status,
+            stress=stress, tangent=tangent, status=status,
             costs={"dem_steps": ev.dem_steps, "rve_evaluations": ev.rve_evaluations,
                    "particle_steps": ev.particle_steps},
-            fields={"void_ratio": f64(h.void_ratio), "coordination": f64(h.coordination),
-                    "stress_skew": 0.5 * (love[:, 0, 1] - love[:, 1, 0])},
+            fields=fields, reasons=reasons,
         )
 
+    def _committed(self) -> MaterialResponse:
+        """The response of the committed state: the last committed evaluation's, else
+        measured on the committed RVEs (homogenised, not stepped; objective tangent)."""
+        if self._committed_response is None:
+            from granular_material.dem import DEMBatch
+            from granular_material.dem.homogenization import objective_tangent
+
+            p = self.parameters
+            batch = DEMBatch(self.committed_rves(), device=p.device, shards=p.shards)
+            h = batch.homogenize()
+            love = np.asarray(h.stress, dtype=np.float64)
+            stress = _sym(love)
+            n = len(stress)
+            self._committed_response = MaterialResponse(
+                stress=stress,
+                tangent=np.asarray(objective_tangent(np.asarray(h.tangent, dtype=np.float64),
+                                                     stress), dtype=np.float64),
+                status=np.zeros(n, dtype=np.int8),
+                fields={"void_ratio": np.asarray(h.void_ratio, dtype=np.float64),
+                        "coordination": np.asarray(h.coordination, dtype=np.float64),
+                        "stress_skew": 0.5 * (love[:, 0, 1] - love[:, 1, 0])})
+        return self._committed_response
+
+    def _check_confinement(self, response: MaterialResponse) -> None:
+        if self._warned_unconfined:
+            return
+        ok = response.status == PointStatus.OK
+        pressure = -0.5 * np.trace(response.stress, axis1=1, axis2=2)
+        loose = np.flatnonzero(ok & (pressure < UNCONFINED_FRACTION * self.confining))
+        if loose.size:
+            self._warned_unconfined = True
+            warnings.warn(
+                f"{loose.size} of {len(pressure)} DEM points have lost their confinement "
+                f"(mean pressure below {UNCONFINED_FRACTION:.0%} of {self.confining:g} Pa, "
+                f"e.g. {pressure[loose[0]]:.3g} Pa at point {loose[0]}): an unconfined RVE "
+                "relaxes into a stress-free gas of discs. Apply a confining pressure on the "
+                "boundary of the specimen (see docs/guide/scikit-fem.md)",
+                UnconfinedWarning, stacklevel=_user_stacklevel())
+
     def commit(self) -> None:
-        """The RVE states of the last evaluation become the committed states."""
+        """The RVE states of the last evaluation become the committed states (and its total
+        ∇u :attr:`committed_grad_u`)."""
         self._allocated().commit()
+        self._track_commit()
+        self._committed_response = self._last_response
 
     def revert(self) -> None:
         """Every RVE back to its committed state."""
         if self.backend is not None:
             self.backend.revert()
+        self._track_revert()
 
     def checkpoint(self, path: str | Path) -> None:
-        """Write the committed RVE states (an RVE file, B = n_points) to ``path``; with the
-        ``mpi`` backend rank 0 gathers the shards and writes the one file, which either
-        backend, on any number of ranks, restores."""
-        self._allocated().checkpoint(path)
+        """Write the committed RVE states (an RVE file, B = n_points) to ``path``, with the
+        committed total ∇u; with the ``mpi`` backend rank 0 gathers the shards and writes
+        the one file, which either backend, on any number of ranks, restores."""
+        data = self._allocated().checkpoint_data()
+        extra = {**data.extra, _GRAD_KEY: self.committed_grad_u}
+        save_rve(path, replace(data, extra=extra))
 
     def restore(self, path: str | Path) -> None:
         """Load the committed state written by :meth:`checkpoint` (RVE states with contact
-        history, and what reuse and ``continue`` carry between steps)."""
-        self.backend = self._backend(load_rve(path), resume=True)
-
+        history, what reuse and ``continue`` carry between steps, the committed total ∇u)."""
+        data = load_rve(path)
+        self.backend = self._backend(data, resume=True)
+        self._reset_state(self.backend.n_rve)
+        if _GRAD_KEY in data.extra:
+            self._committed_grad = np.array(data.extra[_GRAD_KEY], dtype=np.float64)

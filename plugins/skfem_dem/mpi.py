@@ -17,7 +17,8 @@ command   Bcast      2 int64: the command and its argument
 header    Gather     ``HEADER`` int64 a rank: error flag, complete flag, drives done, the
                      rank's compute time [ns], then DEM steps, RVE paths and particle-steps
                      of each drive (up to 5: four perturbed runs and the trial)
-rows      Gatherv    ``ROW`` float64 a point: failed flag, then every field of
+rows      Gatherv    ``ROW`` float64 a point: failure code (0: OK, else 1 + the index of
+                     its reason in ``FailureReason``), then every field of
                      :class:`~granular_material.dem.Homogenized` flattened in its order
                      (stress 4, tangent 16, void ratio, coordination, fabric 4, unbalanced
                      force, contacts, sliding fraction, volume)
@@ -53,6 +54,7 @@ from granular_material_skfem.backend import Evaluation, InProcessBackend
 from granular_material_skfem.parameters import DEMMaterialParameters, in_process_backend
 
 from granular_material.dem import Homogenized, RVEData, resolve_device, save_rve
+from granular_material.fem.material import FailureReason
 from granular_material.filesafe import deferred_signals
 
 __all__ = [
@@ -253,7 +255,7 @@ class _Shard:
                 if len(ev.drives) > _MAX_DRIVES:
                     raise RuntimeError(f"{len(ev.drives)} drives in one evaluation, more "
                                        f"than the header's {_MAX_DRIVES}")
-                rows = _pack(ev.homogenized, ev.failed)
+                rows = _pack(ev.homogenized, ev.failed, ev.failure_reasons())
                 header[_COMPLETE] = int(ev.complete)
                 header[_DRIVES] = len(ev.drives)
                 for k, cost in enumerate(ev.drives):
@@ -289,16 +291,26 @@ class _Shard:
         return self.backend.committed_rves(mine) if len(mine) else None
 
 
-def _pack(h: Homogenized, failed: np.ndarray) -> np.ndarray:
-    """The rows (B, ROW) float64 of homogenised RVEs and their failed flags."""
-    parts = [np.asarray(failed, dtype=np.float64)[:, None]]
+#: the reasons a failure code stands for (code k > 0: _REASONS[k - 1])
+_REASONS = tuple(r.value for r in FailureReason if r is not FailureReason.NONE)
+
+
+def _pack(h: Homogenized, failed: np.ndarray, reasons: np.ndarray | None = None
+          ) -> np.ndarray:
+    """The rows (B, ROW) float64 of homogenised RVEs and their failure codes (``reasons``
+    None: "failed" for every failed RVE)."""
+    if reasons is None:
+        reasons = np.where(failed, FailureReason.FAILED.value, "")
+    codes = np.array([0.0 if not bad else 1.0 + _REASONS.index(str(reason) or "failed")
+                      for bad, reason in zip(failed, reasons, strict=True)])
+    parts = [codes[:, None]]
     parts += [np.asarray(getattr(h, name), dtype=np.float64).reshape(len(failed), -1)
               for name in _FIELD_SHAPES]
     return np.ascontiguousarray(np.concatenate(parts, axis=1))
 
 
-def _unpack(rows: np.ndarray) -> tuple[Homogenized, np.ndarray]:
-    """Homogenised RVEs and failed flags from rows (B, ROW)."""
+def _unpack(rows: np.ndarray) -> tuple[Homogenized, np.ndarray, np.ndarray]:
+    """Homogenised RVEs, failed flags and failure reasons from rows (B, ROW)."""
     n = rows.shape[0]
     values, column = {}, 1
     for name, shape in _FIELD_SHAPES.items():
@@ -306,7 +318,12 @@ def _unpack(rows: np.ndarray) -> tuple[Homogenized, np.ndarray]:
         block = rows[:, column: column + width].reshape((n, *shape))
         values[name] = block.astype(np.int64) if name in _INTEGER_FIELDS else block.copy()
         column += width
-    return Homogenized(**values), rows[:, 0] != 0
+    codes = rows[:, 0]
+    failed = codes != 0
+    reasons = np.array(["" if not bad else (_REASONS[int(code) - 1] if np.isfinite(code)
+                                            else FailureReason.FAILED.value)
+                        for bad, code in zip(failed, codes, strict=True)], dtype=object)
+    return Homogenized(**values), failed, reasons
 
 
 # -- the exchanges: every rank runs the same function, rank 0 with its payload ---------------
@@ -595,7 +612,7 @@ class MPIBackend:
         headers, rows = self._run(_Command.EVALUATE, grad_u, "evaluate")
         self.timings.append(ExchangeTiming(time.perf_counter() - started,
                                            headers[:, _NANOSECONDS] * 1e-9))
-        h, failed = _unpack(rows)
+        h, failed, reasons = _unpack(rows)
         costs = headers[:, 4:].reshape(self.world.size, _MAX_DRIVES, 3)
         incomplete = headers[:, _COMPLETE] == 0
         # as one batch: an evaluation ends with the drive that blew up, whose cost is lost
@@ -609,7 +626,8 @@ class MPIBackend:
             h = Homogenized(**{name: np.full_like(np.asarray(getattr(h, name),
                                                              dtype=np.float64), np.nan)
                                for name in _FIELD_SHAPES})
-        return Evaluation(h, failed, *totals, drives=drives, complete=not incomplete.any())
+        return Evaluation(h, failed, *totals, drives=drives, complete=not incomplete.any(),
+                          reasons=reasons)
 
     def commit(self) -> None:
         """Every shard's state of the last evaluate becomes its committed state."""

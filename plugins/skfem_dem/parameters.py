@@ -26,7 +26,9 @@ class DEMMaterialParameters:
         rve: RVE file to load (B = 1, or B = number of Gauss points); None: prepare packings.
         particles: discs per prepared RVE (ignored with ``rve``), >= ``min_discs()`` (12).
         seed: seed of the first prepared RVE; RVE p uses seed + p (independent packings).
-        pressure: isotropic consolidation pressure of prepared RVEs [Pa], > 0.
+        pressure: isotropic consolidation pressure of prepared RVEs [Pa], > 0: the
+            material's ``confining`` (:attr:`DEMMaterial.confining`; this field keeps its
+            name for the MPI workers and checkpoints that carry it).
         replicate: one RVE (the first of the file, or one prepared with ``seed``) copied to
             every Gauss point.
         device: "cpu", "cuda" or None (CUDA when present).

@@ -165,7 +165,7 @@ def material_for_run(p: DEMParameters, context: RunContext) -> DEMMaterial:
     particles = _particles(p, context)
     replicate = _replicate(p, context)
     packing = _packing(p, context)
-    return DEMMaterial(rve=p.rve, particles=particles, seed=p.seed, pressure=context.confining,
+    return DEMMaterial(rve=p.rve, particles=particles, seed=p.seed, confining=context.confining,
                        replicate=replicate, device=context.device, shards=context.shards,
                        progress=context.progress, tangent=p.tangent,
                        perturbation=p.perturbation, backend=context.backend, packing=packing,
