@@ -68,19 +68,28 @@ ESCAPED_BARS = {
     "granular_material.procedures.element_tests.lateral_stress_error": ["|σxx/(−confining) − 1|"],
     "granular_material.procedures.strain_path.drive_grad_u": ["|H01/H11|"],
 }
-_escaped_seen: set[tuple[str, str]] = set()
 
 
 def _escape_bars(app, what, name, obj, options, lines):
+    # what was escaped, per document, kept in the environment so that an incremental build
+    # (which reads only the changed documents) still knows what the others escaped
+    if not hasattr(app.env, "gm_escaped_bars"):
+        app.env.gm_escaped_bars = {}
+    seen = app.env.gm_escaped_bars.setdefault(app.env.docname, set())
     for text in ESCAPED_BARS.get(name, ()):
         for i, line in enumerate(lines):
             if text in line:
                 lines[i] = line.replace(text, "``" + text + "``")
-                _escaped_seen.add((name, text))
+                seen.add((name, text))
+
+
+def _purge_escapes(app, env, docname):
+    getattr(env, "gm_escaped_bars", {}).pop(docname, None)
 
 
 def _check_escapes(app, env):
-    stale = [(n, t) for n, ts in ESCAPED_BARS.items() for t in ts if (n, t) not in _escaped_seen]
+    seen = set().union(*getattr(env, "gm_escaped_bars", {}).values())
+    stale = [(n, t) for n, ts in ESCAPED_BARS.items() for t in ts if (n, t) not in seen]
     if stale:
         from sphinx.util import logging
 
@@ -119,5 +128,6 @@ def _check_api_complete(app, env):
 
 def setup(app):
     app.connect("autodoc-process-docstring", _escape_bars)
+    app.connect("env-purge-doc", _purge_escapes)
     app.connect("env-updated", _check_escapes)
     app.connect("env-updated", _check_api_complete)
