@@ -2,7 +2,7 @@
 either a bounded, physically sensible result or a clear error raised before any work.
 
 Units SI, stress tension positive (docs/design.md#conventions). The packings are small
-(12–64 discs) so that the whole matrix runs in about a minute on two CPU cores; the README's
+(12–64 discs) so that the whole matrix runs in about a minute on two CPU cores; the docs'
 "Numerical extremes" table gives the outcomes measured with it.
 """
 

@@ -298,7 +298,7 @@ def test_convergence_setting_is_checked():
     with pytest.raises(ValueError, match="convergence must be one of force, displacement"):
         NewtonSettings(convergence="energy")
     assert default_settings("dem", convergence="displacement").convergence == "displacement"
-    # the commands' default: Guo & Zhao's test (with finite strain, see the README)
+    # the commands' default: Guo & Zhao's test (with finite strain, see docs/physics.md)
     assert default_settings("dem").convergence == "displacement"
     assert default_settings("dem", convergence="force").convergence == "force"
 

@@ -22,7 +22,7 @@ __all__ = ["COMMAND_DEFAULTS", "default_settings", "default_stress_tol", "is_noi
 #: up to 100 iterations — with the last increment extrapolated as the predictor (their code
 #: solves with the committed tangent: the same band, half the iterations). On their 2 × 4
 #: case this is a loop in which the shear band of their code forms; with Aitken relaxation
-#: it stays nearly uniform, whatever the test (see the README, "Finite strain")
+#: it stays nearly uniform, whatever the test (see docs/physics.md, "Finite strain")
 COMMAND_DEFAULTS: dict[str, Any] = {"formulation": "updated-lagrangian",
                                     "convergence": "displacement", "rtol": 1e-2,
                                     "predictor": "extrapolate", "relaxation": "none",

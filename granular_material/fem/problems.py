@@ -18,7 +18,7 @@ functions (consistent nodal forces: p·L·(1/6, 2/3, 1/6) on a quadratic edge of
 Quadrature (``gauss``: Gauss–Legendre points per direction, ``gauss × gauss`` per element):
 the default is 2 × 2 for quad4 (full) and quad8 (*reduced*: the serendipity element's full
 rule is 3 × 3; 2 × 2 is what Guo & Zhao's FEM×DEM biaxial uses, one RVE per point, at the
-price of one spurious zero-energy (hourglass) mode per element, see the README) and 3 × 3
+price of one spurious zero-energy (hourglass) mode per element, see docs/physics.md) and 3 × 3
 for quad9 (full). Elements are numbered up the columns (element ``e = ix · ny + iy``, ix
 along x, iy along y); Gauss point ``p = e · gauss² + q``, ``q = i · gauss + j`` with i the
 point's index along y and j along x, each from the lower coordinate up (the mesh's elements

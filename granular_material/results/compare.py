@@ -36,7 +36,7 @@ def curve_errors(curve: pd.DataFrame, reference: pd.DataFrame) -> dict[str, floa
         ``peak_strain_error_pct``: axial strain at the peak minus the reference's [% strain];
         ``stress_ratio_rms_pct``: RMS difference of σ1/σ3 over the common strains, relative
         to the reference's peak [%]; ``volumetric_strain_rms_pct``: RMS difference of εv,
-        relative to the reference's largest |εv| [%]; ``void_ratio_error``: final void
+        relative to the reference's largest ``|εv|`` [%]; ``void_ratio_error``: final void
         ratio minus the reference's [-] (NaN without ``void_ratio``).
     """
     e, q = curve["axial_strain"].to_numpy(), curve["stress_ratio"].to_numpy()

@@ -151,7 +151,8 @@ def rasterize_pores(
 
     Returns:
         shape (n_pixels, n_pixels), bool: True where the pixel centre
-        origin + (j + ½, i + ½)·pixel lies in no disc image (|x − c| > r), at row i, column j.
+        origin + (j + ½, i + ½)·pixel lies in no disc image (``|x − c|`` > r), at row i,
+        column j.
     """
     r = np.asarray(radius, dtype=np.float64).reshape(-1)
     x = np.asarray(position, dtype=np.float64).reshape(-1, 2)

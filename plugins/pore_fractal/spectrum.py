@@ -61,7 +61,7 @@ class MultifractalSpectrum:
         r2_tau: R² of the τ fit, shape (..., nq), float64.
         poor_fit: True where ``r2 < min_r2``, shape (..., nq), bool.
         se_alpha, se_f, Dq_se: standard errors of the least-squares slopes α(q), f(q) and
-            of D_q (SE of τ over |q − 1|; of α at q = 1), shape (..., nq), float64; NaN
+            of D_q (SE of τ over ``|q − 1|``; of α at q = 1), shape (..., nq), float64; NaN
             with two box sizes only. The log-moments of nested boxes are not independent,
             so read them as the scatter about the line, not as a confidence interval.
         D0: capacity dimension D0 = −τ(0) = f(α0), float64 scalar or shape (...).
