@@ -141,11 +141,11 @@ def entry() -> None:
 def main(argv: list[str] | None = None) -> int:
     """Run the command line; returns the exit code (2 for bad input, 1 for a failed run,
     130/143 for a run stopped by Ctrl-C/SIGTERM)."""
-    from granular_material.cli.options import interrupt_exit_code, stop_signals_as_interrupt
-
     argv = sys.argv[1:] if argv is None else list(argv)
     if not _names_a_command(argv):  # --help, --version or nothing: no command to import
         command_parser().parse_args(argv)
+    from granular_material.cli.options import interrupt_exit_code, stop_signals_as_interrupt
+
     quiet_warp()  # keep stdout clean for --json
     parser = build_parser()
     args = parser.parse_args(argv)

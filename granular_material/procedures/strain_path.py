@@ -39,7 +39,7 @@ DEFAULT_STRAIN_PER_STEP = 1.0e-5
 
 #: default cap on the DEM steps of one run of the DEM (a path, a test): 10⁶ steps is about 100
 #: times the default biaxial test (1.05 × 10⁴ steps to 10 % at 1e-5 a step) or a path of
-#: |∇u| = 10 at 1e-5 a step; one 64-disc RVE runs about 4 × 10³ steps/s on one CPU core (a
+#: ``|∇u|`` = 10 at 1e-5 a step; one 64-disc RVE runs about 4 × 10³ steps/s on one CPU core (a
 #: 400-disc one about six times fewer), so the cap is minutes to half an hour of work: far
 #: past any run a typo would start on purpose, well short of the 10⁷ – 10³⁰⁰ steps a
 #: mistyped strain asks for.
