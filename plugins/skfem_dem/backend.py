@@ -27,6 +27,7 @@ from granular_material.procedures import (
     over_step_cap,
     path_steps,
 )
+from granular_material.procedures.strain_path import DEFAULT_MIN_STEPS, DEFAULT_STRAIN_PER_STEP
 
 __all__ = [
     "DRIVES",
@@ -52,6 +53,10 @@ DRIVES = ("restart", "continue")
 #: its tangent for the change of ∇u
 REUSE_CORRECTIONS = ("none", "tangent")
 _COMPONENTS = ((0, 0), (0, 1), (1, 0), (1, 1))  # the (k, l) of ∂u_k/∂x_l
+
+
+#: the smallest perturbation of ∇u the perturbation tangent takes [-]
+MIN_PERTURBATION = 1.0e-4
 
 
 def check_driving(tangent: str, perturbation: float, min_perturbation: float,
@@ -222,9 +227,9 @@ class InProcessBackend:
             failed (the Newton driver then cuts the increment back); None: no cap.
     """
 
-    def __init__(self, batch: DEMBatch, max_strain_per_step: float = 1.0e-5,
-                 min_steps: int = 2, tangent: str = "objective",
-                 perturbation: float = 0.1, min_perturbation: float = 1.0e-4,
+    def __init__(self, batch: DEMBatch, max_strain_per_step: float = DEFAULT_STRAIN_PER_STEP,
+                 min_steps: int = DEFAULT_MIN_STEPS, tangent: str = "objective",
+                 perturbation: float = 0.1, min_perturbation: float = MIN_PERTURBATION,
                  reuse_tol: float = 0.0, reuse_correction: str = "none",
                  drive: str = "restart", max_steps: int | None = None) -> None:
         check_driving(tangent, perturbation, min_perturbation, max_strain_per_step, min_steps)

@@ -55,10 +55,13 @@ from granular_material.fem.material import (
     ScikitFemInterface,
 )
 from granular_material.procedures.packing import (
+    DEFAULT_DISCS,
+    DEFAULT_PRESSURE,
     VOID_RATIO_TOLERANCE,
     PackingParameters,
     prepare_packing,
 )
+from granular_material.procedures.strain_path import DEFAULT_MIN_STEPS, DEFAULT_STRAIN_PER_STEP
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -116,10 +119,12 @@ class DEMMaterial(ScikitFemInterface):
     for_run = staticmethod(material_for_run)
     run_summary = staticmethod(run_summary)
 
-    def __init__(self, rve: str | Path | None = None, particles: int = 400, seed: int = 1,
+    def __init__(self, rve: str | Path | None = None, particles: int = DEFAULT_DISCS,
+                 seed: int = 1,
                  pressure: float | None = None, replicate: bool = False,
-                 device: str | None = None, max_strain_per_step: float = 1.0e-5,
-                 min_steps: int = 2, shards: int | None = None,
+                 device: str | None = None,
+                 max_strain_per_step: float = DEFAULT_STRAIN_PER_STEP,
+                 min_steps: int = DEFAULT_MIN_STEPS, shards: int | None = None,
                  progress: bool = False, tangent: str = "objective",
                  perturbation: float = 0.1, reuse_tol: float = 0.0,
                  reuse_correction: str = "none", drive: str = "restart",
@@ -188,7 +193,7 @@ class DEMMaterial(ScikitFemInterface):
                           DeprecationWarning, stacklevel=_user_stacklevel())
             confining = pressure
         if confining is None:
-            confining = 100.0e3
+            confining = DEFAULT_PRESSURE
         self.parameters = DEMMaterialParameters(
             None if rve is None else str(rve), particles, seed, confining, replicate, device,
             max_strain_per_step, min_steps, shards, tangent, perturbation, reuse_tol,

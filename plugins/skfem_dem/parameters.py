@@ -6,10 +6,21 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from granular_material_skfem.backend import InProcessBackend, check_driving, check_reuse
+from granular_material_skfem.backend import (
+    MIN_PERTURBATION,
+    InProcessBackend,
+    check_driving,
+    check_reuse,
+)
 
 from granular_material.dem import DEMBatch, RVEData, resolve_device
-from granular_material.procedures.packing import PackingParameters, min_discs
+from granular_material.procedures.packing import (
+    DEFAULT_DISCS,
+    DEFAULT_PRESSURE,
+    PackingParameters,
+    min_discs,
+)
+from granular_material.procedures.strain_path import DEFAULT_MIN_STEPS, DEFAULT_STRAIN_PER_STEP
 
 __all__ = ["BACKENDS", "DEMMaterialParameters", "in_process_backend"]
 
@@ -64,13 +75,13 @@ class DEMMaterialParameters:
     """
 
     rve: str | None = None
-    particles: int = 400
+    particles: int = DEFAULT_DISCS
     seed: int = 1
-    pressure: float = 100.0e3
+    pressure: float = DEFAULT_PRESSURE
     replicate: bool = False
     device: str | None = None
-    max_strain_per_step: float = 1.0e-5
-    min_steps: int = 2
+    max_strain_per_step: float = DEFAULT_STRAIN_PER_STEP
+    min_steps: int = DEFAULT_MIN_STEPS
     shards: int | None = None
     tangent: str = "objective"
     perturbation: float = 0.1
@@ -85,7 +96,7 @@ class DEMMaterialParameters:
         if self.backend not in BACKENDS:
             raise ValueError(f"backend must be one of {', '.join(BACKENDS)}, "
                              f"got {self.backend!r}")
-        check_driving(self.tangent, self.perturbation, 1.0e-4, self.max_strain_per_step,
+        check_driving(self.tangent, self.perturbation, MIN_PERTURBATION, self.max_strain_per_step,
                       self.min_steps)
         check_reuse(self.reuse_tol, self.reuse_correction, self.drive, self.tangent)
         if self.max_dem_steps is not None and (int(self.max_dem_steps) != self.max_dem_steps

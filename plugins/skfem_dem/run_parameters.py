@@ -9,13 +9,25 @@ from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, ClassVar
 
-from granular_material_skfem.backend import TANGENTS
+from granular_material_skfem.backend import (
+    MIN_PERTURBATION,
+    TANGENTS,
+    check_driving,
+    check_reuse,
+)
 
 from granular_material.checks import (
     RVE_MATERIAL_DEFAULTS,
     UsageError,
     packing_parameters,
     rve_file_shape,
+    rve_material_given,
+)
+from granular_material.procedures.packing import DEFAULT_DISCS
+from granular_material.procedures.strain_path import (
+    DEFAULT_MAX_DEM_STEPS,
+    DEFAULT_MIN_STEPS,
+    DEFAULT_STRAIN_PER_STEP,
 )
 
 if TYPE_CHECKING:
@@ -27,11 +39,7 @@ if TYPE_CHECKING:
 __all__ = ["DEFAULT_PARTICLES", "DEMParameters", "check_run", "material_for_run", "run_summary"]
 
 #: discs per prepared RVE where neither the spec nor the specimen's scale says
-DEFAULT_PARTICLES = 400
-#: largest strain of one DEM step while an RVE is driven along ∇u [-] (quasi-static)
-DEFAULT_STRAIN_PER_STEP = 1e-5
-#: cap on the DEM steps of one RVE path in one evaluation
-DEFAULT_MAX_DEM_STEPS = 10**6
+DEFAULT_PARTICLES = DEFAULT_DISCS
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -90,17 +98,17 @@ class DEMParameters:
 
         if self.rve is not None:
             object.__setattr__(self, "rve", Path(self.rve))
-        if self.tangent not in TANGENTS:
-            raise SpecError("tangent", f"must be one of {', '.join(TANGENTS)}, got "
-                                       f"{self.tangent!r}")
-        if not self.max_strain_per_step > 0:
-            raise SpecError("max_strain_per_step", "must be a positive strain, got "
-                                                   f"{self.max_strain_per_step!r}")
+        try:  # the material's own checks of its driving, its names as the spec's fields
+            check_driving(self.tangent, self.perturbation, MIN_PERTURBATION,
+                          self.max_strain_per_step, DEFAULT_MIN_STEPS)
+            check_reuse(self.reuse_tol, self.reuse_correction, self.drive, self.tangent)
+        except ValueError as exc:
+            name, message = str(exc).split(" ", 1)
+            raise SpecError(name, message) from None
 
     def rve_material_given(self) -> list[str]:
         """The RVE material fields set to other than their defaults, as ``--options``."""
-        return [f"--{name.replace('_', '-')}" for name, default in RVE_MATERIAL_DEFAULTS.items()
-                if getattr(self, name) != default]
+        return rve_material_given(self)
 
 
 def _particles(p: DEMParameters, context: RunContext) -> int:
