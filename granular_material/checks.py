@@ -12,7 +12,6 @@ import contextlib
 import os
 import re
 from collections.abc import Iterator
-from importlib.metadata import entry_points
 from pathlib import Path
 from typing import Any
 
@@ -26,8 +25,8 @@ from granular_material.procedures.packing import (
 
 __all__ = ["DISC_BYTES", "MEMORY_LIMIT", "RVE_MATERIAL_DEFAULTS", "UsageError",
            "available_memory", "check_memory", "check_output_dir", "check_output_file",
-           "cleanup_on_rejection", "entry_point_names", "load_entry_point", "make_parents",
-           "packing_parameters", "rve_file_shape", "rve_material_given"]
+           "cleanup_on_rejection", "make_parents", "packing_parameters", "rve_file_shape",
+           "rve_material_given"]
 
 
 class UsageError(ValueError):
@@ -119,23 +118,6 @@ def check_output_dir(path: Path | None, option: str = "--out") -> None:
     if path.exists() and not path.is_dir():
         raise UsageError(f"{option} {path} exists and is not a folder")
     _writable_folder(path, option, path)
-
-
-def entry_point_names(group: str) -> list[str]:
-    """The names registered in the entry-point group ``group`` (materials, post-processors,
-    commands), sorted."""
-    return sorted({ep.name for ep in entry_points(group=group)})
-
-
-def load_entry_point(group: str, name: str, what: str) -> Any:
-    """What is registered under ``name`` in the entry-point group ``group``, loaded; a
-    ``UsageError`` naming ``what`` it is (``material``, ``post-processor``) and the choices
-    installed when nothing is."""
-    matches = [ep for ep in entry_points(group=group) if ep.name == name]
-    if not matches:
-        choices = ", ".join(entry_point_names(group)) or "none installed"
-        raise UsageError(f"{what} {name!r} is not registered; available: {choices}")
-    return matches[0].load()
 
 
 @contextlib.contextmanager

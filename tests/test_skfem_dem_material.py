@@ -40,7 +40,7 @@ def material(small_rve_path) -> DEMMaterial:
 def test_packing_parameters_are_checked_where_built():
     """The RVE material the material prepares is checked when its parameters are built:
     radii, target void ratio, the meta, and the fewest discs for the radii given."""
-    with pytest.raises(ValueError, match="r_min = 0.005 exceeds r_max = 0.003"):
+    with pytest.raises(ValueError, match=r"r_min = 0\.005 exceeds r_max = 0\.003"):
         PackingParameters(radius_range=(5e-3, 3e-3))
     with pytest.raises(ValueError, match="target_void_ratio"):
         PackingParameters(target_void_ratio=0.0)

@@ -16,10 +16,13 @@ import argparse
 import signal
 import sys
 import warnings
-from importlib.metadata import entry_points
 from typing import Any
 
 from granular_material import __version__
+from granular_material.entry_points import entry_point_names, load_entry_point
+
+#: the entry-point group of plugin commands (each a ``register(subparsers)`` callable)
+COMMAND_GROUP = "granular_material.commands"
 
 __all__ = ["UsageError", "build_parser", "entry", "main", "quiet_warp"]
 
@@ -54,11 +57,11 @@ def __getattr__(name: str) -> Any:  # UsageError, imported only when asked for (
 
 
 def _register_plugins(subparsers: argparse._SubParsersAction) -> None:
-    for ep in entry_points(group="granular_material.commands"):
+    for name in entry_point_names(COMMAND_GROUP):
         try:
-            register = ep.load()
+            register = load_entry_point(COMMAND_GROUP, name, "command")
         except ImportError as exc:
-            warnings.warn(f"command plugin {ep.name!r} could not be loaded: {exc}", stacklevel=2)
+            warnings.warn(f"command plugin {name!r} could not be loaded: {exc}", stacklevel=2)
             continue
         register(subparsers)
 
@@ -88,7 +91,7 @@ def command_parser() -> argparse.ArgumentParser:
     built without importing any command: what ``granular-material --help``, ``--version``
     and a missing command use."""
     parser, subparsers = _top_parser()
-    plugins = [ep.name for ep in entry_points(group="granular_material.commands")]
+    plugins = entry_point_names(COMMAND_GROUP)
     names = [n for n in COMMAND_HELP if n in _CORE or n in plugins]
     names += sorted(n for n in plugins if n not in COMMAND_HELP)
     for name in names:

@@ -59,12 +59,12 @@ from __future__ import annotations
 import enum
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from importlib.metadata import entry_points
 from pathlib import Path
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
+from granular_material.entry_points import entry_point_names, load_entry_point
 from granular_material.fem.layout import Layout, grad_points, to_quadrature
 
 __all__ = [
@@ -386,17 +386,12 @@ class ScikitFemInterface:
 
 def available_materials() -> list[str]:
     """Names registered in the ``granular_material.materials`` entry-point group."""
-    return sorted({ep.name for ep in entry_points(group=ENTRY_POINT_GROUP)})
+    return entry_point_names(ENTRY_POINT_GROUP)
 
 
 def load_material(name: str) -> type:
     """The material class registered under ``name``; ``ValueError`` naming the choices."""
-    matches = [ep for ep in entry_points(group=ENTRY_POINT_GROUP) if ep.name == name]
-    if not matches:
-        raise ValueError(
-            f"material {name!r} is not registered; available: {', '.join(available_materials())}"
-        )
-    return matches[0].load()
+    return load_entry_point(ENTRY_POINT_GROUP, name, "material")
 
 
 def create_material(name: str, **parameters: Any) -> Material:

@@ -17,7 +17,7 @@ from typing import Any, Protocol
 
 import pandas as pd
 
-from granular_material.checks import entry_point_names, load_entry_point
+from granular_material.entry_points import entry_point_names, load_entry_point
 
 __all__ = [
     "POSTPROCESSOR_GROUP",
