@@ -38,7 +38,7 @@ class FEMRunError(RuntimeError):
 
 def run_spec(spec: RunSpec, log_path: Path) -> int:
     """Run ``spec`` in this process, continuing from the checkpoint in its output folder
-    where there is one; the spec (``run.toml`` beside the log) and the run's summary are
+    where a run was started; the spec (``run.toml`` beside the log) and the run's summary are
     appended to ``log_path``. Returns the command's exit code (0, or 1 when Newton stopped
     the run short); an interrupt (Ctrl-C, SIGTERM) that stopped the run is raised again
     after its outputs are written (the checkpoint is kept)."""
@@ -47,7 +47,8 @@ def run_spec(spec: RunSpec, log_path: Path) -> int:
     save(spec, spec_path)
     with open(log_path, "a") as log:
         log.write(f"# granular-material {spec.problem.test}, in this process: {spec_path}\n")
-    outcome = run(spec, resume=True)
+    started = (spec.output.out / "checkpoint" / "options.json").is_file()
+    outcome = run(spec, resume=started)
     with open(log_path, "a") as log:
         log.write(json.dumps(outcome.summary, indent=1, default=str) + "\n")
     if outcome.interrupt is not None:
