@@ -120,11 +120,13 @@ def convert(key: str, kind: str, action: argparse.Action, value: Any) -> tuple[A
 
 
 def help_of(action: argparse.Action) -> str:
+    """The option's help text, in parentheses after a message ("" without one)."""
     text = " ".join((action.help or "").split()).replace("%%", "%")
     return f" ({text})" if text else ""
 
 
 def suggest(name: str, known: list[str]) -> str:
+    """" (did you mean ...?)" with the keys of ``known`` closest to ``name`` ("" if none)."""
     close = difflib.get_close_matches(name, known, n=3)
     return f" (did you mean {' or '.join(repr(c) for c in close)}?)" if close else ""
 

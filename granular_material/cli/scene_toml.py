@@ -61,6 +61,7 @@ class Where:
         self.path, self.text = path, text
 
     def error(self, key_path: tuple[str, ...], message: str) -> UsageError:
+        """A UsageError of ``message`` at the file and the line of ``key_path``."""
         line = line_of(self.text, key_path) if key_path else None
         at = f"{self.path}, line {line}" if line else f"{self.path}"
         return UsageError(f"{at}: {message}")
@@ -78,6 +79,8 @@ def toml_repr(value: Any) -> str:
 
 
 def read_toml(path: Path) -> tuple[str, dict[str, Any]]:
+    """The text of the scene file ``path`` and its TOML; a UsageError naming the file (and
+    the line of a TOML error)."""
     try:
         text = path.read_text(encoding="utf-8")
     except FileNotFoundError:
