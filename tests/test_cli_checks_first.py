@@ -31,14 +31,14 @@ def no_work(monkeypatch: pytest.MonkeyPatch) -> None:
     import granular_material_pore_fractal.cli as fractal
 
     import granular_material.procedures as procedures
+    import granular_material.procedures.driven_path as driven_path
     import granular_material.procedures.packing as packing
-    import granular_material.procedures.path_test as path_test
 
     def forbidden(*_args: object, **_kwargs: object) -> None:
         raise AssertionError("the refusal came after work had started")
 
     for module, name in ((packing, "random_gas"), (packing, "consolidate"),
-                         (procedures, "drive_grad_u"), (path_test, "drive_grad_u"),
+                         (procedures, "drive_grad_u"), (driven_path, "drive_grad_u"),
                          (procedures, "biaxial_test"),
                          (fractal, "analyse_rve")):
         monkeypatch.setattr(module, name, forbidden)

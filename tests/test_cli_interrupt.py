@@ -14,8 +14,8 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
+import granular_material.procedures.driven_path as driven_path
 import granular_material.procedures.element_tests as element_tests
-import granular_material.procedures.path_test as path_test
 from granular_material.cli import main
 from granular_material.cli.options import Terminated, stop_signals_as_interrupt
 from granular_material.dem import save_rve
@@ -71,7 +71,7 @@ def test_biaxial_dem_keeps_the_records_made_before_the_signal(interrupt, code, r
 @pytest.mark.parametrize(("interrupt", "code"), [(KeyboardInterrupt, 130), (Terminated, 143)])
 def test_dem_drive_keeps_the_finished_increments(interrupt, code, rve64, tmp_path,
                                                  monkeypatch, capsys):
-    _interrupt_on_call(monkeypatch, path_test, "drive_grad_u", 3, interrupt)
+    _interrupt_on_call(monkeypatch, driven_path, "drive_grad_u", 3, interrupt)
     csv = tmp_path / "path.csv"
     got, report, err = _main(capsys, "dem-drive", str(rve64), "--grad-u", "0,0.001,0,0",
                              "--increments", "5", "--out", str(csv))
