@@ -31,10 +31,11 @@ from granular_material.cli.options import (
 from granular_material.fem import available_materials, available_postprocessors, load_material
 from granular_material.fem.kinematics import FORMULATIONS
 from granular_material.fem.linear_elastic import LinearElasticRunParameters
+from granular_material.fem.newton import PREDICTORS, RELAXATIONS, TANGENT_UPDATES
 from granular_material.fem.problems import PLATENS
 from granular_material.runs import OutputSpec, RunSpec, SpecError, from_flat, run, to_flat
 from granular_material.runs.presets import PRESET_NAMES, preset_fields
-from granular_material.runs.spec import SCALES, NewtonSpec, ProblemSpec
+from granular_material.runs.spec import BACKENDS, SCALES, NewtonSpec, ProblemSpec
 
 __all__ = ["command_line", "register", "report", "run_biaxial_command", "run_single_element",
            "spec_from_args"]
@@ -73,7 +74,7 @@ def _newton_arguments(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--max-cutbacks", type=int, default=_NEWTON.max_cutbacks,
                    help=f"how often an increment may be halved (default {_NEWTON.max_cutbacks})")
     add_convergence(g, _NEWTON.convergence, _NEWTON.rtol)
-    g.add_argument("--predictor", choices=("tangent", "extrapolate"), default=_NEWTON.predictor,
+    g.add_argument("--predictor", choices=PREDICTORS, default=_NEWTON.predictor,
                    help="first guess of a step: committed-tangent solve or the last increment "
                         f"scaled (default {_NEWTON.predictor})")
     g.add_argument("--formulation", choices=FORMULATIONS, default=_NEWTON.formulation,
@@ -95,10 +96,10 @@ def _newton_arguments(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--perturbation", type=float, default=_DEM.perturbation,
                    help="dem, --tangent perturbation: perturbation of grad u relative to its "
                         "largest component (default 0.1)")
-    g.add_argument("--relaxation", choices=("none", "aitken"), default=_NEWTON.relaxation,
+    g.add_argument("--relaxation", choices=RELAXATIONS, default=_NEWTON.relaxation,
                    help=f"relaxation of Newton corrections (default {_NEWTON.relaxation}: the "
                         "DEM tangent leaves out the discs' rearrangement and is too stiff)")
-    g.add_argument("--tangent-update", choices=("none", "secant"),
+    g.add_argument("--tangent-update", choices=TANGENT_UPDATES,
                    default=_NEWTON.tangent_update,
                    help=f"none: the material's tangent at every iterate (default "
                         f"{_NEWTON.tangent_update}); secant: "
@@ -117,10 +118,11 @@ def _dem_arguments(parser: argparse.ArgumentParser) -> None:
                         "component) since its RVE was last driven keeps that response instead "
                         f"of being stepped; 0: every RVE every iteration (default "
                         f"{_DEM.reuse_tol:g})")
-    g.add_argument("--reuse-correction", choices=("none", "tangent"), default=_DEM.reuse_correction,
+    g.add_argument("--reuse-correction", choices=_DEM.reuse_corrections,
+                   default=_DEM.reuse_correction,
                    help="a reused response as it is (none, default) or corrected to first "
                         "order by its tangent")
-    g.add_argument("--drive", choices=("restart", "continue"), default=_DEM.drive,
+    g.add_argument("--drive", choices=_DEM.drives, default=_DEM.drive,
                    help="restart: each iteration drives an RVE from its committed state along "
                         "the whole step (Guo & Zhao, default); continue: from its last trial "
                         "state by the change of grad u (fewer DEM steps, path-dependent)")
@@ -171,7 +173,7 @@ def _common_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--shards", type=int, default=None,
                         help="CPU threads (shards) of the DEM batch, per rank with --backend "
                              "mpi (default: one per core, shared by a node's ranks)")
-    parser.add_argument("--backend", choices=("inprocess", "mpi"), default="inprocess",
+    parser.add_argument("--backend", choices=BACKENDS, default=BACKENDS[0],
                         help="dem: where the RVEs live: this process (default) or shards on "
                              "the ranks of an MPI job (launch with mpiexec -n K; rank 0 runs "
                              "the FEM and alone writes and prints; the same results)")

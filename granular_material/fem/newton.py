@@ -50,6 +50,12 @@ __all__ = [
 
 #: the Newton convergence tests (NewtonSettings.convergence)
 CONVERGENCE_TESTS = ("force", "displacement")
+#: the first guesses of a load step (NewtonSettings.predictor)
+PREDICTORS = ("tangent", "extrapolate")
+#: the relaxations of Newton corrections (NewtonSettings.relaxation)
+RELAXATIONS = ("none", "aitken")
+#: the updates of the points' tangents between evaluations (NewtonSettings.tangent_update)
+TANGENT_UPDATES = ("none", "secant")
 
 
 @dataclass(frozen=True)
@@ -125,19 +131,11 @@ class NewtonSettings:
         if not (0 <= self.accept_correction < 1):
             raise ValueError(f"accept_correction must be 0 (off) or lie in (0, 1), "
                              f"got {self.accept_correction!r}")
-        if self.convergence not in CONVERGENCE_TESTS:
-            raise ValueError(f"convergence must be one of {', '.join(CONVERGENCE_TESTS)}, "
-                             f"got {self.convergence!r}")
-        if self.predictor not in ("tangent", "extrapolate"):
-            raise ValueError(
-                f"predictor must be 'tangent' or 'extrapolate', got {self.predictor!r}"
-            )
-        if self.relaxation not in ("none", "aitken"):
-            raise ValueError(f"relaxation must be 'none' or 'aitken', got {self.relaxation!r}")
-        if self.tangent_update not in ("none", "secant"):
-            raise ValueError(
-                f"tangent_update must be 'none' or 'secant', got {self.tangent_update!r}"
-            )
+        for name, choices in (("convergence", CONVERGENCE_TESTS), ("predictor", PREDICTORS),
+                              ("relaxation", RELAXATIONS), ("tangent_update", TANGENT_UPDATES)):
+            if getattr(self, name) not in choices:
+                raise ValueError(f"{name} must be one of {', '.join(choices)}, got "
+                                 f"{getattr(self, name)!r}")
         if not (self.secant_min_change > 0 and math.isfinite(self.secant_min_change)):
             raise ValueError(
                 f"secant_min_change must be a finite number > 0, got {self.secant_min_change!r}"

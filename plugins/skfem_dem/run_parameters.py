@@ -10,7 +10,9 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, ClassVar
 
 from granular_material_skfem.backend import (
+    DRIVES,
     MIN_PERTURBATION,
+    REUSE_CORRECTIONS,
     TANGENTS,
     check_driving,
     check_reuse,
@@ -63,8 +65,10 @@ class DEMParameters:
             ``granular-material prepare``; Wu et al. 2025, Table 1 by default).
     """
 
-    #: the RVE tangents the material offers
+    #: the RVE tangents the material offers, its drives and corrections of reused responses
     tangents: ClassVar[tuple[str, ...]] = TANGENTS
+    drives: ClassVar[tuple[str, ...]] = DRIVES
+    reuse_corrections: ClassVar[tuple[str, ...]] = REUSE_CORRECTIONS
     #: discs per prepared RVE where neither the spec nor the specimen's scale says
     default_particles: ClassVar[int] = DEFAULT_PARTICLES
 
