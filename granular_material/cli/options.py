@@ -287,7 +287,9 @@ def add_rve_material_options(parser: argparse.ArgumentParser | argparse._Argumen
     parser.add_argument("--kt", type=positive, default=d["kt"],
                         help=f"tangential stiffness [N/m] ({d['kt']:g})")
     parser.add_argument("--young", type=positive, default=d["young"],
-                        help=f"FrictMat Young's modulus [Pa] for --law frictmat ({d['young']:g})")
+                        help="--law frictmat: the discs' Young's modulus [Pa], which sets the "
+                             f"contact stiffness kn = 2E r1 r2/(r1 + r2) ({d['young']:g}; not "
+                             "the --E of a linear-elastic material)")
     parser.add_argument("--kt-over-kn", type=positive, default=d["kt_over_kn"],
                         help=f"FrictMat kt/kn ({d['kt_over_kn']:g})")
     parser.add_argument("--friction-angle", type=float, default=d["friction_angle"],
