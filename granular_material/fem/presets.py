@@ -32,8 +32,7 @@ class Preset:
         stress_floor: Newton's absolute stress tolerance as a fraction of the confining
             pressure [-].
         tangent: objective, kruyt-rothenburg, perturbation or secant (the objective
-            tangent with Broyden updates); the command line takes a preset's
-            kruyt-rothenburg, measured before the objective form existed, in that form.
+            tangent with Broyden updates).
         acceleration: "predictor/relaxation", e.g. "extrapolate/aitken".
         reuse_tol: reuse tolerance of undisturbed RVEs [-].
     """

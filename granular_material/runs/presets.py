@@ -19,13 +19,12 @@ _MEASURED_WITH = {"convergence": "force", "max_iterations": 25}
 def preset_fields(name: str, confining: float, with_discs: bool = True) -> dict[str, Any]:
     """The flat spec fields of preset ``name`` for a run at ``confining`` [Pa] (its stress
     floor is a fraction of it); ``with_discs``: the discs per prepared RVE too (not for a
-    run of an RVE file, whose discs are the file's). Its Kruyt–Rothenburg tangent (the
-    affine estimate the study measured, before the objective form existed) is taken in
-    the objective form; its secant tangent is the objective one with Broyden updates."""
+    run of an RVE file, whose discs are the file's). Its secant tangent is the objective one
+    with Broyden updates."""
     preset = load_presets()[name]
     predictor, relaxation = preset.acceleration.split("/")
     secant = preset.tangent == "secant"
-    tangent = "objective" if preset.tangent in ("secant", "kruyt-rothenburg") else preset.tangent
+    tangent = "objective" if secant else preset.tangent
     values: dict[str, Any] = {
         **_MEASURED_WITH, "rtol": preset.rtol, "stress_tol": preset.stress_floor * confining,
         "tangent": tangent, "tangent_update": "secant" if secant else "none",
