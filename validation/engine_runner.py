@@ -117,7 +117,6 @@ def ours_prepare(out: str | Path, particles: int = DEFAULT_DISCS, seed: int = 1,
     from types import SimpleNamespace
 
     from granular_material.checks import RVE_MATERIAL_DEFAULTS, packing_parameters
-    from granular_material.cli.options import scalar_or_list
     from granular_material.dem import save_rve
     from granular_material.procedures import prepare_packing
 
@@ -136,17 +135,9 @@ def ours_prepare(out: str | Path, particles: int = DEFAULT_DISCS, seed: int = 1,
         h = batch.homogenize()
         out.parent.mkdir(parents=True, exist_ok=True)
         save_rve(out, batch.to_data())
-    report: dict[str, Any] = {
-        "void_ratio": scalar_or_list(h.void_ratio),
-        "mean_stress": scalar_or_list(h.mean_stress),
-        "coordination": scalar_or_list(h.coordination),
-        "cell": scalar_or_list(batch.cell()),
-        "particles": batch.n_disc,
-        "batch": batch.n_rve,
-        "timestep": scalar_or_list(batch.dt),
-        "warnings": [],  # only --target-void-ratio warns, not set here
-        "out": str(out),
-    }
+    report: dict[str, Any] = {**batch.summary(h),
+                              "warnings": [],  # only --target-void-ratio warns, not set here
+                              "out": str(out)}
     return _summary(report, timing, "prepare")
 
 

@@ -131,15 +131,7 @@ def _run_prepare(args: argparse.Namespace) -> int:
         progress=progress_enabled(args),
     )
     h = batch.homogenize()
-    report: dict[str, Any] = {
-        "void_ratio": scalar_or_list(h.void_ratio),
-        "mean_stress": scalar_or_list(h.mean_stress),
-        "coordination": scalar_or_list(h.coordination),
-        "cell": scalar_or_list(batch.cell()),
-        "particles": batch.n_disc,
-        "batch": batch.n_rve,
-        "timestep": scalar_or_list(batch.dt),
-    }
+    report: dict[str, Any] = batch.summary(h)
     warnings: list[str] = []
     error = None
     target = args.target_void_ratio

@@ -15,6 +15,7 @@ import os
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -257,6 +258,23 @@ class DEMBatch:
             shard.state.cell.assign(np.asarray(cell, dtype=np.float64)[shard.rves])
             if refresh:
                 shard.solver.refresh_lists(shard.model, shard.state, shard.loading)
+
+    def summary(self, homogenized: Homogenized | None = None) -> dict[str, Any]:
+        """The batch's state as JSON values, each a list over the RVEs (the value itself for
+        one RVE): ``void_ratio``, ``mean_stress`` [Pa], ``coordination``, ``cell`` [m],
+        ``particles`` and ``batch`` (counts), ``timestep`` [s]; ``homogenized``: this state's
+        measures where the caller has them."""
+        h = self.homogenize() if homogenized is None else homogenized
+
+        def batch_value(values: np.ndarray) -> Any:
+            listed = np.asarray(values).tolist()
+            return listed[0] if self.n_rve == 1 else listed
+
+        return {"void_ratio": batch_value(h.void_ratio),
+                "mean_stress": batch_value(h.mean_stress),
+                "coordination": batch_value(h.coordination), "cell": batch_value(self.cell()),
+                "particles": self.n_disc, "batch": self.n_rve,
+                "timestep": batch_value(self.dt)}
 
     def homogenize(self, rves: np.ndarray | None = None) -> Homogenized:
         """Stress, tangent, void ratio, coordination, fabric of every RVE, or with the
