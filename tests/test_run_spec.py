@@ -246,3 +246,21 @@ def test_a_saved_spec_runs_as_a_scene(tmp_path, capsys):
         to_toml(spec).replace("steps = 2", "steps = 0"))
     assert main(["run", str(tmp_path / "bad.toml"), "--check"]) == 2
     assert "bad.toml, line" in capsys.readouterr().err
+
+
+def test_isotropic_start_is_a_spec_field_and_a_flag():
+    from granular_material.cli import build_parser
+    from granular_material.cli.fem import spec_from_args
+
+    args = build_parser().parse_args(["single-element", "--isotropic", "--particles", "32",
+                                      "--steps", "1", "--axial-strain", "0.001",
+                                      "--device", "cpu", "--no-progress"])
+    spec = spec_from_args(args)
+    assert spec.material.parameters.isotropic
+    shear = {}
+    for isotropic in (False, True):
+        element = spec.replace(material=MaterialSpec(
+            name="dem", parameters={"particles": 32, "isotropic": isotropic}))
+        first = run(element).result.steps.iloc[0]
+        shear[isotropic] = abs(first["sxy"]) / element.problem.confining
+    assert shear[True] < 0.01 < shear[False]

@@ -126,6 +126,10 @@ def _dem_arguments(parser: argparse.ArgumentParser) -> None:
                    help="restart: each iteration drives an RVE from its committed state along "
                         "the whole step (Guo & Zhao, default); continue: from its last trial "
                         "state by the change of grad u (fewer DEM steps, path-dependent)")
+    g.add_argument("--isotropic", action="store_true",
+                   help="relax every RVE to the isotropic stress -confining I before the first "
+                        "load step (a packing consolidated by the normal servo keeps some "
+                        "shear stress: about -14 kPa at 100 kPa for 64 discs)")
     g.add_argument("--max-strain-per-step", type=positive, default=_DEM.max_strain_per_step,
                    metavar="STRAIN",
                    help="largest strain of one DEM step while an RVE is driven along grad u "

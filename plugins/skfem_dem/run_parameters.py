@@ -54,6 +54,9 @@ class DEMParameters:
         seed: seed of the first prepared RVE (RVE p: seed + p).
         independent: single element: four independent RVEs instead of one replicated.
         compare_dem: single element: also the pure-DEM drained biaxial test of RVE 0.
+        isotropic: relax every RVE to the isotropic stress −confining I before the first
+            load step (:meth:`DEMMaterial.make_isotropic`; a packing consolidated by a normal
+            servo keeps some shear stress).
         tangent: objective, kruyt-rothenburg, perturbation or condensed.
         perturbation: relative perturbation of ∇u of the perturbation tangent [-].
         reuse_tol: strain under which a point keeps its last response [-]; 0: never.
@@ -77,6 +80,7 @@ class DEMParameters:
     seed: int = 1
     independent: bool = False
     compare_dem: bool = False
+    isotropic: bool = False
     tangent: str = "objective"
     perturbation: float = 0.1
     reuse_tol: float = 0.0
@@ -183,7 +187,7 @@ def material_for_run(p: DEMParameters, context: RunContext) -> DEMMaterial:
                        perturbation=p.perturbation, backend=context.backend, packing=packing,
                        reuse_tol=p.reuse_tol, reuse_correction=p.reuse_correction,
                        drive=p.drive, max_dem_steps=p.max_dem_steps,
-                       max_strain_per_step=p.max_strain_per_step)
+                       max_strain_per_step=p.max_strain_per_step, isotropic=p.isotropic)
 
 
 def run_summary(p: DEMParameters, context: RunContext) -> dict[str, Any]:
