@@ -9,6 +9,9 @@ A material class that a run specification names may offer run hooks beside its
 - ``for_run(parameters, context) -> Material``: the material, not yet allocated;
 - ``run_summary(parameters, context) -> dict``: what the run's summary says of it;
 - ``launch(backend, main) -> int``: run ``main`` with the material's points on ``backend``;
+- ``reference_curve(axial_strain, confining, device, progress) -> DataFrame`` (a method),
+  asked for where its parameters set ``compare_dem``: the material's own drained biaxial
+  curve beside a single element (the DEM's: RVE 0 in pure DEM), kept in the checkpoint;
 - ``noisy`` (class attribute): its stress carries noise (looser Newton defaults).
 
 A material without them is built as ``cls(**parameters)`` and holds nothing the run
