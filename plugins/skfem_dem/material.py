@@ -43,7 +43,7 @@ from granular_material_skfem.parameters import (
 from granular_material_skfem.run_parameters import (
     DEMParameters,
     check_run,
-    material_for_run,
+    material_keywords,
     run_summary,
 )
 
@@ -66,6 +66,8 @@ from granular_material.procedures.strain_path import DEFAULT_MIN_STEPS, DEFAULT_
 if TYPE_CHECKING:
     import pandas as pd
     from granular_material_skfem.mpi import MPIBackend
+
+    from granular_material.runs.context import RunContext
 
 __all__ = ["BACKENDS", "UNCONFINED_FRACTION", "DEMMaterial", "DEMMaterialParameters",
            "UnconfinedWarning", "in_process_backend"]
@@ -116,7 +118,6 @@ class DEMMaterial(ScikitFemInterface):
     #: DEM stress carries noise: the Newton defaults of noisy materials apply
     noisy = True
     check_run = staticmethod(check_run)
-    for_run = staticmethod(material_for_run)
     run_summary = staticmethod(run_summary)
 
     def __init__(self, rve: str | Path | None = None, particles: int = DEFAULT_DISCS,
@@ -236,6 +237,12 @@ class DEMMaterial(ScikitFemInterface):
         if self.backend is None:
             raise RuntimeError("allocate() the DEM material first")
         return self.backend
+
+    @classmethod
+    def for_run(cls, parameters: DEMParameters, context: RunContext) -> DEMMaterial:
+        """The material of a run specification (not yet allocated): the run hook of
+        :mod:`granular_material.runs.context`."""
+        return cls(**material_keywords(parameters, context))
 
     def reference_curve(self, axial_strain: float, confining: float, device: str | None,
                         progress: bool = False) -> pd.DataFrame:

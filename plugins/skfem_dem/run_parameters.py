@@ -1,11 +1,11 @@
 """The DEM material in a run specification: its own parameters (:class:`DEMParameters`) and
 what a run asks of it before any work (checks, the discs it will hold, its summary) and to
-build it (:func:`material_for_run`). :class:`~granular_material_skfem.DEMMaterial` offers
+build it (:func:`material_keywords`). :class:`~granular_material_skfem.DEMMaterial` offers
 these as its ``Parameters`` and its run hooks."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, ClassVar
 
@@ -33,15 +33,11 @@ from granular_material.procedures.strain_path import (
 )
 
 if TYPE_CHECKING:
-    from granular_material_skfem.material import DEMMaterial
-
     from granular_material.procedures.packing import PackingParameters
     from granular_material.runs.context import RunContext
 
-__all__ = ["DEFAULT_PARTICLES", "DEMParameters", "check_run", "material_for_run", "run_summary"]
+__all__ = ["DEMParameters", "check_run", "material_keywords", "run_summary"]
 
-#: discs per prepared RVE where neither the spec nor the specimen's scale says
-DEFAULT_PARTICLES = DEFAULT_DISCS
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -73,7 +69,7 @@ class DEMParameters:
     drives: ClassVar[tuple[str, ...]] = DRIVES
     reuse_corrections: ClassVar[tuple[str, ...]] = REUSE_CORRECTIONS
     #: discs per prepared RVE where neither the spec nor the specimen's scale says
-    default_particles: ClassVar[int] = DEFAULT_PARTICLES
+    default_particles: ClassVar[int] = DEFAULT_DISCS
 
     rve: Path | None = None
     particles: int | None = None
@@ -114,16 +110,12 @@ class DEMParameters:
             name, message = str(exc).split(" ", 1)
             raise SpecError(name, message) from None
 
-    def rve_material_given(self) -> list[str]:
-        """The RVE material fields set to other than their defaults, as ``--options``."""
-        return rve_material_given(self)
-
 
 def _particles(p: DEMParameters, context: RunContext) -> int:
     """The discs per RVE the run holds: the file's, else the spec's, the scale's or 400."""
     if p.rve is not None:
         return rve_file_shape(p.rve)[1]
-    return p.particles or context.scale_discs or DEFAULT_PARTICLES
+    return p.particles or context.scale_discs or DEFAULT_DISCS
 
 
 def _replicate(p: DEMParameters, context: RunContext) -> bool:
@@ -150,7 +142,7 @@ def _packing(p: DEMParameters, context: RunContext) -> PackingParameters | None:
     carries its own: then no RVE material field may be set)."""
     if p.rve is None:
         return packing_parameters(p, _particles(p, context), context.confining, "--confining")
-    given = p.rve_material_given()
+    given = rve_material_given(p)
     if given:
         raise UsageError(f"{', '.join(given)} set{'s' if len(given) == 1 else ''} the "
                          f"material of the RVEs a run prepares, but --rve {p.rve} carries its "
@@ -174,20 +166,17 @@ def check_run(p: DEMParameters, context: RunContext) -> int:
     return _particles(p, context)
 
 
-def material_for_run(p: DEMParameters, context: RunContext) -> DEMMaterial:
-    """The DEM material of the run (not yet allocated), its inputs checked first."""
-    from granular_material_skfem.material import DEMMaterial
-
-    particles = _particles(p, context)
-    replicate = _replicate(p, context)
-    packing = _packing(p, context)
-    return DEMMaterial(rve=p.rve, particles=particles, seed=p.seed, confining=context.confining,
-                       replicate=replicate, device=context.device, shards=context.shards,
-                       progress=context.progress, tangent=p.tangent,
-                       perturbation=p.perturbation, backend=context.backend, packing=packing,
-                       reuse_tol=p.reuse_tol, reuse_correction=p.reuse_correction,
-                       drive=p.drive, max_dem_steps=p.max_dem_steps,
-                       max_strain_per_step=p.max_strain_per_step, isotropic=p.isotropic)
+def material_keywords(p: DEMParameters, context: RunContext) -> dict[str, Any]:
+    """The keywords of :class:`~granular_material_skfem.DEMMaterial` for the run, its inputs
+    checked first (its ``for_run`` hook builds the material of them)."""
+    return dict(rve=p.rve, particles=_particles(p, context), seed=p.seed,
+                confining=context.confining, replicate=_replicate(p, context),
+                device=context.device, shards=context.shards, progress=context.progress,
+                tangent=p.tangent, perturbation=p.perturbation, backend=context.backend,
+                packing=_packing(p, context), reuse_tol=p.reuse_tol,
+                reuse_correction=p.reuse_correction, drive=p.drive,
+                max_dem_steps=p.max_dem_steps, max_strain_per_step=p.max_strain_per_step,
+                isotropic=p.isotropic)
 
 
 def run_summary(p: DEMParameters, context: RunContext) -> dict[str, Any]:
@@ -209,7 +198,3 @@ def run_summary(p: DEMParameters, context: RunContext) -> dict[str, Any]:
         "friction_angle": meta.friction_angle, "damping": meta.damping,
         "density": meta.density, "thickness": meta.thickness}}
 
-
-def parameter_names() -> tuple[str, ...]:
-    """The flat names of :class:`DEMParameters`."""
-    return tuple(f.name for f in fields(DEMParameters))
