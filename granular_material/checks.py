@@ -9,6 +9,7 @@ value, as the caller names it (``option``: a command-line flag by default).
 from __future__ import annotations
 
 import contextlib
+import functools
 import os
 import re
 from collections.abc import Iterator
@@ -149,11 +150,22 @@ def make_parents(path: Path | None) -> None:
 
 
 def rve_file_shape(path: Path, option: str = "--rve") -> tuple[int, int]:
-    """(B, N): the RVEs and discs per RVE of the RVE file ``path``, read before any work."""
+    """(B, N): the RVEs and discs per RVE of the RVE file ``path``, read (and so checked)
+    before any work; a file asked about again unchanged (same size and modification time)
+    is not read again."""
+    path = Path(path)
+    if not path.exists():
+        raise UsageError(f"{option} {path} does not exist")
+    stat = path.stat()
+    return _rve_file_shape(str(path.resolve()), stat.st_mtime_ns, stat.st_size)
+
+
+@functools.lru_cache(maxsize=16)
+def _rve_file_shape(path: str, mtime_ns: int, size: int) -> tuple[int, int]:
+    """(B, N) of the RVE file ``path`` as it is at ``mtime_ns`` and ``size`` (the cache's
+    key: a file written since is read anew; a file that cannot be read is not cached)."""
     from granular_material.dem import load_rve
 
-    if not Path(path).exists():
-        raise UsageError(f"{option} {path} does not exist")
     data = load_rve(path)
     return data.n_rve, data.n_disc
 
