@@ -283,22 +283,15 @@ def _given(args: argparse.Namespace) -> dict[str, Any]:
             if k not in _CLI_ONLY and v != parser.get_default(k)}
 
 
-def _material_fields(material: str, given: dict[str, Any]) -> dict[str, Any]:
-    """The options of ``given`` that a run of ``material`` takes: the spec's sections' and
-    the material's own; an RVE material option with a material that has none is refused
-    (another material's options are left unused)."""
-    from granular_material.runs.serial import SECTIONS
-
+def _check_rve_options(material: str, given: dict[str, Any]) -> None:
+    """An RVE material option given with a material that prepares no RVEs is refused (the
+    other options of another material are left unused)."""
     own = set(load_material(material).Parameters.__dataclass_fields__)
     rve_options = [_flag(k) for k in given if k in RVE_MATERIAL_DEFAULTS and k not in own]
     if rve_options:
         raise UsageError(f"{', '.join(rve_options)} set{'s' if len(rve_options) == 1 else ''} "
                          "the material of the RVEs a run prepares, but --material "
                          f"{material} has no RVEs")
-    taken = own | {"device", "shards", "backend"}
-    for kind in SECTIONS.values():
-        taken |= set(kind.__dataclass_fields__)
-    return {k: v for k, v in given.items() if k in taken}
 
 
 def _flag(name: str) -> str:
@@ -319,12 +312,13 @@ def spec_from_args(args: argparse.Namespace) -> RunSpec:
         flat.update(preset_fields(args.preset, confining=args.confining,
                                   with_discs=args.rve is None))
         flat["preset"] = args.preset
-    flat.update(_material_fields(material, given))
+    _check_rve_options(material, given)
+    flat.update(given)
     if args.resume is not None:
         flat["out"] = args.resume
     flat["progress"] = progress_enabled(args)
-    try:
-        return from_flat(flat)
+    try:  # another material's options, given or not, are no fields of this run
+        return from_flat(flat, strict=False)
     except SpecError as exc:
         raise UsageError(f"{_flag(exc.field)} {exc.message}") from None
 
