@@ -324,14 +324,17 @@ def spec_from_args(args: argparse.Namespace) -> RunSpec:
 
 
 def report(args: argparse.Namespace, summary: dict[str, Any],
-           interrupt: KeyboardInterrupt | None = None) -> int:
+           interrupt: KeyboardInterrupt | None = None, resume_with: str | None = None) -> int:
     """Print the summary; the exit code: 0, 1 when the run stopped short, 130/143 when
-    Ctrl-C or SIGTERM (``interrupt``) stopped it."""
+    Ctrl-C or SIGTERM (``interrupt``) stopped it, with how to continue it (``resume_with``:
+    the command that does, else ``--resume OUT`` with the same options)."""
     emit(args, summary)
     out = summary.get("out")
     if interrupt is not None:
         print(f"error: {summary['error']}", file=sys.stderr)
-        if out is not None:
+        if resume_with is not None:
+            print(f"continue it with `{resume_with}`", file=sys.stderr)
+        elif out is not None:
             print(f"continue it with --resume {out} and the same options", file=sys.stderr)
         return interrupt_exit_code(interrupt)
     if summary["error"]:

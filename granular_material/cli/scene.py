@@ -363,7 +363,11 @@ def _run_spec_file(path: Path, text: str, data: dict[str, Any],
         print(command_line(spec))
         return 0
     outcome = run(spec, resume=args.resume)
-    return report(argparse.Namespace(json=False), outcome.summary, outcome.interrupt)
+    again = shlex.join(["granular-material", "run", str(path),
+                        *(["--out", str(args.out)] if args.out is not None else []),
+                        "--resume"])
+    return report(argparse.Namespace(json=False), outcome.summary, outcome.interrupt,
+                  resume_with=again)
 
 
 def _run_command(parsers: Mapping[str, argparse.ArgumentParser], args: argparse.Namespace,
