@@ -195,7 +195,13 @@ def _common_arguments(parser: argparse.ArgumentParser) -> None:
                    metavar="N",
                    help="save the committed state (RVEs with contact history, displacement, "
                         "Newton state) in OUT/checkpoint after every N load steps and after "
-                        "the last (default 1); the tables of every step are kept regardless")
+                        "the last; default: by elapsed time, after every step while a save "
+                        "takes under a tenth of the time since the last, at the latest every "
+                        "--checkpoint-minutes; the tables of every step are kept regardless")
+    g.add_argument("--checkpoint-minutes", type=positive,
+                   default=_OUTPUT.checkpoint_minutes, metavar="M",
+                   help="without --checkpoint-every: the longest time between two saves of "
+                        f"the committed state (default {_OUTPUT.checkpoint_minutes:g} min)")
     g.add_argument("--resume", type=Path, default=None, metavar="DIR",
                    help="continue the stopped or killed run whose --out was DIR, in DIR, "
                         "from its last checkpoint (give the other options as then); the "

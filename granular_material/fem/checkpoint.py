@@ -34,6 +34,7 @@ import io
 import json
 import math
 import re
+import time
 import zipfile
 from collections.abc import Iterator
 from dataclasses import MISSING, asdict, dataclass, fields
@@ -224,15 +225,31 @@ def _record(path: Path, record: Any) -> StepRecord:
     return StepRecord(**record)
 
 
-class RunCheckpoint:
-    """The checkpoint folder of one run; ``every``: save the committed state after every this
-    many load steps (and after the last step); the per-step tables are kept for every step."""
+#: by elapsed time, the committed state is saved once this many times the last save's
+#: duration has passed since it ended: a cheap save is made after every step, and saving
+#: costs at most about 1/SAVE_SPACING of the run
+SAVE_SPACING = 10.0
 
-    def __init__(self, folder: str | Path, every: int = 1) -> None:
-        if int(every) != every or every < 1:
+
+class RunCheckpoint:
+    """The checkpoint folder of one run. The committed state is saved after the initial state,
+    after the last step and, in between, after every ``every`` load steps; with ``every``
+    None, by elapsed time: after the first step that ends :data:`SAVE_SPACING` times the last
+    save's duration after it, and at the latest ``minutes`` after it. The per-step tables are
+    kept for every step."""
+
+    def __init__(self, folder: str | Path, every: int | None = 1,
+                 minutes: float = 10.0) -> None:
+        if every is not None and (int(every) != every or every < 1):
             raise ValueError(f"checkpoint every must be an integer >= 1, got {every!r}")
+        if not (math.isfinite(minutes) and minutes > 0):
+            raise ValueError(f"checkpoint minutes must be > 0, got {minutes!r}")
         self.folder = Path(folder)
-        self.every = int(every)
+        self.every = None if every is None else int(every)
+        self.minutes = float(minutes)
+        #: when the last save of the state ended (time.monotonic) and how long it took [s]
+        self._saved_at: float | None = None
+        self._save_seconds = 0.0
         #: SHA-256 of each file written (or verified) so far, by its path in the folder
         self._sums: dict[str, str] = {}
         self._options_sum: str | None = None
@@ -347,13 +364,19 @@ class RunCheckpoint:
 
     # -- the committed state ----------------------------------------------------------------
     def due(self, step: int, last_step: int) -> bool:
-        """Whether the state after ``step`` (of ``last_step``) is saved."""
-        return step % self.every == 0 or step == last_step
+        """Whether the committed state after load ``step`` of ``last_step`` is to be saved."""
+        if self.every is not None:
+            return step % self.every == 0 or step == last_step
+        if step == last_step or self._saved_at is None:
+            return True
+        since = time.monotonic() - self._saved_at
+        return since >= min(SAVE_SPACING * self._save_seconds, 60.0 * self.minutes)
 
     def save_state(self, step: int, solver: NewtonSolver, material: Material) -> None:
         """Save the committed state after load ``step`` (material first, then the solver's
         state as the commit point, with the manifest of the files it rests on), then drop
         the material file it replaces."""
+        started = time.monotonic()
         name = f"material_{step:05d}.npz"
         material.checkpoint(self.folder / name)
         state = solver.committed_state()
@@ -382,6 +405,8 @@ class RunCheckpoint:
         }
         _write_npz(self.folder / _STATE, arrays)
         self._drop_stale(keep=name)
+        self._saved_at = time.monotonic()
+        self._save_seconds = self._saved_at - started
 
     def _drop_stale(self, keep: str) -> None:
         """Material files other than ``keep`` and half-written files."""

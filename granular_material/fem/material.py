@@ -138,6 +138,10 @@ class MaterialResponse:
         reasons: why each point failed, shape (n,), str (values of :class:`FailureReason`,
             "" where the point is OK); None (default) derives it: "failed" where the status
             is not OK, "non_finite" where stress or tangent is not finite, else "".
+        timings: wall-clock seconds [s] the evaluation spent by phase, for the run's timing
+            table (:data:`granular_material.timing.RUN_PHASES`: the DEM material reports
+            ``dem``, ``homogenization`` and ``tangent``); empty when the material does not
+            time itself.
     """
 
     stress: np.ndarray
@@ -146,6 +150,7 @@ class MaterialResponse:
     costs: Mapping[str, int | float] = field(default_factory=dict)
     fields: Mapping[str, np.ndarray] = field(default_factory=dict)
     reasons: np.ndarray | None = None
+    timings: Mapping[str, float] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "costs", _costs(self.costs))

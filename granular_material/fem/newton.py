@@ -38,6 +38,7 @@ from granular_material.fem.kinematics import FORMULATIONS, Kinematics
 from granular_material.fem.loading import Loading
 from granular_material.fem.material import Material, MaterialResponse
 from granular_material.procedures.progress import progress_bar
+from granular_material.timing import PhaseTimes
 
 __all__ = [
     "CommittedState",
@@ -187,6 +188,11 @@ class StepRecord:
             (:class:`~granular_material.fem.material.FailureReason` values, e.g.
             ``{"max_dem_steps": 4}``), summed over the failed evaluations of the step;
             empty when none failed.
+        timings: wall-clock seconds [s] of the step by phase: ``material`` (its evaluations,
+            whole), the phases the material reports inside them (e.g. ``dem``,
+            ``homogenization``, ``tangent``), ``assembly`` (stiffness, forces, boundary
+            conditions) and ``linear_solve`` (see :data:`granular_material.timing.RUN_PHASES`);
+            what ``wall_time`` holds beyond them is the solver's own bookkeeping.
     """
 
     step: int
@@ -200,6 +206,7 @@ class StepRecord:
     converged_by: list[str] = field(default_factory=list)
     correction_history: list[list[float]] = field(default_factory=list)
     failures: dict[str, int] = field(default_factory=dict)
+    timings: dict[str, float] = field(default_factory=dict)
 
 
 @dataclass
@@ -410,18 +417,22 @@ class NewtonSolver:
         """Total ∇u [-] at the Gauss points, committed state, shape (n, 2, 2)."""
         return gauss_points_grad(self.basis, self.u)
 
-    def _increment(self, target: float) -> _Attempt:
+    def _increment(self, target: float, times: PhaseTimes) -> _Attempt:
+        """One increment to load factor ``target`` from the committed state; its phases'
+        seconds are added to ``times``."""
         s, D, kin = self.settings, self.loading.dirichlet_dofs, self.kinematics
         grad_n = self._grad_committed
-        u_d, f_ext = self._external(target, self.u)
-        du = np.zeros_like(self.u)
-        du[D] = u_d - self.u[D]
         response = self.response
-        K = stiffness(self.basis, kin.assembled_tangent(response.tangent, response.stress,
-                                                        grad_n, grad_n))
-        A, b, x, interior = condense(K, f_ext - self.f_int, x=du, D=D)
+        with times.phase("assembly"):
+            u_d, f_ext = self._external(target, self.u)
+            du = np.zeros_like(self.u)
+            du[D] = u_d - self.u[D]
+            K = stiffness(self.basis, kin.assembled_tangent(response.tangent, response.stress,
+                                                            grad_n, grad_n))
+            A, b, x, interior = condense(K, f_ext - self.f_int, x=du, D=D)
         r0 = float(np.linalg.norm(b))
-        du = solve(A, b, x, interior)
+        with times.phase("linear_solve"):
+            du = solve(A, b, x, interior)
         if s.predictor == "extrapolate" and self._last is not None:
             last_step, last_du = self._last
             du[interior] = (target - self.load_factor) / last_step * last_du[interior]
@@ -438,7 +449,9 @@ class NewtonSolver:
         for it in range(1, s.max_iterations + 1):
             grad_step = gauss_points_grad(self.basis, du)
             grad_u = kin.material_gradient(grad_n, grad_step)
-            response = self.material.evaluate(grad_u)
+            with times.phase("material"):
+                response = self.material.evaluate(grad_u)
+            times.add_all(response.timings)
             _add_costs(cost, response.costs)
             if not response.ok:
                 bad = response.failed_points()
@@ -448,10 +461,11 @@ class NewtonSolver:
                                 f"material failed at points {bad[:8].tolist()} ({why})",
                                 failures=counts)
             grad_total = grad_n + grad_step
-            f_int = internal_force(self.basis, kin.assembled_stress(response.stress,
-                                                                    grad_total))
-            if kin.finite:
-                f_ext = self._external(target, self.u + du)[1]
+            with times.phase("assembly"):
+                f_int = internal_force(self.basis, kin.assembled_stress(response.stress,
+                                                                        grad_total))
+                if kin.finite:
+                    f_ext = self._external(target, self.u + du)[1]
             residual = f_int - f_ext
             r = float(np.linalg.norm(residual[interior]))
             history.append(r / r0 if r0 > 0 else r)
@@ -480,10 +494,12 @@ class NewtonSolver:
                 break
             tangent = (response.tangent if secant is None
                        else secant.update(grad_u, response.stress))
-            K = stiffness(self.basis, kin.assembled_tangent(tangent, response.stress, grad_n,
-                                                            grad_total))
-            A, b, x, interior = condense(K, -residual, D=D)
-            correction = solve(A, b, x, interior)
+            with times.phase("assembly"):
+                K = stiffness(self.basis, kin.assembled_tangent(tangent, response.stress,
+                                                                grad_n, grad_total))
+                A, b, x, interior = condense(K, -residual, D=D)
+            with times.phase("linear_solve"):
+                correction = solve(A, b, x, interior)
             previous = du
             du = du + correction if aitken is None else aitken.update(du, correction)
             step_norm = self.l2_norm(du)
@@ -501,12 +517,13 @@ class NewtonSolver:
         """
         t0 = time.perf_counter()
         record = StepRecord(step=step, load_factor=target)
+        times = PhaseTimes()
         nominal = target - self.load_factor
         increment = nominal
         smallest = nominal / 2 ** self.settings.max_cutbacks
         while self.load_factor < target - 1e-12 * max(abs(target), 1.0):
             end = min(self.load_factor + increment, target)
-            attempt = self._increment(end)
+            attempt = self._increment(end, times)
             record.iterations += attempt.iterations
             _add_costs(record.costs, attempt.cost)
             _add_costs(record.failures, attempt.failures)  # type: ignore[arg-type]
@@ -528,6 +545,7 @@ class NewtonSolver:
             increment = (end - self.load_factor) / 2  # half of what was tried (maybe clipped)
             if increment < smallest * (1 - 1e-9):
                 record.wall_time = time.perf_counter() - t0
+                record.timings = times.as_dict()
                 raise NewtonError(
                     f"load step {step} (load factor {self.load_factor:.6g} -> {target:.6g}) "
                     f"did not converge ({attempt.reason}) even with the increment halved "
@@ -536,6 +554,7 @@ class NewtonSolver:
                     [*self.records, record],
                 )
         record.wall_time = time.perf_counter() - t0
+        record.timings = times.as_dict()
         self.records.append(record)
         return record
 

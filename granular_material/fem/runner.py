@@ -49,6 +49,7 @@ from granular_material.fem.material import Material
 from granular_material.fem.newton import NewtonError, NewtonSettings, NewtonSolver, StepRecord
 from granular_material.fem.problems import BiaxialProblem, BiaxialSetup, build_biaxial
 from granular_material.fem.tracking import Tracking
+from granular_material.timing import PhaseTimes
 
 __all__ = ["COST_COLUMNS", "BiaxialResult", "RunObserver", "run_biaxial"]
 
@@ -99,6 +100,12 @@ class BiaxialResult:
             converge included (the records' ``failures`` summed; empty when no point
             failed). A failed point never reaches ``points``: a step commits only when
             every point succeeded.
+        timings: wall-clock seconds [s] by phase of the load steps (the records'
+            ``timings`` summed, the step that did not converge included, with ``steps``
+            their whole wall time) and of what this process did between them
+            (``initial_state``, ``tables``, ``tracking``, ``checkpoint``); a resumed run's
+            steps before the resume count with the time they took then.
+            :func:`granular_material.timing.phase_table` makes the run's table of them.
     """
 
     problem: BiaxialProblem
@@ -111,6 +118,7 @@ class BiaxialResult:
     resumed_from: int | None = None
     interrupt: KeyboardInterrupt | None = None
     failures: dict[str, int] = field(default_factory=dict)
+    timings: dict[str, float] = field(default_factory=dict)
 
     def row_nearest(self, axial_strain: float) -> int:
         """Row of ``steps`` (and of ``displacements``) whose axial strain [-] is nearest."""
@@ -164,6 +172,15 @@ def _rows(solver: NewtonSolver, problem: BiaxialProblem, record: StepRecord | No
     return row, points
 
 
+def _timings(records: list[StepRecord], between: PhaseTimes) -> dict[str, float]:
+    """Seconds by phase of ``records`` (``steps``: their wall time) and ``between`` them."""
+    times = PhaseTimes(between.seconds)
+    for record in records:
+        times.add_all(record.timings)
+        times.add("steps", record.wall_time)
+    return times.as_dict()
+
+
 def _failures(records: list[StepRecord]) -> dict[str, int]:
     """Failed point-evaluations by reason over ``records``."""
     out: dict[str, int] = {}
@@ -189,6 +206,7 @@ class _Collector:
         self.tables: list[pd.DataFrame] = []
         self.displacements: list[np.ndarray] = []
         self.tracked: list[pd.DataFrame] = []
+        self.times = PhaseTimes()  # what this process spends between the load steps
 
     def keep(self, row: dict[str, Any], points: pd.DataFrame, u: np.ndarray,
              tracked: pd.DataFrame | None) -> None:
@@ -203,16 +221,24 @@ class _Collector:
 
     def collect(self, solver: NewtonSolver, record: StepRecord | None) -> None:
         """The step ``solver`` has just committed (``record`` None: the initial state)."""
-        row, points = _rows(solver, self.problem, record)
+        times = self.times
+        if record is None:
+            with times.phase("initial_state"):
+                solver.response  # noqa: B018 (the material's first evaluation, timed here)
+        with times.phase("tables"):
+            row, points = _rows(solver, self.problem, record)
         tracked = None
         n_points = self.problem.setup.n_points
         if self.tracking is not None and self.tracking.due(row["step"]):
-            tracked = self.tracking.rows(self.material, row["step"], row["axial_strain"],
-                                         n_points)
-        self.keep(row, points, solver.u, tracked)
-        if self.checkpoint is not None:
-            self.checkpoint.save_step(row, points, solver.u, tracked)
-            if self.checkpoint.due(row["step"], self.n_steps):
+            with times.phase("tracking"):
+                tracked = self.tracking.rows(self.material, row["step"], row["axial_strain"],
+                                             n_points)
+        with times.phase("tables"):
+            self.keep(row, points, solver.u, tracked)
+            if self.checkpoint is not None:
+                self.checkpoint.save_step(row, points, solver.u, tracked)
+        if self.checkpoint is not None and self.checkpoint.due(row["step"], self.n_steps):
+            with times.phase("checkpoint"):
                 self.checkpoint.save_state(row["step"], solver, self.material)
         if self.on_step is not None and record is not None:
             self.on_step(solver, record, points)
@@ -231,6 +257,7 @@ class _Collector:
                      else pd.DataFrame()),
             resumed_from=None if saved is None else saved.step, interrupt=interrupt,
             failures=_failures([*solver.records, *unfinished]),
+            timings=_timings([*solver.records, *unfinished], self.times),
         )
 
 

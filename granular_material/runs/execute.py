@@ -46,6 +46,7 @@ from granular_material.results.lock import FolderLock
 from granular_material.runs.context import RunContext
 from granular_material.runs.resume import open_checkpoint, start_checkpoint
 from granular_material.runs.spec import FULL_SCALE, REDUCED_SCALE, RunSpec
+from granular_material.timing import PhaseTimes, phase_table
 
 __all__ = ["RunOutcome", "RunPlan", "check", "run"]
 
@@ -77,6 +78,9 @@ class RunOutcome:
     summary: dict[str, Any]
     reference: pd.DataFrame | None = None
     plan: RunPlan | None = field(default=None, repr=False)
+    #: seconds by phase of the whole run (the summary's ``timing_s``): preparation,
+    #: reference, the load steps' parts, tables, checkpoints, outputs
+    timing: dict[str, float] = field(default_factory=dict)
 
     @property
     def interrupt(self) -> KeyboardInterrupt | None:
@@ -183,21 +187,25 @@ def run(spec: RunSpec, observer: RunObserver | None = None, *,
     step as :class:`~granular_material.fem.runner.RunObserver`. A Newton failure or an
     interrupt ends the run early with the steps so far (``outcome.result.error``,
     ``outcome.interrupt``); bad input is a ``ValueError`` before any work."""
+    started = time.perf_counter()
     out = spec.output.out
     if resume and out is None:
         raise UsageError("a resumed run needs its output folder (output.out)")
     check_output_dir(out)
+    times = PhaseTimes()
     with _locked(out):
         checkpoint, saved = open_checkpoint(spec, resume)
         plan = check(spec)
         material = _built(spec, plan.context)
         with cleanup_on_rejection(out), start_checkpoint(spec, checkpoint, saved):
             if not saved:
-                material.allocate(plan.setup.n_points)
-            reference = _reference(material, plan, checkpoint)
+                with times.phase("preparation"):
+                    material.allocate(plan.setup.n_points)
+            with times.phase("reference"):
+                reference = _reference(material, plan, checkpoint)
             outcome = _execute(plan, material, observer, checkpoint, saved)
         outcome.reference = reference
-        _finish(plan, outcome)
+        _finish(plan, outcome, times, started)
     return outcome
 
 
@@ -271,8 +279,10 @@ def _material_summary(plan: RunPlan) -> dict[str, Any]:
     return hook(plan.spec.material.parameters, plan.context) if hook is not None else {}
 
 
-def _finish(plan: RunPlan, outcome: RunOutcome) -> None:
-    """The summary's last entries, and the outputs and ``summary.json`` under the folder."""
+def _finish(plan: RunPlan, outcome: RunOutcome, times: PhaseTimes, started: float) -> None:
+    """The summary's last entries (``timing_s``: the run's seconds by phase, ``times`` those
+    of what ran before the load steps, ``started`` the run's start, time.perf_counter), and
+    the outputs and ``summary.json`` under the folder."""
     spec, summary, result = plan.spec, outcome.summary, outcome.result
     out = spec.output.out
     if spec.problem.test == "biaxial":
@@ -291,10 +301,15 @@ def _finish(plan: RunPlan, outcome: RunOutcome) -> None:
             summary["dem_axial_strain_at_peak"] = float(reference["axial_strain"].iloc[peak])
         summary.update(_material_summary(plan))
     if out is not None:
-        write_outputs(result, out, map_strain=list(spec.output.map_strain),
-                      reference=outcome.reference)
-        if outcome.reference is not None:
-            write_csv(outcome.reference, Path(out) / "pure_dem.csv")
+        with times.phase("outputs"):
+            write_outputs(result, out, map_strain=list(spec.output.map_strain),
+                          reference=outcome.reference)
+            if outcome.reference is not None:
+                write_csv(outcome.reference, Path(out) / "pure_dem.csv")
+    times.add_all(result.timings)
+    outcome.timing = phase_table(times.seconds, time.perf_counter() - started)
+    summary["timing_s"] = {name: round(value, 3) for name, value in outcome.timing.items()}
+    if out is not None:
         summary["out"] = str(out)
         if Path(out).is_dir():
             write_json(summary, Path(out) / "summary.json")

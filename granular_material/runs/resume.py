@@ -18,7 +18,8 @@ __all__ = ["open_checkpoint", "spec_differences", "start_checkpoint"]
 
 #: fields that may differ between a run and its resume: where it writes, how it reports and
 #: how often it saves, the CPU threads and the backend (neither changes a result)
-RESUME_FREE = frozenset({"out", "progress", "checkpoint_every", "shards", "backend"})
+RESUME_FREE = frozenset({"out", "progress", "checkpoint_every", "checkpoint_minutes",
+                         "shards", "backend"})
 #: options added after checkpoints were first written, with the value older runs had
 _ADDED_OPTIONS = {"element": "quad4", "quadrature": None, "convergence": "force",
                   "formulation": "small-strain", "accept_correction": 0.0,
@@ -81,7 +82,8 @@ def open_checkpoint(spec: RunSpec, resume: bool) -> tuple[RunCheckpoint | None, 
     out = spec.output.out
     if out is None:
         return None, False
-    checkpoint = RunCheckpoint(Path(out) / "checkpoint", every=spec.output.checkpoint_every)
+    checkpoint = RunCheckpoint(Path(out) / "checkpoint", every=spec.output.checkpoint_every,
+                               minutes=spec.output.checkpoint_minutes)
     if not resume:
         return checkpoint, False
     if not checkpoint.has_options():

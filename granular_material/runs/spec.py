@@ -280,7 +280,11 @@ class OutputSpec:
             none.
         every: with ``track``: every this many load steps.
         postprocess: with ``track``: the post-processors; None: every installed one.
-        checkpoint_every: save the committed state every this many load steps (with out).
+        checkpoint_every: save the committed state every this many load steps (with out);
+            None: by elapsed time (:class:`~granular_material.fem.checkpoint.RunCheckpoint`:
+            after every step while saving is cheap, at most every ``checkpoint_minutes``).
+        checkpoint_minutes: with ``checkpoint_every`` None, the longest time [min] between
+            two saves of the committed state.
         progress: show progress bars.
     """
 
@@ -289,7 +293,8 @@ class OutputSpec:
     track: tuple[str, ...] | None = None
     every: int = 1
     postprocess: tuple[str, ...] | None = None
-    checkpoint_every: int = 1
+    checkpoint_every: int | None = None
+    checkpoint_minutes: float = 10.0
     progress: bool = False
 
     def __post_init__(self) -> None:
@@ -301,7 +306,11 @@ class OutputSpec:
         if self.postprocess is not None:
             object.__setattr__(self, "postprocess", tuple(self.postprocess))
         _at_least("every", self.every, 1)
-        _at_least("checkpoint_every", self.checkpoint_every, 1)
+        if self.checkpoint_every is not None:
+            _at_least("checkpoint_every", self.checkpoint_every, 1)
+        if not (math.isfinite(self.checkpoint_minutes) and self.checkpoint_minutes > 0):
+            raise SpecError("checkpoint_minutes",
+                            f"must be a time > 0 min, got {self.checkpoint_minutes!r}")
 
     def postprocessors(self) -> tuple[str, ...]:
         """The post-processors of tracked points: the given ones, else every installed one."""

@@ -28,6 +28,7 @@ from granular_material.procedures import (
     path_steps,
 )
 from granular_material.procedures.strain_path import DEFAULT_MIN_STEPS, DEFAULT_STRAIN_PER_STEP
+from granular_material.timing import PhaseTimes
 
 __all__ = [
     "DRIVES",
@@ -105,6 +106,9 @@ class Evaluation:
             and the response is NaN throughout.
         reasons: why each failed RVE failed, shape (B,), str (:class:`FailureReason`
             values, "" where it did not); None: "failed" where ``failed``.
+        timings: wall-clock seconds [s] by phase: ``dem`` (stepping the RVEs, restoring
+            them included), ``homogenization`` (Love stress, tangent, fabric) and ``tangent``
+            (the objective or condensed tangent on top); empty where not timed.
     """
 
     homogenized: Homogenized
@@ -115,6 +119,7 @@ class Evaluation:
     drives: tuple[tuple[int, int, int], ...] = ()
     complete: bool = True
     reasons: np.ndarray | None = None
+    timings: dict[str, float] | None = None
 
     def failure_reasons(self) -> np.ndarray:
         """:attr:`reasons`, or "failed" where ``failed`` when the backend gave none."""
@@ -255,6 +260,8 @@ class InProcessBackend:
         self._committed_response: Homogenized | None = None
         #: why each RVE failed in the current evaluation ("" where it did not)
         self._reasons = np.full(b, "", dtype=object)
+        #: the current evaluation's seconds by phase
+        self._times = PhaseTimes()
 
     @property
     def n_rve(self) -> int:
@@ -277,18 +284,20 @@ class InProcessBackend:
         self._mark(capped & ~failed, FailureReason.MAX_DEM_STEPS)
         failed |= capped
         moving = moving & ~failed
-        if restart:
-            self.batch.restore(self._committed, None if moving.all() else moving)
+        with self._times.phase("dem"):
+            if restart:
+                self.batch.restore(self._committed, None if moving.all() else moving)
         if not moving.any():
             return 0, 0, 0
         grad_u = np.where(moving[:, None, None], grad_u, 0.0)
         steps = path_steps(grad_u, self.max_strain_per_step, self.min_steps, self.max_steps)
         try:
-            dem_steps = drive_grad_u(self.batch, grad_u,
-                                     max_strain_per_step=self.max_strain_per_step,
-                                     min_steps=self.min_steps,
-                                     active=None if moving.all() else moving,
-                                     max_steps=self.max_steps)
+            with self._times.phase("dem"):
+                dem_steps = drive_grad_u(self.batch, grad_u,
+                                         max_strain_per_step=self.max_strain_per_step,
+                                         min_steps=self.min_steps,
+                                         active=None if moving.all() else moving,
+                                         max_steps=self.max_steps)
         except DEMInstabilityError as exc:
             blown = np.zeros_like(failed)
             blown[np.asarray(exc.rve, dtype=int)] = True
@@ -327,16 +336,18 @@ class InProcessBackend:
     def _measure(self, moved: np.ndarray) -> Homogenized:
         """The current response: measured afresh for the ``moved`` RVEs, kept for the
         others."""
-        if self._current is None or moved.all():
-            return self.batch.homogenize()
-        if not moved.any():
-            return self._current
-        return self._current.with_rves(moved, self.batch.homogenize(moved))
+        with self._times.phase("homogenization"):
+            if self._current is None or moved.all():
+                return self.batch.homogenize()
+            if not moved.any():
+                return self._current
+            return self._current.with_rves(moved, self.batch.homogenize(moved))
 
     def evaluate(self, grad_u: np.ndarray) -> Evaluation:
         """Respond to ∇u [-] (B, 2, 2) since the commit: the RVEs that moved are driven to
         it, the others reused (see the class docstring); homogenised results."""
         self._trial = False
+        self._times = PhaseTimes()
         finite = np.isfinite(grad_u).all(axis=(1, 2))
         self._reasons = np.full(self.n_rve, "", dtype=object)
         self._mark(~finite, FailureReason.NON_FINITE_INPUT)
@@ -359,7 +370,8 @@ class InProcessBackend:
                     break
                 drives.append(cost)
                 sigma = np.full((self.n_rve, 2, 2), np.nan)
-                sigma[moving] = self.batch.homogenize(moving).stress
+                with self._times.phase("homogenization"):
+                    sigma[moving] = self.batch.homogenize(moving).stress
                 perturbed.append(sigma)
         if cost is not None:
             if self.drive == "restart" or perturbed:
@@ -371,7 +383,8 @@ class InProcessBackend:
         if cost is None:
             h = self._current if self._current is not None else self.batch.homogenize()
             return Evaluation(_nan_like(h), failed, *_totals(drives), drives=tuple(drives),
-                              complete=False, reasons=self._reasons.copy())
+                              complete=False, reasons=self._reasons.copy(),
+                              timings=self._times.as_dict())
         drives.append(cost)
         moved = moving & ~failed
         new = self._measure(moved)
@@ -383,13 +396,16 @@ class InProcessBackend:
                                                   / size[moved, None, None])
             new = replace(new, tangent=tangent)
         if self.tangent == "condensed" and moved.any():
-            new = _with_condensed(self.batch, new, moved)
+            with self._times.phase("tangent"):
+                new = _with_condensed(self.batch, new, moved)
         self._reached[moved] = target[moved]
         self._current = new
         self._target = target
         self._trial = True
-        return Evaluation(self._response(new, target), failed, *_totals(drives),
-                          drives=tuple(drives), reasons=self._reasons.copy())
+        with self._times.phase("tangent"):
+            response = self._response(new, target)
+        return Evaluation(response, failed, *_totals(drives), drives=tuple(drives),
+                          reasons=self._reasons.copy(), timings=self._times.as_dict())
 
     def _response(self, current: Homogenized, target: np.ndarray) -> Homogenized:
         """What the RVEs answer for ``target``: their current response, reused RVEs'
