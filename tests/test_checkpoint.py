@@ -287,3 +287,24 @@ def test_sigkill_at_random_moments_resumes_to_the_same_run(rve64, reference_run,
     print(f"{kills} SIGKILLs ({kills_before_a_save} before the first save) in {chains} "
           "chains")
     assert kills_before_a_save < kills, "no kill came after the first saved step"
+
+
+def test_a_fresh_run_is_refused_over_a_stopped_runs_checkpoint(tmp_path, capsys):
+    """Only ``--resume`` continues a stopped run's work: a plain rerun into its folder is
+    refused (exit 2) and changes nothing; a finished run's folder may be run again."""
+    out = tmp_path / "le"
+    argv = ["single-element", "--material", "linear-elastic", "--steps", "4",
+            "--axial-strain", "0.004", "--device", "cpu", "--no-progress", "--json",
+            "--out", str(out)]
+    assert main(argv) == 0
+    assert main(argv) == 0  # finished: run again
+    capsys.readouterr()
+    options = out / "checkpoint" / "options.json"
+    record = json.loads(options.read_text())
+    record["spec"]["problem"]["steps"] = 8  # as if it had stopped after step 4 of 8
+    options.write_text(json.dumps(record))
+    before = {p: p.read_bytes() for p in sorted(out.rglob("*")) if p.is_file()}
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert "stopped after load step 4 of 8" in err and "--resume" in err
+    assert {p: p.read_bytes() for p in sorted(out.rglob("*")) if p.is_file()} == before

@@ -60,7 +60,7 @@ SINGLE = ["single-element", "--steps", "5", "--axial-strain", "0.005", "--device
           "--no-progress", "--json"]
 BIAXIAL = ["biaxial", "--elements", "1", "2", "--steps", "5", "--axial-strain", "0.005",
            "--device", "cpu", "--no-progress", "--json", "--drive", "continue",
-           "--track", "0", "5", "--every", "2"]
+           "--track", "0", "5", "--every", "2", "--checkpoint-every", "1"]
 
 
 def _environment(**extra: str) -> dict[str, str]:

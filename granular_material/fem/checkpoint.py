@@ -305,6 +305,16 @@ class RunCheckpoint:
         """Whether a run's options are recorded here (a run was started in the folder)."""
         return (self.folder / _OPTIONS).is_file()
 
+    def saved_step(self) -> int | None:
+        """The load step of the saved committed state, read from ``state.npz`` alone (not
+        checked against its manifest: :meth:`verify` does that); None when there is none or
+        it cannot be read."""
+        try:
+            with np.load(self.folder / _STATE, allow_pickle=False) as npz:
+                return int(npz["step"])
+        except (OSError, ValueError, KeyError, TypeError, zipfile.BadZipFile):
+            return None
+
     def has_state(self) -> bool:
         """Whether a committed state has been saved (else a resume starts from the beginning)."""
         return (self.folder / _STATE).is_file()

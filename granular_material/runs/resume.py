@@ -14,7 +14,8 @@ from granular_material.fem import CheckpointError, RunCheckpoint
 from granular_material.runs.serial import from_dict, from_flat, to_dict, to_flat
 from granular_material.runs.spec import RunSpec
 
-__all__ = ["open_checkpoint", "spec_differences", "start_checkpoint"]
+__all__ = ["open_checkpoint", "refuse_over_stopped_run", "spec_differences",
+           "start_checkpoint"]
 
 #: fields that may differ between a run and its resume: where it writes, how it reports and
 #: how often it saves, the CPU threads and the backend (neither changes a result)
@@ -74,6 +75,30 @@ def _check_record(spec: RunSpec, checkpoint: RunCheckpoint, folder: Path) -> Non
         raise UsageError(f"--resume {folder}: give the options the run was started with; "
                          f"these differ: {'; '.join(differ)} (nothing in the folder was "
                          "changed)")
+
+
+def refuse_over_stopped_run(spec: RunSpec) -> None:
+    """A fresh run would empty its folder's checkpoint: refused (UsageError, nothing
+    changed) where that checkpoint is of a run that stopped before its last load step, whose
+    work a ``--resume`` would continue; a finished run's, a damaged or an unsaved one's may
+    be replaced."""
+    out = spec.output.out
+    if out is None:
+        return
+    checkpoint = RunCheckpoint(Path(out) / "checkpoint")
+    step = checkpoint.saved_step() if checkpoint.has_options() else None
+    if step is None:
+        return
+    try:
+        planned = _saved_spec(checkpoint.read_options()).problem.steps
+    except (CheckpointError, ValueError, KeyError, TypeError):
+        return
+    if step >= planned:
+        return
+    raise UsageError(f"{out} holds the checkpoint of a run stopped after load step {step} of "
+                     f"{planned}: continue it with --resume (and the options it was started "
+                     f"with), or remove {checkpoint.folder} to start afresh there; nothing in "
+                     "the folder was changed")
 
 
 def open_checkpoint(spec: RunSpec, resume: bool) -> tuple[RunCheckpoint | None, bool]:
