@@ -161,3 +161,19 @@ def test_the_dem_backend_uses_the_cg_on_cuda(packings: RVEData, monkeypatch) -> 
     assert calls == ["cuda:0"]
     assert np.all(on_cuda[~moved] == 0.0)
     assert _relative(on_cuda[moved], on_cpu[moved]).max() < 1e-8
+
+
+def test_cost_benchmark_times_both_solvers(tmp_path) -> None:
+    """benchmarks/condensed_tangent.py --cost-only --solver both at smoke size: both
+    solvers timed, and the CG's tangent that of scipy's LU."""
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / "condensed_tangent.py"
+    spec = importlib.util.spec_from_file_location("condensed_tangent_bench_cg", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    cost = module.main(["--particles", "24", "--seeds", "1", "--cost-only", "--solver", "both",
+                        "--out", str(tmp_path)]).iloc[0]
+    assert cost["condensed_cg_call_s_per_rve"] > 0 and cost["condensed_direct_call_s_per_rve"] > 0
+    assert cost["cg_vs_direct_max_rel"] < 1e-8 and cost["cg_iterations_max"] > 0

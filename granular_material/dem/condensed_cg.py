@@ -24,7 +24,8 @@ diagonal block); a system stops at its own relative residual ‖r‖₂/‖b‖�
 with the products K_Gu X reduced on the device as well.
 
 Assembly (the contact network, the per-contact stiffness blocks) is the scipy path's, on
-the host, from :meth:`RVEData` (``DEMBatch.to_data``); only the solve runs on the device.
+the host, from an :class:`RVEData` (``DEMBatch.to_data``); only the solves and the products
+K_Gu X run on the device.
 float64 only: a relative residual of 1e-10 is below float32's resolution.
 """
 
