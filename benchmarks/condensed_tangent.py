@@ -4,7 +4,8 @@ what the condensed tangent costs beside a DEM evaluation (issue 26's done-when),
 Usage::
 
     python benchmarks/condensed_tangent.py [--particles 100] [--seeds 1,2,3]
-        [--increment 1e-4] [--hold 2000] [--cost-only] [--out DIR]
+        [--increment 1e-4] [--hold 2000] [--cost-only] [--solver direct|cg|both]
+        [--out DIR]
 
 RVEs of ``--particles`` discs (one per seed, ``prepare_packing``: 100 kPa, friction 0.5 rad)
 in three states: ``p0`` as prepared; ``shear`` right after a 1 % pure shear
@@ -23,7 +24,10 @@ The tangents: ``kr`` (Kruyt–Rothenburg, ``homogenize``), ``condensed`` (free s
 ``condensed-coulomb``, and ``perturbation`` (the DEM material's forward differences: four
 more ``drive`` runs of ∇u = 1e-4 E_kl from the state). Error = |C:Δ∇u − Δσ_DEM| / |Δσ_DEM|
 (Frobenius). Writes ``prediction.csv``, ``prediction.md`` and ``cost.json`` under ``--out``.
-Measures; never passes or fails.
+``--solver``: how the costs time the condensed tangent's solves: ``direct`` (scipy LU per
+RVE, the default), ``cg`` (``condensed_cg``: the batched warp CG on the CPU device) or
+``both`` (each, wall time of the whole batch's call per RVE, median of the repeats, and the
+largest difference between the two tangents). Measures; never passes or fails.
 """
 
 from __future__ import annotations
@@ -39,6 +43,7 @@ import pandas as pd
 from granular_material.dem import DEMBatch, RVEData
 from granular_material.dem.batch import BatchSnapshot
 from granular_material.dem.condensed import condensed_tangent
+from granular_material.dem.condensed_cg import condensed_tangent_cg
 from granular_material.procedures import drive_grad_u, prepare_packing
 from granular_material.results.compare import markdown_table
 
@@ -96,10 +101,11 @@ def _states(particles: int, seeds: list[int], hold: int) -> dict[str, RVEData]:
     return states
 
 
-def _costs(data: RVEData, increment: float, repeats: int = 5) -> dict:
+def _costs(data: RVEData, increment: float, repeats: int = 5, solver: str = "direct") -> dict:
     """Wall time [s] per RVE of the condensed tangent (its state read from the batch
     included) beside one DEM evaluation of the batch (``drive_grad_u`` of ``increment``,
-    and of a 1e-3 load step), divided by B."""
+    and of a 1e-3 load step), divided by B; with ``solver`` "cg" or "both" the warp CG's
+    (and the scipy path's) whole call per RVE as well."""
     batch = DEMBatch(data, device="cpu")
     snap = batch.snapshot()
     n = data.n_rve
@@ -117,7 +123,23 @@ def _costs(data: RVEData, increment: float, repeats: int = 5) -> dict:
         timings["to_data"].append((time.perf_counter() - start) / n)
         result = condensed_tangent(state)
         timings["condensed"].append(float(np.mean(result.seconds)))
+    if solver in ("cg", "both"):
+        cg = condensed_tangent_cg(state)  # warm-up: the kernels are built
+        calls = {"cg": condensed_tangent_cg}
+        if solver == "both":
+            calls["direct"] = condensed_tangent
+        for name, call in calls.items():
+            timings[f"condensed_{name}_call"] = []
+            for _ in range(repeats):
+                start = time.perf_counter()
+                call(state)
+                timings[f"condensed_{name}_call"].append((time.perf_counter() - start) / n)
     out = {f"{name}_s_per_rve": float(np.median(v)) for name, v in timings.items()}
+    if solver in ("cg", "both"):
+        out["cg_iterations_max"] = int(cg.iterations.max())
+        out["cg_iterations_mean"] = float(cg.iterations.mean())
+        out["cg_vs_direct_max_rel"] = float(np.abs(cg.tangent - result.tangent).max()
+                                            / np.abs(result.tangent).max())
     out["unknowns_per_rve"] = float(np.mean(result.n_unknowns))
     out["contacts_per_rve"] = float(np.mean(result.n_contacts))
     return out
@@ -132,6 +154,8 @@ def main(argv: list[str] | None = None) -> pd.DataFrame:
     parser.add_argument("--hold", type=int, default=2000)
     parser.add_argument("--cost-only", action="store_true",
                         help="only the costs, of the prepared RVEs (no predictions)")
+    parser.add_argument("--solver", choices=("direct", "cg", "both"), default="direct",
+                        help="which condensed-tangent solver the costs time")
     parser.add_argument("--out", type=Path, default=Path("condensed-tangent"))
     args = parser.parse_args(argv)
     seeds = [int(s) for s in args.seeds.split(",")]
@@ -139,8 +163,8 @@ def main(argv: list[str] | None = None) -> pd.DataFrame:
     if args.cost_only:
         data = RVEData.concatenate([prepare_packing(n_disc=args.particles, seed=s,
                                                     device="cpu").to_data() for s in seeds])
-        cost = _costs(data, args.increment)
-        cost.update(particles=args.particles, seeds=seeds)
+        cost = _costs(data, args.increment, solver=args.solver)
+        cost.update(particles=args.particles, seeds=seeds, solver=args.solver)
         (args.out / "cost.json").write_text(json.dumps(cost, indent=2) + "\n")
         print(json.dumps(cost, indent=2))
         return pd.DataFrame([cost])
@@ -176,8 +200,8 @@ def main(argv: list[str] | None = None) -> pd.DataFrame:
     summary = table.groupby(["state", "protocol", "direction"], sort=False)[errors].agg(
         lambda v: " / ".join(f"{100 * x:.0f}" for x in v)).reset_index()
     (args.out / "prediction.md").write_text(markdown_table(summary) + "\n")
-    cost = _costs(states["p0"], args.increment)
-    cost.update(particles=args.particles, seeds=seeds)
+    cost = _costs(states["p0"], args.increment, solver=args.solver)
+    cost.update(particles=args.particles, seeds=seeds, solver=args.solver)
     (args.out / "cost.json").write_text(json.dumps(cost, indent=2) + "\n")
     print(markdown_table(summary))
     print(json.dumps(cost, indent=2))

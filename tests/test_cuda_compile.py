@@ -15,6 +15,7 @@ from pathlib import Path
 import pytest
 import warp as wp
 
+from granular_material.dem import condensed_cg
 from granular_material.dem.kernels import DTYPES, STEP_VARIANTS, kernel_modules
 
 ARCH = 90  #: Hopper (H100, H200)
@@ -29,6 +30,12 @@ pytestmark = pytest.mark.skipif(
 #: the packages whose warp kernels must all be covered by ``kernel_modules``
 PACKAGES = ("granular_material", "granular_material_skfem", "granular_material_pore_fractal",
             "granular_material_reproduction", "granular_material_validation")
+
+
+def _all_modules() -> dict[str, wp.Module]:
+    """The engine's modules (every float type and step variant) and the condensed tangent's
+    CG (float64 only: its relative residual of 1e-10 is below float32's resolution)."""
+    return {**kernel_modules(), **condensed_cg.kernel_modules()}
 
 
 def _base_name(name: str) -> str:
@@ -49,14 +56,14 @@ def test_kernel_modules_cover_every_variant_and_kernel():
 
 def test_every_warp_module_of_the_project_is_compiled():
     """A kernel module added anywhere in the project (an ``@wp.kernel`` in a new file) must
-    join :func:`kernel_modules`, or this test names it."""
+    join :func:`_all_modules`, or this test names it."""
     for package in PACKAGES:
         root = importlib.import_module(package)
         for info in pkgutil.walk_packages(root.__path__, prefix=package + "."):
             if info.name.endswith("__main__"):
                 continue
             importlib.import_module(info.name)
-    covered = {_base_name(name) for name in kernel_modules()}
+    covered = {_base_name(name) for name in _all_modules()}
     ours = {
         _base_name(name) for name, module in wp._src.context.user_modules.items()
         if name.startswith("granular_material") and module.kernels
@@ -64,9 +71,9 @@ def test_every_warp_module_of_the_project_is_compiled():
     assert ours <= covered, f"kernel modules not compiled by this test: {sorted(ours - covered)}"
 
 
-@pytest.mark.parametrize("name", sorted(kernel_modules()))
+@pytest.mark.parametrize("name", sorted(_all_modules()))
 def test_module_compiles_to_ptx_for_sm90(name: str, tmp_path: Path):
-    module = kernel_modules()[name]
+    module = _all_modules()[name]
     paths = wp.compile_aot_module(module, arch=ARCH, use_ptx=True, module_dir=tmp_path)
     assert len(paths) == 1 and paths[0].suffix == ".ptx" and f"sm{ARCH}" in paths[0].name
     ptx = paths[0].read_text()

@@ -234,9 +234,24 @@ def _contact_matrices(net: ContactNetwork, sliding: str) -> tuple[np.ndarray, np
     return b, k
 
 
-def _condense_one(net: ContactNetwork, sliding: str,
-                  regularization: float) -> tuple[np.ndarray, np.ndarray, int, int]:
-    """(C, affine) [Pa] as 4 × 4 (index 2i + j) of one RVE, discs left out, unknowns."""
+@dataclass(frozen=True)
+class _ReducedSystem:
+    """One RVE's linear system over its unknowns (see :func:`_reduced_system`)."""
+
+    k_uu: sp.csc_matrix | None  #: K_uu, regularised [N/m], (n_free, n_free); None if empty
+    k_ug: np.ndarray  #: K_uG [N/m·m], (n_free, 4)
+    k_gu: np.ndarray  #: K_Gu, (4, n_free)
+    affine: np.ndarray  #: K_GG of the contacts between kept discs [N·m], (4, 4)
+    affine_all: np.ndarray  #: K_GG of every contact [N·m], (4, 4)
+    free: np.ndarray  #: which of the 3N unknowns (u_x, u_y, w of each disc) are solved, bool
+    kept: np.ndarray  #: the discs of at least two contacts, (N,), bool
+    left_out: int  #: discs left out
+
+
+def _reduced_system(net: ContactNetwork, sliding: str,
+                    regularization: float) -> _ReducedSystem:
+    """K_uu (regularised), K_uG, K_Gu and the affine terms of one RVE: the kept discs'
+    translations and rotations, less one disc's translation (module docstring)."""
     kept, alive = _kept_discs(net)
     b, k = _contact_matrices(net, sliding)
     local = np.matmul(b.transpose(0, 2, 1), np.matmul(k, b))  # Bᵀ k B, (M, 10, 10)
@@ -252,7 +267,8 @@ def _condense_one(net: ContactNetwork, sliding: str,
     n_free = int(free.sum())
     left_out = int((~kept).sum())
     if n_free == 0:
-        return affine / net.volume, affine_all / net.volume, left_out, 0
+        return _ReducedSystem(None, np.zeros((0, 4)), np.zeros((4, 0)), affine, affine_all,
+                              free, kept, left_out)
     number = np.where(free, np.cumsum(free) - 1, -1)  # reduced index of each unknown, or −1
     a, c = net.a[alive], net.c[alive]
     dofs = number[np.concatenate([3 * a[:, None] + np.arange(3),
@@ -276,6 +292,18 @@ def _condense_one(net: ContactNetwork, sliding: str,
 
     k_ug = np.stack([gather(local[:, :6, 6 + g]) for g in range(4)], axis=1)
     k_gu = np.stack([gather(local[:, 6 + g, :6]) for g in range(4)], axis=0)
+    return _ReducedSystem(k_uu, k_ug, k_gu, affine, affine_all, free, kept, left_out)
+
+
+def _condense_one(net: ContactNetwork, sliding: str,
+                  regularization: float) -> tuple[np.ndarray, np.ndarray, int, int]:
+    """(C, affine) [Pa] as 4 × 4 (index 2i + j) of one RVE, discs left out, unknowns."""
+    system = _reduced_system(net, sliding, regularization)
+    affine, affine_all, left_out = system.affine, system.affine_all, system.left_out
+    if system.k_uu is None:
+        return affine / net.volume, affine_all / net.volume, left_out, 0
+    k_uu, k_ug, k_gu = system.k_uu, system.k_ug, system.k_gu
+    n_free = k_uu.shape[0]
     if sliding == "free":  # symmetric positive definite: diagonal pivots are stable
         lu = spla.splu(k_uu, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
                        options={"SymmetricMode": True})

@@ -19,6 +19,7 @@ import numpy as np
 
 from granular_material.dem import DEMBatch, DEMInstabilityError, Homogenized, RVEData, save_rve
 from granular_material.dem.condensed import condensed_tangent
+from granular_material.dem.condensed_cg import condensed_tangent_cg
 from granular_material.dem.homogenization import objective_tangent, spin_tangent
 from granular_material.fem.material import FailureReason
 from granular_material.procedures import (
@@ -155,9 +156,15 @@ def _nan_like(h: Homogenized) -> Homogenized:
 
 
 def _with_condensed(batch: DEMBatch, h: Homogenized, moved: np.ndarray) -> Homogenized:
-    """``h`` with the condensed tangent [Pa] of the ``moved`` RVEs' current states."""
+    """``h`` with the condensed tangent [Pa] of the ``moved`` RVEs' current states: on a
+    CUDA batch by the warp CG on its device, on the CPU by scipy's LU."""
     tangent = np.array(h.tangent, dtype=np.float64, copy=True)
-    tangent[moved] = condensed_tangent(batch.to_data(), rves=np.flatnonzero(moved)).tangent
+    rves = np.flatnonzero(moved)
+    if str(batch.device).startswith("cuda"):
+        result = condensed_tangent_cg(batch.to_data(), rves=rves, device=batch.device)
+    else:
+        result = condensed_tangent(batch.to_data(), rves=rves)
+    tangent[moved] = result.tangent
     return replace(h, tangent=tangent)
 
 
