@@ -1,11 +1,14 @@
-"""Pieces of ``benchmarks/gpu_check.sh`` that are Python: is a CUDA device there, and does
-a sheared batch on it agree with the CPU.
+"""Pieces of ``benchmarks/gpu_check.sh`` that are Python: is a CUDA device there, does a
+sheared batch on it agree with the CPU, and does the condensed tangent's CG on it agree
+with the LU on the host.
 
 Usage::
 
     python benchmarks/gpu_check.py require-cuda
     python benchmarks/gpu_check.py agreement --out DIR [--device cuda] [--reference cpu]
         [--batch 16] [--particles 400] [--strain 2e-3] [--dtypes float64,float32]
+    python benchmarks/gpu_check.py condensed --out DIR [--device cuda] [--batch 8]
+        [--particles 400] [--strain 2e-3]
 
 ``agreement`` prepares one packing (seed 1, 100 kPa, on the reference device, float64),
 gives each of the B copies its own displacement gradient (simple and pure shear,
@@ -15,6 +18,11 @@ by RVE: ``agreement.csv`` (one row per float type and RVE) and ``agreement.json`
 largest differences and whether they are within the tolerance of ``tests/test_dem_cuda.py``,
 rtol 1e-6 on stress for float64, 1e-3 for float32). The same device on both sides (a CPU
 against itself) checks the piece itself: every difference is then zero.
+``condensed`` drives B copies of one packing as ``agreement`` does (on the CPU), then
+computes their condensed tangents by scipy's LU on the host and by the warp CG on
+``--device`` (``granular_material.dem.condensed_cg``): ``condensed.json`` holds the largest
+relative difference max|ΔC|/max|C| per RVE (tolerance 1e-8), the CG's iterations and both
+paths' seconds.
 Measures; exit 1 only where the agreement is outside the tolerance.
 """
 
@@ -31,6 +39,8 @@ import pandas as pd
 
 #: relative tolerance on stress between devices (same kernels; the compilers' FMA choices)
 TOLERANCE = {"float64": 1e-6, "float32": 1e-3}
+#: relative tolerance of the CG's condensed tangent against the LU's (its residual is 1e-10)
+CONDENSED_TOLERANCE = 1e-8
 
 
 def require_cuda() -> str:
@@ -124,6 +134,43 @@ def agreement(out: Path, device: str = "cuda", reference: str = "cpu", n_rve: in
     return summary
 
 
+def condensed(out: Path, device: str = "cuda", n_rve: int = 8, particles: int = 400,
+              strain: float = 2e-3) -> dict:
+    """The condensed tangents of a sheared batch by the warp CG on ``device`` against
+    scipy's LU; writes ``condensed.json`` under ``out`` and returns it."""
+    import warp as wp
+
+    wp.config.quiet = True
+    from granular_material.dem import DEMBatch
+    from granular_material.dem.condensed import condensed_tangent
+    from granular_material.dem.condensed_cg import condensed_tangent_cg
+    from granular_material.procedures import drive_grad_u, prepare_packing
+    from granular_material.procedures.packing import DEFAULT_PRESSURE
+    from granular_material.results import write_json
+
+    out.mkdir(parents=True, exist_ok=True)
+    one = prepare_packing(n_disc=particles, seed=1, pressure=DEFAULT_PRESSURE,
+                          device="cpu").to_data().select(0)
+    batch = DEMBatch(one.replicate(n_rve), device="cpu")
+    drive_grad_u(batch, gradients(n_rve, strain))
+    data = batch.to_data()
+    t0 = time.perf_counter()
+    lu = condensed_tangent(data)
+    t1 = time.perf_counter()
+    cg = condensed_tangent_cg(data, device=device)
+    t2 = time.perf_counter()
+    scale = np.abs(lu.tangent).max(axis=(1, 2, 3, 4))
+    rel = np.abs(cg.tangent - lu.tangent).max(axis=(1, 2, 3, 4)) / scale
+    summary = {"device": device, "n_rve": n_rve, "particles": particles, "strain": strain,
+               "max_rel_diff": float(rel.max()), "rel_diff": rel.tolist(),
+               "cg_iterations": np.asarray(cg.iterations).tolist(),
+               "seconds": {"lu_host": t1 - t0, "cg": t2 - t1},
+               "tolerance": CONDENSED_TOLERANCE,
+               "within_tolerance": bool(rel.max() <= CONDENSED_TOLERANCE)}
+    write_json(summary, out / "condensed.json")
+    return summary
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     sub = parser.add_subparsers(dest="command", required=True)
@@ -136,10 +183,26 @@ def main(argv: list[str] | None = None) -> int:
     agree.add_argument("--particles", type=int, default=400)
     agree.add_argument("--strain", type=float, default=2e-3)
     agree.add_argument("--dtypes", default="float64,float32")
+    tangent = sub.add_parser("condensed", help="the condensed tangent's CG on --device "
+                                               "against the LU on the host")
+    tangent.add_argument("--out", type=Path, required=True)
+    tangent.add_argument("--device", default="cuda")
+    tangent.add_argument("--batch", type=int, default=8)
+    tangent.add_argument("--particles", type=int, default=400)
+    tangent.add_argument("--strain", type=float, default=2e-3)
     args = parser.parse_args(argv)
     if args.command == "require-cuda":
         print(require_cuda())
         return 0
+    if args.command == "condensed":
+        if args.device.startswith("cuda"):
+            require_cuda()
+        summary = condensed(args.out, args.device, args.batch, args.particles, args.strain)
+        print(f"condensed tangent: CG on {args.device} against the LU, {args.batch} RVEs: "
+              f"rel. diff <= {summary['max_rel_diff']:.3g} (tolerance "
+              f"{CONDENSED_TOLERANCE:g}: {'within' if summary['within_tolerance'] else 'OUTSIDE'}"
+              f"); CG {summary['seconds']['cg']:.3g} s, LU {summary['seconds']['lu_host']:.3g} s")
+        return 0 if summary["within_tolerance"] else 1
     if args.device.startswith("cuda") or args.reference.startswith("cuda"):
         require_cuda()
     summary = agreement(args.out, args.device, args.reference, args.batch, args.particles,

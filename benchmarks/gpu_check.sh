@@ -9,7 +9,9 @@
 #   2. throughput.csv/.json: particle-steps/s at B = 1, 16, 64, 256, 1024, 4096 RVEs x 400
 #      discs, float64 and float32, one process per case (undamped, sheared at 1e-5 a step)
 #   3. agreement.csv/.json: CUDA against the CPU on a sheared batch of 16 RVEs, per float type
-#   4. specimen/: the paper's specimen (10 x 15 Q4, 600 RVEs of 400 discs), its first 5 load
+#   4. condensed.json: the condensed tangent's batched CG on CUDA against scipy's LU on the
+#      host, 8 sheared RVEs of 400 discs (iterations, seconds, largest difference)
+#   5. specimen/: the paper's specimen (10 x 15 Q4, 600 RVEs of 400 discs), its first 5 load
 #      steps of 0.1 % (those of --steps 100 --axial-strain 0.1), steps.csv and summary.json
 # Every step runs under its own time limit; one that fails or runs out is recorded and the
 # others still run. Exit 0 only when every step passed; 2 at once where there is no GPU.
@@ -19,16 +21,18 @@ cd "$(dirname "$0")/.."
 PYTHON=${PYTHON:-python}
 OUT=${1:-out/gpu-check}
 # limits [s] of the steps (sum 290 s)
-T_TESTS=${T_TESTS:-60} T_THROUGHPUT=${T_THROUGHPUT:-120} T_AGREEMENT=${T_AGREEMENT:-30}
-T_SPECIMEN=${T_SPECIMEN:-80}
+T_TESTS=${T_TESTS:-60} T_THROUGHPUT=${T_THROUGHPUT:-100} T_AGREEMENT=${T_AGREEMENT:-30}
+T_CONDENSED=${T_CONDENSED:-20} T_SPECIMEN=${T_SPECIMEN:-80}
 
 if [ "${GPU_CHECK_SMOKE:-0}" = 1 ]; then  # the script itself, on the CPU, at toy sizes
     DEV=cpu DEVICE="cpu (smoke)" TESTS=(tests/test_dem_cuda.py) BATCHES=1,2 PARTICLES=30
     AGREE=(--batch 2 --particles 30 --strain 2e-4) SPECIMEN=(--elements 1 1 --particles 30)
+    CONDENSED=(--batch 2 --particles 30 --strain 2e-4)
 else
     DEVICE=$("$PYTHON" benchmarks/gpu_check.py require-cuda) || exit 2
     DEV=cuda TESTS=(tests/test_dem_cuda.py tests/test_cuda_compile.py)
     BATCHES=1,16,64,256,1024,4096 PARTICLES=400 AGREE=(--batch 16 --particles 400)
+    CONDENSED=(--batch 8 --particles 400)
     SPECIMEN=(--scale full)
 fi
 mkdir -p "$OUT"
@@ -52,6 +56,8 @@ run_step throughput "$T_THROUGHPUT" "$PYTHON" benchmarks/dem_throughput.py --dev
     --repeats 1 --no-yade --no-lammps --out "$OUT/throughput.csv"
 run_step agreement "$T_AGREEMENT" "$PYTHON" benchmarks/gpu_check.py agreement \
     --device $DEV --reference cpu "${AGREE[@]}" --out "$OUT"
+run_step condensed "$T_CONDENSED" "$PYTHON" benchmarks/gpu_check.py condensed \
+    --device $DEV "${CONDENSED[@]}" --out "$OUT"
 run_step specimen "$T_SPECIMEN" "$PYTHON" -m granular_material.cli biaxial "${SPECIMEN[@]}" \
     --device $DEV --steps 5 --axial-strain 0.005 --drive continue --no-progress \
     --out "$OUT/specimen"
@@ -63,7 +69,7 @@ status=0
     echo "  \"commit\": \"$(git rev-parse --short HEAD 2>/dev/null || echo unknown)\","
     echo "  \"steps\": {"
     sep=""
-    for name in tests throughput agreement specimen; do
+    for name in tests throughput agreement condensed specimen; do
         printf '%s    "%s": {"exit": %d, "seconds": %d}' "$sep" "$name" "${RC[$name]}" \
             "${SECONDS_OF[$name]}"
         sep=$',\n'

@@ -38,10 +38,10 @@ def test_script_stops_with_a_message_without_a_gpu(tmp_path):
 def test_script_is_valid_bash_and_names_every_step():
     text = (BENCH / "gpu_check.sh").read_text()
     assert subprocess.run(["bash", "-n", str(BENCH / "gpu_check.sh")]).returncode == 0
-    for step in ("tests", "throughput", "agreement", "specimen"):
+    for step in ("tests", "throughput", "agreement", "condensed", "specimen"):
         assert f"run_step {step} " in text
     limits = [int(v) for v in re.findall(r"T_\w+=\$\{T_\w+:-(\d+)\}", text)]
-    assert len(limits) == 4 and sum(limits) < 300  # under 5 minutes with the start-up
+    assert len(limits) == 5 and sum(limits) < 300  # under 5 minutes with the start-up
 
 
 def test_gradients_cover_the_batch():
@@ -73,7 +73,15 @@ def test_whole_script_at_smoke_size_on_the_cpu(tmp_path):
     assert done.returncode == 0, done.stdout[-3000:]
     summary = json.loads((out / "summary.json").read_text())
     assert {name: step["exit"] for name, step in summary["steps"].items()} == {
-        "tests": 0, "throughput": 0, "agreement": 0, "specimen": 0}
+        "tests": 0, "throughput": 0, "agreement": 0, "condensed": 0, "specimen": 0}
     for name in ("tests.xml", "throughput.csv", "throughput.json", "agreement.csv",
-                 "agreement.json", "specimen/steps.csv", "specimen/summary.json"):
+                 "agreement.json", "condensed.json", "specimen/steps.csv",
+                 "specimen/summary.json"):
         assert (out / name).exists(), name
+
+
+def test_condensed_cg_against_the_lu_on_the_cpu(tmp_path):
+    summary = _module().condensed(tmp_path, device="cpu", n_rve=2, particles=30,
+                                  strain=2e-4)
+    assert summary["within_tolerance"] and summary["max_rel_diff"] <= 1e-8
+    assert json.loads((tmp_path / "condensed.json").read_text())["n_rve"] == 2
