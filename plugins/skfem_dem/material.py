@@ -500,7 +500,8 @@ class DEMMaterial(ScikitFemInterface):
         the one file, which either backend, on any number of ranks, restores."""
         data = self._allocated().checkpoint_data()
         extra = {**data.extra, _GRAD_KEY: self.committed_grad_u}
-        save_rve(path, replace(data, extra=extra))
+        # a run's own state, checked whole when a resume reads it: written fast
+        save_rve(path, replace(data, extra=extra), compress=False, validate=False)
 
     def restore(self, path: str | Path) -> None:
         """Load the committed state written by :meth:`checkpoint` (RVE states with contact
