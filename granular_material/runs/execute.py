@@ -307,7 +307,11 @@ def _finish(plan: RunPlan, outcome: RunOutcome, times: PhaseTimes, started: floa
             if outcome.reference is not None:
                 write_csv(outcome.reference, Path(out) / "pure_dem.csv")
     times.add_all(result.timings)
-    outcome.timing = phase_table(times.seconds, time.perf_counter() - started)
+    # a resumed run's steps before the resume count (in the parts and the whole) with the
+    # time they took then; its preparation was that of the first process's
+    earlier = (0.0 if result.resumed_from is None else
+               sum(r.wall_time for r in result.records if r.step <= result.resumed_from))
+    outcome.timing = phase_table(times.seconds, time.perf_counter() - started + earlier)
     summary["timing_s"] = {name: round(value, 3) for name, value in outcome.timing.items()}
     if out is not None:
         summary["out"] = str(out)
