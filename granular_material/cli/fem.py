@@ -35,7 +35,6 @@ from granular_material.fem.newton import PREDICTORS, RELAXATIONS, TANGENT_UPDATE
 from granular_material.fem.problems import PLATENS
 from granular_material.runs import OutputSpec, RunSpec, SpecError, from_flat, run, to_flat
 from granular_material.runs.presets import PRESET_NAMES, preset_fields
-from granular_material.runs.resume import refuse_over_stopped_run
 from granular_material.runs.spec import BACKENDS, SCALES, NewtonSpec, ProblemSpec
 
 __all__ = ["command_line", "register", "report", "run_biaxial_command", "run_single_element",
@@ -387,9 +386,7 @@ def _check_resume_folder(args: argparse.Namespace) -> None:
 def _command(args: argparse.Namespace) -> int:
     _check_resume_folder(args)
     spec = spec_from_args(args)
-    if args.resume is None:
-        refuse_over_stopped_run(spec)
-    outcome = run(spec, resume=args.resume is not None)
+    outcome = run(spec, resume=args.resume is not None, keep_stopped=True)
     return report(args, outcome.summary, outcome.interrupt)
 
 

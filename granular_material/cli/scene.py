@@ -351,7 +351,6 @@ def _run_spec_file(path: Path, text: str, data: dict[str, Any],
 
     from granular_material.cli.fem import command_line, report
     from granular_material.runs import check, from_dict, run
-    from granular_material.runs.resume import refuse_over_stopped_run
 
     try:
         spec = from_dict(data)
@@ -363,9 +362,7 @@ def _run_spec_file(path: Path, text: str, data: dict[str, Any],
     if args.check:
         print(command_line(spec))
         return 0
-    if not args.resume:
-        refuse_over_stopped_run(spec)
-    outcome = run(spec, resume=args.resume)
+    outcome = run(spec, resume=args.resume, keep_stopped=True)
     again = shlex.join(["granular-material", "run", str(path),
                         *(["--out", str(args.out)] if args.out is not None else []),
                         "--resume"])

@@ -44,7 +44,11 @@ from granular_material.results import (
 )
 from granular_material.results.lock import FolderLock
 from granular_material.runs.context import RunContext
-from granular_material.runs.resume import open_checkpoint, start_checkpoint
+from granular_material.runs.resume import (
+    open_checkpoint,
+    refuse_over_stopped_run,
+    start_checkpoint,
+)
 from granular_material.runs.spec import FULL_SCALE, REDUCED_SCALE, RunSpec
 from granular_material.timing import PhaseTimes, phase_table
 
@@ -178,12 +182,15 @@ def _locked(out: Path | None) -> Iterator[None]:
 
 
 def run(spec: RunSpec, observer: RunObserver | None = None, *,
-        resume: bool = False) -> RunOutcome:
+        resume: bool = False, keep_stopped: bool = False) -> RunOutcome:
     """Run ``spec``: check it (:func:`check`), lock and write its output folder as it goes
-    (tables, fields, figures, ``summary.json``; checkpoints every
-    ``output.checkpoint_every`` steps), and return the outcome. ``resume`` continues the run
-    whose checkpoint is in ``output.out`` (its spec must be this one, but for where and how
-    it reports; with no saved step it starts afresh). ``observer`` follows every committed
+    (tables, fields, figures, ``summary.json``; checkpoints of the committed state, see
+    :class:`~granular_material.fem.checkpoint.RunCheckpoint`), and return the outcome.
+    ``resume`` continues the run whose checkpoint is in ``output.out`` (its spec must be this
+    one, but for where and how it reports; with no saved step it starts afresh); a fresh run
+    replaces the folder's checkpoint, but with ``keep_stopped`` (the commands' choice) not
+    that of a run stopped before its last step (a UsageError, nothing changed). ``observer``
+    follows every committed
     step as :class:`~granular_material.fem.runner.RunObserver`. A Newton failure or an
     interrupt ends the run early with the steps so far (``outcome.result.error``,
     ``outcome.interrupt``); bad input is a ``ValueError`` before any work."""
@@ -194,6 +201,8 @@ def run(spec: RunSpec, observer: RunObserver | None = None, *,
     check_output_dir(out)
     times = PhaseTimes()
     with _locked(out):
+        if keep_stopped and not resume:
+            refuse_over_stopped_run(spec)
         checkpoint, saved = open_checkpoint(spec, resume)
         plan = check(spec)
         material = _built(spec, plan.context)
