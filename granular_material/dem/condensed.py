@@ -314,6 +314,20 @@ def _condense_one(net: ContactNetwork, sliding: str,
     return condensed / net.volume, affine_all / net.volume, left_out, n_free
 
 
+def _selected(data: RVEData, rves: np.ndarray | None, regularization: float) -> np.ndarray:
+    """The RVE indices to condense (all of ``data`` for None), once ``regularization`` is
+    checked."""
+    if not (math.isfinite(regularization) and regularization > 0):
+        raise ValueError(f"regularization must be a number > 0, got {regularization!r}")
+    return np.arange(data.n_rve) if rves is None else np.asarray(rves, dtype=int)
+
+
+def _counters(count: int) -> tuple[np.ndarray, ...]:
+    """Per-RVE tallies of a condensation: contacts, sliding, left out, unknowns (int), and
+    seconds (float), each shape (count,)."""
+    return (*(np.zeros(count, dtype=np.int64) for _ in range(4)), np.zeros(count))
+
+
 def condensed_tangent(data: RVEData, sliding: str = "free", regularization: float = 1e-9,
                       rves: np.ndarray | None = None,
                       cap_tolerance: float = SLIDING_TOLERANCE) -> CondensedTangent:
@@ -325,14 +339,10 @@ def condensed_tangent(data: RVEData, sliding: str = "free", regularization: floa
     sparse LU per RVE, on the CPU."""
     if sliding not in SLIDING_MODES:
         raise ValueError(f"sliding must be one of {', '.join(SLIDING_MODES)}, got {sliding!r}")
-    if not (math.isfinite(regularization) and regularization > 0):
-        raise ValueError(f"regularization must be a number > 0, got {regularization!r}")
-    index = np.arange(data.n_rve) if rves is None else np.asarray(rves, dtype=int)
+    index = _selected(data, rves, regularization)
     count = len(index)
     tangent, affine = np.zeros((count, 4, 4)), np.zeros((count, 4, 4))
-    n_contacts, n_sliding, n_left_out, n_unknowns = (np.zeros(count, dtype=np.int64)
-                                                     for _ in range(4))
-    seconds = np.zeros(count)
+    n_contacts, n_sliding, n_left_out, n_unknowns, seconds = _counters(count)
     for slot, rve in enumerate(index):
         start = time.perf_counter()
         net = contact_network(data, int(rve), cap_tolerance)

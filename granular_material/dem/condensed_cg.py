@@ -43,7 +43,9 @@ import warp as wp
 from granular_material.dem.condensed import (
     SLIDING_TOLERANCE,
     CondensedTangent,
+    _counters,
     _reduced_system,
+    _selected,
     contact_network,
 )
 from granular_material.dem.rve_file import RVEData
@@ -289,17 +291,13 @@ def condensed_tangent_cg(data: RVEData, rves: np.ndarray | None = None, device: 
     breakdown, :class:`CGNotConvergedError` names the RVEs. ``check_every``: iterations
     launched between the host's checks for active systems. ``seconds`` is each RVE's
     assembly plus an equal share of the batch's solve [s]."""
-    if not (math.isfinite(regularization) and regularization > 0):
-        raise ValueError(f"regularization must be a number > 0, got {regularization!r}")
     if not (math.isfinite(tolerance) and tolerance > 0):
         raise ValueError(f"tolerance must be a number > 0, got {tolerance!r}")
-    index = np.arange(data.n_rve) if rves is None else np.asarray(rves, dtype=int)
+    index = _selected(data, rves, regularization)
     count = len(index)
     affine, affine_all = np.zeros((count, 4, 4)), np.zeros((count, 4, 4))
     volume = np.zeros(count)
-    n_contacts, n_sliding, n_left_out, n_unknowns = (np.zeros(count, dtype=np.int64)
-                                                     for _ in range(4))
-    seconds = np.zeros(count)
+    n_contacts, n_sliding, n_left_out, n_unknowns, seconds = _counters(count)
     parts = []
     for slot, rve in enumerate(index):
         start = time.perf_counter()
