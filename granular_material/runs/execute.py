@@ -44,11 +44,7 @@ from granular_material.results import (
 )
 from granular_material.results.lock import FolderLock
 from granular_material.runs.context import RunContext
-from granular_material.runs.resume import (
-    open_checkpoint,
-    refuse_over_stopped_run,
-    start_checkpoint,
-)
+from granular_material.runs.resume import open_checkpoint, start_checkpoint
 from granular_material.runs.spec import FULL_SCALE, REDUCED_SCALE, RunSpec
 from granular_material.timing import PhaseTimes, phase_table
 
@@ -201,9 +197,7 @@ def run(spec: RunSpec, observer: RunObserver | None = None, *,
     check_output_dir(out)
     times = PhaseTimes()
     with _locked(out):
-        if keep_stopped and not resume:
-            refuse_over_stopped_run(spec)
-        checkpoint, saved = open_checkpoint(spec, resume)
+        checkpoint, saved = open_checkpoint(spec, resume, keep_stopped)
         plan = check(spec)
         material = _built(spec, plan.context)
         with cleanup_on_rejection(out), start_checkpoint(spec, checkpoint, saved):

@@ -14,8 +14,7 @@ from granular_material.fem import CheckpointError, RunCheckpoint
 from granular_material.runs.serial import from_dict, from_flat, to_dict, to_flat
 from granular_material.runs.spec import RunSpec
 
-__all__ = ["open_checkpoint", "refuse_over_stopped_run", "spec_differences",
-           "start_checkpoint"]
+__all__ = ["open_checkpoint", "spec_differences", "start_checkpoint"]
 
 #: fields that may differ between a run and its resume: where it writes, how it reports and
 #: how often it saves, the CPU threads and the backend (neither changes a result)
@@ -77,15 +76,10 @@ def _check_record(spec: RunSpec, checkpoint: RunCheckpoint, folder: Path) -> Non
                          "changed)")
 
 
-def refuse_over_stopped_run(spec: RunSpec) -> None:
-    """A fresh run would empty its folder's checkpoint: refused (UsageError, nothing
-    changed) where that checkpoint is of a run that stopped before its last load step, whose
-    work a ``--resume`` would continue; a finished run's, a damaged or an unsaved one's may
-    be replaced."""
-    out = spec.output.out
-    if out is None:
-        return
-    checkpoint = RunCheckpoint(Path(out) / "checkpoint")
+def _refuse_over_stopped_run(checkpoint: RunCheckpoint, out: Path) -> None:
+    """A fresh run would empty ``checkpoint``: refused (UsageError, nothing changed) where
+    it is of a run that stopped before its last load step, whose work a ``--resume`` would
+    continue; a finished run's, a damaged or an unsaved one's may be replaced."""
     step = checkpoint.saved_step() if checkpoint.has_options() else None
     if step is None:
         return
@@ -101,15 +95,19 @@ def refuse_over_stopped_run(spec: RunSpec) -> None:
                      "the folder was changed")
 
 
-def open_checkpoint(spec: RunSpec, resume: bool) -> tuple[RunCheckpoint | None, bool]:
+def open_checkpoint(spec: RunSpec, resume: bool, keep_stopped: bool = False,
+                    ) -> tuple[RunCheckpoint | None, bool]:
     """The run's checkpoint (None without an output folder) and whether the run resumes
-    from a saved state in it (checked whole first); else it starts afresh."""
+    from a saved state in it (checked whole first); else it starts afresh, which
+    ``keep_stopped`` refuses over the checkpoint of a run stopped before its last step."""
     out = spec.output.out
     if out is None:
         return None, False
     checkpoint = RunCheckpoint(Path(out) / "checkpoint", every=spec.output.checkpoint_every,
                                minutes=spec.output.checkpoint_minutes)
     if not resume:
+        if keep_stopped:
+            _refuse_over_stopped_run(checkpoint, Path(out))
         return checkpoint, False
     if not checkpoint.has_options():
         if checkpoint.has_state():

@@ -11,7 +11,7 @@ of its own, behind the same calls.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Protocol
 
@@ -120,7 +120,7 @@ class Evaluation:
     drives: tuple[tuple[int, int, int], ...] = ()
     complete: bool = True
     reasons: np.ndarray | None = None
-    timings: dict[str, float] | None = None
+    timings: dict[str, float] = field(default_factory=dict)
 
     def failure_reasons(self) -> np.ndarray:
         """:attr:`reasons`, or "failed" where ``failed`` when the backend gave none."""

@@ -439,7 +439,7 @@ class DEMMaterial(ScikitFemInterface):
             stress=stress, tangent=tangent, status=status,
             costs={"dem_steps": ev.dem_steps, "rve_evaluations": ev.rve_evaluations,
                    "particle_steps": ev.particle_steps},
-            fields=fields, reasons=reasons, timings=dict(ev.timings or {}),
+            fields=fields, reasons=reasons, timings=ev.timings,
         )
 
     def _committed(self) -> MaterialResponse:
