@@ -241,6 +241,11 @@ def test_biaxial_on_two_ranks_is_the_in_process_run(rve_files, biaxial_reference
     assert run.returncode == 0, run.stderr
     assert _summary(run) == summary and summary["tracked_rows"] == 6
     _assert_same_tables(out, reference)
+    # the ranks' phases reach the summary: the slowest rank's DEM and homogenisation, a
+    # part of the material's time as in process
+    timing = json.loads((out / "summary.json").read_text())["timing_s"]
+    assert timing["dem"] > 0 and timing["homogenization"] > 0
+    assert timing["dem"] + timing["homogenization"] < timing["total"]
 
 
 @needs_mpi

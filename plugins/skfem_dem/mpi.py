@@ -16,7 +16,8 @@ command   Bcast      2 int64: the command and its argument
 ∇u        Scatterv   4 float64 a point (∂u_k/∂x_l, row-major)
 header    Gather     ``HEADER`` int64 a rank: error flag, complete flag, drives done, the
                      rank's compute time [ns], then DEM steps, RVE paths and particle-steps
-                     of each drive (up to 5: four perturbed runs and the trial)
+                     of each drive (up to 5: four perturbed runs and the trial), then its
+                     time [ns] in each of the backend's phases (DEM, homogenisation, tangent)
 rows      Gatherv    ``ROW`` float64 a point: failure code (0: OK, else 1 + the index of
                      its reason in ``FailureReason``), then every field of
                      :class:`~granular_material.dem.Homogenized` flattened in its order
@@ -60,6 +61,7 @@ from granular_material.filesafe import deferred_signals
 __all__ = [
     "FAULT_VARIABLE",
     "HEADER",
+    "PHASES",
     "ROW",
     "ExchangeTiming",
     "MPIBackend",
@@ -90,8 +92,11 @@ ROW = 1 + sum(int(np.prod(shape)) for shape in _FIELD_SHAPES.values())
 #: the most drives of one evaluation (four perturbed runs and the trial)
 _MAX_DRIVES = 5
 _ERROR, _COMPLETE, _DRIVES, _NANOSECONDS = range(4)
+#: the phases of an evaluation a rank times (:attr:`Evaluation.timings`), after the drives
+PHASES = ("dem", "homogenization", "tangent")
+_PHASE_START = 4 + 3 * _MAX_DRIVES
 #: int64 a rank in the gathered header
-HEADER = 4 + 3 * _MAX_DRIVES
+HEADER = _PHASE_START + len(PHASES)
 _ERROR_TAG = 77
 
 
@@ -260,6 +265,8 @@ class _Shard:
                 header[_DRIVES] = len(ev.drives)
                 for k, cost in enumerate(ev.drives):
                     header[4 + 3 * k: 7 + 3 * k] = cost
+                for k, phase in enumerate(PHASES):
+                    header[_PHASE_START + k] = round(ev.timings.get(phase, 0.0) * 1e9)
         except Exception as exc:
             header[_ERROR] = 1
             error = _describe(exc)
@@ -289,6 +296,15 @@ class _Shard:
             return self.backend.committed_rves()
         mine = points[(points >= start) & (points < stop)] - start
         return self.backend.committed_rves(mine) if len(mine) else None
+
+
+def _critical_phases(headers: np.ndarray) -> dict[str, float]:
+    """Seconds [s] by phase of the evaluation's critical path: those of the rank that took
+    longest (the ranks work at once; rank 0 waits for the slowest), from the gathered
+    ``headers`` (size, HEADER)."""
+    slowest = int(np.argmax(headers[:, _NANOSECONDS]))
+    return {phase: float(headers[slowest, _PHASE_START + k]) * 1e-9
+            for k, phase in enumerate(PHASES)}
 
 
 #: the reasons a failure code stands for (code k > 0: _REASONS[k - 1])
@@ -613,7 +629,7 @@ class MPIBackend:
         self.timings.append(ExchangeTiming(time.perf_counter() - started,
                                            headers[:, _NANOSECONDS] * 1e-9))
         h, failed, reasons = _unpack(rows)
-        costs = headers[:, 4:].reshape(self.world.size, _MAX_DRIVES, 3)
+        costs = headers[:, 4:_PHASE_START].reshape(self.world.size, _MAX_DRIVES, 3)
         incomplete = headers[:, _COMPLETE] == 0
         # as one batch: an evaluation ends with the drive that blew up, whose cost is lost
         n_drives = int(headers[incomplete, _DRIVES].min() if incomplete.any()
@@ -627,7 +643,7 @@ class MPIBackend:
                                                              dtype=np.float64), np.nan)
                                for name in _FIELD_SHAPES})
         return Evaluation(h, failed, *totals, drives=drives, complete=not incomplete.any(),
-                          reasons=reasons)
+                          reasons=reasons, timings=_critical_phases(headers))
 
     def commit(self) -> None:
         """Every shard's state of the last evaluate becomes its committed state."""
