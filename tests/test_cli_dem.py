@@ -100,3 +100,22 @@ def test_outputs_go_into_new_folders(small_rve_path, tmp_path, capsys):
                "--out", str(out), "--device", "cpu"])
     assert rc == 0
     assert out.exists()
+
+
+def test_a_prepared_file_gives_a_run_the_rves_it_would_prepare(tmp_path, capsys):
+    """Prepare once, run many: ``prepare --batch B --seed S`` then ``--rve`` gives a FEM run
+    the RVEs it prepares itself from ``--seed S`` (one per Gauss point), bit for bit."""
+    rves = tmp_path / "rves.npz"
+    assert main(["prepare", "--particles", "24", "--batch", "4", "--seed", "3",
+                 "--out", str(rves), "--device", "cpu", "--no-progress"]) == 0
+    common = ["biaxial", "--elements", "1", "1", "--steps", "1", "--axial-strain", "0.002",
+              "--shards", "1", "--device", "cpu", "--no-progress"]
+    assert main([*common, "--particles", "24", "--seed", "3", "--out",
+                 str(tmp_path / "own")]) == 0
+    assert main([*common, "--rve", str(rves), "--out", str(tmp_path / "file")]) == 0
+    capsys.readouterr()
+    for table in ("steps.csv", "points.csv"):
+        own, file = (pd.read_csv(tmp_path / run / table).drop(columns="wall_time",
+                                                               errors="ignore")
+                     for run in ("own", "file"))
+        pd.testing.assert_frame_equal(own, file, check_exact=True)
