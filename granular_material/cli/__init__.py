@@ -13,6 +13,7 @@ taking the parsed arguments and returning the exit code).
 from __future__ import annotations
 
 import argparse
+import importlib
 import signal
 import sys
 import warnings
@@ -44,8 +45,11 @@ COMMAND_HELP: dict[str, str] = {
     "rve-size-study": "how many discs an RVE needs: pore spectra and biaxial tests by size",
     "validate-yade": "cross-validate the DEM against YADE (needs Debian's yade)",
 }
-_CORE = ("prepare", "biaxial-dem", "dem-drive", "single-element", "biaxial", "run",
-         "trade-study")
+#: the module of :mod:`granular_material.cli` that registers each core command
+_CORE_MODULES = {"prepare": "dem", "biaxial-dem": "dem", "dem-drive": "dem",
+                 "single-element": "fem", "biaxial": "fem", "run": "scene",
+                 "trade-study": "study"}
+_CORE = tuple(_CORE_MODULES)
 
 
 def __getattr__(name: str) -> Any:  # UsageError, imported only when asked for (it is heavy)
@@ -56,8 +60,10 @@ def __getattr__(name: str) -> Any:  # UsageError, imported only when asked for (
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
-def _register_plugins(subparsers: argparse._SubParsersAction) -> None:
-    for name in entry_point_names(COMMAND_GROUP):
+def _register_plugins(subparsers: argparse._SubParsersAction,
+                      names: list[str] | None = None) -> None:
+    """Register the plugin commands ``names`` (default: every one installed)."""
+    for name in entry_point_names(COMMAND_GROUP) if names is None else names:
         try:
             register = load_entry_point(COMMAND_GROUP, name, "command")
         except ImportError as exc:
@@ -105,16 +111,22 @@ def _names_a_command(argv: list[str]) -> bool:
     return bool(argv) and not argv[0].startswith("-")
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The full argument parser, plugin commands included."""
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The full argument parser, plugin commands included; with ``command`` (an installed
+    command's name) only that command's, so that running or asking for the help of one
+    command imports no other (the plugins' matplotlib and scipy.stats among them). An
+    unknown name gets the full parser, whose error lists the commands."""
     parser, subparsers = _top_parser()
-    from granular_material.cli import dem, fem, scene, study  # here: quiet_warp imports light
-
-    dem.register(subparsers)
-    fem.register(subparsers)
-    scene.register(subparsers)
-    study.register(subparsers)
-    _register_plugins(subparsers)
+    plugins = entry_point_names(COMMAND_GROUP)
+    if command in _CORE_MODULES:
+        modules, names = [_CORE_MODULES[command]], []
+    elif command in plugins:
+        modules, names = [], [command]
+    else:
+        modules, names = list(dict.fromkeys(_CORE_MODULES.values())), plugins
+    for module in modules:  # imported here: quiet_warp imports light
+        importlib.import_module(f"granular_material.cli.{module}").register(subparsers)
+    _register_plugins(subparsers, names)
     return parser
 
 
@@ -150,7 +162,7 @@ def main(argv: list[str] | None = None) -> int:
     from granular_material.cli.options import interrupt_exit_code, stop_signals_as_interrupt
 
     quiet_warp()  # keep stdout clean for --json
-    parser = build_parser()
+    parser = build_parser(argv[0])
     args = parser.parse_args(argv)
     with stop_signals_as_interrupt():  # the reports below too: a later signal is ignored
         try:
