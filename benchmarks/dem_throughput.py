@@ -54,15 +54,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from granular_material.provenance import code_commit
+
 REPO = Path(__file__).resolve().parents[1]
-
-
-def _commit(rev: str = "HEAD") -> str:
-    try:
-        return subprocess.run(["git", "rev-parse", "--short", rev], capture_output=True,
-                              text=True, check=True, cwd=REPO).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        return "unknown"
 
 
 def measure(rve: Path, n_rve: int, seconds: float, device: str | None, dtype: str,
@@ -382,14 +376,14 @@ def main(argv: list[str] | None = None) -> pd.DataFrame | None:
         table["ratio_to_yade_per_core"] = per_shard / table["yade_particle_steps_per_s"]
     else:
         table["ratio_to_yade"] = table["ratio_to_yade_per_core"] = math.nan
-    table["commit"] = _commit()
+    table["commit"] = code_commit()
     if args.baseline:
-        table["baseline_commit"] = _commit(args.baseline)
+        table["baseline_commit"] = code_commit(args.baseline)
         table["ratio_to_baseline"] = (table["particle_steps_per_s"]
                                       / table["baseline_particle_steps_per_s"])
     machine = _machine()
-    print(f"commit {_commit()}"
-          + (f" against {_commit(args.baseline)}" if args.baseline else "")
+    print(f"commit {code_commit()}"
+          + (f" against {code_commit(args.baseline)}" if args.baseline else "")
           + f" on {machine}, local damping {args.damping:g}"
           + "; medians of the cases' runs, one YADE core: "
           + (f"{yade:.3e} particle-steps/s" if yade else "not measured")
@@ -406,7 +400,7 @@ def main(argv: list[str] | None = None) -> pd.DataFrame | None:
         from granular_material.results import write_csv, write_json
 
         write_csv(table, args.out)
-        write_json({"commit": _commit(), "machine": machine, "damping": args.damping,
+        write_json({"commit": code_commit(), "machine": machine, "damping": args.damping,
                     "yade_particle_steps_per_s": yade, "lammps": lammps,
                     "rows": table.to_dict(orient="records")}, args.out.with_suffix(".json"))
     return table
@@ -499,8 +493,8 @@ def _physics(args: argparse.Namespace, rve: Path, tqdm) -> pd.DataFrame:
         if (row.batch, row.variant) in f64.index else math.nan
         for row in table.itertuples()
     ]
-    table["commit"] = _commit()
-    print(f"commit {_commit()}; frictionless, undamped, no servo; build_s: the module's build "
+    table["commit"] = code_commit()
+    print(f"commit {code_commit()}; frictionless, undamped, no servo; build_s: the module's build "
           "from an empty kernel cache (generic: the whole module, variants: two kernels); "
           "prepare_s: the first prepare (module load from the cache, records, graph)")
     print(table.to_string(index=False, float_format=lambda v: f"{v:.4g}"))

@@ -43,6 +43,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from granular_material.provenance import code_commit
+
 REPO = Path(__file__).resolve().parents[1]
 #: Gauss points of the message-size table and the estimate: Wu et al.'s specimen and a large one
 SIZES = (600, 8192)
@@ -56,14 +58,6 @@ GPU_RATE = 2.0e9
 #: drive_grad_u) took 20 ms with OpenBLAS's two threads on the busy 2-core machine, 0.45 ms
 #: with one, which would swamp the DEM work being compared
 BLAS_THREADS = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
-
-
-def _commit() -> str:
-    try:
-        return subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True,
-                              text=True, check=True, cwd=REPO).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        return "unknown"
 
 
 def _mpiexec() -> str | None:
@@ -292,7 +286,7 @@ def main(argv: list[str] | None = None) -> dict[str, pd.DataFrame] | None:
     messages = _messages()
     dem_steps = int(table["dem_steps"].iloc[0])
     estimate = _estimate(table, exchange, args.particles, dem_steps)
-    header = (f"commit {_commit()}, device {args.device}, {os.cpu_count()} cores; "
+    header = (f"commit {code_commit()}, device {args.device}, {os.cpu_count()} cores; "
               f"{args.points} RVEs of {args.particles} discs, {dem_steps} DEM steps an "
               f"evaluation; medians of {args.rounds} x {args.repeats} evaluations")
     fmt = lambda v: f"{v:.4g}"  # noqa: E731

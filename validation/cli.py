@@ -35,10 +35,11 @@ def run_validation(names: list[str], out: str | Path, device: str | None = None,
         chosen = [replace(c, seeds=tuple(seeds)) for c in chosen]
     entries = [cases.run_case(c, out, device=device) for c in chosen]
     import granular_material
+    from granular_material.provenance import code_commit
 
     context = {"YADE": f"{yade} ({yade_runner.yade_version()})",
-               "our engine": f"granular_material {granular_material.__version__} from "
-                             f"{Path(granular_material.__file__).parent}",
+               "our engine": f"granular_material {granular_material.__version__}, commit "
+                             f"{code_commit()}, from {Path(granular_material.__file__).parent}",
                "our device": device or "default (CUDA when present, else CPU)",
                "total wall time": f"{time.perf_counter() - start:.1f} s"}
     report.write_report(entries, out, context)

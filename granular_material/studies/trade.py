@@ -28,7 +28,6 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-import subprocess
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
@@ -42,6 +41,7 @@ from granular_material.dem import DEMBatch, RVEData, critical_timestep, load_rve
 from granular_material.procedures import biaxial_test, prepare_packing, progress_bar
 from granular_material.procedures.element_tests import biaxial_steps
 from granular_material.procedures.packing import DEFAULT_PRESSURE
+from granular_material.provenance import code_commit
 from granular_material.results import band_summary, write_csv
 from granular_material.results.compare import (
     ERROR_COLUMNS,
@@ -378,16 +378,6 @@ def _jiggled(data: RVEData, noise: float) -> RVEData:
                    extra={**data.extra, "fractional_position": frac})
 
 
-def _commit() -> str:
-    """The git commit of the code that runs (``unknown`` outside a checkout)."""
-    try:
-        done = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True,
-                              text=True, cwd=Path(__file__).parent, timeout=10)
-    except (OSError, subprocess.SubprocessError):
-        return "unknown"
-    return done.stdout.strip() or "unknown"
-
-
 # -- measuring -------------------------------------------------------------------------------
 def _errors(row: PlannedRow, curve: pd.DataFrame, reference: pd.DataFrame) -> dict[str, float]:
     """The row's errors: its curve against its reference's (see the module docstring)."""
@@ -570,7 +560,7 @@ def run_trade_study(scale: str | StudyScale, out: str | Path, device: str = "cpu
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     runner = _Runner(study, out, device)
-    commit = _commit()
+    commit = code_commit()
     planned = plan_runs(study)
     _drop_rows(out / "trade.csv", lambda t: (t["knob"] != "preset") & ~pd.Series(
         list(zip(t["knob"], t["value"], t["run"], strict=True)), index=t.index).isin(
