@@ -1,5 +1,5 @@
-"""The commit a report records: the package's checkout's, marked when it is not clean, and
-``unknown`` for a package that is no checkout's own files."""
+"""The commit a report records: the project's checkout's, marked when it is not clean, and
+``unknown`` for a package that no checkout of this project holds."""
 
 from __future__ import annotations
 
@@ -17,34 +17,45 @@ def _git(folder, *args):
 
 
 @pytest.fixture
-def checkout(tmp_path, monkeypatch):
-    """A git repository whose ``pkg/__init__.py`` is committed, as the package's folder."""
-    package = tmp_path / "repo" / "pkg"
+def checkout(tmp_path):
+    """A repository that tracks this project's ``granular_material/provenance.py``."""
+    package = tmp_path / "repo" / "granular_material"
     package.mkdir(parents=True)
-    (package / "__init__.py").write_text("x = 1\n")
+    (package / "provenance.py").write_text("x = 1\n")
     _git(package.parent, "init", "-q")
     _git(package.parent, "add", ".")
     _git(package.parent, "commit", "-q", "-m", "one")
-    monkeypatch.setattr(provenance, "_HERE", package)
     return package
 
 
-def test_a_clean_checkout_gives_its_commit(checkout):
+def test_a_clean_checkout_gives_its_commit(checkout, monkeypatch):
+    monkeypatch.setattr(provenance, "_HERE", checkout)
     assert provenance.code_commit() == _git(checkout, "rev-parse", "--short", "HEAD")
 
 
-def test_uncommitted_changes_are_marked(checkout):
-    (checkout / "__init__.py").write_text("x = 2\n")
+def test_uncommitted_changes_are_marked(checkout, monkeypatch):
+    monkeypatch.setattr(provenance, "_HERE", checkout)
+    (checkout / "provenance.py").write_text("x = 2\n")
     commit = _git(checkout, "rev-parse", "--short", "HEAD")
     assert provenance.code_commit() == f"{commit}+dirty"
     assert provenance.code_commit("HEAD~0") == commit  # another revision: no mark
 
 
-def test_untracked_package_or_no_repository_is_unknown(tmp_path, monkeypatch):
-    loose = tmp_path / "site-packages" / "pkg"
-    loose.mkdir(parents=True)
-    (loose / "__init__.py").write_text("")
-    monkeypatch.setattr(provenance, "_HERE", loose)
+def test_a_copy_installed_inside_the_checkout_gives_the_checkout(checkout, monkeypatch):
+    """As tox installs the package: built from the checkout, into a folder inside it."""
+    installed = checkout.parent / ".tox" / "site-packages" / "granular_material"
+    installed.mkdir(parents=True)
+    monkeypatch.setattr(provenance, "_HERE", installed)
+    assert provenance.code_commit() == _git(checkout, "rev-parse", "--short", "HEAD")
+
+
+def test_no_repository_or_another_projects_is_unknown(tmp_path, monkeypatch):
+    installed = tmp_path / "venv" / "site-packages" / "granular_material"
+    installed.mkdir(parents=True)
+    monkeypatch.setattr(provenance, "_HERE", installed)
     assert provenance.code_commit() == "unknown"  # no repository at all
-    _git(tmp_path, "init", "-q")  # a repository around it that does not track it
+    (tmp_path / "own.py").write_text("")
+    _git(tmp_path, "init", "-q")  # a user's repository with the environment inside it
+    _git(tmp_path, "add", "own.py")
+    _git(tmp_path, "commit", "-q", "-m", "theirs")
     assert provenance.code_commit() == "unknown"
