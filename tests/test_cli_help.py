@@ -58,3 +58,10 @@ def test_one_command_parser_is_that_of_the_full_parser():
     full = build_parser()
     for argv in (["biaxial", "--steps", "3", "--shards", "1"], ["prepare", "--batch", "2"]):
         assert vars(build_parser(argv[0]).parse_args(argv)) == vars(full.parse_args(argv))
+
+
+def test_run_gets_every_command_for_its_scenes():
+    """A scene names any command, so ``run`` is built with all of them."""
+    action = next(a for a in build_parser("run")._actions if a.dest == "command")
+    assert set(action.choices) == set(next(
+        a for a in build_parser()._actions if a.dest == "command").choices)

@@ -50,6 +50,8 @@ _CORE_MODULES = {"prepare": "dem", "biaxial-dem": "dem", "dem-drive": "dem",
                  "single-element": "fem", "biaxial": "fem", "run": "scene",
                  "trade-study": "study"}
 _CORE = tuple(_CORE_MODULES)
+#: commands that run the others (a scene names any command): built with the full parser
+_RUNS_OTHER_COMMANDS = frozenset({"run"})
 
 
 def __getattr__(name: str) -> Any:  # UsageError, imported only when asked for (it is heavy)
@@ -115,10 +117,10 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     """The full argument parser, plugin commands included; with ``command`` (an installed
     command's name) only that command's, so that running or asking for the help of one
     command imports no other (the plugins' matplotlib and scipy.stats among them). An
-    unknown name gets the full parser, whose error lists the commands."""
+    unknown name, and ``run`` (whose scenes name any command), get the full parser."""
     parser, subparsers = _top_parser()
     plugins = entry_point_names(COMMAND_GROUP)
-    if command in _CORE_MODULES:
+    if command in _CORE_MODULES and command not in _RUNS_OTHER_COMMANDS:
         modules, names = [_CORE_MODULES[command]], []
     elif command in plugins:
         modules, names = [], [command]
