@@ -13,7 +13,7 @@ import contextlib
 import time
 from collections.abc import Iterator, Mapping
 
-__all__ = ["RUN_PHASES", "PhaseTimes", "phase_table"]
+__all__ = ["MATERIAL_PHASES", "RUN_PHASES", "PhaseTimes", "phase_table"]
 
 
 class PhaseTimes:
@@ -67,8 +67,8 @@ RUN_PHASES: dict[str, str] = {
 }
 
 #: the phases a material reports inside its evaluations (timed by the Newton solver as
-#: ``material``)
-_MATERIAL_PHASES = ("dem", "homogenization", "tangent")
+#: ``material``), as the DEM material's backends time them
+MATERIAL_PHASES = ("dem", "homogenization", "tangent")
 
 
 def phase_table(seconds: Mapping[str, float], total: float) -> dict[str, float]:
@@ -77,7 +77,7 @@ def phase_table(seconds: Mapping[str, float], total: float) -> dict[str, float]:
     whole of the load steps' Newton work) are split into their parts and the other phases
     they hold; ``total`` [s] is the run's wall time, whose unaccounted rest is ``other``."""
     raw = dict(seconds)
-    inner = sum(raw.get(name, 0.0) for name in _MATERIAL_PHASES)
+    inner = sum(raw.get(name, 0.0) for name in MATERIAL_PHASES)
     material = raw.pop("material", inner)
     steps = raw.pop("steps", None)
     table = {name: raw.get(name, 0.0) for name in RUN_PHASES}

@@ -57,11 +57,11 @@ from granular_material_skfem.parameters import DEMMaterialParameters, in_process
 from granular_material.dem import Homogenized, RVEData, resolve_device, save_rve
 from granular_material.fem.material import FailureReason
 from granular_material.filesafe import deferred_signals
+from granular_material.timing import MATERIAL_PHASES
 
 __all__ = [
     "FAULT_VARIABLE",
     "HEADER",
-    "PHASES",
     "ROW",
     "ExchangeTiming",
     "MPIBackend",
@@ -92,11 +92,11 @@ ROW = 1 + sum(int(np.prod(shape)) for shape in _FIELD_SHAPES.values())
 #: the most drives of one evaluation (four perturbed runs and the trial)
 _MAX_DRIVES = 5
 _ERROR, _COMPLETE, _DRIVES, _NANOSECONDS = range(4)
-#: the phases of an evaluation a rank times (:attr:`Evaluation.timings`), after the drives
-PHASES = ("dem", "homogenization", "tangent")
+#: where a rank's seconds by phase (:data:`~granular_material.timing.MATERIAL_PHASES`, its
+#: :attr:`Evaluation.timings`) start in its header, after the drives
 _PHASE_START = 4 + 3 * _MAX_DRIVES
 #: int64 a rank in the gathered header
-HEADER = _PHASE_START + len(PHASES)
+HEADER = _PHASE_START + len(MATERIAL_PHASES)
 _ERROR_TAG = 77
 
 
@@ -265,7 +265,7 @@ class _Shard:
                 header[_DRIVES] = len(ev.drives)
                 for k, cost in enumerate(ev.drives):
                     header[4 + 3 * k: 7 + 3 * k] = cost
-                for k, phase in enumerate(PHASES):
+                for k, phase in enumerate(MATERIAL_PHASES):
                     header[_PHASE_START + k] = round(ev.timings.get(phase, 0.0) * 1e9)
         except Exception as exc:
             header[_ERROR] = 1
@@ -304,7 +304,7 @@ def _critical_phases(headers: np.ndarray) -> dict[str, float]:
     ``headers`` (size, HEADER)."""
     slowest = int(np.argmax(headers[:, _NANOSECONDS]))
     return {phase: float(headers[slowest, _PHASE_START + k]) * 1e-9
-            for k, phase in enumerate(PHASES)}
+            for k, phase in enumerate(MATERIAL_PHASES)}
 
 
 #: the reasons a failure code stands for (code k > 0: _REASONS[k - 1])
