@@ -248,6 +248,67 @@ def test_dem_material_returns_the_condensed_tangent(sheared: RVEData, tmp_path) 
         DEMMaterial(rve=path, device="cpu", tangent="condensd").allocate(1)
 
 
+def test_a_held_tangent_is_condensed_once_an_increment(sheared: RVEData, tmp_path,
+                                                       monkeypatch) -> None:
+    """``hold_tangent(True)``: the next evaluation condenses, the later ones (same or other
+    ∇u) return that tangent, plus the rotation of their own stress, without condensing
+    again; a revert or commit ends the hold. Under the Newton driver's ``tangent_update=
+    "hold"`` the material holds and the run is the same, with one condensation a step."""
+    from granular_material_skfem import DEMMaterial, backend
+
+    from granular_material.dem import save_rve
+    from granular_material.fem import (
+        BiaxialSetup,
+        NewtonSettings,
+        NewtonSolver,
+        build_biaxial,
+    )
+
+    path = tmp_path / "sheared.npz"
+    save_rve(path, sheared)
+    condensations = []
+    original = backend._with_condensed
+    monkeypatch.setattr(backend, "_with_condensed",
+                        lambda *a: condensations.append(1) or original(*a))
+    material = DEMMaterial(rve=path, device="cpu", replicate=True, tangent="condensed")
+    material.allocate(2)
+    first = np.array([[[1e-4, 0.0], [0.0, -1e-4]], [[0.0, 1e-4], [1e-4, 0.0]]])
+    material.hold_tangent(True)
+    held = material.evaluate(first)
+    later = material.evaluate(2 * first)
+    assert len(condensations) == 1
+    np.testing.assert_allclose(later.tangent - spin_tangent(later.stress),
+                               held.tangent - spin_tangent(held.stress), rtol=0, atol=1e-6)
+    assert not np.allclose(later.stress, held.stress)
+    material.revert()
+    fresh = material.evaluate(2 * first)
+    assert len(condensations) == 2
+    scale = np.abs(fresh.tangent).max()
+    assert np.abs(fresh.tangent - later.tangent).max() > 1e-6 * scale
+
+    class CondensingEveryTime(DEMMaterial):
+        hold_tangent = None  # the driver finds nothing to ask
+
+    def single_element(hold_in_material: bool):
+        kind = DEMMaterial if hold_in_material else CondensingEveryTime
+        mat = kind(rve=path, device="cpu", tangent="condensed")
+        problem = build_biaxial(BiaxialSetup(width=1.0, height=1.0, nx=1, ny=1,
+                                             confining=100e3, axial_strain=0.002))
+        settings = NewtonSettings(convergence="displacement", rtol=0.01,
+                                  predictor="extrapolate", tangent_update="hold")
+        solver = NewtonSolver(problem.basis, mat, problem.loading, settings)
+        condensations.clear()
+        records = solver.run(2)
+        return solver.u, records, len(condensations)
+
+    u_held, records_held, condensed_held = single_element(True)
+    u_every, records_every, condensed_every = single_element(False)
+    np.testing.assert_array_equal(u_held, u_every)
+    assert [r.iterations for r in records_held] == [r.iterations for r in records_every]
+    evaluations = sum(r.iterations for r in records_every)
+    assert condensed_every >= evaluations > condensed_held
+
+
 def test_prediction_benchmark_smoke(tmp_path) -> None:
     """benchmarks/condensed_tangent.py at smoke size: every state, protocol and direction
     of one seed, finite errors, and the costs."""

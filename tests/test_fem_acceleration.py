@@ -15,8 +15,10 @@ from granular_material.fem import (
     NewtonSettings,
     NewtonSolver,
     build_biaxial,
+    newton,
 )
 from granular_material.fem.acceleration import AitkenRelaxation, SecantTangent
+from granular_material.fem.forms import stiffness
 from granular_material.fem.linear_elastic import isotropic_tangent
 
 
@@ -146,3 +148,65 @@ def test_secant_tangent_learns_the_softened_band():
     reference.step(0.5, step=1)
     reference.step(1.0, step=2)
     np.testing.assert_allclose(tight.u, reference.u, atol=1e-4 * np.abs(reference.u).max())
+
+
+class DriftingTangent(BandSoftened):
+    """Linear elastic (C) whose reported tangent drifts with every evaluation since the last
+    commit or revert, (2 + k)·C at the k-th: a tangent that changes with the iterate, as the
+    condensed one does when contacts switch between sticking and sliding."""
+
+    def __init__(self, n_points: int):
+        super().__init__(np.zeros(n_points, dtype=bool), soft=1.0, hard=1.0)
+        self.evaluations = 0
+
+    def evaluate(self, grad_u):
+        response = super().evaluate(grad_u)
+        factor = 2.0 + self.evaluations
+        self.evaluations += 1
+        return MaterialResponse(response.stress, factor * np.asarray(response.tangent),
+                                response.status)
+
+    def commit(self):
+        super().commit()
+        self.evaluations = 0
+
+    def revert(self):
+        super().revert()
+        self.evaluations = 0
+
+
+def test_a_held_tangent_is_the_first_evaluations_for_every_correction(monkeypatch):
+    """``tangent_update="hold"``: every correction of an increment is solved with the
+    tangent of its first evaluation (modified Newton), so a tangent that drifts with the
+    iterate does not hold it back: 2C throughout halves the error every iteration, while
+    2C, 3C, 4C, ... shrinks it only as 1/k."""
+    # a confining pressure: the load a scaled tangent gets wrong (a prescribed displacement
+    # alone it would get right, whatever the scale)
+    problem = build_biaxial(BiaxialSetup(width=1.0, height=2.0, nx=1, ny=2, confining=1e5,
+                                         axial_strain=0.01))
+    n_points = problem.basis.nelems * problem.basis.X.shape[-1]
+    assembled = []  # the tangents the stiffness matrices are assembled from
+    monkeypatch.setattr(newton, "stiffness",
+                        lambda basis, tangent: assembled.append(tangent)
+                        or stiffness(basis, tangent))
+
+    def solver(material, tangent_update):
+        settings = NewtonSettings(rtol=1e-6, max_iterations=60, max_cutbacks=0,
+                                  tangent_update=tangent_update)
+        return NewtonSolver(problem.basis, material, problem.loading, settings)
+
+    held = solver(DriftingTangent(n_points), "hold")
+    record = held.step(1.0, step=1)
+    base = np.broadcast_to(2 * isotropic_tangent(20e6, 15e6), (n_points, 2, 2, 2, 2))
+    # the committed state's tangent (the predictor), then the corrections' (all the first's)
+    assert len(assembled) == record.iterations
+    for tangent in assembled:
+        np.testing.assert_allclose(tangent, base)
+    assert record.iterations <= 22  # 2**-20 ≈ 1e-6
+    exact = solver(BandSoftened(np.zeros(n_points, dtype=bool), soft=1.0, hard=1.0), "none")
+    exact.step(1.0, step=1)
+    np.testing.assert_allclose(held.u, exact.u, atol=1e-5 * np.abs(exact.u).max())
+    assembled.clear()
+    with pytest.raises(NewtonError, match="not converged in 60"):
+        solver(DriftingTangent(n_points), "none").step(1.0, step=1)
+    assert not np.allclose(assembled[-1], assembled[1])

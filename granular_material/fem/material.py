@@ -49,7 +49,12 @@ Semantics every implementation keeps:
 - ``commit()`` makes the state of the last ``evaluate`` the committed one;
 - ``revert()`` drops the trial state (the next ``evaluate`` starts from the committed one
   anyway, but a material that keeps its trial state in place restores it here);
-- ``checkpoint(path)`` / ``restore(path)`` write and read the committed state.
+- ``checkpoint(path)`` / ``restore(path)`` write and read the committed state;
+- optionally, ``hold_tangent(hold)``: the Newton driver's ``tangent_update="hold"`` calls
+  ``hold_tangent(True)`` before an increment's first evaluation and then uses that
+  evaluation's tangent alone, so a material whose tangent is costly (the DEM material's
+  condensed or perturbation tangent) may return it unchanged from the later evaluations,
+  until the next ``commit`` or ``revert``. A material without it is evaluated as always.
 
 Materials are found by name through the ``granular_material.materials`` entry-point group.
 """

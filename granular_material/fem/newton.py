@@ -56,7 +56,7 @@ PREDICTORS = ("tangent", "extrapolate")
 #: the relaxations of Newton corrections (NewtonSettings.relaxation)
 RELAXATIONS = ("none", "aitken")
 #: the updates of the points' tangents between evaluations (NewtonSettings.tangent_update)
-TANGENT_UPDATES = ("none", "secant")
+TANGENT_UPDATES = ("none", "secant", "hold")
 
 
 @dataclass(frozen=True)
@@ -86,7 +86,12 @@ class NewtonSettings:
         tangent_update: "none" (the material's tangent at every iterate) or "secant" (each
             point's tangent, started from the committed one, is corrected after every
             evaluation by a Broyden update from the stress change the material gave; see
-            :class:`~granular_material.fem.acceleration.SecantTangent`).
+            :class:`~granular_material.fem.acceleration.SecantTangent`) or "hold" (the
+            tangent of the increment's first evaluation is kept for all its corrections:
+            modified Newton. A tangent that switches with the iterate, such as the condensed
+            one whose contacts flip between sticking and sliding, can make full Newton cycle
+            between two iterates; a held tangent cannot switch. A material with a
+            ``hold_tangent`` method is told, so that it need not measure the later ones).
         secant_min_change: smallest norm of a point's change of ∇u [-] that updates its
             secant tangent. Smaller changes carry mostly DEM noise: on 64-disc RVEs past the
             peak, 1e-6 let the updates learn the noise and Newton stalled; 1e-4 (default)
@@ -442,6 +447,10 @@ class NewtonSolver:
         corrections: list[float] = []
         by_displacement = s.convergence == "displacement"
         secant = None
+        held = None
+        hold_tangent = getattr(self.material, "hold_tangent", None)
+        if s.tangent_update == "hold" and callable(hold_tangent):
+            hold_tangent(True)  # the material need not measure the later iterates' tangents
         if s.tangent_update == "secant":
             stress = self.response.stress
             secant = SecantTangent(np.zeros_like(stress), stress, self.response.tangent,
@@ -492,8 +501,13 @@ class NewtonSolver:
                                 corrections=corrections)
             if it == s.max_iterations:
                 break
-            tangent = (response.tangent if secant is None
-                       else secant.update(grad_u, response.stress))
+            if s.tangent_update == "hold":
+                if held is None:
+                    held = response.tangent
+                tangent = held
+            else:
+                tangent = (response.tangent if secant is None
+                           else secant.update(grad_u, response.stress))
             with times.phase("assembly"):
                 K = stiffness(self.basis, kin.assembled_tangent(tangent, response.stress,
                                                                 grad_n, grad_total))

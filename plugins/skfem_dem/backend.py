@@ -269,6 +269,9 @@ class InProcessBackend:
         self._reasons = np.full(b, "", dtype=object)
         #: the current evaluation's seconds by phase
         self._times = PhaseTimes()
+        #: hold_tangent: whether it is on, and the tangent held (before the stress's spin)
+        self._hold = False
+        self._held: np.ndarray | None = None
 
     @property
     def n_rve(self) -> int:
@@ -350,6 +353,15 @@ class InProcessBackend:
                 return self._current
             return self._current.with_rves(moved, self.batch.homogenize(moved))
 
+    def hold_tangent(self, hold: bool) -> None:
+        """``hold``: the next evaluation measures the tangent and the later ones, up to the
+        next commit or revert, return that one instead of measuring it again: no condensation
+        (``condensed``) and no four perturbed drives (``perturbation``), for a Newton driver
+        that keeps the first tangent of an increment anyway. The other tangents cost
+        nothing extra and are measured as always."""
+        self._hold = bool(hold)
+        self._held = None
+
     def evaluate(self, grad_u: np.ndarray) -> Evaluation:
         """Respond to ∇u [-] (B, 2, 2) since the commit: the RVEs that moved are driven to
         it, the others reused (see the class docstring); homogenised results."""
@@ -366,7 +378,8 @@ class InProcessBackend:
         drives: list[tuple[int, int, int]] = []  # DEM steps, RVE paths, particle-steps
         perturbed: list[np.ndarray] = []
         cost: tuple[int, int, int] | None = (0, 0, 0)
-        if self.tangent == "perturbation" and moving.any():
+        held = self._held if self._hold else None
+        if self.tangent == "perturbation" and moving.any() and held is None:
             size = np.maximum(self.perturbation * np.abs(target).max(axis=(1, 2)),
                               self.min_perturbation)
             for row, col in _COMPONENTS:
@@ -402,9 +415,13 @@ class InProcessBackend:
                 tangent[moved, :, :, row, col] = ((sigma[moved] - stress[moved])
                                                   / size[moved, None, None])
             new = replace(new, tangent=tangent)
-        if self.tangent == "condensed" and moved.any():
+        if self.tangent == "condensed" and moved.any() and held is None:
             with self._times.phase("tangent"):
                 new = _with_condensed(self.batch, new, moved)
+        if held is not None:
+            new = replace(new, tangent=held)
+        elif self._hold and self.tangent in ("condensed", "perturbation"):
+            self._held = np.array(new.tangent, dtype=np.float64, copy=True)
         self._reached[moved] = target[moved]
         self._current = new
         self._target = target
@@ -449,11 +466,13 @@ class InProcessBackend:
         self._target[:] = 0.0
         self._committed_response = self._current
         self._trial = False
+        self.hold_tangent(False)
 
     def revert(self) -> None:
         """Restore the committed state on the device."""
         self._back_to_committed()
         self._trial = False
+        self.hold_tangent(False)
 
     def committed_rves(self, rves: np.ndarray | None = None) -> RVEData:
         """The committed RVE states (contact history included), of all RVEs or of the

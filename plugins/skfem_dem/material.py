@@ -481,6 +481,16 @@ class DEMMaterial(ScikitFemInterface):
                 "boundary of the specimen (see docs/guide/scikit-fem.md)",
                 UnconfinedWarning, stacklevel=_user_stacklevel())
 
+    def hold_tangent(self, hold: bool) -> None:
+        """``hold``: the next evaluation's tangent is returned by the later ones too, up to
+        the next commit or revert, without measuring it again (the condensed and
+        perturbation tangents cost a condensation or four DEM drives each time). Asked by
+        the Newton driver's ``tangent_update="hold"``, which uses that tangent alone. The
+        MPI backend measures it every time."""
+        hold_tangent = getattr(self._allocated(), "hold_tangent", None)
+        if hold_tangent is not None:
+            hold_tangent(hold)
+
     def commit(self) -> None:
         """The RVE states of the last evaluation become the committed states (and its total
         ∇u :attr:`committed_grad_u`)."""
