@@ -66,8 +66,12 @@ def _newton_arguments(parser: argparse.ArgumentParser) -> None:
                         "DEM noise (default 0.005 x confining for dem, 0 for linear-elastic)")
     g.add_argument("--stall-rtol", type=float, default=None,
                    help="accept an iterate with ||R||/||R0|| below this once the residual has "
-                        "stopped falling for 8 iterations (DEM stress noise; default 2 x rtol "
-                        "for dem, off for linear-elastic; 0: off)")
+                        "stopped falling for --stall-window iterations (DEM stress noise; "
+                        "default 2 x rtol for dem, off for linear-elastic; 0: off)")
+    g.add_argument("--stall-window", type=int, default=_NEWTON.stall_window,
+                   help="iterations without a 10 %% drop of the smallest residual (or "
+                        "correction) that make a stall, for --stall-rtol and "
+                        f"--accept-correction (default {_NEWTON.stall_window})")
     g.add_argument("--max-iterations", type=int, default=_NEWTON.max_iterations,
                    help="iterations per increment before it is halved "
                         f"(default {_NEWTON.max_iterations})")
@@ -104,7 +108,10 @@ def _newton_arguments(parser: argparse.ArgumentParser) -> None:
                    help=f"none: the material's tangent at every iterate (default "
                         f"{_NEWTON.tangent_update}); secant: "
                         "each point's tangent corrected by Broyden updates from the stress "
-                        "change its RVE gave (use with --relaxation none)")
+                        "change its RVE gave (use with --relaxation none); hold: the "
+                        "tangent of the increment's first evaluation kept for all its "
+                        "corrections (modified Newton: a tangent that switches with the "
+                        "iterate cannot make it cycle)")
     g.add_argument("--secant-min-change", type=float, default=_NEWTON.secant_min_change,
                    help="--tangent-update secant: smallest change of a point's grad u that "
                         f"updates its tangent (default {_NEWTON.secant_min_change:g}; smaller "

@@ -167,14 +167,16 @@ class NewtonSpec:
             material, else 0 (off).
         accept_correction: accept a stalled increment once ‖δu‖/‖Δu‖ is at most this [-];
             None: 1e-2 for a noisy material, else 0 (off).
-        max_iterations, max_cutbacks, convergence, predictor, formulation, relaxation,
-        tangent_update, secant_min_change: as :class:`~granular_material.fem.NewtonSettings`.
+        stall_window, max_iterations, max_cutbacks, convergence, predictor, formulation,
+        relaxation, tangent_update, secant_min_change: as
+        :class:`~granular_material.fem.NewtonSettings`.
     """
 
     rtol: float = _newton_default("rtol")
     stress_tol: float | None = None
     stall_rtol: float | None = None
     accept_correction: float | None = None
+    stall_window: int = _newton_default("stall_window")
     max_iterations: int = _newton_default("max_iterations")
     max_cutbacks: int = _newton_default("max_cutbacks")
     convergence: str = _newton_default("convergence")
