@@ -57,6 +57,8 @@ def _elastic(**problem) -> RunSpec:
     (lambda: ProblemSpec(test="biaxial", quadrature=11), "quadrature"),
     (lambda: NewtonSpec(formulation="total-lagrangian"), "formulation"),
     (lambda: NewtonSpec(accept_correction=2.0), "accept_correction"),
+    (lambda: NewtonSpec(stall_window=1), "stall_window"),
+    (lambda: NewtonSpec(tangent_update="freeze"), "tangent_update"),
     (lambda: NewtonSpec(stress_tol=-1.0), "stress_tol"),
     (lambda: OutputSpec(every=0), "every"),
     (lambda: MaterialSpec(name="dem", parameters={"tangent": "secant"}), "tangent"),
