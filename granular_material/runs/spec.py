@@ -169,7 +169,7 @@ class NewtonSpec:
             None: 1e-2 for a noisy material, else 0 (off).
         stall_window, max_iterations, max_cutbacks, convergence, predictor, formulation,
         relaxation, tangent_update, secant_min_change: as
-        :class:`~granular_material.fem.NewtonSettings`.
+            :class:`~granular_material.fem.NewtonSettings`.
     """
 
     rtol: float = _newton_default("rtol")
