@@ -378,7 +378,7 @@ class InProcessBackend:
         drives: list[tuple[int, int, int]] = []  # DEM steps, RVE paths, particle-steps
         perturbed: list[np.ndarray] = []
         cost: tuple[int, int, int] | None = (0, 0, 0)
-        held = self._held if self._hold else None
+        held = self._held  # None unless a hold is on and its first tangent is measured
         if self.tangent == "perturbation" and moving.any() and held is None:
             size = np.maximum(self.perturbation * np.abs(target).max(axis=(1, 2)),
                               self.min_perturbation)
