@@ -278,3 +278,70 @@ def test_rank_0_failing_stops_the_workers(rve_files, tmp_path):
                **{FAULT_VARIABLE: "0:2"})
     assert run.returncode == 1, run.stderr
     assert "MPI rank 0 failed in evaluate: RuntimeError: fault injected" in run.stderr
+
+
+#: run under mpiexec: every rank counts its condensations while rank 0 holds the tangent for
+#: two evaluations, commits, and evaluates once more; each rank writes its count to argv[2]
+_HOLD_SCRIPT = """
+import sys
+from pathlib import Path
+
+import numpy as np
+import granular_material_skfem.backend as backend
+from granular_material_skfem.mpi import MPIBackend, launch
+from granular_material_skfem.parameters import DEMMaterialParameters
+from granular_material.dem import load_rve
+
+condensations = 0
+condense = backend._with_condensed
+
+
+def counting(*args, **kwargs):
+    global condensations
+    condensations += 1
+    return condense(*args, **kwargs)
+
+
+backend._with_condensed = counting
+
+
+def main():
+    data = load_rve(sys.argv[1])
+    rves = MPIBackend(data, DEMMaterialParameters(tangent="condensed", device="cpu",
+                                                  shards=1, backend="mpi"))
+    grad_u = np.tile(np.array([[0.0, 1e-4], [0.0, -2e-4]]), (data.n_rve, 1, 1))
+    rves.hold_tangent(True)
+    first = rves.evaluate(grad_u)
+    second = rves.evaluate(1.5 * grad_u)  # the held tangent, with the new stress's spin
+    rves.commit()  # ends the hold: the next evaluation condenses
+    rves.evaluate(grad_u)
+
+    def without_spin(ev):
+        s = np.asarray(ev.homogenized.stress)
+        spin = backend.spin_tangent(0.5 * (s + s.transpose(0, 2, 1)))
+        return np.asarray(ev.homogenized.tangent) - spin
+
+    assert np.array_equal(without_spin(first), without_spin(second)), "the tangent changed"
+    return 0
+
+
+code = launch(main)
+from mpi4py import MPI
+Path(sys.argv[2], f"rank{MPI.COMM_WORLD.rank}").write_text(str(condensations))
+sys.exit(code)
+"""
+
+
+@needs_mpi
+def test_a_held_tangent_is_condensed_once_an_increment_on_every_rank(rve_files, tmp_path):
+    """``hold_tangent`` reaches every rank: with it on, a rank condenses its RVEs at the
+    first evaluation only and returns that tangent for the second; after a commit it
+    condenses again. Two condensations a rank for three evaluations."""
+    script = tmp_path / "hold.py"
+    script.write_text(_HOLD_SCRIPT)
+    command = [MPIEXEC, "-n", "2", sys.executable, str(script), str(rve_files[4]),
+               str(tmp_path)]
+    run = subprocess.run(command, capture_output=True, text=True, env=_environment(),
+                         timeout=TIMEOUT)
+    assert run.returncode == 0, run.stderr
+    assert [(tmp_path / f"rank{r}").read_text() for r in (0, 1)] == ["2", "2"]

@@ -25,7 +25,8 @@ rows      Gatherv    ``ROW`` float64 a point: failure code (0: OK, else 1 + the 
                      force, contacts, sliding fraction, volume)
 ========  =========  =====================================================================
 
-Commit and revert are per rank, answered by an error flag each; set-up, checkpoints and the
+Commit, revert and a held tangent (the Newton driver's ``tangent_update="hold"``: a flag
+broadcast, pickled) are per rank, answered by an error flag each; set-up, checkpoints and the
 RVEs of tracked points (rare) travel as pickled RVE data. A checkpoint is one RVE file written
 by rank 0 (the same file as in process), so a run resumes on any number of ranks or in
 process.
@@ -108,6 +109,7 @@ class _Command(enum.IntEnum):
     REVERT = 4
     CHECKPOINT = 5
     COMMITTED = 6
+    HOLD = 7
 
 
 class MPIRankError(RuntimeError):
@@ -282,6 +284,15 @@ class _Shard:
             return _describe(exc)
         return None
 
+    def hold(self, hold: bool) -> str | None:
+        """``hold_tangent(hold)`` of this rank's RVEs; the error, if any."""
+        try:
+            if self.backend is not None:
+                self.backend.hold_tangent(hold)
+        except Exception as exc:
+            return _describe(exc)
+        return None
+
     def checkpoint_data(self) -> RVEData | None:
         """This rank's committed RVEs with the backend's arrays, or None if it holds none."""
         return None if self.backend is None else self.backend.checkpoint_data()
@@ -424,6 +435,12 @@ def _exchange_call(what: str) -> Callable[..., _Outcome]:
     return exchange
 
 
+def _exchange_hold(world: _World, shard: _Shard, hold: bool | None = None) -> _Outcome:
+    """Rank 0's ``hold`` broadcast, every rank's shard told; rank 0 gets the errors."""
+    hold = world.comm.bcast(hold, root=0)
+    return None, _report(world, shard.hold(bool(hold)))
+
+
 def _gather_data(world: _World, produce: Callable[[], RVEData | None]) -> _Outcome:
     """Every rank's ``produce()`` gathered to rank 0, in rank order, with the errors."""
     try:
@@ -455,6 +472,7 @@ _EXCHANGES: dict[_Command, Callable[..., _Outcome]] = {
     _Command.REVERT: _exchange_call("revert"),
     _Command.CHECKPOINT: _exchange_checkpoint,
     _Command.COMMITTED: _exchange_committed,
+    _Command.HOLD: _exchange_hold,
 }
 
 _SHARD: _Shard | None = None
@@ -652,6 +670,12 @@ class MPIBackend:
     def revert(self) -> None:
         """Every shard back to its committed state."""
         self._run(_Command.REVERT, None, "revert")
+
+    def hold_tangent(self, hold: bool) -> None:
+        """Every shard holds its next evaluation's tangent (``hold``) or stops holding it,
+        as :meth:`InProcessBackend.hold_tangent`: one condensation (or one set of perturbed
+        drives) an increment on every rank."""
+        self._run(_Command.HOLD, bool(hold), "hold")
 
     def committed_rves(self, rves: np.ndarray | None = None) -> RVEData:
         """The committed RVE states of all points, or of the indices ``rves`` in their
