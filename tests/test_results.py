@@ -38,9 +38,15 @@ def test_summarize_biaxial_takes_the_first_largest_ratio():
 def test_default_settings_are_the_commands_and_depend_on_the_material_by_name():
     dem, elastic = default_settings("dem"), default_settings("linear-elastic")
     for s in (dem, elastic):  # Guo & Zhao's loop in finite strain, our predictor
-        assert (s.predictor, s.relaxation) == ("extrapolate", "none")
+        assert s.predictor == "extrapolate"
         assert (s.convergence, s.rtol, s.max_iterations) == ("displacement", 0.01, 100)
         assert s.formulation == "updated-lagrangian"
+    # a noisy material's increments hold their first tangent and are Aitken-relaxed; a
+    # smooth one keeps full Newton; either can be asked for the other's
+    assert (dem.relaxation, dem.tangent_update) == ("aitken", "hold")
+    assert (elastic.relaxation, elastic.tangent_update) == ("none", "none")
+    plain = default_settings("dem", relaxation="none", tangent_update="none")
+    assert (plain.relaxation, plain.tangent_update) == ("none", "none")
     assert dem.accept_correction == 0.01 and elastic.accept_correction == 0.0
     assert dem.stall_rtol == 2 * dem.rtol and elastic.stall_rtol == 0.0
     assert default_settings("dem", rtol=0.01).stall_rtol == 0.02

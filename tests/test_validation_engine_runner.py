@@ -77,3 +77,19 @@ def test_the_femxdem_variants_are_run_specs() -> None:
         from_flat({"material": "dem", "test": "biaxial", **fields})
     assert set(femxdem_case.ours_variants((1, 2))) == {
         "ours-defaults", "ours-as-gz", "ours-q9", "ours-small-strain", "ours-fine"}
+
+
+def test_a_cached_femxdem_run_is_keyed_by_the_defaults_it_ran_under(monkeypatch):
+    """A run folder's ``run.json`` is read back only for the run the same options make
+    today: the key holds every spec field with its default and the Newton settings the DEM
+    material gets, so a change of the commands' defaults reruns it."""
+    from granular_material.fem import defaults
+
+    flat = {"test": "biaxial", "rve": "rve.npz", "elements": [2, 4], "steps": 30,
+            "axial_strain": 0.03, "out": "run", "element": "quad8"}
+    today = engine_runner._resolved(flat)
+    assert today["tangent"] == "condensed"
+    assert today["newton_settings"]["relaxation"] == "aitken"
+    monkeypatch.setattr(defaults, "NOISY_DEFAULTS", {})
+    assert engine_runner._resolved(flat) != today
+    assert engine_runner._resolved(flat)["newton_settings"]["relaxation"] == "none"

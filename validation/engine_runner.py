@@ -27,6 +27,7 @@ import contextlib
 import json
 import time
 from collections.abc import Iterator
+from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
@@ -239,6 +240,18 @@ def ours_drive(rve: str | Path, out_csv: str | Path, grad_u: list[float], increm
     return _rve_zero(out_csv), result
 
 
+def _resolved(flat: dict[str, Any]) -> dict[str, Any]:
+    """The run the flat spec fields ``flat`` make today: every field of the spec with its
+    default filled in and the Newton settings the DEM material gets, so that a cached run
+    made under other defaults is not taken for it."""
+    from granular_material.runs import from_flat
+    from granular_material.runs.serial import to_flat
+
+    spec = from_flat({"material": "dem", **flat})
+    settings = json.loads(json.dumps(asdict(spec.newton.settings(noisy=True)), default=str))
+    return {**to_flat(spec), "newton_settings": settings}
+
+
 def _fem_run(flat: dict[str, Any]) -> dict[str, Any]:
     """The FEM × DEM run of the flat spec fields ``flat`` in this process
     (:func:`granular_material.runs.run`); its summary as ``--json`` prints it, plus
@@ -313,11 +326,12 @@ def ours_femxdem_biaxial(rve: str | Path, out_dir: str | Path,
             **(extra or {})}
     done = out_dir / "run.json"
     cached = json.loads(done.read_text()) if done.is_file() else {}
-    if cached.get("spec") == flat:
+    key = _resolved(flat)
+    if cached.get("spec") == key:
         result = cached["result"]
     else:
         result = _fem_run(flat)
-        done.write_text(json.dumps({"spec": flat, "result": result}, indent=1))
+        done.write_text(json.dumps({"spec": key, "result": result}, indent=1))
     curve = pd.read_csv(out_dir / "steps.csv").drop(columns=["residual_history"],
                                                     errors="ignore")
     return curve, pd.read_csv(out_dir / "points.csv"), result

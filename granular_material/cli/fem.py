@@ -91,27 +91,28 @@ def _newton_arguments(parser: argparse.ArgumentParser) -> None:
                         "correction ||du||/||Du|| is at most this (Guo & Zhao's test; default "
                         "1e-2 for dem, off for linear-elastic; 0: off)")
     g.add_argument("--tangent", choices=TANGENTS, default=_DEM.tangent,
-                   help="dem: tangent of the RVEs: objective (Kruyt-Rothenburg on sym grad u "
-                        "plus the stress's spin, symmetric: a rigid rotation costs nothing; "
-                        "default), kruyt-rothenburg (Wu et al. eq. 6 as published), forward "
+                   help="dem: tangent of the RVEs: condensed (the contact network's stiffness "
+                        "with the discs' fluctuations condensed out, plus the stress's spin; "
+                        "no DEM run; default), objective (Kruyt-Rothenburg on sym grad u "
+                        "plus the stress's spin, symmetric: a rigid rotation costs nothing), "
+                        "kruyt-rothenburg (Wu et al. eq. 6 as published) or forward "
                         "differences of each RVE's response (perturbation: 4 more DEM runs per "
-                        "iteration) or condensed (the contact network's stiffness with the "
-                        "discs' fluctuations condensed out, plus the stress's spin; no DEM run)")
+                        "iteration)")
     g.add_argument("--perturbation", type=float, default=_DEM.perturbation,
                    help="dem, --tangent perturbation: perturbation of grad u relative to its "
                         "largest component (default 0.1)")
-    g.add_argument("--relaxation", choices=RELAXATIONS, default=_NEWTON.relaxation,
-                   help=f"relaxation of Newton corrections (default {_NEWTON.relaxation}: the "
-                        "DEM tangent leaves out the discs' rearrangement and is too stiff)")
-    g.add_argument("--tangent-update", choices=TANGENT_UPDATES,
-                   default=_NEWTON.tangent_update,
-                   help=f"none: the material's tangent at every iterate (default "
-                        f"{_NEWTON.tangent_update}); secant: "
+    g.add_argument("--relaxation", choices=RELAXATIONS, default=None,
+                   help="relaxation of Newton corrections (default aitken for dem: it damps "
+                        "the DEM noise a soft tangent turns into displacement; none for "
+                        "linear-elastic)")
+    g.add_argument("--tangent-update", choices=TANGENT_UPDATES, default=None,
+                   help="none: the material's tangent at every iterate (default for "
+                        "linear-elastic); secant: "
                         "each point's tangent corrected by Broyden updates from the stress "
                         "change its RVE gave (use with --relaxation none); hold: the "
                         "tangent of the increment's first evaluation kept for all its "
                         "corrections (modified Newton: a tangent that switches with the "
-                        "iterate cannot make it cycle)")
+                        "iterate cannot make it cycle; default for dem)")
     g.add_argument("--secant-min-change", type=float, default=_NEWTON.secant_min_change,
                    help="--tangent-update secant: smallest change of a point's grad u that "
                         f"updates its tangent (default {_NEWTON.secant_min_change:g}; smaller "

@@ -167,9 +167,11 @@ class NewtonSpec:
             material, else 0 (off).
         accept_correction: accept a stalled increment once ‖δu‖/‖Δu‖ is at most this [-];
             None: 1e-2 for a noisy material, else 0 (off).
+        relaxation: "none" or "aitken"; None: aitken for a noisy material, else none.
+        tangent_update: "none", "secant" or "hold"; None: hold for a noisy material, else
+            none.
         stall_window, max_iterations, max_cutbacks, convergence, predictor, formulation,
-        relaxation, tangent_update, secant_min_change: as
-            :class:`~granular_material.fem.NewtonSettings`.
+        secant_min_change: as :class:`~granular_material.fem.NewtonSettings`.
     """
 
     rtol: float = _newton_default("rtol")
@@ -182,8 +184,8 @@ class NewtonSpec:
     convergence: str = _newton_default("convergence")
     predictor: str = _newton_default("predictor")
     formulation: str = _newton_default("formulation")
-    relaxation: str = _newton_default("relaxation")
-    tangent_update: str = _newton_default("tangent_update")
+    relaxation: str | None = None
+    tangent_update: str | None = None
     secant_min_change: float = _newton_default("secant_min_change")
 
     def __post_init__(self) -> None:

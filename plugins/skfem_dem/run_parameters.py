@@ -53,7 +53,8 @@ class DEMParameters:
         isotropic: relax every RVE to the isotropic stress −confining I before the first
             load step (:meth:`DEMMaterial.make_isotropic`; a packing consolidated by a normal
             servo keeps some shear stress).
-        tangent: objective, kruyt-rothenburg, perturbation or condensed.
+        tangent: condensed (default: the contact network's stiffness with the discs'
+            rearrangement condensed out), objective, kruyt-rothenburg or perturbation.
         perturbation: relative perturbation of ∇u of the perturbation tangent [-].
         reuse_tol: strain under which a point keeps its last response [-]; 0: never.
         reuse_correction: none or tangent (a reused response corrected to first order).
@@ -77,7 +78,7 @@ class DEMParameters:
     independent: bool = False
     compare_dem: bool = False
     isotropic: bool = False
-    tangent: str = "objective"
+    tangent: str = "condensed"
     perturbation: float = 0.1
     reuse_tol: float = 0.0
     reuse_correction: str = "none"
