@@ -47,6 +47,10 @@ def test_default_settings_are_the_commands_and_depend_on_the_material_by_name():
     assert (elastic.relaxation, elastic.tangent_update) == ("none", "none")
     plain = default_settings("dem", relaxation="none", tangent_update="none")
     assert (plain.relaxation, plain.tangent_update) == ("none", "none")
+    # Broyden updates come without Aitken (the two fight) unless it is asked for
+    assert default_settings("dem", tangent_update="secant").relaxation == "none"
+    assert default_settings("dem", tangent_update="secant",
+                            relaxation="aitken").relaxation == "aitken"
     assert dem.accept_correction == 0.01 and elastic.accept_correction == 0.0
     assert dem.stall_rtol == 2 * dem.rtol and elastic.stall_rtol == 0.0
     assert default_settings("dem", rtol=0.01).stall_rtol == 0.02

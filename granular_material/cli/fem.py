@@ -109,7 +109,8 @@ def _newton_arguments(parser: argparse.ArgumentParser) -> None:
                    help="none: the material's tangent at every iterate (default for "
                         "linear-elastic); secant: "
                         "each point's tangent corrected by Broyden updates from the stress "
-                        "change its RVE gave (use with --relaxation none); hold: the "
+                        "change its RVE gave (without relaxation unless --relaxation is "
+                        "given: Aitken and the updates fight); hold: the "
                         "tangent of the increment's first evaluation kept for all its "
                         "corrections (modified Newton: a tangent that switches with the "
                         "iterate cannot make it cycle; default for dem)")

@@ -59,14 +59,16 @@ def default_settings(material: str | bool, **overrides: Any) -> NewtonSettings:
 
     ``overrides`` are NewtonSettings fields; one given as None takes its default. A noisy
     (DEM) material gets :data:`NOISY_DEFAULTS` (Aitken relaxation, the tangent held over an
-    increment); the stall tolerance defaults to 2 × rtol for it and to 0 (off) otherwise; so
-    does the acceptance of a stalled residual on a small correction
-    (:data:`NOISY_ACCEPT_CORRECTION`).
+    increment; no relaxation with secant updates unless one is asked for); the stall
+    tolerance defaults to 2 × rtol for it and to 0 (off) otherwise; so does the acceptance
+    of a stalled residual on a small correction (:data:`NOISY_ACCEPT_CORRECTION`).
     """
     noisy = is_noisy(material)
     values = dict(COMMAND_DEFAULTS)
     if noisy:
         values.update(NOISY_DEFAULTS)
+        if overrides.get("tangent_update") == "secant" and overrides.get("relaxation") is None:
+            values["relaxation"] = "none"  # Broyden updates and Aitken fight (docs/physics.md)
     values.update({k: v for k, v in overrides.items() if v is not None})
     if "stall_rtol" not in values:
         rtol = values.get("rtol", NewtonSettings.rtol)

@@ -167,7 +167,8 @@ class NewtonSpec:
             material, else 0 (off).
         accept_correction: accept a stalled increment once ‖δu‖/‖Δu‖ is at most this [-];
             None: 1e-2 for a noisy material, else 0 (off).
-        relaxation: "none" or "aitken"; None: aitken for a noisy material, else none.
+        relaxation: "none" or "aitken"; None: aitken for a noisy material (none with
+            secant updates), else none.
         tangent_update: "none", "secant" or "hold"; None: hold for a noisy material, else
             none.
         stall_window, max_iterations, max_cutbacks, convergence, predictor, formulation,
