@@ -129,7 +129,7 @@ SHAPES: dict[str, Callable[[np.ndarray], np.ndarray]] = {
     "add a column": lambda a: np.concatenate([a, a[..., :1]], axis=-1) if a.ndim else a,
     "drop a disc": lambda a: a[:, :-1] if a.ndim > 1 else a,
     "flatten": lambda a: a.reshape(-1),
-    "drop the batch axis": lambda a: a[0] if a.ndim else a,
+    "drop the batch axis": lambda a: a[0] if a.ndim and len(a) else a,  # an emptied one stays
     "add a batch": lambda a: np.concatenate([a, a]) if a.ndim else a,
     "scalar": lambda a: np.asarray(a.reshape(-1)[0]) if a.size else np.asarray(0.0),
     "empty": lambda a: a[:0],
