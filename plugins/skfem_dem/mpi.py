@@ -275,20 +275,12 @@ class _Shard:
         header[_NANOSECONDS] = time.perf_counter_ns() - started
         return header, rows, error
 
-    def call(self, what: str) -> str | None:
-        """``commit`` or ``revert`` of this rank's RVEs; the error, if any."""
+    def call(self, what: str, *args: Any) -> str | None:
+        """``commit``, ``revert`` or ``hold_tangent(*args)`` of this rank's RVEs; the error,
+        if any."""
         try:
             if self.backend is not None:
-                getattr(self.backend, what)()
-        except Exception as exc:
-            return _describe(exc)
-        return None
-
-    def hold(self, hold: bool) -> str | None:
-        """``hold_tangent(hold)`` of this rank's RVEs; the error, if any."""
-        try:
-            if self.backend is not None:
-                self.backend.hold_tangent(hold)
+                getattr(self.backend, what)(*args)
         except Exception as exc:
             return _describe(exc)
         return None
@@ -438,7 +430,7 @@ def _exchange_call(what: str) -> Callable[..., _Outcome]:
 def _exchange_hold(world: _World, shard: _Shard, hold: bool | None = None) -> _Outcome:
     """Rank 0's ``hold`` broadcast, every rank's shard told; rank 0 gets the errors."""
     hold = world.comm.bcast(hold, root=0)
-    return None, _report(world, shard.hold(bool(hold)))
+    return None, _report(world, shard.call("hold_tangent", bool(hold)))
 
 
 def _gather_data(world: _World, produce: Callable[[], RVEData | None]) -> _Outcome:
