@@ -155,6 +155,10 @@ def test_resume_compares_the_saved_spec_field_by_field(tmp_path, capsys):
     assert main([*argv[:-1], "--E", "70e6", "--resume", str(out)]) == 2
     err = capsys.readouterr().err
     assert "--E 70000000.0 (the run had 60000000.0)" in err
+    # an option left to the material's default is named as such, not as None
+    assert main([*argv, "--relaxation", "aitken", "--resume", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "--relaxation 'aitken' (the run did not give it)" in err
     assert main([*argv, "--resume", str(out)]) == 0
 
 

@@ -53,8 +53,14 @@ def spec_differences(given: RunSpec, saved: RunSpec) -> list[str]:
     """The fields (as ``--options``) of ``given`` that differ from ``saved``, but for those
     a resume may change (:data:`RESUME_FREE`)."""
     now, then = _compared(given), _compared(saved)
-    return [f"--{k.replace('_', '-')} {now.get(k)!r} (the run had {then.get(k)!r})"
-            for k in sorted(set(now) | set(then))
+
+    def difference(name: str, value: Any, before: Any) -> str:
+        # None: left to the material's default
+        given = "not given" if value is None else repr(value)
+        had = "the run did not give it" if before is None else f"the run had {before!r}"
+        return f"--{name.replace('_', '-')} {given} ({had})"
+
+    return [difference(k, now.get(k), then.get(k)) for k in sorted(set(now) | set(then))
             if k not in RESUME_FREE and now.get(k) != then.get(k)]
 
 
