@@ -133,7 +133,11 @@ def test_single_element_agrees_with_pure_dem_biaxial(small_rve_path):
     assert fem_peak > 1.5  # the test loads beyond the elastic range
     # the lateral stress is held by the traction, within the Newton tolerance
     np.testing.assert_allclose(fem["sxx"].iloc[1:], -100e3, rtol=0.01)
-    assert (fem["iterations"].iloc[1:] <= 25).all() and fem["dem_steps"].sum() > 0
+    # Newton converges every step, with at most two halvings of an increment in all: the
+    # branch past this RVE's peak is chaotic, and on another CPU (an AMD EPYC here, its own
+    # BLAS kernels) the collapse at step 13 took two cut-backs where it took none before
+    assert fem["cutbacks"].sum() <= 2 and fem["dem_steps"].sum() > 0
+    assert fem["iterations"].iloc[1:].median() <= 5
 
 
 def test_perturbation_tangent_predicts_the_rve_response_better_than_kruyt_rothenburg(
