@@ -278,7 +278,7 @@ def test_mesh_convergence_of_rough_platens():
 def test_linear_elastic_converges_by_force_and_by_displacement(element):
     setup = BiaxialSetup(nx=2, ny=3, element=element, platens="rough", axial_strain=0.01)
     runs = {}
-    for test in ("force", "displacement"):
+    for test in ("force", "displacement", "residual-displacement"):
         result = run_biaxial(setup, _elastic(), 2,
                              NewtonSettings(convergence=test, predictor="tangent"))
         assert result.error is None
@@ -292,14 +292,19 @@ def test_linear_elastic_converges_by_force_and_by_displacement(element):
     assert len(history) == 1 and history[0][0] < 1e-8
     np.testing.assert_allclose(runs["displacement"].displacements,
                                runs["force"].displacements, rtol=0, atol=1e-15)
+    # judged one iterate earlier: the exact predictor itself is accepted, one evaluation
+    assert (runs["residual-displacement"].steps["iterations"].iloc[1:] == 1).all()
+    np.testing.assert_allclose(runs["residual-displacement"].displacements,
+                               runs["force"].displacements, rtol=0, atol=1e-15)
 
 
 def test_convergence_setting_is_checked():
     with pytest.raises(ValueError, match="convergence must be one of force, displacement"):
         NewtonSettings(convergence="energy")
     assert default_settings("dem", convergence="displacement").convergence == "displacement"
-    # the commands' default: Guo & Zhao's test (with finite strain, see docs/physics.md)
-    assert default_settings("dem").convergence == "displacement"
+    # the commands' default: Guo & Zhao's test judged one iterate earlier (docs/physics.md)
+    assert default_settings("dem").convergence == "residual-displacement"
+    assert default_settings("linear-elastic").convergence == "residual-displacement"
     assert default_settings("dem", convergence="force").convergence == "force"
 
 
@@ -331,6 +336,34 @@ def test_dem_single_element_converges_by_displacement(tmp_path, capsys):
         else:
             assert accepted <= {"force", "force-atol", "stall"}
     print("iterations per step:", counts)
+
+
+def test_residual_displacement_accepts_the_iterate_before_guo_and_zhao_s_last_run(tmp_path,
+                                                                               capsys):
+    """The same DEM element from the same state: both tests take the same iterates and the
+    same corrections up to the first within rtol; Guo & Zhao's applies it and evaluates the
+    RVEs once more, the residual test accepts the iterate that asked for it: one evaluation
+    fewer, a state that differs by that correction (at most rtol of the increment)."""
+    runs = {}
+    for test in ("displacement", "residual-displacement"):
+        out = tmp_path / test
+        code = main(["single-element", "--particles", "16", "--seed", "3", "--steps", "1",
+                     "--axial-strain", "0.001", "--device", "cpu", "--convergence", test,
+                     "--map-strain", "0.001", "--out", str(out), "--json"])
+        assert code == 0
+        capsys.readouterr()
+        runs[test] = pd.read_csv(out / "steps.csv").iloc[1]
+    before, after = runs["displacement"], runs["residual-displacement"]
+    assert before["converged_by"] == "displacement"
+    assert after["converged_by"] == "residual-displacement"
+    history = json.loads(after["correction_history"])
+    assert history == json.loads(before["correction_history"])
+    assert len(history) == 1 and history[0][-1] <= 1e-2 < min(history[0][:-1], default=1)
+    assert after["iterations"] == before["iterations"] - 1
+    assert after["rve_evaluations"] < before["rve_evaluations"]
+    # the stress of a different (earlier) iterate, close to the accepted one of their loop
+    assert after["syy"] != before["syy"]
+    assert after["syy"] == pytest.approx(before["syy"], rel=0.05)
 
 
 # -- outputs and checkpoints of DEM runs with quad8 ----------------------------------------

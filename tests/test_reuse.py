@@ -189,12 +189,14 @@ def test_tracked_postprocessor_runs_exactly_on_the_named_points_and_steps(small_
 
 
 def test_cli_refuses_reuse_with_the_displacement_test(small_rve_path, capsys):
-    """Reused RVEs answer in steps: with the displacement test (the default) no increment
-    could converge, so the pair is refused before any work, naming both options."""
-    code = main(["single-element", "--rve", str(small_rve_path), "--steps", "2",
-                 "--reuse-tol", "1e-6"])
-    assert code == 2
-    assert "--reuse-tol 1e-06 needs --convergence force" in capsys.readouterr().err
+    """Reused RVEs answer in steps: with either displacement test (the residual one is the
+    default) no increment could converge, so the pair is refused before any work, naming
+    both options."""
+    for test in ([], ["--convergence", "displacement"]):
+        code = main(["single-element", "--rve", str(small_rve_path), "--steps", "2",
+                     "--reuse-tol", "1e-6", *test])
+        assert code == 2
+        assert "--reuse-tol 1e-06 needs --convergence force" in capsys.readouterr().err
 
 
 def test_cli_reports_counts_and_writes_tracked_csv(small_rve_path, tmp_path, capsys):

@@ -167,7 +167,7 @@ def test_a_checkpoint_of_the_options_era_resumes(tmp_path, capsys):
     through the spec they make."""
     out = tmp_path / "run"
     argv = ["single-element", "--material", "linear-elastic", "--steps", "3",
-            "--axial-strain", "0.01", "--no-progress"]
+            "--axial-strain", "0.01", "--convergence", "displacement", "--no-progress"]
     assert main([*argv, "--out", str(out)]) == 0
     options = out / "checkpoint" / "options.json"
     old = {"command": "single-element", "material": "linear-elastic", "E": 60e6, "nu": 0.3,

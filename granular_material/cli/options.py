@@ -230,8 +230,11 @@ def add_convergence(group: Any, default: str = "force", rtol: float = 0.005) -> 
                             "far, L2 norms over the specimen; the material is evaluated once "
                             "more after the accepted correction (at least 2 evaluations per "
                             "increment) and --stress-tol is not used (Guo & Zhao: --rtol "
-                            f"0.01; default --rtol {rtol:g} either way). steps.csv records "
-                            "which test accepted each step (converged_by)")
+                            "0.01); residual-displacement: the same ratio of the correction "
+                            "the current iterate asks for, which is then not applied: that "
+                            "iterate, already evaluated, is accepted (one material evaluation "
+                            f"an increment fewer; default --rtol {rtol:g} in every test). "
+                            "steps.csv records which test accepted each step (converged_by)")
 
 
 def add_dtype(parser: argparse.ArgumentParser) -> None:

@@ -19,7 +19,14 @@ The convergence test is a choice (:attr:`NewtonSettings.convergence`):
   L² norm over the specimen (‖v‖² = ∫ v·v dV, as escript's ``util.L2`` that Guo & Zhao
   use). As in their code, the material is evaluated once more at the corrected
   displacement and that evaluation is the converged state: the test judges the correction,
-  not the residual left after it, and takes at least two evaluations per increment.
+  not the residual left after it, and takes at least two evaluations per increment;
+- ``residual-displacement`` (the commands' default): the same ratio, taken of the correction
+  the current iterate's residual asks for (relaxed, when a relaxation is on) before it is
+  applied; when it is within rtol, that iterate, already evaluated, is the converged state.
+  The tolerance then bounds the accepted state's own equilibrium error (as the displacement
+  it would take to remove it), and the evaluation that ``displacement`` spends on a
+  correction already known to be within rtol is saved: one DEM run per increment. An
+  increment can converge on its predictor.
 """
 
 from __future__ import annotations
@@ -50,7 +57,7 @@ __all__ = [
 ]
 
 #: the Newton convergence tests (NewtonSettings.convergence)
-CONVERGENCE_TESTS = ("force", "displacement")
+CONVERGENCE_TESTS = ("force", "displacement", "residual-displacement")
 #: the first guesses of a load step (NewtonSettings.predictor)
 PREDICTORS = ("tangent", "extrapolate")
 #: the relaxations of Newton corrections (NewtonSettings.relaxation)
@@ -96,9 +103,12 @@ class NewtonSettings:
             secant tangent. Smaller changes carry mostly DEM noise: on 64-disc RVEs past the
             peak, 1e-6 let the updates learn the noise and Newton stalled; 1e-4 (default)
             updates mostly on the first iterate of an increment.
-        convergence: "force" (‖R‖/‖R₀‖ ≤ rtol or ‖R‖ ≤ atol, default) or "displacement"
-            (Guo & Zhao: ‖δu‖_L2 / ‖Δu‖_L2 ≤ rtol, see the module docstring; atol is not
-            used, the stall test, when on, applies to the displacement ratios).
+        convergence: "force" (‖R‖/‖R₀‖ ≤ rtol or ‖R‖ ≤ atol, default), "displacement"
+            (Guo & Zhao: ‖δu‖_L2 / ‖Δu‖_L2 ≤ rtol of the correction just applied, then one
+            more evaluation) or "residual-displacement" (that ratio of the correction the
+            current iterate asks for, which is then not applied); see the module docstring.
+            With either displacement test atol is not used and the stall test, when on,
+            applies to the displacement ratios.
         formulation: "small-strain" (default here: the textbook problem) or
             "updated-lagrangian" (finite strain as Guo & Zhao: equilibrium on the current
             configuration, the material driven by ∇Δu on the committed one, a follower
@@ -184,11 +194,13 @@ class StepRecord:
         wall_time: seconds spent on the step.
         converged_by: the test that accepted each converged increment of the step:
             "force" (‖R‖/‖R₀‖ ≤ rtol), "force-atol" (‖R‖ ≤ atol, the stress floor),
-            "displacement" (‖δu‖/‖Δu‖ ≤ rtol), "stall" (a stalled ratio, see stall_rtol)
+            "displacement" (‖δu‖/‖Δu‖ ≤ rtol), "residual-displacement" (the same ratio of
+            the correction the iterate asked for), "stall" (a stalled ratio, see stall_rtol)
             or "correction" (a stalled residual with a small correction, see
             accept_correction).
         correction_history: ‖δu‖_L2 / ‖Δu‖_L2 of every Newton correction, one list per
-            attempt (recorded whatever the test; the predictor is not a correction).
+            attempt (recorded whatever the test; the predictor is not a correction; with
+            "residual-displacement" the last one is the correction that was not needed).
         failures: points whose evaluation failed, by reason
             (:class:`~granular_material.fem.material.FailureReason` values, e.g.
             ``{"max_dem_steps": 4}``), summed over the failed evaluations of the step;
@@ -446,6 +458,7 @@ class NewtonSolver:
         aitken = AitkenRelaxation() if s.relaxation == "aitken" else None
         corrections: list[float] = []
         by_displacement = s.convergence == "displacement"
+        ahead = s.convergence == "residual-displacement"
         secant = None
         held = None
         hold_tangent = getattr(self.material, "hold_tangent", None)
@@ -484,6 +497,8 @@ class NewtonSolver:
                     by = "displacement"
                 elif _stalled(corrections, s):
                     by = "stall"
+            elif ahead:
+                pass  # judged below, once the correction this iterate asks for is known
             elif r0 > 0 and r <= s.rtol * r0:
                 by = "force"
             elif r <= s.atol:
@@ -499,7 +514,7 @@ class NewtonSolver:
             if not math.isfinite(r) or (r0 > 0 and r > s.divergence * r0):
                 return _Attempt(False, du, None, None, history, it, cost, "diverged",
                                 corrections=corrections)
-            if it == s.max_iterations:
+            if it == s.max_iterations and not ahead:
                 break
             if s.tangent_update == "hold":
                 if held is None:
@@ -514,11 +529,21 @@ class NewtonSolver:
                 A, b, x, interior = condense(K, -residual, D=D)
             with times.phase("linear_solve"):
                 correction = solve(A, b, x, interior)
-            previous = du
-            du = du + correction if aitken is None else aitken.update(du, correction)
-            step_norm = self.l2_norm(du)
-            change = self.l2_norm(du - previous)
+            proposed = du + correction if aitken is None else aitken.update(du, correction)
+            step_norm = self.l2_norm(proposed)
+            change = self.l2_norm(proposed - du)
             corrections.append(change / step_norm if step_norm > 0 else 0.0)
+            if ahead:  # the test judges the correction this iterate asks for, before it
+                if corrections[-1] <= s.rtol:
+                    by = "residual-displacement"
+                elif _stalled(corrections, s):
+                    by = "stall"
+                if by:
+                    return _Attempt(True, du, response, f_int, history, it, cost, "",
+                                    stalled=by == "stall", by=by, corrections=corrections)
+                if it == s.max_iterations:
+                    break
+            du = proposed
         return _Attempt(False, du, None, None, history, s.max_iterations, cost,
                         f"not converged in {s.max_iterations} iterations",
                         corrections=corrections)

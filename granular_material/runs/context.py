@@ -40,7 +40,8 @@ class RunContext:
         shards: CPU shards of a batch (None: one per core).
         backend: "inprocess" or "mpi".
         progress: show progress bars.
-        convergence: the Newton convergence test ("force" or "displacement").
+        convergence: the Newton convergence test ("force", "displacement" or
+            "residual-displacement").
     """
 
     test: str

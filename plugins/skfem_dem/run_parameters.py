@@ -155,7 +155,7 @@ def check_run(p: DEMParameters, context: RunContext) -> int:
     """Before any work: the parameters can run in ``context``; the discs per Gauss point."""
     if p.rve is not None and not p.rve.exists():
         raise FileNotFoundError(f"--rve {p.rve} does not exist")
-    if p.reuse_tol > 0 and context.convergence == "displacement":
+    if p.reuse_tol > 0 and context.convergence in ("displacement", "residual-displacement"):
         raise UsageError(f"--reuse-tol {p.reuse_tol:g} needs --convergence force (with "
                          "--relaxation aitken, as measured): a reused RVE answers the same "
                          "stress for any change of grad u below the tolerance, so the Newton "
