@@ -85,8 +85,8 @@ def phase_table(seconds: Mapping[str, float], total: float) -> dict[str, float]:
     if steps is not None:
         newton = material + table["assembly"] + table["linear_solve"]
         table["newton_other"] = max(steps - newton, 0.0)
-    # phases under half a millisecond (a reference curve not asked for) go to "other"
-    table = {name: value for name, value in table.items() if value >= 5e-4}
+    # a phase the run never entered is left out; one it entered is listed, however short
+    table = {name: value for name, value in table.items() if value > 0.0}
     table["other"] = max(total - sum(table.values()), 0.0)
     table["total"] = float(total)
     return table

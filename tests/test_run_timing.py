@@ -36,6 +36,9 @@ def test_the_phase_table_splits_the_wholes_into_parts_that_sum_to_the_run():
     assert set(table) <= {*RUN_PHASES, "other", "total"}
     # time the phases do not account for is the rest
     assert phase_table(raw, total=28.0)["other"] == pytest.approx(9.0)
+    # a phase entered is listed however short; one never entered is not
+    short = phase_table({**raw, "linear_solve": 2e-5}, total=19.0)
+    assert short["linear_solve"] == 2e-5 and "reference" not in short
 
 
 def test_a_dem_run_reports_its_time_by_phase(tmp_path, capsys):
@@ -48,6 +51,7 @@ def test_a_dem_run_reports_its_time_by_phase(tmp_path, capsys):
     for phase in ("preparation", "initial_state", "dem", "homogenization", "assembly",
                   "linear_solve", "tables", "checkpoint", "outputs"):
         assert timing[phase] > 0, phase
+    assert "reference" not in timing  # no pure-DEM curve was asked for (--compare-dem)
     parts = sum(v for k, v in timing.items() if k != "total")
     assert parts == pytest.approx(timing["total"], abs=0.01)
     assert timing["total"] >= summary["wall_time_s"]

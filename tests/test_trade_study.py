@@ -16,7 +16,7 @@ from granular_material.cli import main
 from granular_material.results.compare import curve_errors, mean_curve
 from granular_material.results.trade_plots import pareto_front
 from granular_material.studies import SCALES, plan_runs
-from granular_material.studies.trade import PRESETS, accuracy, knobs, recommend
+from granular_material.studies.trade import PRESETS, accuracy, knobs, read_trade_table, recommend
 
 
 def _curve(peak: float = 2.0, scale_ev: float = 1.0) -> pd.DataFrame:
@@ -87,13 +87,13 @@ def smoke_study(tmp_path_factory) -> tuple[Path, dict]:
 
 def test_smoke_study_writes_every_row_figure_and_section(smoke_study):
     out, presets = smoke_study
-    table = pd.read_csv(out / "trade.csv", dtype={"value": str})
+    table = read_trade_table(out / "trade.csv")
     scale = SCALES["smoke"]
     for knob in knobs(scale):
         rows = table[(table["knob"] == knob.name) & (table["test"] == knob.test)]
         assert sorted(rows["value"]) == sorted(map(str, knob.values)), knob.name
         assert (out / f"knob_{knob.name}.png").stat().st_size > 1000
-    assert (rows_ok := table[table["error"].fillna("") == ""])["wall_s"].gt(0).all()
+    assert (rows_ok := table[table["error"] == ""])["wall_s"].gt(0).all()
     assert rows_ok["particle_steps"].gt(0).all()
     reference = table[table["is_reference"] & ~table["knob"].isin(["discs", "preset"])]
     assert np.allclose(reference[["peak_error_pct", "stress_ratio_rms_pct"]], 0.0)
@@ -111,7 +111,7 @@ def test_error_grows_with_the_strain_per_dem_step(smoke_study):
     """The quasi-static criterion: coarser DEM steps, larger error (physics, not a
     tolerance we chose)."""
     out, _ = smoke_study
-    table = pd.read_csv(out / "trade.csv", dtype={"value": str})
+    table = read_trade_table(out / "trade.csv")
     rows = table[table["knob"] == "strain_per_step"].copy()
     rows["step"] = rows["value"].astype(float)
     rows = rows.sort_values("step")

@@ -34,7 +34,7 @@ def run_trade_study_command(args: argparse.Namespace) -> int:
     presets = table[table["knob"] == "preset"].assign(accuracy=accuracy)
     report: dict[str, Any] = {
         "scale": args.scale, "device": device, "rows": len(table),
-        "failed_runs": int((table["error"].fillna("") != "").sum()),
+        "failed_runs": int((table["error"] != "").sum()),
         "presets": {name: {f"{row.test}_accuracy_pct": float(row.accuracy)
                            for row in group.itertuples()}
                     | {f"{row.test}_wall_s": float(row.wall_s) for row in group.itertuples()}

@@ -35,7 +35,7 @@ def plot_pareto(table: pd.DataFrame, error: pd.Series, path: str | Path) -> Path
     fig, ax = plt.subplots(figsize=(7, 5), constrained_layout=True)
     shown = table.assign(accuracy=error.to_numpy())
     shown = shown[np.isfinite(shown["accuracy"]) & (shown["wall_s"] > 0)]
-    failed = shown["error"].fillna("").astype(str) != "" if "error" in shown else False
+    failed = shown["error"].fillna("") != "" if "error" in shown else False
     for test, group in shown.groupby("test"):
         colour = _COLOURS.get(str(test), "k")
         ran = group[~failed[group.index]] if "error" in shown else group

@@ -204,8 +204,7 @@ def run(spec: RunSpec, observer: RunObserver | None = None, *,
             if not saved:
                 with times.phase("preparation"):
                     material.allocate(plan.setup.n_points)
-            with times.phase("reference"):
-                reference = _reference(material, plan, checkpoint)
+            reference = _reference(material, plan, checkpoint, times)
             outcome = _execute(plan, material, observer, checkpoint, saved)
         outcome.reference = reference
         _finish(plan, outcome, times, started)
@@ -213,11 +212,19 @@ def run(spec: RunSpec, observer: RunObserver | None = None, *,
 
 
 def _reference(material: Any, plan: RunPlan, checkpoint: RunCheckpoint | None,
-               ) -> pd.DataFrame | None:
+               times: PhaseTimes) -> pd.DataFrame | None:
     """A single element's pure-DEM curve, where its parameters ask for one: computed once
-    from the RVE before the first load step, kept in the checkpoint."""
+    from the RVE before the first load step (timed as ``reference`` in ``times``), kept in
+    the checkpoint."""
     if not getattr(plan.spec.material.parameters, "compare_dem", False):
         return None
+    with times.phase("reference"):
+        return _reference_curve(material, plan, checkpoint)
+
+
+def _reference_curve(material: Any, plan: RunPlan, checkpoint: RunCheckpoint | None,
+                     ) -> pd.DataFrame:
+    """The pure-DEM curve from the checkpoint, or computed and saved there."""
     saved = None if checkpoint is None else checkpoint.load_table("pure_dem")
     if saved is not None:
         return saved

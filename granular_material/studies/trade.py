@@ -52,8 +52,8 @@ from granular_material.results.compare import (
 from granular_material.runs import from_flat
 from granular_material.runs import run as run_spec
 
-__all__ = ["PRESETS", "REFERENCE", "SCALES", "Knob", "StudyScale", "plan_runs", "recommend",
-           "run_trade_study"]
+__all__ = ["PRESETS", "REFERENCE", "SCALES", "Knob", "StudyScale", "plan_runs",
+           "read_trade_table", "recommend", "run_trade_study"]
 
 
 # -- what is studied -------------------------------------------------------------------------
@@ -438,7 +438,7 @@ def recommend(table: pd.DataFrame, scale: StudyScale) -> dict[str, dict[str, Any
             if knob.name not in PRESET_KNOBS:
                 continue
             values[knob.name] = ref[knob.name]
-            rows = table[(table["knob"] == knob.name) & (table["error"].fillna("") == "")]
+            rows = table[(table["knob"] == knob.name) & (table["error"] == "")]
             if budget is None or rows.empty:
                 continue
             fine = rows[accuracy(rows) <= budget]
@@ -486,7 +486,7 @@ def _measure(rows: list[PlannedRow], runner: _Runner, out: Path, device: str, co
     table_path = out / "trade.csv"
     written: set[tuple[str, str, str]] = set()
     if table_path.exists():
-        old = pd.read_csv(table_path, dtype={"value": str})
+        old = read_trade_table(table_path)
         written = set(zip(old["knob"], old["value"], old["run"], strict=True))
     pending = [r for r in rows if (r.knob, str(r.value), run_key(r.settings)) not in written]
     needed: dict[str, dict[str, Any]] = {}
@@ -521,6 +521,13 @@ def _measure(rows: list[PlannedRow], runner: _Runner, out: Path, device: str, co
                 pending = [r for r in pending if r not in ready]
 
 
+def read_trade_table(path: str | Path) -> pd.DataFrame:
+    """``trade.csv`` as a table: ``value`` and ``error`` as text, "" where a run had no
+    error (pandas would read an all-empty column as floats)."""
+    table = pd.read_csv(path, dtype={"value": str, "error": str})
+    return table.assign(error=table["error"].fillna(""))
+
+
 def _load_run(out: Path, key: str) -> RunResult:
     meta = json.loads((out / "curves" / f"{key}.json").read_text())
     return RunResult(_load_curve(out, key), meta.pop("wall_s"), meta.pop("particle_steps"),
@@ -532,7 +539,7 @@ def _drop_rows(path: Path, stale: Callable[[pd.DataFrame], pd.Series]) -> None:
     or rule: a study run again with other sizes or presets keeps only its own)."""
     if not path.exists():
         return
-    table = pd.read_csv(path, dtype={"value": str})
+    table = read_trade_table(path)
     marked = stale(table)
     if marked.any():
         write_csv(table[~marked], path)
@@ -542,7 +549,7 @@ def _append(path: Path, rows: list[dict[str, Any]]) -> None:
     """``rows`` added to the table at ``path``, which is replaced whole."""
     frame = pd.DataFrame(rows)
     if path.exists():
-        frame = pd.concat([pd.read_csv(path, dtype={"value": str}), frame], ignore_index=True)
+        frame = pd.concat([read_trade_table(path), frame], ignore_index=True)
     write_csv(frame, path)
 
 
@@ -566,13 +573,13 @@ def run_trade_study(scale: str | StudyScale, out: str | Path, device: str = "cpu
         list(zip(t["knob"], t["value"], t["run"], strict=True)), index=t.index).isin(
         {(r.knob, str(r.value), run_key(r.settings)) for r in planned}))
     _measure(planned, runner, out, device, commit, progress, log)
-    table = pd.read_csv(out / "trade.csv", dtype={"value": str})
+    table = read_trade_table(out / "trade.csv")
     presets = recommend(table[table["knob"] != "preset"], study)
     preset_rows = _preset_rows(presets, study)
     _drop_rows(out / "trade.csv", lambda t: (t["knob"] == "preset") & ~t["run"].isin(
         {run_key(r.settings) for r in preset_rows}))
     _measure(preset_rows, runner, out, device, commit, progress, log)
-    table = pd.read_csv(out / "trade.csv", dtype={"value": str})
+    table = read_trade_table(out / "trade.csv")
     (out / "presets.json").write_text(json.dumps(presets, indent=2) + "\n")
     plot_pareto(table, accuracy(table), out / "pareto.png")
     for name in dict.fromkeys(k.name for k in knobs(study)):
