@@ -255,3 +255,26 @@ def test_fits_of_a_run_stopped_early_are_nan_not_an_error():
     fits = fractal_fits(pd.DataFrame(rows))
     assert fits["slope"].isna().all() and (fits["samples"] == 2).all()
     assert not slopes_differ(fits, "D0", "inside", "outside")["differ"]
+
+
+def test_a_run_started_with_other_settings_is_set_aside_and_redone(smoke, tmp_path):
+    """After a change of defaults the element's FEM checkpoint cannot be resumed: --redo
+    sets its run folder aside whole and runs afresh with the settings of today."""
+    reference, _ = smoke
+    out = tmp_path / "older"
+    subprocess.run(["cp", "-r", str(reference), str(out)], check=True)
+    options = out / "element" / "run" / "checkpoint" / "options.json"
+    record = json.loads(options.read_text())
+    today = record["spec"]["newton"]["convergence"]
+    record["spec"]["newton"]["convergence"] = "force"  # as older code's default had it
+    options.write_text(json.dumps(record))
+    done = subprocess.run(_command(out, "--redo", "element"), capture_output=True, text=True,
+                          timeout=600, check=False)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert "--convergence " in done.stderr and "set aside" in done.stderr
+    (aside,) = (out / "element").glob("run.before-*")
+    assert json.loads((aside / "checkpoint" / "options.json").read_text()) == record
+    rerun = json.loads(options.read_text())["spec"]["newton"]["convergence"]
+    assert rerun == today != "force"
+    assert "set aside" in (out / "element" / "run.log").read_text()
+    assert json.loads((out / "element" / "result.json").read_text())["error"] is None

@@ -155,11 +155,37 @@ def test_resume_compares_the_saved_spec_field_by_field(tmp_path, capsys):
     assert main([*argv[:-1], "--E", "70e6", "--resume", str(out)]) == 2
     err = capsys.readouterr().err
     assert "--E 70000000.0 (the run had 60000000.0)" in err
-    # an option left to the material's default is named as such, not as None
+    # Newton's options are compared as the run resolved them (its record keeps them)
     assert main([*argv, "--relaxation", "aitken", "--resume", str(out)]) == 2
     err = capsys.readouterr().err
-    assert "--relaxation 'aitken' (the run did not give it)" in err
+    assert "--relaxation 'aitken' (the run had 'none')" in err
     assert main([*argv, "--resume", str(out)]) == 0
+    # an option left to the material's default is named as such, not as None
+    assert main([*argv, "--quadrature", "3", "--resume", str(out)]) == 2
+    assert "(the run did not give it)" in capsys.readouterr().err
+
+
+def test_a_default_changed_since_the_run_started_is_refused_by_name(tmp_path, capsys):
+    """A run left an option to the commands' default, which a later version changed: its
+    resume is refused (it would mix two settings in one run), naming the option; given
+    the run's value explicitly, it resumes."""
+    out = tmp_path / "run"
+    argv = ["single-element", "--material", "linear-elastic", "--steps", "3",
+            "--axial-strain", "0.01", "--no-progress"]
+    assert main([*argv, "--out", str(out)]) == 0
+    options = out / "checkpoint" / "options.json"
+    record = json.loads(options.read_text())
+    assert record["newton"]["relaxation"] == "none" and record["spec"]["newton"][
+        "relaxation"] is None
+    record["newton"]["relaxation"] = "aitken"  # what an older version's default made of it
+    from granular_material.fem import RunCheckpoint
+
+    (out / "checkpoint" / "state.npz").unlink()  # as if killed before it saved a step
+    RunCheckpoint(out / "checkpoint").write_options(record)
+    capsys.readouterr()
+    assert main([*argv, "--resume", str(out)]) == 2
+    assert "--relaxation 'none' by default (the run had 'aitken')" in capsys.readouterr().err
+    assert main([*argv, "--relaxation", "aitken", "--resume", str(out)]) == 0
 
 
 def test_a_checkpoint_of_the_options_era_resumes(tmp_path, capsys):

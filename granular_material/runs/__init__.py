@@ -14,6 +14,7 @@ and :func:`run`, the one entry point of a FEM run (:mod:`~granular_material.runs
 
 from granular_material.runs.context import RunContext
 from granular_material.runs.execute import RunOutcome, RunPlan, check, run
+from granular_material.runs.resume import differences_from_saved
 from granular_material.runs.serial import from_dict, from_flat, load, save, to_dict, to_flat
 from granular_material.runs.spec import (
     MaterialSpec,
@@ -25,5 +26,5 @@ from granular_material.runs.spec import (
 )
 
 __all__ = ["MaterialSpec", "NewtonSpec", "OutputSpec", "ProblemSpec", "RunContext",
-           "RunOutcome", "RunPlan", "RunSpec", "SpecError", "check", "from_dict", "from_flat",
-           "load", "run", "save", "to_dict", "to_flat"]
+           "RunOutcome", "RunPlan", "RunSpec", "SpecError", "check", "differences_from_saved",
+           "from_dict", "from_flat", "load", "run", "save", "to_dict", "to_flat"]

@@ -4,8 +4,10 @@ checked against it field by field before anything in the folder is touched."""
 from __future__ import annotations
 
 import contextlib
+import json
 import sys
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
+from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
@@ -14,7 +16,8 @@ from granular_material.fem import CheckpointError, RunCheckpoint
 from granular_material.runs.serial import from_dict, from_flat, to_dict, to_flat
 from granular_material.runs.spec import RunSpec
 
-__all__ = ["open_checkpoint", "spec_differences", "start_checkpoint"]
+__all__ = ["differences_from_saved", "open_checkpoint", "resolved_newton", "spec_differences",
+           "start_checkpoint"]
 
 #: fields that may differ between a run and its resume: where it writes, how it reports and
 #: how often it saves, the CPU threads and the backend (neither changes a result)
@@ -49,9 +52,26 @@ def _compared(spec: RunSpec) -> dict[str, Any]:
     return flat
 
 
-def spec_differences(given: RunSpec, saved: RunSpec) -> list[str]:
+def resolved_newton(spec: RunSpec) -> dict[str, Any] | None:
+    """The Newton settings ``spec`` runs with, the commands' defaults filled in (as JSON
+    values; ``stress_tol`` the absolute tolerance [Pa]); None where the spec's values are
+    refused (its check says why)."""
+    try:
+        noisy = spec.material.noisy
+        values = asdict(spec.newton.settings(noisy))
+        values["stress_tol"] = spec.newton.stress_tolerance(noisy, spec.problem.confining)
+    except ValueError:
+        return None
+    return json.loads(json.dumps(values))
+
+
+def spec_differences(given: RunSpec, saved: RunSpec,
+                     saved_newton: Mapping[str, Any] | None = None) -> list[str]:
     """The fields (as ``--options``) of ``given`` that differ from ``saved``, but for those
-    a resume may change (:data:`RESUME_FREE`)."""
+    a resume may change (:data:`RESUME_FREE`). With ``saved_newton`` (the run's
+    :func:`resolved_newton`, recorded since the commands' defaults may change between
+    versions) the Newton settings are compared as resolved: an option left to a default
+    that is no longer the run's differs, and one given as the run's value does not."""
     now, then = _compared(given), _compared(saved)
 
     def difference(name: str, value: Any, before: Any) -> str:
@@ -60,8 +80,36 @@ def spec_differences(given: RunSpec, saved: RunSpec) -> list[str]:
         had = "the run did not give it" if before is None else f"the run had {before!r}"
         return f"--{name.replace('_', '-')} {given} ({had})"
 
-    return [difference(k, now.get(k), then.get(k)) for k in sorted(set(now) | set(then))
-            if k not in RESUME_FREE and now.get(k) != then.get(k)]
+    differ: list[str] = []
+    resolved = resolved_newton(given) if saved_newton is not None else None
+    if saved_newton is not None and resolved is not None:
+        for name in sorted(set(resolved) & set(saved_newton)):
+            if resolved[name] != saved_newton[name]:
+                option = f"--{name.replace('_', '-')}" if name in now else name
+                how = " by default" if now.get(name) is None else ""
+                differ.append(f"{option} {resolved[name]!r}{how} (the run had "
+                              f"{saved_newton[name]!r})")
+        now = {k: v for k, v in now.items() if k not in saved_newton}
+        then = {k: v for k, v in then.items() if k not in saved_newton}
+    return differ + [difference(k, now.get(k), then.get(k))
+                     for k in sorted(set(now) | set(then))
+                     if k not in RESUME_FREE and now.get(k) != then.get(k)]
+
+
+def differences_from_saved(spec: RunSpec) -> list[str]:
+    """What of ``spec`` differs from the spec of the run started in its output folder, as a
+    resume would name it (:func:`spec_differences`); empty where no run was started there or
+    its record cannot be read (a resume then says why)."""
+    if spec.output.out is None:
+        return []
+    checkpoint = RunCheckpoint(Path(spec.output.out) / "checkpoint")
+    if not checkpoint.has_options():
+        return []
+    try:
+        record = checkpoint.read_options()
+        return spec_differences(spec, _saved_spec(record), record.get("newton"))
+    except (CheckpointError, ValueError, KeyError, TypeError):
+        return []
 
 
 def _check_record(spec: RunSpec, checkpoint: RunCheckpoint, folder: Path) -> None:
@@ -75,7 +123,7 @@ def _check_record(spec: RunSpec, checkpoint: RunCheckpoint, folder: Path) -> Non
     command = record.get("command")
     if command not in (None, spec.problem.test):
         raise UsageError(f"--resume {folder} is a {command} run, not {spec.problem.test}")
-    differ = spec_differences(spec, _saved_spec(record))
+    differ = spec_differences(spec, _saved_spec(record), record.get("newton"))
     if differ:
         raise UsageError(f"--resume {folder}: give the options the run was started with; "
                          f"these differ: {'; '.join(differ)} (nothing in the folder was "
@@ -144,7 +192,8 @@ def start_checkpoint(spec: RunSpec, checkpoint: RunCheckpoint | None,
     if checkpoint is None or resuming:
         yield
         return
-    checkpoint.start({"command": spec.problem.test, "spec": to_dict(spec)})
+    checkpoint.start({"command": spec.problem.test, "spec": to_dict(spec),
+                      "newton": resolved_newton(spec)})
     try:
         yield
     except ValueError:

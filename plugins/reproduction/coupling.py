@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import json
 import math
+import sys
+import time
 from pathlib import Path
 from typing import Any
 
@@ -23,7 +25,15 @@ from granular_material.dem import DEMBatch, load_rve, save_rve
 from granular_material.procedures import biaxial_test, prepare_packing
 from granular_material.results import shear_band, write_csv
 from granular_material.results.compare import curve_errors, mean_curve
-from granular_material.runs import MaterialSpec, OutputSpec, ProblemSpec, RunSpec, run, save
+from granular_material.runs import (
+    MaterialSpec,
+    OutputSpec,
+    ProblemSpec,
+    RunSpec,
+    differences_from_saved,
+    run,
+    save,
+)
 
 from .scales import ReproductionScale
 
@@ -38,7 +48,10 @@ class FEMRunError(RuntimeError):
 
 def run_spec(spec: RunSpec, log_path: Path) -> int:
     """Run ``spec`` in this process, continuing from the checkpoint in its output folder
-    where a run was started; the spec (``run.toml`` beside the log) and the run's summary are
+    where a run of this spec was started. A run started there with other settings (older
+    code's defaults, another scale) cannot be continued: its folder is set aside whole as
+    ``run.before-<time>`` beside it and the run starts afresh (said on stderr and in the
+    log). The spec (``run.toml`` beside the log) and the run's summary are
     appended to ``log_path``. Returns the command's exit code (0, or 1 when Newton stopped
     the run short); an interrupt (Ctrl-C, SIGTERM) that stopped the run is raised again
     after its outputs are written (the checkpoint is kept)."""
@@ -48,12 +61,33 @@ def run_spec(spec: RunSpec, log_path: Path) -> int:
     with open(log_path, "a") as log:
         log.write(f"# granular-material {spec.problem.test}, in this process: {spec_path}\n")
     started = (spec.output.out / "checkpoint" / "options.json").is_file()
+    differ = differences_from_saved(spec) if started else []
+    if differ:
+        aside = _set_aside(spec.output.out)
+        note = (f"{spec.output.out} held a run started with other settings "
+                f"({'; '.join(differ)}); set aside as {aside.name}, started afresh")
+        print(f"granular-material reproduce: {note}", file=sys.stderr)
+        with open(log_path, "a") as log:
+            log.write(f"# {note}\n")
+        started = False
     outcome = run(spec, resume=started)
     with open(log_path, "a") as log:
         log.write(json.dumps(outcome.summary, indent=1, default=str) + "\n")
     if outcome.interrupt is not None:
         raise outcome.interrupt
     return 1 if outcome.summary["error"] else 0
+
+
+def _set_aside(folder: Path) -> Path:
+    """``folder`` renamed to ``<name>.before-<UTC time>`` beside it (nothing removed)."""
+    stamp = time.strftime("%Y%m%dT%H%M%SZ", time.gmtime())
+    aside = folder.with_name(f"{folder.name}.before-{stamp}")
+    count = 1
+    while aside.exists():
+        count += 1
+        aside = folder.with_name(f"{folder.name}.before-{stamp}-{count}")
+    folder.rename(aside)
+    return aside
 
 
 def _spec(scale: ReproductionScale, device: str, folder: Path, problem: dict[str, Any],

@@ -5,7 +5,8 @@ output folder and, last, its ``result.json``: a part with a ``result.json`` is d
 rerun skips it (``--redo PART`` runs it again from its caches, and times the speed-up
 again). Inside a part, what is expensive is cached
 as soon as it is made (packings, spectra, each size's curves, the FEM runs' checkpoints),
-so an interrupted part restarts where it stopped. ``report.md`` is written from the
+so an interrupted part restarts where it stopped; a FEM run checkpointed with other
+settings (older defaults) is set aside and run afresh. ``report.md`` is written from the
 ``result.json`` files of the parts done.
 """
 
