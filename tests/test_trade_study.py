@@ -158,3 +158,18 @@ def test_preset_sets_the_options_left_at_their_defaults(tmp_path, capsys):
     code = main(["single-element", "--material", "linear-elastic", "--preset", "quick",
                  "--steps", "2"])
     assert code == 2 and "--material dem" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(("value", "settings"), [
+    ("objective", {"tangent": "objective", "tangent_update": "none"}),
+    ("secant", {"tangent": "objective", "tangent_update": "secant"}),
+    ("condensed-hold", {"tangent": "condensed", "tangent_update": "hold"}),
+])
+def test_a_tangent_knob_value_names_the_tangent_and_its_update(value, settings):
+    from granular_material.fem.presets import tangent_settings
+    from granular_material.runs.presets import preset_fields
+
+    assert tangent_settings(value) == settings
+    for name in PRESETS:  # every committed preset's tangent reads as one of these
+        fields = preset_fields(name, 100e3)
+        assert fields["tangent_update"] in ("none", "secant", "hold")

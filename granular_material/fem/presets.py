@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
 
-__all__ = ["PRESETS_FILE", "Preset", "load_presets"]
+__all__ = ["PRESETS_FILE", "Preset", "load_presets", "tangent_settings"]
 
 PRESETS_FILE = Path(__file__).with_name("presets.json")
 
@@ -31,8 +31,9 @@ class Preset:
         rtol: Newton's relative residual tolerance.
         stress_floor: Newton's absolute stress tolerance as a fraction of the confining
             pressure [-].
-        tangent: objective, kruyt-rothenburg, perturbation or secant (the objective
-            tangent with Broyden updates).
+        tangent: a material tangent (objective, kruyt-rothenburg, perturbation,
+            condensed), "secant" (the objective tangent with Broyden updates) or
+            "<tangent>-hold" (held over each increment): :func:`tangent_settings`.
         acceleration: "predictor/relaxation", e.g. "extrapolate/aitken".
         reuse_tol: reuse tolerance of undisturbed RVEs [-].
     """
@@ -45,6 +46,18 @@ class Preset:
     tangent: str
     acceleration: str
     reuse_tol: float
+
+
+def tangent_settings(value: str) -> dict[str, str]:
+    """The material tangent and Newton's tangent update of a tangent knob ``value`` of the
+    trade study and the presets: "secant" is the objective tangent with Broyden updates,
+    "<tangent>-hold" that tangent held over each increment, any other the material tangent
+    of every iterate."""
+    if value == "secant":
+        return {"tangent": "objective", "tangent_update": "secant"}
+    if value.endswith("-hold"):
+        return {"tangent": value.removesuffix("-hold"), "tangent_update": "hold"}
+    return {"tangent": value, "tangent_update": "none"}
 
 
 @cache

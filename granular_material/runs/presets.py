@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from granular_material.fem.presets import load_presets
+from granular_material.fem.presets import load_presets, tangent_settings
 
 __all__ = ["PRESET_NAMES", "preset_fields"]
 
@@ -19,16 +19,14 @@ _MEASURED_WITH = {"convergence": "force", "max_iterations": 25}
 def preset_fields(name: str, confining: float, with_discs: bool = True) -> dict[str, Any]:
     """The flat spec fields of preset ``name`` for a run at ``confining`` [Pa] (its stress
     floor is a fraction of it); ``with_discs``: the discs per prepared RVE too (not for a
-    run of an RVE file, whose discs are the file's). Its secant tangent is the objective one
-    with Broyden updates."""
+    run of an RVE file, whose discs are the file's). Its tangent is read as
+    :func:`~granular_material.fem.presets.tangent_settings` says."""
     preset = load_presets()[name]
     predictor, relaxation = preset.acceleration.split("/")
-    secant = preset.tangent == "secant"
-    tangent = "objective" if secant else preset.tangent
     values: dict[str, Any] = {
         **_MEASURED_WITH, "rtol": preset.rtol, "stress_tol": preset.stress_floor * confining,
-        "tangent": tangent, "tangent_update": "secant" if secant else "none",
-        "predictor": predictor, "relaxation": relaxation, "reuse_tol": preset.reuse_tol,
+        **tangent_settings(preset.tangent), "predictor": predictor,
+        "relaxation": relaxation, "reuse_tol": preset.reuse_tol,
         "max_strain_per_step": preset.strain_per_step,
     }
     if with_discs:

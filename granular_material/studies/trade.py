@@ -38,6 +38,7 @@ import numpy as np
 import pandas as pd
 
 from granular_material.dem import DEMBatch, RVEData, critical_timestep, load_rve, save_rve
+from granular_material.fem.presets import tangent_settings
 from granular_material.procedures import biaxial_test, prepare_packing, progress_bar
 from granular_material.procedures.element_tests import biaxial_steps
 from granular_material.procedures.packing import DEFAULT_PRESSURE
@@ -117,7 +118,7 @@ SCALES: dict[str, StudyScale] = {
         name="smoke", axial_strain=0.02, seeds=(1, 2), discs=(16, 36), base_discs=16,
         strain_steps=(1.0e-5, 4.0e-5, 1.0e-4), safeties=(0.3, 0.8), dampings=(0.1, 0.3),
         element_discs=16, element_steps=4, rtols=(1.0e-3, 1.0e-2), stress_floors=(0.001,),
-        tangents=("objective",), accelerations=("extrapolate/aitken",),
+        tangents=("objective", "condensed-hold"), accelerations=("extrapolate/aitken",),
         reuse_tols=(0.0, 1.0e-4), meshes=((1, 1), (1, 2)), mesh_discs=16, mesh_steps=2,
         records=20, mesh_replicate=True,
     ),
@@ -127,7 +128,8 @@ SCALES: dict[str, StudyScale] = {
         safeties=(0.1, 0.3, 0.6, 0.9), dampings=(0.05, 0.1, 0.2, 0.3), element_discs=100,
         element_steps=40, rtols=(1.0e-3, 5.0e-3, 1.0e-2, 2.0e-2),
         stress_floors=(0.001, 0.005, 0.02),
-        tangents=("objective", "kruyt-rothenburg", "perturbation", "secant"),
+        tangents=("objective", "kruyt-rothenburg", "perturbation", "secant", "condensed",
+                  "condensed-hold"),
         accelerations=("tangent/none", "extrapolate/none", "extrapolate/aitken"),
         reuse_tols=(0.0, 1.0e-6, 1.0e-5, 1.0e-4), meshes=((1, 2), (2, 4)), mesh_discs=64,
         mesh_steps=20,
@@ -326,15 +328,13 @@ class _Runner:
         fields) on the RVE file ``rve`` (one RVE, copied to every point) or, without one,
         packings prepared from the study's first seed, run by :func:`run`."""
         predictor, relaxation = s["acceleration"].split("/")
-        secant = s["tangent"] == "secant"
         # the knobs are those of the force test (rtol of ‖R‖/‖R₀‖, the stress floor, reuse)
         spec = from_flat({
             **problem, "material": "dem", "confining": self.scale.confining,
             "axial_strain": self.scale.axial_strain, "rve": rve, "particles": s["discs"],
-            "seed": self.scale.seeds[0], "tangent": "objective" if secant else s["tangent"],
+            "seed": self.scale.seeds[0], **tangent_settings(s["tangent"]),
             "reuse_tol": s["reuse_tol"], "convergence": "force", "max_iterations": 25,
             "rtol": s["rtol"], "predictor": predictor, "relaxation": relaxation,
-            "tangent_update": "secant" if secant else "none",
             "stress_tol": s["stress_floor"] * self.scale.confining, "device": self.device})
         started = time.perf_counter()
         result = run_spec(spec).result
