@@ -76,6 +76,38 @@ def test_recommend_takes_the_cheapest_within_budget():
     assert set(chosen) == set(PRESETS)
 
 
+def test_recommend_counts_the_tangent_s_own_work():
+    """A tangent with fewer particle-steps whose condensation costs more than the DEM it
+    saves is not the cheaper one."""
+    scale = SCALES["smoke"]
+    rows = [("objective", 0.0, 100, 110.0), ("condensed-hold", 0.5, 80, 160.0)]
+    table = pd.DataFrame([{"knob": "tangent", "value": value, "peak_error_pct": error,
+                           "stress_ratio_rms_pct": 0.0, "wall_s": 1.0,
+                           "particle_steps": steps, "cost_particle_steps": cost, "error": ""}
+                          for value, error, steps, cost in rows])
+    assert recommend(table, scale)["quick"]["tangent"] == "objective"
+    cheaper = table.assign(cost_particle_steps=[110.0, 90.0])
+    assert recommend(cheaper, scale)["quick"]["tangent"] == "condensed-hold"
+    # a table of an older study, without the cost, is judged by its particle-steps
+    assert recommend(table.drop(columns="cost_particle_steps"), scale)["quick"][
+        "tangent"] == "condensed-hold"
+    # a saving within what round-off alone moves the reference's cost is a tie: the
+    # reference wins it
+    keyed = cheaper.assign(test="element", run=["ref", "cond"], reference_run="ref")
+    noise = keyed.iloc[[0]].assign(knob="noise", value="1e-09", run="jiggled",
+                                   cost_particle_steps=137.5)  # 25 % off the reference
+    assert recommend(pd.concat([keyed, noise]), scale)["quick"]["tangent"] == "objective"
+    noise = noise.assign(cost_particle_steps=112.2)  # 2 %: the 18 % saving is real
+    assert recommend(pd.concat([keyed, noise]), scale)["quick"]["tangent"] == "condensed-hold"
+
+
+def test_a_run_s_cost_adds_its_tangent_s_share_of_the_material_s_time():
+    from granular_material.studies.trade import _dem_equivalent
+
+    assert _dem_equivalent(1000, {"dem": 2.0, "homogenization": 0.5, "tangent": 1.5}) == 2000
+    assert _dem_equivalent(1000, {}) == 1000  # nothing timed: the particle-steps
+
+
 @pytest.fixture(scope="module")
 def smoke_study(tmp_path_factory) -> tuple[Path, dict]:
     out = tmp_path_factory.mktemp("trade") / "study"
@@ -93,8 +125,12 @@ def test_smoke_study_writes_every_row_figure_and_section(smoke_study):
         rows = table[(table["knob"] == knob.name) & (table["test"] == knob.test)]
         assert sorted(rows["value"]) == sorted(map(str, knob.values)), knob.name
         assert (out / f"knob_{knob.name}.png").stat().st_size > 1000
-    assert (rows_ok := table[table["error"] == ""])["wall_s"].gt(0).all()
+    rows_ok = table[table["error"] == ""]
+    assert rows_ok["wall_s"].gt(0).all()
     assert rows_ok["particle_steps"].gt(0).all()
+    assert (rows_ok["cost_particle_steps"] >= rows_ok["particle_steps"]).all()
+    condensed = rows_ok[rows_ok["value"] == "condensed-hold"]
+    assert (condensed["cost_particle_steps"] > condensed["particle_steps"]).all()
     reference = table[table["is_reference"] & ~table["knob"].isin(["discs", "preset"])]
     assert np.allclose(reference[["peak_error_pct", "stress_ratio_rms_pct"]], 0.0)
     dem = table[table["test"] == "dem"]
