@@ -60,7 +60,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--scale", choices=("smoke", "cpu", "gpu"), default="cpu",
                    help="smoke: under a minute, checks the machinery; cpu: the study for 2 CPU "
-                        "cores (about 15 min of runs here); gpu: 5 seeds, 400-disc elements, the "
+                        "cores (5–15 min of runs here); gpu: 5 seeds, 400-disc elements, the "
                         "10 x 15 mesh (default cpu)")
     p.add_argument("--out", type=Path, default=Path("out/trade-study"),
                    help="output folder (default out/trade-study); an existing one is "
