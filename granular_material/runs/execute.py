@@ -322,7 +322,8 @@ def _finish(plan: RunPlan, outcome: RunOutcome, times: PhaseTimes, started: floa
     earlier = (0.0 if result.resumed_from is None else
                sum(r.wall_time for r in result.records if r.step <= result.resumed_from))
     outcome.timing = phase_table(times.seconds, time.perf_counter() - started + earlier)
-    summary["timing_s"] = {name: round(value, 3) for name, value in outcome.timing.items()}
+    # to the microsecond: a phase the run entered stays above zero however short
+    summary["timing_s"] = {name: round(value, 6) for name, value in outcome.timing.items()}
     if out is not None:
         summary["out"] = str(out)
         if Path(out).is_dir():
