@@ -96,6 +96,11 @@ def spec_differences(given: RunSpec, saved: RunSpec,
                      if k not in RESUME_FREE and now.get(k) != then.get(k)]
 
 
+def _record_differences(spec: RunSpec, record: dict[str, Any]) -> list[str]:
+    """What of ``spec`` differs from the run a checkpoint's ``record`` was started with."""
+    return spec_differences(spec, _saved_spec(record), record.get("newton"))
+
+
 def differences_from_saved(spec: RunSpec) -> list[str]:
     """What of ``spec`` differs from the spec of the run started in its output folder, as a
     resume would name it (:func:`spec_differences`); empty where no run was started there or
@@ -106,8 +111,7 @@ def differences_from_saved(spec: RunSpec) -> list[str]:
     if not checkpoint.has_options():
         return []
     try:
-        record = checkpoint.read_options()
-        return spec_differences(spec, _saved_spec(record), record.get("newton"))
+        return _record_differences(spec, checkpoint.read_options())
     except (CheckpointError, ValueError, KeyError, TypeError):
         return []
 
@@ -123,7 +127,7 @@ def _check_record(spec: RunSpec, checkpoint: RunCheckpoint, folder: Path) -> Non
     command = record.get("command")
     if command not in (None, spec.problem.test):
         raise UsageError(f"--resume {folder} is a {command} run, not {spec.problem.test}")
-    differ = spec_differences(spec, _saved_spec(record), record.get("newton"))
+    differ = _record_differences(spec, record)
     if differ:
         raise UsageError(f"--resume {folder}: give the options the run was started with; "
                          f"these differ: {'; '.join(differ)} (nothing in the folder was "

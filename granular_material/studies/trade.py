@@ -465,10 +465,10 @@ def recommend(table: pd.DataFrame, scale: StudyScale) -> dict[str, dict[str, Any
             fine = rows[accuracy(rows) <= budget]
             fine = fine.assign(not_reference=fine["value"] != str(ref[knob.name]))
             if not fine.empty:
-                cost = _cost(fine)
-                tied = fine[cost <= cost.min() * (1.0 + _cost_scatter(table, knob.test))]
-                best = tied.assign(cost=_cost(tied)).sort_values(
-                    ["not_reference", "cost"]).iloc[0]["value"]
+                fine = fine.assign(cost=_cost(fine))
+                scatter = _cost_scatter(table, knob.test)
+                tied = fine[fine["cost"] <= fine["cost"].min() * (1.0 + scatter)]
+                best = tied.sort_values(["not_reference", "cost"]).iloc[0]["value"]
                 values[knob.name] = _typed(best, knob)
         chosen[name] = values
     return chosen
