@@ -325,3 +325,24 @@ def test_prediction_benchmark_smoke(tmp_path) -> None:
     errors = table[[c for c in table.columns if c.endswith("_err")]].to_numpy()
     assert np.isfinite(errors).all()
     assert (tmp_path / "prediction.md").exists() and (tmp_path / "cost.json").exists()
+
+
+def test_newton_view_benchmark_smoke(tmp_path) -> None:
+    """benchmarks/newton_tangent.py at smoke size: one seed, one state, every tangent
+    against the path's derivative; the perturbation tangent (differences of the same path)
+    is the closest."""
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / "newton_tangent.py"
+    spec = importlib.util.spec_from_file_location("newton_tangent_bench", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    table = module.main(["--particles", "64", "--seeds", "1", "--strains", "0.5",
+                         "--out", str(tmp_path)])
+    assert sorted(table["tangent"]) == sorted(["kruyt-rothenburg", "objective", "condensed",
+                                               "condensed-coulomb", "perturbation"])
+    assert np.isfinite(table["error %"]).all() and (table["J_xxxx MPa"] > 0).all()
+    error = table.set_index("tangent")["error %"]
+    assert error["perturbation"] < min(error["condensed"], error["kruyt-rothenburg"])
+    assert (tmp_path / "newton_tangent.md").exists()
