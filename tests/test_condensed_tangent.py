@@ -309,16 +309,22 @@ def test_a_held_tangent_is_condensed_once_an_increment(sheared: RVEData, tmp_pat
     assert condensed_every >= evaluations > condensed_held
 
 
-def test_prediction_benchmark_smoke(tmp_path) -> None:
-    """benchmarks/condensed_tangent.py at smoke size: every state, protocol and direction
-    of one seed, finite errors, and the costs."""
+def _benchmark(name: str):
+    """The module benchmarks/``name``.py, loaded from its file."""
     import importlib.util
     from pathlib import Path
 
-    path = Path(__file__).resolve().parents[1] / "benchmarks" / "condensed_tangent.py"
-    spec = importlib.util.spec_from_file_location("condensed_tangent_bench", path)
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / f"{name}.py"
+    spec = importlib.util.spec_from_file_location(f"{name}_bench", path)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
+    return module
+
+
+def test_prediction_benchmark_smoke(tmp_path) -> None:
+    """benchmarks/condensed_tangent.py at smoke size: every state, protocol and direction
+    of one seed, finite errors, and the costs."""
+    module = _benchmark("condensed_tangent")
     table = module.main(["--particles", "24", "--seeds", "1", "--hold", "200",
                          "--out", str(tmp_path)])
     assert len(table) == 3 * 3 * len(module.DIRECTIONS)
@@ -331,13 +337,7 @@ def test_newton_view_benchmark_smoke(tmp_path) -> None:
     """benchmarks/newton_tangent.py at smoke size: one seed, one state, every tangent
     against the path's derivative; the perturbation tangent (differences of the same path)
     is the closest."""
-    import importlib.util
-    from pathlib import Path
-
-    path = Path(__file__).resolve().parents[1] / "benchmarks" / "newton_tangent.py"
-    spec = importlib.util.spec_from_file_location("newton_tangent_bench", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
+    module = _benchmark("newton_tangent")
     table = module.main(["--particles", "64", "--seeds", "1", "--strains", "0.5",
                          "--out", str(tmp_path)])
     assert sorted(table["tangent"]) == sorted(["kruyt-rothenburg", "objective", "condensed",
