@@ -6,12 +6,12 @@ strain) on the same mesh, every Gauss point starting from the same RVE (their
 ``prepareRVE.py`` procedure, one RVE copied to every point). Theirs is run as shipped (8-node
 quadrilaterals, 2 × 2 Gauss points, Newton ``rtol = 1e-2`` on ‖δu‖/‖Δu‖; see
 :mod:`granular_material_validation.guo_zhao_runner`); ours with its defaults (``ours-defaults``:
-Q4, finite strain, Guo & Zhao's Newton loop with the condensed tangent held over each
-increment and Aitken relaxation), as Guo & Zhao (``ours-as-gz``: their 8-node elements and
-convergence test, our defaults otherwise), and, where the command line has the options,
-with 9-node elements (``ours-q9``), in small strain (``ours-small-strain``) and on a mesh
-twice as fine (``ours-fine``), so that the band can be put on the element, the mesh or the
-kinematics.
+Q4, finite strain, the condensed tangent held over each increment, Aitken relaxation and Guo &
+Zhao's displacement test judged one iterate earlier), as Guo & Zhao (``ours-as-gz``: their
+8-node elements and convergence test, our defaults otherwise), and, where the command line
+has the options, with 9-node elements (``ours-q9``), in small strain
+(``ours-small-strain``) and on a mesh twice as fine (``ours-fine``), so that the band can be
+put on the element, the mesh or the kinematics.
 The curve judged is ``ours-as-gz`` when it runs, else ``ours-defaults``. Chaos baseline:
 their code against itself at 1 % less strain a load step.
 """
