@@ -41,7 +41,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from granular_material.dem import DEMBatch, RVEData
+from granular_material.dem import DEMBatch, Homogenized, RVEData
 from granular_material.dem.batch import BatchSnapshot
 from granular_material.dem.condensed import condensed_tangent
 from granular_material.dem.homogenization import objective_tangent
@@ -55,51 +55,53 @@ CONFINING = 100e3  #: [Pa]
 PERTURBATION = 0.1  #: the DEM material's default relative perturbation
 
 
+def _voigt_stress(stress: np.ndarray) -> np.ndarray:
+    """Stresses (B, 2, 2) as Voigt rows (B, 3): σxx, σyy, σxy."""
+    return np.stack([stress[:, 0, 0], stress[:, 1, 1], stress[:, 0, 1]], axis=1)
+
+
 def _voigt(tangent: np.ndarray) -> np.ndarray:
     """C (B, 2, 2, 2, 2) [Pa] as the (B, 3, 3) block acting on the symmetric directions,
     rows σxx, σyy, σxy."""
-    columns = [np.einsum("bijkl,kl->bij", tangent, e) for e in DIRECTIONS]
-    return np.stack([np.stack([c[:, 0, 0], c[:, 1, 1], c[:, 0, 1]], axis=1)
-                     for c in columns], axis=2)
+    return np.stack([_voigt_stress(np.einsum("bijkl,kl->bij", tangent, e))
+                     for e in DIRECTIONS], axis=2)
 
 
-def _stress_after(batch: DEMBatch, snap: BatchSnapshot, grad_u: np.ndarray) -> np.ndarray:
-    """Stress [Pa] (B, 2, 2) after the path from ``snap`` to ``grad_u`` (B, 2, 2)."""
+def _after(batch: DEMBatch, snap: BatchSnapshot, grad_u: np.ndarray) -> Homogenized:
+    """The RVEs' response at the end of the path from ``snap`` to ``grad_u`` (B, 2, 2)."""
     batch.restore(snap)
     drive_grad_u(batch, grad_u)
-    return batch.homogenize().stress
+    return batch.homogenize()
 
 
-def _path_derivative(batch: DEMBatch, snap: BatchSnapshot, step: np.ndarray,
-                     width: float) -> np.ndarray:
-    """J (B, 3, 3) [Pa]: central differences of the path's end stress at ``step``."""
+def _differences(batch: DEMBatch, snap: BatchSnapshot, step: np.ndarray, width: float,
+                 base: np.ndarray | None = None) -> np.ndarray:
+    """(B, 3, 3) [Pa]: differences of the path's end stress at ``step`` along
+    :data:`DIRECTIONS`, central without ``base``, forward from the stress ``base`` (B, 2, 2)
+    at ``step`` with it (the perturbation tangent)."""
     columns = []
     for e in DIRECTIONS:
-        plus = _stress_after(batch, snap, step + width * e)
-        minus = _stress_after(batch, snap, step - width * e)
-        d = (plus - minus) / (2 * width)
-        columns.append(np.stack([d[:, 0, 0], d[:, 1, 1], d[:, 0, 1]], axis=1))
+        plus = _after(batch, snap, step + width * e).stress
+        if base is None:
+            d = (plus - _after(batch, snap, step - width * e).stress) / (2 * width)
+        else:
+            d = (plus - base) / width
+        columns.append(_voigt_stress(d))
     return np.stack(columns, axis=2)
 
 
-def _forward(batch: DEMBatch, snap: BatchSnapshot, step: np.ndarray, base: np.ndarray,
-             width: float) -> np.ndarray:
-    """The perturbation tangent (B, 3, 3) [Pa]: forward differences of the same path."""
-    columns = []
-    for e in DIRECTIONS:
-        d = (_stress_after(batch, snap, step + width * e) - base) / width
-        columns.append(np.stack([d[:, 0, 0], d[:, 1, 1], d[:, 0, 1]], axis=1))
-    return np.stack(columns, axis=2)
+def _final(curve: pd.DataFrame) -> pd.DataFrame:
+    """The last record of a :func:`biaxial_test` curve, one row per RVE in batch order."""
+    return curve[curve["step"] == curve["step"].max()].sort_values("rve")
 
 
 def _lateral_rate(batch: DEMBatch, snap: BatchSnapshot, step: float) -> np.ndarray:
     """Lateral strain [-] (B,) the biaxial test makes over the next ``step`` of axial
     strain from ``snap`` (the state is restored after)."""
     batch.restore(snap)
-    curve = biaxial_test(batch, axial_strain=step, confining=CONFINING)
-    last = curve[curve["step"] == curve["step"].max()].sort_values("rve")
+    lateral = _final(biaxial_test(batch, axial_strain=step, confining=CONFINING))
     batch.restore(snap)
-    return last["lateral_strain"].to_numpy()
+    return lateral["lateral_strain"].to_numpy()
 
 
 def measure(particles: int, seeds: list[int], strains: list[float], step: float,
@@ -114,22 +116,22 @@ def measure(particles: int, seeds: list[int], strains: list[float], step: float,
         curve = biaxial_test(batch, axial_strain=(strain - reached) / (1 - reached),
                              confining=CONFINING)
         reached = strain
-        last = curve[curve["step"] == curve["step"].max()].sort_values("rve")
+        last = _final(curve)
         snap = batch.snapshot()
         lateral = _lateral_rate(batch, snap, step)
         load = np.zeros((batch.n_rve, 2, 2))
         load[:, 0, 0], load[:, 1, 1] = lateral, -step
-        exact = _path_derivative(batch, snap, load, width * step)
-        end = _stress_after(batch, snap, load)
-        h = batch.homogenize()
-        condensed = {mode: condensed_tangent(batch.to_data(), sliding=mode).tangent
+        exact = _differences(batch, snap, load, width * step)
+        h = _after(batch, snap, load)
+        data = batch.to_data()
+        condensed = {mode: condensed_tangent(data, sliding=mode).tangent
                      for mode in ("free", "coulomb")}
         tangents = {
             "kruyt-rothenburg": _voigt(h.tangent),
             "objective": _voigt(objective_tangent(h.tangent, h.stress)),
             "condensed": _voigt(condensed["free"]),
             "condensed-coulomb": _voigt(condensed["coulomb"]),
-            "perturbation": _forward(batch, snap, load, end, PERTURBATION * step),
+            "perturbation": _differences(batch, snap, load, PERTURBATION * step, h.stress),
         }
         for name, c in tangents.items():
             for b, seed in enumerate(seeds):

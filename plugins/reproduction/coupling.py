@@ -61,7 +61,7 @@ def run_spec(spec: RunSpec, log_path: Path) -> int:
     with open(log_path, "a") as log:
         log.write(f"# granular-material {spec.problem.test}, in this process: {spec_path}\n")
     started = (spec.output.out / "checkpoint" / "options.json").is_file()
-    differ = differences_from_saved(spec) if started else []
+    differ = differences_from_saved(spec)
     if differ:
         aside = _set_aside(spec.output.out)
         note = (f"{spec.output.out} held a run started with other settings "
