@@ -197,7 +197,9 @@ def _run_case(source: Path, rve: Path, n_rve: int, args: argparse.Namespace,
         command += ["--device", args.device]
     if args.shards:
         command += ["--shards", str(args.shards)]
-    env = {**os.environ, "PYTHONPATH": str(source)}
+    # the engine at source first; what PYTHONPATH held (a --target install, say) after it
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(
+        filter(None, [str(source), os.environ.get("PYTHONPATH")]))}
     done = subprocess.run(command, capture_output=True, text=True, env=env, check=False)
     if done.returncode != 0:
         raise RuntimeError(f"benchmark worker for B={n_rve} ({source}) failed:\n"

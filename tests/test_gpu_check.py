@@ -41,7 +41,9 @@ def test_script_is_valid_bash_and_names_every_step():
     for step in ("tests", "throughput", "agreement", "condensed", "specimen"):
         assert f"run_step {step} " in text
     limits = [int(v) for v in re.findall(r"T_\w+=\$\{T_\w+:-(\d+)\}", text)]
-    assert len(limits) == 5 and sum(limits) < 300  # under 5 minutes with the start-up
+    # the limits are caps (an H200 took 197 s for all five, 2026-12-04): together they fit,
+    # with the install and start-up, in one 10-minute command on a lent GPU machine
+    assert len(limits) == 5 and sum(limits) <= 480
 
 
 def test_gradients_cover_the_batch():
@@ -85,3 +87,8 @@ def test_condensed_cg_against_the_lu_on_the_cpu(tmp_path):
                                   strain=2e-4)
     assert summary["within_tolerance"] and summary["max_rel_diff"] <= 1e-8
     assert json.loads((tmp_path / "condensed.json").read_text())["n_rve"] == 2
+    seconds = summary["seconds"]
+    assert 0 < seconds["cg_assembly_host"] and 0 < seconds["cg_solve"]
+    assert seconds["cg_assembly_host"] + seconds["cg_solve"] == pytest.approx(seconds["cg"],
+                                                                              rel=0.2)
+    assert seconds["dem_200_steps"] > 0
