@@ -32,7 +32,7 @@ if [ "${GPU_CHECK_SMOKE:-0}" = 1 ]; then  # the script itself, on the CPU, at to
     AGREE=(--batch 2 --particles 30 --strain 2e-4) SPECIMEN=(--elements 1 1 --particles 30)
     CONDENSED=(--batch 2 --particles 30 --strain 2e-4)
 else
-    DEVICE=$("$PYTHON" benchmarks/gpu_check.py require-cuda) || exit 2
+    DEVICE=$("$PYTHON" benchmarks/gpu_check.py require-cuda | tail -n 1) || exit 2
     DEV=cuda TESTS=(tests/test_dem_cuda.py tests/test_cuda_compile.py)
     BATCHES=1,16,64,256,1024,4096 PARTICLES=400 AGREE=(--batch 16 --particles 400)
     CONDENSED=(--batch 600 --particles 400)

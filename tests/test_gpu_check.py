@@ -35,6 +35,15 @@ def test_script_stops_with_a_message_without_a_gpu(tmp_path):
     assert not out.exists()  # nothing started
 
 
+@pytest.mark.skipif(wp.is_cuda_available(), reason="a CUDA device is here")
+def test_require_cuda_prints_nothing_but_the_device_to_stdout():
+    """Its stdout becomes summary.json's "device": warp's start-up banner must not reach it
+    (on an H200 it did, and the file was not JSON)."""
+    done = subprocess.run([sys.executable, str(BENCH / "gpu_check.py"), "require-cuda"],
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 2 and done.stdout == ""
+
+
 def test_script_is_valid_bash_and_names_every_step():
     text = (BENCH / "gpu_check.sh").read_text()
     assert subprocess.run(["bash", "-n", str(BENCH / "gpu_check.sh")]).returncode == 0
