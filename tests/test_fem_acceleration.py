@@ -96,6 +96,73 @@ def test_aitken_converges_where_a_too_stiff_tangent_stalls_plain_newton():
     np.testing.assert_allclose(relaxed.u, reference.u, atol=1e-5 * np.abs(reference.u).max())
 
 
+class Saturating:
+    """Stress C:ε scaled so that its norm saturates at ``cap`` [Pa] (‖σ‖ = cap·tanh(‖C:ε‖ /
+    cap)), while its tangent reports C: past the cap it stops answering, as a DEM RVE that
+    loses its confinement; ``largest`` is the largest |∇u| it was asked to evaluate."""
+
+    def __init__(self, n_points: int, cap: float):
+        self.c = isotropic_tangent(20e6, 15e6)
+        self.cap = cap
+        self.strain = np.zeros((n_points, 2, 2))
+        self.trial = None
+        self.evaluations, self.largest = 0, 0.0
+
+    n_points = property(lambda self: self.strain.shape[0])
+
+    def allocate(self, n_points: int) -> None:
+        assert n_points == self.n_points
+
+    def evaluate(self, grad_u):
+        self.evaluations += 1
+        self.largest = max(self.largest, float(np.abs(grad_u).max()))
+        self.trial = self.strain + 0.5 * (grad_u + np.swapaxes(grad_u, 1, 2))
+        linear = np.einsum("ijkl,nkl->nij", self.c, self.trial)
+        norm = np.maximum(np.linalg.norm(linear, axis=(1, 2)), 1e-30)[:, None, None]
+        stress = linear * self.cap * np.tanh(norm / self.cap) / norm
+        tangent = np.broadcast_to(self.c, (self.n_points, 2, 2, 2, 2))
+        return MaterialResponse(stress, tangent, np.zeros(self.n_points, dtype=np.int8))
+
+    def commit(self):
+        self.strain = self.trial
+
+    def revert(self):
+        self.trial = None
+
+
+def _saturating_problem(confining: float, max_growth: float) -> NewtonSolver:
+    """A 2 × 4 biaxial specimen of :class:`Saturating` (cap 100 kPa) under ``confining``,
+    Aitken and the extrapolating predictor, no cut-backs."""
+    problem = build_biaxial(BiaxialSetup(width=1.0, height=2.0, nx=2, ny=4,
+                                         confining=confining, axial_strain=0.01))
+    n_points = problem.basis.nelems * len(problem.basis.quadrature[1])
+    settings = NewtonSettings(max_cutbacks=0, relaxation="aitken", predictor="extrapolate",
+                              max_growth=max_growth)
+    return NewtonSolver(problem.basis, Saturating(n_points, 1e5), problem.loading, settings)
+
+
+def test_corrections_that_keep_growing_the_increment_are_stopped_before_evaluated():
+    """Confined beyond what the material can carry (200 kPa against a cap of 100 kPa), the
+    corrections never shrink and Aitken's factor grows: without the limit the iterates
+    reach |∇u| > 1 in a step of 0.1 % axial strain and use all 25 evaluations; with it the
+    increment is abandoned at its third, named, before the material sees the iterate."""
+    unlimited = _saturating_problem(2e5, max_growth=1e12)
+    with pytest.raises(NewtonError, match="not converged in 25"):
+        unlimited.step(0.1, step=1)
+    assert unlimited.material.evaluations == 26 and unlimited.material.largest > 1.0
+    limited = _saturating_problem(2e5, max_growth=10.0)
+    with pytest.raises(NewtonError, match=r"grew the increment to [\d.]+ times the first"):
+        limited.step(0.1, step=1)
+    assert limited.material.evaluations <= 4 and limited.material.largest < 0.01
+    # where the material can carry the load the limit changes nothing
+    runs = [_saturating_problem(5e4, max_growth=g) for g in (10.0, 1e12)]
+    for run in runs:
+        run.step(0.1, step=1)
+    np.testing.assert_array_equal(runs[0].u, runs[1].u)
+    with pytest.raises(ValueError, match="max_growth"):
+        NewtonSettings(max_growth=1.0)
+
+
 def test_secant_tangent_recovers_a_linear_response_along_orthogonal_changes():
     rng = np.random.default_rng(3)
     true = rng.normal(size=(2, 4, 4)) * 1e7
