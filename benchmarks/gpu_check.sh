@@ -22,8 +22,8 @@ set -uo pipefail
 cd "$(dirname "$0")/.."
 PYTHON=${PYTHON:-python}
 OUT=${1:-out/gpu-check}
-# limits [s] of the steps (sum 480 s; on an H200 with a cold kernel cache they took 47, 51,
-# 62, 8 (8 RVEs) and 69 s)
+# limits [s] of the steps (sum 480 s; on an H200 with a cold kernel cache they took 37, 50,
+# 84, 16 and 46 s, 2026-12-04)
 T_TESTS=${T_TESTS:-60} T_THROUGHPUT=${T_THROUGHPUT:-100} T_AGREEMENT=${T_AGREEMENT:-150}
 T_CONDENSED=${T_CONDENSED:-90} T_SPECIMEN=${T_SPECIMEN:-80}
 
