@@ -34,16 +34,13 @@ def test_aitken_learns_the_factor_of_a_uniformly_too_stiff_tangent():
         AitkenRelaxation(lower=2.0)
 
 
-class BandSoftened:
-    """Linear elastic whose true stiffness is ``soft`` · C inside a band and ``hard`` · C
-    outside, while its tangent always reports C: the Kruyt–Rothenburg tangent of a sheared
-    specimen in caricature (too stiff everywhere, most of all inside the band).
-    """
+class _Caricature:
+    """A small-strain material whose tangent always reports one isotropic C [Pa] while its
+    stress is :meth:`stress_of` the strain: the bookkeeping the caricatures below share."""
 
-    def __init__(self, in_band: np.ndarray, soft: float = 0.05, hard: float = 0.5):
+    def __init__(self, n_points: int):
         self.c = isotropic_tangent(20e6, 15e6)
-        self.factor = np.where(in_band, soft, hard)
-        self.strain = np.zeros((in_band.size, 2, 2))
+        self.strain = np.zeros((n_points, 2, 2))
         self.trial = None
 
     n_points = property(lambda self: self.strain.shape[0])
@@ -51,11 +48,14 @@ class BandSoftened:
     def allocate(self, n_points: int) -> None:
         assert n_points == self.n_points
 
+    def stress_of(self, strain: np.ndarray) -> np.ndarray:
+        raise NotImplementedError
+
     def evaluate(self, grad_u):
         self.trial = self.strain + 0.5 * (grad_u + np.swapaxes(grad_u, 1, 2))
-        stress = self.factor[:, None, None] * np.einsum("ijkl,nkl->nij", self.c, self.trial)
         tangent = np.broadcast_to(self.c, (self.n_points, 2, 2, 2, 2))
-        return MaterialResponse(stress, tangent, np.zeros(self.n_points, dtype=np.int8))
+        return MaterialResponse(self.stress_of(self.trial), tangent,
+                                np.zeros(self.n_points, dtype=np.int8))
 
     def commit(self):
         self.strain = self.trial
@@ -68,6 +68,20 @@ class BandSoftened:
 
     def restore(self, path):
         self.strain = np.load(path)
+
+
+class BandSoftened(_Caricature):
+    """Linear elastic whose true stiffness is ``soft`` · C inside a band and ``hard`` · C
+    outside, while its tangent always reports C: the Kruyt–Rothenburg tangent of a sheared
+    specimen in caricature (too stiff everywhere, most of all inside the band).
+    """
+
+    def __init__(self, in_band: np.ndarray, soft: float = 0.05, hard: float = 0.5):
+        super().__init__(in_band.size)
+        self.factor = np.where(in_band, soft, hard)
+
+    def stress_of(self, strain: np.ndarray) -> np.ndarray:
+        return self.factor[:, None, None] * np.einsum("ijkl,nkl->nij", self.c, strain)
 
 
 def _band_problem(relaxation: str, tangent_update: str = "none") -> NewtonSolver:
@@ -96,38 +110,25 @@ def test_aitken_converges_where_a_too_stiff_tangent_stalls_plain_newton():
     np.testing.assert_allclose(relaxed.u, reference.u, atol=1e-5 * np.abs(reference.u).max())
 
 
-class Saturating:
+class Saturating(_Caricature):
     """Stress C:ε scaled so that its norm saturates at ``cap`` [Pa] (‖σ‖ = cap·tanh(‖C:ε‖ /
     cap)), while its tangent reports C: past the cap it stops answering, as a DEM RVE that
     loses its confinement; ``largest`` is the largest |∇u| it was asked to evaluate."""
 
     def __init__(self, n_points: int, cap: float):
-        self.c = isotropic_tangent(20e6, 15e6)
+        super().__init__(n_points)
         self.cap = cap
-        self.strain = np.zeros((n_points, 2, 2))
-        self.trial = None
         self.evaluations, self.largest = 0, 0.0
-
-    n_points = property(lambda self: self.strain.shape[0])
-
-    def allocate(self, n_points: int) -> None:
-        assert n_points == self.n_points
 
     def evaluate(self, grad_u):
         self.evaluations += 1
         self.largest = max(self.largest, float(np.abs(grad_u).max()))
-        self.trial = self.strain + 0.5 * (grad_u + np.swapaxes(grad_u, 1, 2))
-        linear = np.einsum("ijkl,nkl->nij", self.c, self.trial)
+        return super().evaluate(grad_u)
+
+    def stress_of(self, strain: np.ndarray) -> np.ndarray:
+        linear = np.einsum("ijkl,nkl->nij", self.c, strain)
         norm = np.maximum(np.linalg.norm(linear, axis=(1, 2)), 1e-30)[:, None, None]
-        stress = linear * self.cap * np.tanh(norm / self.cap) / norm
-        tangent = np.broadcast_to(self.c, (self.n_points, 2, 2, 2, 2))
-        return MaterialResponse(stress, tangent, np.zeros(self.n_points, dtype=np.int8))
-
-    def commit(self):
-        self.strain = self.trial
-
-    def revert(self):
-        self.trial = None
+        return linear * self.cap * np.tanh(norm / self.cap) / norm
 
 
 def _saturating_problem(confining: float, max_growth: float) -> NewtonSolver:
