@@ -94,7 +94,7 @@ def _newton_arguments(parser: argparse.ArgumentParser) -> None:
                    help="dem: tangent of the RVEs: condensed (the contact network's stiffness "
                         "with the discs' fluctuations condensed out, plus the stress's spin; "
                         "no DEM run, but assembled on the host: on a GPU one costs about "
-                        "8000 DEM steps of the batch, and objective steps faster there; "
+                        "9000 DEM steps of the batch, and objective steps faster there; "
                         "default), objective (Kruyt-Rothenburg on sym grad u "
                         "plus the stress's spin, symmetric: a rigid rotation costs nothing), "
                         "kruyt-rothenburg (Wu et al. eq. 6 as published) or forward "
