@@ -11,8 +11,8 @@
 #   3. agreement.csv/.json: CUDA against the CPU on a sheared batch of 16 RVEs, per float type
 #   4. condensed.json: the condensed tangent's batched CG on CUDA against scipy's LU on the
 #      host, 600 sheared RVEs of 400 discs, the specimen's batch (iterations, largest
-#      difference; seconds of the CG's host assembly and device solve, of the LU, and of 200
-#      DEM steps of the same batch on CUDA)
+#      difference; seconds of the CG's host assembly and device solve, of the LU, of the
+#      same assembled on the device, and of 200 DEM steps of the same batch on CUDA)
 #   5. specimen/: the paper's specimen (10 x 15 Q4, 600 RVEs of 400 discs), its first 5 load
 #      steps of 0.1 % (those of --steps 100 --axial-strain 0.1), steps.csv and summary.json
 # Every step runs under its own time limit; one that fails or runs out is recorded and the

@@ -131,7 +131,8 @@ def test_lattice_mechanisms_rattlers_and_an_empty_rve() -> None:
 
 
 def test_the_dem_backend_uses_the_cg_on_cuda(packings: RVEData, monkeypatch) -> None:
-    """``_with_condensed`` takes the CG for a batch on "cuda…", scipy's LU otherwise."""
+    """``_with_condensed`` takes the host-assembled CG for a float32 batch on "cuda…",
+    scipy's LU on the CPU."""
     from dataclasses import dataclass
 
     from granular_material_skfem import backend
@@ -145,6 +146,7 @@ def test_the_dem_backend_uses_the_cg_on_cuda(packings: RVEData, monkeypatch) -> 
     @dataclass
     class Fake:
         device: str
+        dtype: str = "float32"  # a float64 CUDA batch assembles on its device
 
         def to_data(self) -> RVEData:
             return packings

@@ -100,4 +100,5 @@ def test_condensed_cg_against_the_lu_on_the_cpu(tmp_path):
     assert 0 < seconds["cg_assembly_host"] and 0 < seconds["cg_solve"]
     assert seconds["cg_assembly_host"] + seconds["cg_solve"] == pytest.approx(seconds["cg"],
                                                                               rel=0.2)
-    assert seconds["dem_200_steps"] > 0
+    assert seconds["dem_200_steps"] > 0 and seconds["device_assembly"] > 0
+    assert summary["device_assembly_max_rel_diff"] <= 1e-8

@@ -93,10 +93,11 @@ def _newton_arguments(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--tangent", choices=TANGENTS, default=_DEM.tangent,
                    help="dem: tangent of the RVEs: condensed (the contact network's stiffness "
                         "with the discs' fluctuations condensed out, plus the stress's spin; "
-                        "no DEM run, but assembled on the host: on a GPU one costs about "
-                        "9000 DEM steps of the batch, and objective steps faster there; "
-                        "default), objective (Kruyt-Rothenburg on sym grad u "
-                        "plus the stress's spin, symmetric: a rigid rotation costs nothing), "
+                        "no DEM run; on a GPU, assembled on the host, one cost about 9000 "
+                        "DEM steps of the batch (float64 batches now assemble it on the "
+                        "GPU, not yet timed there); default), objective (Kruyt-Rothenburg "
+                        "on sym grad u plus the stress's spin, symmetric: a rigid rotation "
+                        "costs nothing), "
                         "kruyt-rothenburg (Wu et al. eq. 6 as published) or forward "
                         "differences of each RVE's response (perturbation: 4 more DEM runs per "
                         "iteration)")

@@ -314,12 +314,12 @@ def _condense_one(net: ContactNetwork, sliding: str,
     return condensed / net.volume, affine_all / net.volume, left_out, n_free
 
 
-def _selected(data: RVEData, rves: np.ndarray | None, regularization: float) -> np.ndarray:
-    """The RVE indices to condense (all of ``data`` for None), once ``regularization`` is
+def _selected(n_rve: int, rves: np.ndarray | None, regularization: float) -> np.ndarray:
+    """The RVE indices to condense (all ``n_rve`` for None), once ``regularization`` is
     checked."""
     if not (math.isfinite(regularization) and regularization > 0):
         raise ValueError(f"regularization must be a number > 0, got {regularization!r}")
-    return np.arange(data.n_rve) if rves is None else np.asarray(rves, dtype=int)
+    return np.arange(n_rve) if rves is None else np.asarray(rves, dtype=int)
 
 
 def _counters(count: int) -> tuple[np.ndarray, ...]:
@@ -339,7 +339,7 @@ def condensed_tangent(data: RVEData, sliding: str = "free", regularization: floa
     sparse LU per RVE, on the CPU."""
     if sliding not in SLIDING_MODES:
         raise ValueError(f"sliding must be one of {', '.join(SLIDING_MODES)}, got {sliding!r}")
-    index = _selected(data, rves, regularization)
+    index = _selected(data.n_rve, rves, regularization)
     count = len(index)
     tangent, affine = np.zeros((count, 4, 4)), np.zeros((count, 4, 4))
     n_contacts, n_sliding, n_left_out, n_unknowns, seconds = _counters(count)

@@ -23,9 +23,11 @@ diagonal block); a system stops at its own relative residual ‖r‖₂/‖b‖�
 
 with the products K_Gu X reduced on the device as well.
 
-Assembly (the contact network, the per-contact stiffness blocks) is the scipy path's, on
-the host, from an :class:`RVEData` (``DEMBatch.to_data``); only the solves and the products
-K_Gu X run on the device.
+Here the assembly (the contact network, the per-contact stiffness blocks) is the scipy
+path's, on the host, from an :class:`RVEData` (``DEMBatch.to_data``); only the solves and
+the products K_Gu X run on the device. A float64 batch can assemble the same systems on its
+own device instead (:mod:`granular_material.dem.condensed_device`, through
+:func:`solve_on_device`), which the DEM material does on CUDA.
 float64 only: a relative residual of 1e-10 is below float32's resolution.
 """
 
@@ -92,12 +94,13 @@ class CondensedTangentCG(CondensedTangent):
 
 # -- kernels ------------------------------------------------------------------------------------
 @wp.func
-def _bsr_row(block_start: wp.array(dtype=wp.int32), block_disc: wp.array(dtype=wp.int32),
+def _bsr_row(block_start: wp.array(dtype=wp.int32), row_end: wp.array(dtype=wp.int32),
+             block_disc: wp.array(dtype=wp.int32),
              block_value: wp.array(dtype=mat33), v: wp.array(dtype=vec3), offset: int,
              k: int) -> vec3:
     """Row k of the block matrix times the column of ``v`` that starts at ``offset``."""
     acc = vec3()
-    for e in range(block_start[k], block_start[k + 1]):
+    for e in range(block_start[k], row_end[k]):
         acc += block_value[e] * v[offset + block_disc[e]]
     return acc
 
@@ -144,7 +147,8 @@ def cg_start(disc_start: wp.array(dtype=wp.int32), n_total: int,
 
 @wp.kernel(enable_backward=False, module=MODULE)
 def cg_iterate(disc_start: wp.array(dtype=wp.int32), n_total: int,
-               block_start: wp.array(dtype=wp.int32), block_disc: wp.array(dtype=wp.int32),
+               block_start: wp.array(dtype=wp.int32), row_end: wp.array(dtype=wp.int32),
+               block_disc: wp.array(dtype=wp.int32),
                block_value: wp.array(dtype=mat33), inverse_diagonal: wp.array(dtype=mat33),
                tolerance2: wp.float64, x: wp.array(dtype=vec3), r: wp.array(dtype=vec3),
                z: wp.array(dtype=vec3), p: wp.array(dtype=vec3), q: wp.array(dtype=vec3),
@@ -166,7 +170,7 @@ def cg_iterate(disc_start: wp.array(dtype=wp.int32), n_total: int,
     acc_pq = wp.float64(0.0)
     k = first + lane
     while k < last:
-        qv = _bsr_row(block_start, block_disc, block_value, p, offset, k)
+        qv = _bsr_row(block_start, row_end, block_disc, block_value, p, offset, k)
         q[offset + k] = qv
         acc_pq += wp.dot(p[offset + k], qv)
         k += width
@@ -298,7 +302,7 @@ def condensed_tangent_cg(data: RVEData, rves: np.ndarray | None = None, device: 
     ``solve_seconds`` split the batch's between the two."""
     if not (math.isfinite(tolerance) and tolerance > 0):
         raise ValueError(f"tolerance must be a number > 0, got {tolerance!r}")
-    index = _selected(data, rves, regularization)
+    index = _selected(data.n_rve, rves, regularization)
     count = len(index)
     affine, affine_all = np.zeros((count, 4, 4)), np.zeros((count, 4, 4))
     volume = np.zeros(count)
@@ -358,7 +362,6 @@ def _solve(parts: list[_Blocks], device: str, tolerance: float, max_iterations: 
     rhs = np.concatenate([p.rhs for p in parts], axis=1)  # (3, n_total, 3)
     load = np.concatenate([p.load for p in parts], axis=1)  # (4, n_total, 3)
     disc_rve = np.repeat(np.arange(count), n_kept)
-    n_system = N_SOLVE * count
     if n_total == 0 or count == 0:
         zeros = np.zeros((count, N_SOLVE))
         return (np.zeros((count, 4, N_SOLVE)), zeros.astype(np.int64), zeros,
@@ -376,35 +379,71 @@ def _solve(parts: list[_Blocks], device: str, tolerance: float, max_iterations: 
         return wp.array(np.ascontiguousarray(values, dtype=np.float64), dtype=mat33,
                         device=device)
 
-    block_dim = BLOCK_DIM if wp.get_device(device).is_cuda else 1
     lock = _CPU_LOCK if wp.get_device(device).is_cpu else _NoLock()
     with lock, wp.ScopedDevice(device):
-        d_disc_start, d_disc_rve = int_array(disc_start), int_array(disc_rve)
-        d_block_start, d_block_disc = int_array(block_start), int_array(block_disc)
-        d_block_value, d_inverse = matrices(block_value), matrices(inverse_diagonal)
-        d_rhs, d_load = vectors(rhs), vectors(load)
+        system = DeviceSystem(
+            disc_start=int_array(disc_start), disc_rve=int_array(disc_rve),
+            block_start=int_array(block_start[:-1]), row_end=int_array(block_start[1:]),
+            block_disc=int_array(block_disc),
+            block_value=matrices(block_value), inverse_diagonal=matrices(inverse_diagonal),
+            rhs=vectors(rhs), load=vectors(load), count=count, n_total=n_total)
+        return solve_on_device(system, device, tolerance, max_iterations, check_every)
+
+
+@dataclass
+class DeviceSystem:
+    """The batched systems on the device, as the CG kernels read them: per RVE its discs
+    ``disc_start[b] : disc_start[b + 1]`` (and each disc's RVE), per disc its row of 3 × 3
+    blocks ``block_start[k] : row_end[k]`` (columns ``block_disc``, values
+    ``block_value`` [N/m]), the inverse diagonal blocks, the right-hand sides (3 columns,
+    ``3 · n_total`` vec3) and K_Gu's rows (4 rows, ``4 · n_total`` vec3)."""
+
+    disc_start: wp.array
+    disc_rve: wp.array
+    block_start: wp.array
+    row_end: wp.array
+    block_disc: wp.array
+    block_value: wp.array
+    inverse_diagonal: wp.array
+    rhs: wp.array
+    load: wp.array
+    count: int
+    n_total: int
+
+
+def solve_on_device(system: DeviceSystem, device: str, tolerance: float, max_iterations: int,
+                    check_every: int) -> tuple[np.ndarray, ...]:
+    """The batched CG of ``system`` on ``device`` (the caller holds the CPU module's lock):
+    K_Gu X (B, 4, 3), iterations, residuals, breakdowns and still-active flags (B, 3)."""
+    count, n_total = system.count, system.n_total
+    n_system = N_SOLVE * count
+    block_dim = BLOCK_DIM if wp.get_device(device).is_cuda else 1
+    with wp.ScopedDevice(device):
         x, r, z, p, q = (wp.zeros(N_SOLVE * n_total, dtype=vec3) for _ in range(5))
         rhs_norm2, rz, beta, residual = (wp.zeros(n_system, dtype=wp.float64)
                                          for _ in range(4))
         iterations, active, failed = (wp.zeros(n_system, dtype=wp.int32) for _ in range(3))
         wp.launch_tiled(cg_start, dim=[n_system], block_dim=block_dim,
-                        inputs=[d_disc_start, n_total, d_inverse, d_rhs, x, r, z, p,
-                                rhs_norm2, rz, residual, iterations, active])
+                        inputs=[system.disc_start, n_total, system.inverse_diagonal,
+                                system.rhs, x, r, z, p, rhs_norm2, rz, residual, iterations,
+                                active])
         done = 0
         tolerance2 = wp.float64(tolerance * tolerance)
         while done < max_iterations and active.numpy().any():
             for _ in range(min(check_every, max_iterations - done)):
                 wp.launch_tiled(cg_iterate, dim=[n_system], block_dim=block_dim,
-                                inputs=[d_disc_start, n_total, d_block_start, d_block_disc,
-                                        d_block_value, d_inverse, tolerance2, x, r, z, p, q,
+                                inputs=[system.disc_start, n_total, system.block_start,
+                                        system.row_end,
+                                        system.block_disc, system.block_value,
+                                        system.inverse_diagonal, tolerance2, x, r, z, p, q,
                                         rhs_norm2, rz, beta, residual, iterations, active,
                                         failed])
                 wp.launch(cg_direction, dim=N_SOLVE * n_total,
-                          inputs=[d_disc_rve, n_total, active, beta, z, p])
+                          inputs=[system.disc_rve, n_total, active, beta, z, p])
                 done += 1
         product = wp.zeros(12 * count, dtype=wp.float64)
         wp.launch_tiled(load_products, dim=[12 * count], block_dim=block_dim,
-                        inputs=[d_disc_start, n_total, d_load, x, product])
+                        inputs=[system.disc_start, n_total, system.load, x, product])
         shape = (count, N_SOLVE)
         return (product.numpy().reshape(count, 4, N_SOLVE),
                 iterations.numpy().reshape(shape).astype(np.int64),

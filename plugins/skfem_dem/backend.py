@@ -20,6 +20,7 @@ import numpy as np
 from granular_material.dem import DEMBatch, DEMInstabilityError, Homogenized, RVEData, save_rve
 from granular_material.dem.condensed import condensed_tangent
 from granular_material.dem.condensed_cg import condensed_tangent_cg
+from granular_material.dem.condensed_device import condensed_tangent_of_batch
 from granular_material.dem.homogenization import objective_tangent, spin_tangent
 from granular_material.fem.material import FailureReason
 from granular_material.procedures import (
@@ -157,10 +158,13 @@ def _nan_like(h: Homogenized) -> Homogenized:
 
 def _with_condensed(batch: DEMBatch, h: Homogenized, moved: np.ndarray) -> Homogenized:
     """``h`` with the condensed tangent [Pa] of the ``moved`` RVEs' current states: on a
-    CUDA batch by the warp CG on its device, on the CPU by scipy's LU."""
+    CUDA batch by the warp CG on its device, its systems assembled there too (float64) or on
+    the host (float32); on the CPU by scipy's LU."""
     tangent = np.array(h.tangent, dtype=np.float64, copy=True)
     rves = np.flatnonzero(moved)
-    if str(batch.device).startswith("cuda"):
+    if str(batch.device).startswith("cuda") and batch.dtype == "float64":
+        result = condensed_tangent_of_batch(batch, rves=rves)
+    elif str(batch.device).startswith("cuda"):
         result = condensed_tangent_cg(batch.to_data(), rves=rves, device=batch.device)
     else:
         result = condensed_tangent(batch.to_data(), rves=rves)

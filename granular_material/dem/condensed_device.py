@@ -1,0 +1,485 @@
+"""The condensed tangent of a batch's current state, assembled and solved on its own device
+(issue 26: on CUDA nothing leaves the device but the 4 × 4 tangents).
+
+:func:`granular_material.dem.condensed_cg.condensed_tangent_cg` builds each RVE's system on
+the host from an :class:`RVEData` copy of the batch, RVE by RVE: on an H200 that assembly
+took 2.4 s for 600 RVEs of 400 discs against 0.16 s for the CG itself (docs/performance.md,
+"On an H200"). Here the same systems are assembled by kernels from the engine's own arrays
+(fractional positions, cell, radii, neighbour slots, tangential springs and their mirror
+slots), then solved by the same CG kernels:
+
+- ``slot_contacts`` (one thread a slot): which slots touch, the pair's normal, branch and
+  stiffnesses, and whether it slides (the engine's test on the spring its owner keeps);
+- ``drop_weak_discs`` (one thread a disc, repeated until nothing changes): the discs of
+  fewer than two contacts among the kept ones are left out, as ``condensed._kept_discs``;
+- ``assemble_rows`` (one thread a disc): its row of 3 × 3 blocks, the diagonal and one per
+  contact with a kept disc, packed into the disc's ``capacity + 1`` places (the CG reads a
+  row up to its ``row_end``), its K_uG columns and K_Gu rows;
+- ``rve_sums`` (one thread an RVE): the regularisation's scale, K_GG and the counters;
+- ``regularize`` (one thread a disc): the regularisation and the inverse diagonal blocks.
+
+Every disc keeps its three unknowns: a disc left out and each RVE's fixed translation (its
+first kept disc's) are identity rows with no load, whose solution is zero, the same as
+leaving them out. The contact kinematics are ``condensed._contact_matrices``' (``sliding=
+"free"``), written per slot from the slot owner's side (δn and δt are the same from either
+side of a pair). float64 batches only; a float32 batch takes the host assembly.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import warp as wp
+
+from granular_material.dem.condensed import SLIDING_TOLERANCE, _selected
+from granular_material.dem.condensed_cg import (
+    _COLUMN_OF,
+    _CPU_LOCK,
+    CGNotConvergedError,
+    CondensedTangentCG,
+    DeviceSystem,
+    _NoLock,
+    solve_on_device,
+)
+from granular_material.dem.laws import LAW_FRICTMAT
+
+if TYPE_CHECKING:
+    from granular_material.dem.batch import DEMBatch
+    from granular_material.dem.model import Model
+    from granular_material.dem.state import State
+
+_FRICTMAT = wp.constant(LAW_FRICTMAT)
+__all__ = [
+    "Network",
+    "condensed_tangent_of_batch",
+    "condensed_tangent_on_device",
+    "kernel_modules",
+]
+
+MODULE = "granular_material_dem_condensed_device"  #: the warp module of the kernels below
+
+vec2 = wp.vec2d
+vec3 = wp.vec3d
+vec4 = wp.vec4d
+mat22 = wp.mat22d
+mat33 = wp.mat33d
+mat44 = wp.mat44d
+
+
+@wp.struct
+class Network:
+    """What the assembly reads of a shard's contacts, per slot (B·N·K) or disc (B·N)."""
+
+    partner: wp.array(dtype=wp.int32)  # the partner's index within its RVE, per slot
+    count: wp.array(dtype=wp.int32)  # used slots, per disc
+    radius: wp.array(dtype=wp.float64)  # [m], per disc
+    touching: wp.array(dtype=wp.int32)  # 1 where the slot's pair overlaps
+    sliding: wp.array(dtype=wp.int32)  # 1 where it slides (the engine's test)
+    branch: wp.array(dtype=vec2)  # x_partner − x_owner, minimum image [m]
+    kn: wp.array(dtype=wp.float64)  # [N/m]
+    kt: wp.array(dtype=wp.float64)  # [N/m], 0 where the pair slides
+    kept: wp.array(dtype=wp.int32)  # 1 for a disc of at least two contacts (after dropping)
+
+
+@wp.kernel(enable_backward=False, module=MODULE)
+def slot_contacts(n_disc: int, capacity: int, selected: wp.array(dtype=wp.int32),
+                  fractional: wp.array(dtype=vec2), cell: wp.array(dtype=mat22),
+                  radius: wp.array(dtype=wp.float64), partner: wp.array(dtype=wp.int32),
+                  count: wp.array(dtype=wp.int32), shear: wp.array(dtype=wp.float64),
+                  mirror: wp.array(dtype=wp.int32), law: int, kn0: wp.float64,
+                  kt0: wp.float64, young: wp.float64, kt_over_kn: wp.float64,
+                  mu: wp.float64, cap_tolerance: wp.float64,
+                  touching: wp.array(dtype=wp.int32), sliding: wp.array(dtype=wp.int32),
+                  branch: wp.array(dtype=vec2), kn: wp.array(dtype=wp.float64),
+                  kt: wp.array(dtype=wp.float64)):
+    """Per slot: does its pair touch (overlap > 0), its branch d = x_partner − x_owner
+    (minimum image) [m], kn and kt [N/m] (kt = 0 where the pair slides)."""
+    slot = wp.tid()
+    disc = slot // capacity
+    rve = disc // n_disc
+    touching[slot] = 0
+    sliding[slot] = 0
+    if selected[rve] == 0 or slot - disc * capacity >= count[disc]:
+        return
+    local = partner[slot]
+    other = rve * n_disc + local
+    ds = fractional[other] - fractional[disc]
+    ds = vec2(ds[0] - wp.round(ds[0]), ds[1] - wp.round(ds[1]))
+    d = cell[rve] * ds
+    dist = wp.length(d)
+    ra = radius[disc]
+    rc = radius[other]
+    overlap = ra + rc - dist
+    if not (overlap > wp.float64(0.0) and dist > wp.float64(0.0)):
+        return
+    k_n = kn0
+    k_t = kt0
+    if law == _FRICTMAT:
+        k_n = wp.float64(2.0) * young * ra * rc / (ra + rc)
+        k_t = kt_over_kn * k_n
+    # the pair's spring as its owner (the lower index) keeps it
+    fs = shear[slot]
+    if local < disc - rve * n_disc and mirror[slot] >= 0:
+        fs = shear[rve * n_disc * capacity + mirror[slot]]
+    slides = wp.abs(fs) >= mu * k_n * overlap * (wp.float64(1.0) - cap_tolerance)
+    touching[slot] = 1
+    branch[slot] = d
+    kn[slot] = k_n
+    if slides:
+        sliding[slot] = 1
+        kt[slot] = wp.float64(0.0)
+    else:
+        kt[slot] = k_t
+
+
+@wp.kernel(enable_backward=False, module=MODULE)
+def drop_weak_discs(n_disc: int, capacity: int, partner: wp.array(dtype=wp.int32),
+                    count: wp.array(dtype=wp.int32), touching: wp.array(dtype=wp.int32),
+                    kept: wp.array(dtype=wp.int32), kept_next: wp.array(dtype=wp.int32),
+                    changed: wp.array(dtype=wp.int32)):
+    """One pass of leaving out the discs of fewer than two contacts among the kept discs."""
+    disc = wp.tid()
+    kept_next[disc] = 0
+    if kept[disc] == 0:
+        return
+    first = (disc // n_disc) * n_disc
+    degree = int(0)  # noqa: UP018, RUF046 - a mutable loop variable in warp
+    for j in range(count[disc]):
+        slot = disc * capacity + j
+        if touching[slot] != 0 and kept[first + partner[slot]] != 0:
+            degree += 1
+    if degree >= 2:
+        kept_next[disc] = 1
+    else:
+        changed[0] = 1
+
+
+@wp.func
+def _contact_rows(d: vec2, ra_rc: wp.float64, dist: wp.float64):
+    """(n, s·t, G-part of δn, G-part of δt) of a pair with branch d, radii sum ra_rc."""
+    n = d / dist
+    t = vec2(-n[1], n[0])
+    s = ra_rc / dist
+    g_n = vec4(n[0] * d[0], n[0] * d[1], n[1] * d[0], n[1] * d[1])
+    # δt: s·t⊗d less (r_a + r_c)·ω(G), ω = (G_10 − G_01)/2
+    g_t = vec4(s * t[0] * d[0], s * t[0] * d[1] + wp.float64(0.5) * ra_rc,
+               s * t[1] * d[0] - wp.float64(0.5) * ra_rc, s * t[1] * d[1])
+    return n, s * t, g_n, g_t
+
+
+@wp.kernel(enable_backward=False, module=MODULE)
+def assemble_rows(n_disc: int, capacity: int, net: Network,
+                  first_kept: wp.array(dtype=wp.int32), row_end: wp.array(dtype=wp.int32),
+                  block_disc: wp.array(dtype=wp.int32), block_value: wp.array(dtype=mat33),
+                  rhs: wp.array(dtype=vec3), load: wp.array(dtype=vec3),
+                  diagonal_stiffness: wp.array(dtype=vec3)):
+    """Disc k's row of blocks (the diagonal first, then one per contact with a kept disc,
+    up to ``row_end[k]`` in its ``capacity + 1`` places), its K_uG columns (G_00, sym G_01,
+    G_11) and its K_Gu rows, unregularised; identity rows where an unknown is not solved (a
+    disc left out, the RVE's fixed translation)."""
+    disc = wp.tid()
+    n_total = first_kept.shape[0] * n_disc
+    rve = disc // n_disc
+    base = disc * (capacity + 1)
+    identity = mat33(1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)
+    block_disc[base] = disc
+    row_end[disc] = base + 1
+    if net.kept[disc] == 0:
+        block_value[base] = identity
+        for c in range(3):
+            rhs[c * n_total + disc] = vec3()
+        for g in range(4):
+            load[g * n_total + disc] = vec3()
+        diagonal_stiffness[disc] = vec3()
+        return
+    fixed_rve_disc = rve * n_disc + first_kept[rve]
+    own_free = vec3(1.0, 1.0, 1.0)
+    if disc == fixed_rve_disc:
+        own_free = vec3(0.0, 0.0, 1.0)
+    diag = mat33()
+    col0 = vec3()
+    col1 = vec3()
+    col2 = vec3()
+    row0 = vec3()
+    row1 = vec3()
+    row2 = vec3()
+    row3 = vec3()
+    used = int(0)  # noqa: UP018, RUF046 - a mutable loop variable in warp
+    for j in range(net.count[disc]):
+        slot = disc * capacity + j
+        other = rve * n_disc + net.partner[slot]
+        if net.touching[slot] != 0 and net.kept[other] != 0:
+            d = net.branch[slot]
+            dist = wp.length(d)
+            n, st, g_n, g_t = _contact_rows(d, net.radius[disc] + net.radius[other], dist)
+            k_n = net.kn[slot]
+            k_t = net.kt[slot]
+            # this disc's rows of B (δn, δt over u_x, u_y, w) and the partner's
+            a_n = vec3(-n[0], -n[1], 0.0)
+            a_t = vec3(-st[0], -st[1], -1.0)
+            c_n = vec3(n[0], n[1], 0.0)
+            c_t = vec3(st[0], st[1], -1.0)
+            diag += k_n * wp.outer(a_n, a_n) + k_t * wp.outer(a_t, a_t)
+            off = k_n * wp.outer(a_n, c_n) + k_t * wp.outer(a_t, c_t)
+            other_free = vec3(1.0, 1.0, 1.0)
+            if other == fixed_rve_disc:
+                other_free = vec3(0.0, 0.0, 1.0)
+            used += 1
+            block_value[base + used] = wp.diag(own_free) * off * wp.diag(other_free)
+            block_disc[base + used] = other
+            col0 += k_n * g_n[0] * a_n + k_t * g_t[0] * a_t
+            col1 += wp.float64(0.5) * (k_n * (g_n[1] + g_n[2]) * a_n
+                                       + k_t * (g_t[1] + g_t[2]) * a_t)
+            col2 += k_n * g_n[3] * a_n + k_t * g_t[3] * a_t
+            row0 += k_n * g_n[0] * a_n + k_t * g_t[0] * a_t
+            row1 += k_n * g_n[1] * a_n + k_t * g_t[1] * a_t
+            row2 += k_n * g_n[2] * a_n + k_t * g_t[2] * a_t
+            row3 += k_n * g_n[3] * a_n + k_t * g_t[3] * a_t
+    row_end[disc] = base + 1 + used
+    mask = wp.diag(own_free)
+    diag = mask * diag * mask
+    diagonal_stiffness[disc] = vec3(diag[0, 0], diag[1, 1], diag[2, 2])
+    block_value[base] = diag + wp.diag(vec3(1.0, 1.0, 1.0) - own_free)
+    rhs[disc] = wp.cw_mul(own_free, col0)
+    rhs[n_total + disc] = wp.cw_mul(own_free, col1)
+    rhs[2 * n_total + disc] = wp.cw_mul(own_free, col2)
+    load[disc] = wp.cw_mul(own_free, row0)
+    load[n_total + disc] = wp.cw_mul(own_free, row1)
+    load[2 * n_total + disc] = wp.cw_mul(own_free, row2)
+    load[3 * n_total + disc] = wp.cw_mul(own_free, row3)
+
+
+@wp.kernel(enable_backward=False, module=MODULE)
+def first_kept_disc(n_disc: int, kept: wp.array(dtype=wp.int32),
+                    first_kept: wp.array(dtype=wp.int32)):
+    """Each RVE's first kept disc (within the RVE), 0 where none is kept."""
+    rve = wp.tid()
+    first_kept[rve] = 0
+    for i in range(n_disc):
+        if kept[rve * n_disc + i] != 0:
+            first_kept[rve] = i
+            return
+
+
+@wp.kernel(enable_backward=False, module=MODULE)
+def rve_sums(n_disc: int, capacity: int, net: Network,
+             diagonal_stiffness: wp.array(dtype=vec3), scale: wp.array(dtype=wp.float64),
+             affine: wp.array(dtype=mat44), affine_all: wp.array(dtype=mat44),
+             counters: wp.array(dtype=wp.int32)):
+    """Per RVE: the mean diagonal stiffness of its solved unknowns [N/m], K_GG of the
+    contacts between kept discs and of every contact [N·m] (each pair from its owner's
+    slot), and (contacts, sliding, left out, unknowns)."""
+    rve = wp.tid()
+    first = rve * n_disc
+    total = wp.float64(0.0)
+    n_kept = int(0)  # noqa: UP018, RUF046 - a mutable loop variable in warp
+    n_contacts = int(0)  # noqa: UP018, RUF046 - a mutable loop variable in warp
+    n_sliding = int(0)  # noqa: UP018, RUF046 - a mutable loop variable in warp
+    k_gg = mat44()
+    k_gg_all = mat44()
+    for i in range(n_disc):
+        disc = first + i
+        if net.kept[disc] != 0:
+            n_kept += 1
+            v = diagonal_stiffness[disc]
+            total += v[0] + v[1] + v[2]
+        for j in range(net.count[disc]):
+            slot = disc * capacity + j
+            local = net.partner[slot]
+            if net.touching[slot] != 0 and local > i:
+                other = first + local
+                n_contacts += 1
+                n_sliding += net.sliding[slot]
+                d = net.branch[slot]
+                _n, _st, g_n, g_t = _contact_rows(d, net.radius[disc] + net.radius[other],
+                                                  wp.length(d))
+                term = net.kn[slot] * wp.outer(g_n, g_n) + net.kt[slot] * wp.outer(g_t, g_t)
+                k_gg_all += term
+                if net.kept[disc] != 0 and net.kept[other] != 0:
+                    k_gg += term
+    n_free = int(0)  # noqa: UP018, RUF046 - a mutable loop variable in warp
+    if n_kept > 0:
+        n_free = 3 * n_kept - 2
+    scale[rve] = total / wp.float64(wp.max(n_free, 1))
+    affine[rve] = k_gg
+    affine_all[rve] = k_gg_all
+    counters[4 * rve] = n_contacts
+    counters[4 * rve + 1] = n_sliding
+    counters[4 * rve + 2] = n_disc - n_kept
+    counters[4 * rve + 3] = n_free
+
+
+@wp.kernel(enable_backward=False, module=MODULE)
+def regularize(n_disc: int, capacity: int, regularization: wp.float64,
+               first_kept: wp.array(dtype=wp.int32), kept: wp.array(dtype=wp.int32),
+               scale: wp.array(dtype=wp.float64), block_value: wp.array(dtype=mat33),
+               inverse_diagonal: wp.array(dtype=mat33)):
+    """``regularization`` × the RVE's mean diagonal stiffness on every solved unknown of
+    disc k, and the inverse of its diagonal block."""
+    disc = wp.tid()
+    rve = disc // n_disc
+    base = disc * (capacity + 1)
+    block = block_value[base]
+    if kept[disc] != 0:
+        shift = regularization * scale[rve]
+        if disc == rve * n_disc + first_kept[rve]:
+            block += wp.diag(vec3(0.0, 0.0, shift))
+        else:
+            block += wp.diag(vec3(shift, shift, shift))
+        block_value[base] = block
+    inverse_diagonal[disc] = wp.inverse(block)
+
+
+def kernel_modules() -> dict[str, wp.Module]:
+    """The warp module of this file by name (for an ahead-of-time compile)."""
+    return {MODULE: slot_contacts.module}
+
+
+def condensed_tangent_on_device(model: Model, state: State, rves: np.ndarray | None = None,
+                                tolerance: float = 1e-10, max_iterations: int | None = None,
+                                regularization: float = 1e-9,
+                                cap_tolerance: float = SLIDING_TOLERANCE,
+                                check_every: int = 32) -> CondensedTangentCG:
+    """The condensed tangent C [Pa] (B, 2, 2, 2, 2) of the RVEs ``rves`` (default all) of
+    one shard's ``model`` and ``state`` (float64), as
+    :func:`~granular_material.dem.condensed_cg.condensed_tangent_cg` gives it for
+    ``state_to_data(model, state)``, with its systems assembled on the shard's device (module
+    docstring); the arguments are that function's.
+    ``assembly_seconds`` is the assembly's, ``solve_seconds`` the CG's [s]."""
+    if model.dtype != "float64":
+        raise ValueError(f"the device assembly reads float64 states, got {model.dtype}")
+    if not (math.isfinite(tolerance) and tolerance > 0):
+        raise ValueError(f"tolerance must be a number > 0, got {tolerance!r}")
+    n_rve, n_disc, capacity = model.n_rve, model.n_disc, model.capacity
+    index = _selected(n_rve, rves, regularization)
+    count = len(index)
+    device = model.device
+    law = model.meta.stiffness
+    lock = _CPU_LOCK if wp.get_device(device).is_cpu else _NoLock()
+    start = time.perf_counter()
+    with lock, wp.ScopedDevice(device):
+        chosen = np.zeros(n_rve, dtype=np.int32)
+        chosen[index] = 1
+        selected = wp.array(chosen, dtype=wp.int32)
+        radius = wp.array(np.ascontiguousarray(model.radius, dtype=np.float64).ravel(),
+                          dtype=wp.float64)
+        n_slot, n_total = n_rve * n_disc * capacity, n_rve * n_disc
+        touching, sliding = (wp.zeros(n_slot, dtype=wp.int32) for _ in range(2))
+        branch = wp.zeros(n_slot, dtype=vec2)
+        kn, kt = (wp.zeros(n_slot, dtype=wp.float64) for _ in range(2))
+        frictmat = law["law"] == "frictmat"
+        wp.launch(slot_contacts, dim=n_slot, inputs=[
+            n_disc, capacity, selected, state.fractional_position, state.cell, radius,
+            state.contact_partner, state.contact_count, state.contact_shear_force,
+            state.contact_mirror_slot, LAW_FRICTMAT if frictmat else 0,
+            wp.float64(0.0 if frictmat else float(law["kn"])),
+            wp.float64(0.0 if frictmat else float(law["kt"])),
+            wp.float64(float(law["young"]) if frictmat else 0.0),
+            wp.float64(float(law["kt_over_kn"]) if frictmat else 0.0),
+            wp.float64(math.tan(model.meta.friction_angle)), wp.float64(cap_tolerance)],
+            outputs=[touching, sliding, branch, kn, kt])
+        kept = wp.array(np.repeat(chosen, n_disc), dtype=wp.int32)
+        kept_next = wp.zeros(n_total, dtype=wp.int32)
+        changed = wp.zeros(1, dtype=wp.int32)
+        while True:  # leave out discs of fewer than two contacts until none drops
+            changed.zero_()
+            wp.launch(drop_weak_discs, dim=n_total, inputs=[
+                n_disc, capacity, state.contact_partner, state.contact_count, touching,
+                kept, kept_next, changed])
+            kept, kept_next = kept_next, kept
+            if not changed.numpy()[0]:
+                break
+        first_kept = wp.zeros(n_rve, dtype=wp.int32)
+        wp.launch(first_kept_disc, dim=n_rve, inputs=[n_disc, kept, first_kept])
+        blocks = n_total * (capacity + 1)
+        row_end = wp.zeros(n_total, dtype=wp.int32)
+        block_disc = wp.zeros(blocks, dtype=wp.int32)
+        block_value = wp.zeros(blocks, dtype=mat33)
+        rhs = wp.zeros(3 * n_total, dtype=vec3)
+        load = wp.zeros(4 * n_total, dtype=vec3)
+        diagonal_stiffness = wp.zeros(n_total, dtype=vec3)
+        net = Network()
+        net.partner, net.count = state.contact_partner, state.contact_count
+        net.radius, net.touching, net.sliding = radius, touching, sliding
+        net.branch, net.kn, net.kt, net.kept = branch, kn, kt, kept
+        wp.launch(assemble_rows, dim=n_total, inputs=[n_disc, capacity, net, first_kept],
+                  outputs=[row_end, block_disc, block_value, rhs, load, diagonal_stiffness])
+        scale = wp.zeros(n_rve, dtype=wp.float64)
+        affine, affine_all = (wp.zeros(n_rve, dtype=mat44) for _ in range(2))
+        counters = wp.zeros(4 * n_rve, dtype=wp.int32)
+        wp.launch(rve_sums, dim=n_rve, inputs=[n_disc, capacity, net, diagonal_stiffness],
+                  outputs=[scale, affine, affine_all, counters])
+        inverse = wp.zeros(n_total, dtype=mat33)
+        wp.launch(regularize, dim=n_total, inputs=[
+            n_disc, capacity, wp.float64(regularization), first_kept, kept, scale,
+            block_value, inverse])
+        system = DeviceSystem(
+            disc_start=wp.array(np.arange(n_rve + 1, dtype=np.int32) * n_disc,
+                                dtype=wp.int32),
+            disc_rve=wp.array(np.repeat(np.arange(n_rve, dtype=np.int32), n_disc),
+                              dtype=wp.int32),
+            block_start=wp.array(np.arange(n_total, dtype=np.int32) * (capacity + 1),
+                                 dtype=wp.int32),
+            row_end=row_end, block_disc=block_disc, block_value=block_value,
+            inverse_diagonal=inverse, rhs=rhs, load=load, count=n_rve, n_total=n_total)
+        tallies = counters.numpy().reshape(n_rve, 4)[index].astype(np.int64)
+        if max_iterations is None:
+            max_iterations = max(1000, 4 * int(tallies[:, 3].max(initial=0)))
+        wp.synchronize_device(device)
+        assembled = time.perf_counter()
+        product, iterations, residual, failed, active = solve_on_device(
+            system, device, tolerance, max_iterations, check_every)
+        k_gg = affine.numpy()[index]
+        k_gg_all = affine_all.numpy()[index]
+        cells = state.cell.numpy()[index]
+    solved = time.perf_counter()
+    product, iterations, residual = product[index], iterations[index], residual[index]
+    bad = np.flatnonzero(failed[index].any(axis=1) | active[index].any(axis=1))
+    if len(bad):
+        raise CGNotConvergedError(
+            f"condensed tangent: CG did not reach ‖r‖/‖b‖ <= {tolerance:g} within "
+            f"{max_iterations} iterations (or broke down) for RVEs {index[bad].tolist()} "
+            f"(relative residuals {residual[bad].max(axis=1).tolist()})")
+    volume = (np.linalg.det(cells) * model.meta.thickness)[:, None, None]
+    tangent = (k_gg - product[:, :, _COLUMN_OF]) / volume
+    return CondensedTangentCG(
+        tangent=tangent.reshape(count, 2, 2, 2, 2),
+        affine=(k_gg_all / volume).reshape(count, 2, 2, 2, 2),
+        n_contacts=tallies[:, 0], n_sliding=tallies[:, 1], n_left_out=tallies[:, 2],
+        n_unknowns=tallies[:, 3], seconds=np.full(count, (solved - start) / max(count, 1)),
+        iterations=iterations, residual=residual, assembly_seconds=assembled - start,
+        solve_seconds=solved - assembled,
+    )
+
+
+def condensed_tangent_of_batch(batch: DEMBatch, rves: np.ndarray | None = None,
+                               **options: Any) -> CondensedTangentCG:
+    """:func:`condensed_tangent_on_device` of the RVEs ``rves`` (distinct batch indices,
+    default all) of a float64 :class:`~granular_material.dem.batch.DEMBatch`, shard by
+    shard, returned in the order of ``rves``; ``options`` are that function's."""
+    index = _selected(batch.n_rve, rves, options.get("regularization", 1e-9))
+    parts, order = [], []
+    for shard in batch.shards:
+        inside = index[(index >= shard.first) & (index < shard.first + shard.model.n_rve)]
+        if len(inside):
+            parts.append(condensed_tangent_on_device(shard.model, shard.state,
+                                                     rves=inside - shard.first, **options))
+            order.append(inside)
+    if not parts:
+        return condensed_tangent_on_device(batch.shards[0].model, batch.shards[0].state,
+                                           rves=np.zeros(0, dtype=int), **options)
+    where = {int(rve): k for k, rve in enumerate(np.concatenate(order))}
+    wanted = np.array([where[int(rve)] for rve in index], dtype=int)  # rves' order
+
+    def joined(name: str) -> np.ndarray:
+        return np.concatenate([getattr(p, name) for p in parts])[wanted]
+
+    return CondensedTangentCG(
+        **{name: joined(name) for name in (
+            "tangent", "affine", "n_contacts", "n_sliding", "n_left_out", "n_unknowns",
+            "seconds", "iterations", "residual")},
+        assembly_seconds=sum(p.assembly_seconds for p in parts),
+        solve_seconds=sum(p.solve_seconds for p in parts))
