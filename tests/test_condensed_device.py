@@ -70,13 +70,16 @@ def test_the_frictmat_law_gives_the_direct_solve(sheared: DEMBatch) -> None:
 
 def test_chosen_rves_come_back_in_their_order_bit_for_bit(sheared: DEMBatch) -> None:
     """RVEs 3 and 0 (two shards, asked for in that order): what the whole batch gave them,
-    bit for bit (each RVE's systems are its own), and the host-assembled CG's C."""
+    bit for bit (each RVE's systems are its own), and the host-assembled CG's C; none asked
+    for, none given."""
     whole = condensed_tangent_of_batch(sheared)
     chosen = condensed_tangent_of_batch(sheared, rves=np.array([3, 0]))
     np.testing.assert_array_equal(chosen.tangent, whole.tangent[[3, 0]])
     np.testing.assert_array_equal(chosen.iterations, whole.iterations[[3, 0]])
     host = condensed_tangent_cg(sheared.to_data(), rves=[3, 0])
     assert _relative(chosen.tangent, host.tangent).max() < 1e-9
+    nothing = condensed_tangent_of_batch(sheared, rves=np.zeros(0, dtype=int))
+    assert nothing.tangent.shape == (0, 2, 2, 2, 2) and nothing.iterations.shape == (0, 3)
 
 
 def test_lattice_mechanisms_rattlers_and_an_empty_rve(two_discs) -> None:

@@ -468,9 +468,13 @@ def condensed_tangent_of_batch(batch: DEMBatch, rves: np.ndarray | None = None,
             parts.append(condensed_tangent_on_device(shard.model, shard.state,
                                                      rves=inside - shard.first, **options))
             order.append(inside)
-    if not parts:
-        return condensed_tangent_on_device(batch.shards[0].model, batch.shards[0].state,
-                                           rves=np.zeros(0, dtype=int), **options)
+    if not parts:  # nothing asked for: nothing launched
+        none = np.zeros(0, dtype=np.int64)
+        return CondensedTangentCG(
+            tangent=np.zeros((0, 2, 2, 2, 2)), affine=np.zeros((0, 2, 2, 2, 2)),
+            n_contacts=none, n_sliding=none, n_left_out=none, n_unknowns=none,
+            seconds=np.zeros(0), iterations=np.zeros((0, 3), dtype=np.int64),
+            residual=np.zeros((0, 3)))
     where = {int(rve): k for k, rve in enumerate(np.concatenate(order))}
     wanted = np.array([where[int(rve)] for rve in index], dtype=int)  # rves' order
 
