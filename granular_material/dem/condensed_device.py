@@ -8,10 +8,11 @@ took 2.4 s for 600 RVEs of 400 discs against 0.16 s for the CG itself (docs/perf
 (fractional positions, cell, radii, neighbour slots, tangential springs and their mirror
 slots), then solved by the same CG kernels:
 
-- ``slot_contacts`` (one thread a slot): which slots touch, the pair's normal, branch and
+- ``slot_contacts`` (one thread a slot): which slots touch, the pair's branch and
   stiffnesses, and whether it slides (the engine's test on the spring its owner keeps);
 - ``drop_weak_discs`` (one thread a disc, repeated until nothing changes): the discs of
-  fewer than two contacts among the kept ones are left out, as ``condensed._kept_discs``;
+  fewer than two contacts among the kept ones are left out, as ``condensed._kept_discs``,
+  and ``first_kept_disc`` (one thread an RVE) finds the disc whose translation is fixed;
 - ``assemble_rows`` (one thread a disc): its row of 3 × 3 blocks, the diagonal and one per
   contact with a kept disc, packed into the disc's ``capacity + 1`` places (the CG reads a
   row up to its ``row_end``), its K_uG columns and K_Gu rows;
