@@ -45,14 +45,13 @@ from granular_material.dem.condensed_cg import (
     _NoLock,
     solve_on_device,
 )
-from granular_material.dem.laws import LAW_FRICTMAT
+from granular_material.dem.laws import ContactLaw, branch_vector, pair_stiffness
 
 if TYPE_CHECKING:
     from granular_material.dem.batch import DEMBatch
     from granular_material.dem.model import Model
     from granular_material.dem.state import State
 
-_FRICTMAT = wp.constant(LAW_FRICTMAT)
 __all__ = [
     "Network",
     "condensed_tangent_of_batch",
@@ -90,9 +89,8 @@ def slot_contacts(n_disc: int, capacity: int, selected: wp.array(dtype=wp.int32)
                   fractional: wp.array(dtype=vec2), cell: wp.array(dtype=mat22),
                   radius: wp.array(dtype=wp.float64), partner: wp.array(dtype=wp.int32),
                   count: wp.array(dtype=wp.int32), shear: wp.array(dtype=wp.float64),
-                  mirror: wp.array(dtype=wp.int32), law: int, kn0: wp.float64,
-                  kt0: wp.float64, young: wp.float64, kt_over_kn: wp.float64,
-                  mu: wp.float64, cap_tolerance: wp.float64,
+                  mirror: wp.array(dtype=wp.int32), law: ContactLaw, mu: wp.float64,
+                  cap_tolerance: wp.float64,
                   touching: wp.array(dtype=wp.int32), sliding: wp.array(dtype=wp.int32),
                   branch: wp.array(dtype=vec2), kn: wp.array(dtype=wp.float64),
                   kt: wp.array(dtype=wp.float64)):
@@ -107,20 +105,14 @@ def slot_contacts(n_disc: int, capacity: int, selected: wp.array(dtype=wp.int32)
         return
     local = partner[slot]
     other = rve * n_disc + local
-    ds = fractional[other] - fractional[disc]
-    ds = vec2(ds[0] - wp.round(ds[0]), ds[1] - wp.round(ds[1]))
-    d = cell[rve] * ds
+    d = branch_vector(fractional[disc], fractional[other], cell[rve])
     dist = wp.length(d)
     ra = radius[disc]
     rc = radius[other]
     overlap = ra + rc - dist
     if not (overlap > wp.float64(0.0) and dist > wp.float64(0.0)):
         return
-    k_n = kn0
-    k_t = kt0
-    if law == _FRICTMAT:
-        k_n = wp.float64(2.0) * young * ra * rc / (ra + rc)
-        k_t = kt_over_kn * k_n
+    k_n, k_t = pair_stiffness(law, ra, rc)
     # the pair's spring as its owner (the lower index) keeps it
     fs = shear[slot]
     if local < disc - rve * n_disc and mirror[slot] >= 0:
@@ -358,7 +350,6 @@ def condensed_tangent_on_device(model: Model, state: State, rves: np.ndarray | N
     index = _selected(n_rve, rves, regularization)
     count = len(index)
     device = model.device
-    law = model.meta.stiffness
     lock = _CPU_LOCK if wp.get_device(device).is_cpu else _NoLock()
     start = time.perf_counter()
     with lock, wp.ScopedDevice(device):
@@ -371,15 +362,10 @@ def condensed_tangent_on_device(model: Model, state: State, rves: np.ndarray | N
         touching, sliding = (wp.zeros(n_slot, dtype=wp.int32) for _ in range(2))
         branch = wp.zeros(n_slot, dtype=vec2)
         kn, kt = (wp.zeros(n_slot, dtype=wp.float64) for _ in range(2))
-        frictmat = law["law"] == "frictmat"
         wp.launch(slot_contacts, dim=n_slot, inputs=[
             n_disc, capacity, selected, state.fractional_position, state.cell, radius,
             state.contact_partner, state.contact_count, state.contact_shear_force,
-            state.contact_mirror_slot, LAW_FRICTMAT if frictmat else 0,
-            wp.float64(0.0 if frictmat else float(law["kn"])),
-            wp.float64(0.0 if frictmat else float(law["kt"])),
-            wp.float64(float(law["young"]) if frictmat else 0.0),
-            wp.float64(float(law["kt_over_kn"]) if frictmat else 0.0),
+            state.contact_mirror_slot, model.law,
             wp.float64(math.tan(model.meta.friction_angle)), wp.float64(cap_tolerance)],
             outputs=[touching, sliding, branch, kn, kt])
         kept = wp.array(np.repeat(chosen, n_disc), dtype=wp.int32)
