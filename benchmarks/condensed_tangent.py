@@ -21,13 +21,14 @@ packing's own drift, as ``tests/test_extremes.py`` measures it):
   fixed cell.
 
 The tangents: ``kr`` (Kruyt–Rothenburg, ``homogenize``), ``condensed`` (free sliding),
-``condensed-coulomb``, and ``perturbation`` (the DEM material's forward differences: four
-more ``drive`` runs of ∇u = 1e-4 E_kl from the state). Error = |C:Δ∇u − Δσ_DEM| / |Δσ_DEM|
-(Frobenius). Writes ``prediction.csv``, ``prediction.md`` and ``cost.json`` under ``--out``.
-``--solver``: how the costs time the condensed tangent's solves: ``direct`` (scipy LU per
-RVE, the default), ``cg`` (``condensed_cg``: the batched warp CG on the CPU device) or
-``both`` (each, wall time of the whole batch's call per RVE, median of the repeats, and the
-largest difference between the two tangents). Measures; never passes or fails.
+``condensed-coulomb``, ``condensed-sticking`` (every touching contact keeps kt), and
+``perturbation`` (the DEM material's forward differences: four more ``drive`` runs of ∇u =
+1e-4 E_kl from the state). Error = |C:Δ∇u − Δσ_DEM| / |Δσ_DEM| (Frobenius). Writes
+``prediction.csv``, ``prediction.md`` and ``cost.json`` under ``--out``. ``--solver``: how
+the costs time the condensed tangent's solves: ``direct`` (scipy LU per RVE, the default),
+``cg`` (``condensed_cg``: the batched warp CG on the CPU device) or ``both`` (each, wall
+time of the whole batch's call per RVE, median of the repeats, and the largest difference
+between the two tangents). Measures; never passes or fails.
 """
 
 from __future__ import annotations
@@ -178,6 +179,7 @@ def main(argv: list[str] | None = None) -> pd.DataFrame:
             "kr": h.tangent,
             "condensed": condensed_tangent(data).tangent,
             "condensed-coulomb": condensed_tangent(data, sliding="coulomb").tangent,
+            "condensed-sticking": condensed_tangent(data, sliding="stick").tangent,
             "perturbation": _perturbation(batch, snap),
         }
         for protocol in ("drive", "drive-30", "quasi-static"):

@@ -23,8 +23,9 @@ From that state:
   and the symmetric xy), driven at the FEM's 1e-5 strain a DEM step, so that the drift of
   the state and what the path's own speed does cancel;
 - at the end of the path to Δ: the Kruyt–Rothenburg tangent (``homogenize``), the
-  objective one, the condensed one (free sliding, and Coulomb), and the perturbation tangent
-  as the DEM material computes it (forward differences of the same path, h = 0.1 × max|Δ|).
+  objective one, the condensed one (free sliding, Coulomb, and every contact sticking), and
+  the perturbation tangent as the DEM material computes it (forward differences of the same
+  path, h = 0.1 × max|Δ|).
 
 Each tangent C is compared with J on the three symmetric directions (Voigt xx, yy, 2xy, a
 3 × 3 block): ``error`` = ‖C − J‖/‖J‖ (Frobenius) and ``xx ratio`` = C_xxxx/J_xxxx, the
@@ -125,12 +126,13 @@ def measure(particles: int, seeds: list[int], strains: list[float], step: float,
         h = _after(batch, snap, load)
         data = batch.to_data()
         condensed = {mode: condensed_tangent(data, sliding=mode).tangent
-                     for mode in ("free", "coulomb")}
+                     for mode in ("free", "coulomb", "stick")}
         tangents = {
             "kruyt-rothenburg": _voigt(h.tangent),
             "objective": _voigt(objective_tangent(h.tangent, h.stress)),
             "condensed": _voigt(condensed["free"]),
             "condensed-coulomb": _voigt(condensed["coulomb"]),
+            "condensed-sticking": _voigt(condensed["stick"]),
             "perturbation": _differences(batch, snap, load, PERTURBATION * step, h.stress),
         }
         for name, c in tangents.items():

@@ -139,9 +139,9 @@ def test_the_dem_backend_uses_the_cg_on_cuda(packings: RVEData, monkeypatch) -> 
 
     calls = []
 
-    def cg_on_cpu(data: RVEData, rves: np.ndarray, device: str):
+    def cg_on_cpu(data: RVEData, rves: np.ndarray, device: str, sliding: str):
         calls.append(device)
-        return condensed_tangent_cg(data, rves=rves, device="cpu")
+        return condensed_tangent_cg(data, rves=rves, device="cpu", sliding=sliding)
 
     @dataclass
     class Fake:

@@ -96,6 +96,25 @@ def test_lattice_mechanisms_rattlers_and_an_empty_rve(two_discs) -> None:
     assert empty.n_contacts[0] == 0 and np.all(empty.tangent == 0.0)
 
 
+def test_sticking_contacts_give_the_direct_solve(sheared: DEMBatch) -> None:
+    """``sliding="stick"`` on the device and in the host-assembled CG: scipy's LU result
+    with every touching contact keeping kt, the same counts (sliding still counted); the
+    Coulomb variant, not symmetric, is refused by name."""
+    direct = condensed_tangent(sheared.to_data(), sliding="stick")
+    on_device = condensed_tangent_of_batch(sheared, sliding="stick")
+    host = condensed_tangent_cg(sheared.to_data(), sliding="stick")
+    assert _relative(on_device.tangent, direct.tangent).max() < 1e-8
+    assert _relative(host.tangent, direct.tangent).max() < 1e-8
+    for name in COUNTERS:
+        np.testing.assert_array_equal(getattr(on_device, name), getattr(direct, name))
+    free = condensed_tangent(sheared.to_data(), sliding="free")
+    assert _relative(direct.tangent, free.tangent)[2:].min() > 1e-3  # the sheared ones moved
+    for solve in (condensed_tangent_of_batch, condensed_tangent_cg):
+        with pytest.raises(ValueError, match="sliding must be one of free, stick"):
+            solve(sheared if solve is condensed_tangent_of_batch else sheared.to_data(),
+                  sliding="coulomb")
+
+
 def test_a_float32_state_is_refused_by_name(sheared: DEMBatch) -> None:
     single = DEMBatch(sheared.to_data().select(0), device="cpu", dtype="float32")
     with pytest.raises(ValueError, match="float64"):
@@ -118,13 +137,13 @@ def test_the_dem_backend_assembles_on_a_float64_cuda_batch(sheared: DEMBatch,
         def __getattr__(self, name: str):
             return getattr(sheared, name)
 
-    def device_path(batch, rves):
-        calls.append("device")
-        return condensed_tangent_of_batch(sheared, rves=rves)
+    def device_path(batch, rves, sliding):
+        calls.append(("device", sliding))
+        return condensed_tangent_of_batch(sheared, rves=rves, sliding=sliding)
 
-    def host_cg(data, rves, device):
-        calls.append("host-cg")
-        return condensed_tangent_cg(data, rves=rves)
+    def host_cg(data, rves, device, sliding):
+        calls.append(("host-cg", sliding))
+        return condensed_tangent_cg(data, rves=rves, sliding=sliding)
 
     @dataclass
     class H:
@@ -134,10 +153,15 @@ def test_the_dem_backend_assembles_on_a_float64_cuda_batch(sheared: DEMBatch,
     monkeypatch.setattr(backend, "condensed_tangent_cg", host_cg)
     moved = np.array([False, True, False, True])
     h = H(np.zeros((4, 2, 2, 2, 2)))
-    assembled = backend._with_condensed(OnCuda("float64"), h, moved).tangent
-    host = backend._with_condensed(OnCuda("float32"), h, moved).tangent
-    direct = backend._with_condensed(sheared, h, moved).tangent
-    assert calls == ["device", "host-cg"]
-    assert np.all(assembled[~moved] == 0.0)
-    assert _relative(assembled[moved], direct[moved]).max() < 1e-8
-    assert _relative(host[moved], direct[moved]).max() < 1e-8
+    for sliding in ("free", "stick"):  # each path is told how contacts at the cap respond
+        calls.clear()
+        assembled = backend._with_condensed(OnCuda("float64"), h, moved, sliding).tangent
+        host = backend._with_condensed(OnCuda("float32"), h, moved, sliding).tangent
+        direct = backend._with_condensed(sheared, h, moved, sliding).tangent
+        assert calls == [("device", sliding), ("host-cg", sliding)]
+        assert np.all(assembled[~moved] == 0.0)
+        assert _relative(assembled[moved], direct[moved]).max() < 1e-8
+        assert _relative(host[moved], direct[moved]).max() < 1e-8
+    reference = condensed_tangent(sheared.to_data(), rves=np.flatnonzero(moved),
+                                  sliding="stick").tangent
+    assert _relative(direct[moved], reference).max() < 1e-14

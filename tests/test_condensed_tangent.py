@@ -168,6 +168,28 @@ def test_symmetries_and_objectivity(sheared: RVEData) -> None:
     assert np.linalg.eigvalsh(0.5 * (sym + sym.T)).min() > -1e-10 * scale
 
 
+def test_sticking_bounds_the_free_tangent_from_above(sheared: RVEData) -> None:
+    """``sliding="stick"`` (every touching contact keeps kt) is symmetric and objective, and
+    C_stick − C_free is positive semi-definite: the condensation is a minimum of the
+    network's energy over the fluctuations, and kt only adds energy. Where nothing slides
+    the two are the same matrix."""
+    free = condensed_tangent(sheared, sliding="free")
+    stick = condensed_tangent(sheared, sliding="stick")
+    c, scale = stick.tangent[0], np.abs(stick.tangent[0]).max()
+    assert np.abs(c - c.transpose(2, 3, 0, 1)).max() < 1e-10 * scale
+    assert np.abs(np.einsum("ijkl,kl->ij", c, SPIN)).max() < 1e-10 * scale
+    np.testing.assert_array_equal(stick.n_sliding, free.n_sliding)  # still counted
+    gap = c.reshape(4, 4) - free.tangent[0].reshape(4, 4)
+    eigen = np.linalg.eigvalsh(0.5 * (gap + gap.T))
+    assert eigen.min() > -1e-10 * scale and eigen.max() > 1e-3 * scale
+    # no contact at its cap (the tolerance counts none as sliding): the same C
+    none = condensed_tangent(sheared, sliding="free", cap_tolerance=-1.0)
+    assert none.n_sliding[0] == 0
+    np.testing.assert_allclose(none.tangent, stick.tangent, rtol=0, atol=1e-12 * scale)
+    with pytest.raises(ValueError, match="sliding must be one of"):
+        condensed_tangent(sheared, sliding="stuck")
+
+
 def test_regularisation_does_not_move_c(sheared: RVEData) -> None:
     """The floppy modes left after pruning carry no load: the regularisation shifts C only
     in proportion to itself (below 1e-5 of max|C| at 1e-7, against 1e-11)."""
@@ -246,6 +268,31 @@ def test_dem_material_returns_the_condensed_tangent(sheared: RVEData, tmp_path) 
     assert np.abs(response.tangent - reference.tangent).max() > 0.1 * scale
     with pytest.raises(ValueError, match="tangent must be one of"):
         DEMMaterial(rve=path, device="cpu", tangent="condensd").allocate(1)
+
+
+def test_dem_material_returns_the_sticking_tangent(sheared: RVEData, tmp_path) -> None:
+    """``tangent="condensed-sticking"``: the condensed tangent with every touching contact
+    sticking, plus the stress's spin; the same stress as any other tangent."""
+    from granular_material_skfem import DEMMaterial
+
+    from granular_material.dem import save_rve
+
+    path = tmp_path / "sheared.npz"
+    save_rve(path, sheared)
+    grad = np.array([[[1e-4, 0.0], [0.0, -1e-4]], [[0.0, 1e-4], [1e-4, 0.0]]])
+    materials = {name: DEMMaterial(rve=path, device="cpu", replicate=True, tangent=name)
+                 for name in ("condensed", "condensed-sticking")}
+    responses = {}
+    for name, material in materials.items():
+        material.allocate(2)
+        responses[name] = material.evaluate(grad)
+    sticking = responses["condensed-sticking"]
+    np.testing.assert_array_equal(sticking.stress, responses["condensed"].stress)
+    data = materials["condensed-sticking"].backend.batch.to_data()
+    expected = condensed_tangent(data, sliding="stick").tangent + spin_tangent(sticking.stress)
+    scale = np.abs(expected).max()
+    np.testing.assert_allclose(sticking.tangent, expected, rtol=0, atol=1e-9 * scale)
+    assert np.abs(sticking.tangent - responses["condensed"].tangent).max() > 1e-3 * scale
 
 
 def test_a_held_tangent_is_condensed_once_an_increment(sheared: RVEData, tmp_path,
@@ -341,7 +388,8 @@ def test_newton_view_benchmark_smoke(tmp_path) -> None:
     table = module.main(["--particles", "64", "--seeds", "1", "--strains", "0.5",
                          "--out", str(tmp_path)])
     assert sorted(table["tangent"]) == sorted(["kruyt-rothenburg", "objective", "condensed",
-                                               "condensed-coulomb", "perturbation"])
+                                               "condensed-coulomb", "condensed-sticking",
+                                               "perturbation"])
     assert np.isfinite(table["error %"]).all() and (table["J_xxxx MPa"] > 0).all()
     error = table.set_index("tangent")["error %"]
     assert error["perturbation"] < min(error["condensed"], error["kruyt-rothenburg"])

@@ -22,14 +22,25 @@ s = (r_a + r_c)/|d|,
 The contact's stiffness: kn on δn; kt on δt for a sticking contact; for a sliding one
 (|fs| at μ·fn, the engine's test) the tangential spring does not resist further slip,
 ``sliding="free"`` (kt → 0), or, ``sliding="coulomb"``, the force stays on the cone,
-Δfs = μ·sign(fs)·Δfn (non-symmetric). Initial-stress (geometric) terms of order fn/|d| are
-left out, as Kruyt–Rothenburg leaves them out.
+Δfs = μ·sign(fs)·Δfn (non-symmetric), or, ``sliding="stick"``, it keeps kt: the stiffness
+the network has once every slip stops or reverses, an upper bound of its incremental
+stiffness in every direction (sliding and opening only take stiffness away; contacts that
+form are not seen by any tangent at the state). Initial-stress (geometric) terms of order
+fn/|d| are left out, as Kruyt–Rothenburg leaves them out.
 
-Properties, by construction: with ``sliding="free"`` C has major symmetry
+Why an upper bound matters: modified Newton with a held symmetric tangent K contracts
+where 0 < J ≤ K (J the response's own stiffness, the error shrinks by I − K⁻¹J), and
+overshoots, cycles or diverges where J > 2K. With ``"free"`` a contact at its cap has
+kt = 0 however the next increment moves it; where it moves back, it sticks and answers
+with kt, so K underestimates J in those directions. Measured in docs/physics.md ("Sliding
+contacts in the condensed tangent").
+
+Properties, by construction: with ``sliding="free"`` (or ``"stick"``) C has major symmetry
 (C_ijkl = C_klij; it is the Hessian of the network's energy over V), a spin costs nothing
 (C_ijkl W_kl = 0: minor symmetry in kl) and so, by major symmetry, C is minor symmetric in
 ij too; its affine term is the Kruyt–Rothenburg tangent symmetrised over (ij) and (kl),
-with kt·s² in place of kt (s − 1 = overlap/|d|, about 1e-3) and no kt at sliding contacts.
+with kt·s² in place of kt (s − 1 = overlap/|d|, about 1e-3) and, with ``"free"``, no kt at
+sliding contacts.
 With ``sliding="coulomb"`` C keeps the minor symmetry in kl but loses the major one.
 
 What it predicts is the RVE's quasi-static response: central differences of the DEM (±1e-5,
@@ -75,7 +86,12 @@ __all__ = [
     "contact_network",
 ]
 
-SLIDING_MODES = ("free", "coulomb")  #: how a sliding contact's tangential spring responds
+#: how the tangential spring of a contact at its Coulomb cap responds: "free" (it does not
+#: resist further slip, kt → 0), "coulomb" (the force stays on the cone) or "stick" (it
+#: keeps kt, as every contact does when the slip stops or reverses)
+SLIDING_MODES = ("free", "coulomb", "stick")
+#: the modes whose K_uu is symmetric positive definite (the CG paths take only these)
+SYMMETRIC_SLIDING = ("free", "stick")
 #: relative tolerance of the engine's sliding test |fs| >= μ fn (1 − tol) (kernels_measures)
 SLIDING_TOLERANCE = 1e-9
 #: macro spin ω(G) = (G_10 − G_01)/2 as coefficients over G_kl, index 2k + l
@@ -227,7 +243,7 @@ def _contact_matrices(net: ContactNetwork, sliding: str) -> tuple[np.ndarray, np
         - reach[:, None] * _SPIN[None, :]
     k = np.zeros((m, 2, 2))
     k[:, 0, 0] = net.kn
-    k[:, 1, 1] = np.where(net.sliding, 0.0, net.kt)
+    k[:, 1, 1] = net.kt if sliding == "stick" else np.where(net.sliding, 0.0, net.kt)
     if sliding == "coulomb":
         k[:, 1, 0] = np.where(net.sliding, -net.friction * np.sign(net.shear_force) * net.kn,
                               0.0)
@@ -304,7 +320,7 @@ def _condense_one(net: ContactNetwork, sliding: str,
         return affine / net.volume, affine_all / net.volume, left_out, 0
     k_uu, k_ug, k_gu = system.k_uu, system.k_ug, system.k_gu
     n_free = k_uu.shape[0]
-    if sliding == "free":  # symmetric positive definite: diagonal pivots are stable
+    if sliding in SYMMETRIC_SLIDING:  # symmetric positive definite: diagonal pivots are stable
         lu = spla.splu(k_uu, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
                        options={"SymmetricMode": True})
     else:
@@ -322,6 +338,12 @@ def _selected(n_rve: int, rves: np.ndarray | None, regularization: float) -> np.
     return np.arange(n_rve) if rves is None else np.asarray(rves, dtype=int)
 
 
+def _check_sliding(sliding: str, allowed: tuple[str, ...] = SLIDING_MODES) -> None:
+    """Raise ValueError unless ``sliding`` is one of ``allowed``."""
+    if sliding not in allowed:
+        raise ValueError(f"sliding must be one of {', '.join(allowed)}, got {sliding!r}")
+
+
 def _counters(count: int) -> tuple[np.ndarray, ...]:
     """Per-RVE tallies of a condensation: contacts, sliding, left out, unknowns (int), and
     seconds (float), each shape (count,)."""
@@ -333,12 +355,12 @@ def condensed_tangent(data: RVEData, sliding: str = "free", regularization: floa
                       cap_tolerance: float = SLIDING_TOLERANCE) -> CondensedTangent:
     """The condensed tangent C [Pa] (B, 2, 2, 2, 2), C_ijkl = ∂σ_ij/∂(∂u_k/∂x_l), of every
     RVE of ``data`` (or of the indices ``rves``) in its current configuration (see the
-    module docstring). ``sliding``: "free" (a sliding contact has kt = 0, symmetric) or
-    "coulomb" (Δfs = μ·sign(fs)·Δfn). ``cap_tolerance``: a contact within this share of
-    its Coulomb cap counts as sliding (default: the engine's own test, at the cap). A scipy
-    sparse LU per RVE, on the CPU."""
-    if sliding not in SLIDING_MODES:
-        raise ValueError(f"sliding must be one of {', '.join(SLIDING_MODES)}, got {sliding!r}")
+    module docstring). ``sliding``: "free" (a sliding contact has kt = 0, symmetric),
+    "coulomb" (Δfs = μ·sign(fs)·Δfn) or "stick" (every touching contact keeps kt: the
+    network's elastic stiffness, symmetric; see the module docstring). ``cap_tolerance``: a
+    contact within this share of its Coulomb cap counts as sliding (default: the engine's
+    own test, at the cap). A scipy sparse LU per RVE, on the CPU."""
+    _check_sliding(sliding)
     index = _selected(data.n_rve, rves, regularization)
     count = len(index)
     tangent, affine = np.zeros((count, 4, 4)), np.zeros((count, 4, 4))

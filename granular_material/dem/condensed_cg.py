@@ -4,11 +4,12 @@ warp, on any device (issue 26): on CUDA the fluctuations' solves stay on the dev
 Per RVE the system is the one :func:`granular_material.dem.condensed.condensed_tangent`
 factorises (``condensed._reduced_system``: the same contact network, the same discs left
 out, the same regularisation of every solved unknown by ``regularization`` times the mean
-diagonal stiffness), with ``sliding="free"`` only (K_uu symmetric positive definite; the
-non-symmetric ``"coulomb"`` variant needs the direct solver). It is laid out per kept disc as
-a block-sparse (BSR, 3 × 3 blocks over u_x, u_y, w = r·θ) matrix in flat arrays over the
-batch; the fixed translation of the network's first disc is an identity row and column
-(those two unknowns start at zero and never move, the same solution as leaving them out).
+diagonal stiffness), with ``sliding="free"`` or ``"stick"`` (K_uu symmetric positive
+definite; the non-symmetric ``"coulomb"`` variant needs the direct solver). It is laid out
+per kept disc as a block-sparse (BSR, 3 × 3 blocks over u_x, u_y, w = r·θ) matrix in flat
+arrays over the batch; the fixed translation of the network's first disc is an identity row
+and column (those two unknowns start at zero and never move, the same solution as leaving
+them out).
 
 Right-hand sides: the columns G_00 and G_11 of K_uG and the symmetric part of G_01 and G_10
 (a spin loads nothing, K_uG·W = 0: both share that solution), three systems per RVE. Each
@@ -44,7 +45,9 @@ import warp as wp
 
 from granular_material.dem.condensed import (
     SLIDING_TOLERANCE,
+    SYMMETRIC_SLIDING,
     CondensedTangent,
+    _check_sliding,
     _counters,
     _reduced_system,
     _selected,
@@ -289,10 +292,11 @@ def condensed_tangent_cg(data: RVEData, rves: np.ndarray | None = None, device: 
                          tolerance: float = 1e-10, max_iterations: int | None = None,
                          regularization: float = 1e-9,
                          cap_tolerance: float = SLIDING_TOLERANCE,
-                         check_every: int = 32) -> CondensedTangentCG:
+                         check_every: int = 32, sliding: str = "free") -> CondensedTangentCG:
     """The condensed tangent C [Pa] (B, 2, 2, 2, 2) of every RVE of ``data`` (or of the
-    indices ``rves``), as :func:`condensed.condensed_tangent` with ``sliding="free"``, its
-    solves by a batched block-Jacobi CG on the warp ``device`` (module docstring).
+    indices ``rves``), as :func:`condensed.condensed_tangent` with ``sliding`` ("free" or
+    "stick"), its solves by a batched block-Jacobi CG on the warp ``device`` (module
+    docstring).
 
     ``tolerance``: relative residual ‖r‖/‖b‖ at which each system stops. ``max_iterations``
     (default 4 × the largest number of unknowns of an RVE, at least 1000): past it, or on a
@@ -302,6 +306,7 @@ def condensed_tangent_cg(data: RVEData, rves: np.ndarray | None = None, device: 
     ``solve_seconds`` split the batch's between the two."""
     if not (math.isfinite(tolerance) and tolerance > 0):
         raise ValueError(f"tolerance must be a number > 0, got {tolerance!r}")
+    _check_sliding(sliding, SYMMETRIC_SLIDING)
     index = _selected(data.n_rve, rves, regularization)
     count = len(index)
     affine, affine_all = np.zeros((count, 4, 4)), np.zeros((count, 4, 4))
@@ -311,7 +316,7 @@ def condensed_tangent_cg(data: RVEData, rves: np.ndarray | None = None, device: 
     for slot, rve in enumerate(index):
         start = time.perf_counter()
         net = contact_network(data, int(rve), cap_tolerance)
-        system = _reduced_system(net, "free", regularization)
+        system = _reduced_system(net, sliding, regularization)
         parts.append(_blocks(system))
         affine[slot], affine_all[slot] = system.affine, system.affine_all
         volume[slot] = net.volume

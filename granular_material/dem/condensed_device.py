@@ -22,8 +22,9 @@ slots), then solved by the same CG kernels:
 Every disc keeps its three unknowns: a disc left out and each RVE's fixed translation (its
 first kept disc's) are identity rows with no load, whose solution is zero, the same as
 leaving them out. The contact kinematics are ``condensed._contact_matrices``' (``sliding=
-"free"``), written per slot from the slot owner's side (δn and δt are the same from either
-side of a pair). float64 batches only; a float32 batch takes the host assembly.
+"free"`` or ``"stick"``), written per slot from the slot owner's side (δn and δt are the
+same from either side of a pair). float64 batches only; a float32 batch takes the host
+assembly.
 """
 
 from __future__ import annotations
@@ -35,7 +36,12 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import warp as wp
 
-from granular_material.dem.condensed import SLIDING_TOLERANCE, _selected
+from granular_material.dem.condensed import (
+    SLIDING_TOLERANCE,
+    SYMMETRIC_SLIDING,
+    _check_sliding,
+    _selected,
+)
 from granular_material.dem.condensed_cg import (
     _COLUMN_OF,
     _CPU_LOCK,
@@ -90,12 +96,13 @@ def slot_contacts(n_disc: int, capacity: int, selected: wp.array(dtype=wp.int32)
                   radius: wp.array(dtype=wp.float64), partner: wp.array(dtype=wp.int32),
                   count: wp.array(dtype=wp.int32), shear: wp.array(dtype=wp.float64),
                   mirror: wp.array(dtype=wp.int32), law: ContactLaw, mu: wp.float64,
-                  cap_tolerance: wp.float64,
+                  cap_tolerance: wp.float64, free_slip: wp.int32,
                   touching: wp.array(dtype=wp.int32), sliding: wp.array(dtype=wp.int32),
                   branch: wp.array(dtype=vec2), kn: wp.array(dtype=wp.float64),
                   kt: wp.array(dtype=wp.float64)):
     """Per slot: does its pair touch (overlap > 0), its branch d = x_partner − x_owner
-    (minimum image) [m], kn and kt [N/m] (kt = 0 where the pair slides)."""
+    (minimum image) [m], kn and kt [N/m] (kt = 0 where the pair slides and ``free_slip``
+    is 1: ``sliding="free"``; kt kept with 0: ``"stick"``)."""
     slot = wp.tid()
     disc = slot // capacity
     rve = disc // n_disc
@@ -121,11 +128,11 @@ def slot_contacts(n_disc: int, capacity: int, selected: wp.array(dtype=wp.int32)
     touching[slot] = 1
     branch[slot] = d
     kn[slot] = k_n
+    kt[slot] = k_t
     if slides:
         sliding[slot] = 1
-        kt[slot] = wp.float64(0.0)
-    else:
-        kt[slot] = k_t
+        if free_slip == 1:
+            kt[slot] = wp.float64(0.0)
 
 
 @wp.kernel(enable_backward=False, module=MODULE)
@@ -335,7 +342,8 @@ def condensed_tangent_on_device(model: Model, state: State, rves: np.ndarray | N
                                 tolerance: float = 1e-10, max_iterations: int | None = None,
                                 regularization: float = 1e-9,
                                 cap_tolerance: float = SLIDING_TOLERANCE,
-                                check_every: int = 32) -> CondensedTangentCG:
+                                check_every: int = 32,
+                                sliding: str = "free") -> CondensedTangentCG:
     """The condensed tangent C [Pa] (B, 2, 2, 2, 2) of the RVEs ``rves`` (default all) of
     one shard's ``model`` and ``state`` (float64), as
     :func:`~granular_material.dem.condensed_cg.condensed_tangent_cg` gives it for
@@ -346,6 +354,8 @@ def condensed_tangent_on_device(model: Model, state: State, rves: np.ndarray | N
         raise ValueError(f"the device assembly reads float64 states, got {model.dtype}")
     if not (math.isfinite(tolerance) and tolerance > 0):
         raise ValueError(f"tolerance must be a number > 0, got {tolerance!r}")
+    _check_sliding(sliding, SYMMETRIC_SLIDING)
+    free_slip = 1 if sliding == "free" else 0
     n_rve, n_disc, capacity = model.n_rve, model.n_disc, model.capacity
     index = _selected(n_rve, rves, regularization)
     count = len(index)
@@ -359,15 +369,15 @@ def condensed_tangent_on_device(model: Model, state: State, rves: np.ndarray | N
         radius = wp.array(np.ascontiguousarray(model.radius, dtype=np.float64).ravel(),
                           dtype=wp.float64)
         n_slot, n_total = n_rve * n_disc * capacity, n_rve * n_disc
-        touching, sliding = (wp.zeros(n_slot, dtype=wp.int32) for _ in range(2))
+        touching, at_cap = (wp.zeros(n_slot, dtype=wp.int32) for _ in range(2))
         branch = wp.zeros(n_slot, dtype=vec2)
         kn, kt = (wp.zeros(n_slot, dtype=wp.float64) for _ in range(2))
         wp.launch(slot_contacts, dim=n_slot, inputs=[
             n_disc, capacity, selected, state.fractional_position, state.cell, radius,
             state.contact_partner, state.contact_count, state.contact_shear_force,
             state.contact_mirror_slot, model.law,
-            wp.float64(math.tan(model.meta.friction_angle)), wp.float64(cap_tolerance)],
-            outputs=[touching, sliding, branch, kn, kt])
+            wp.float64(math.tan(model.meta.friction_angle)), wp.float64(cap_tolerance),
+            free_slip], outputs=[touching, at_cap, branch, kn, kt])
         kept = wp.array(np.repeat(chosen, n_disc), dtype=wp.int32)
         kept_next = wp.zeros(n_total, dtype=wp.int32)
         changed = wp.zeros(1, dtype=wp.int32)
@@ -390,7 +400,7 @@ def condensed_tangent_on_device(model: Model, state: State, rves: np.ndarray | N
         diagonal_stiffness = wp.zeros(n_total, dtype=vec3)
         net = Network()
         net.partner, net.count = state.contact_partner, state.contact_count
-        net.radius, net.touching, net.sliding = radius, touching, sliding
+        net.radius, net.touching, net.sliding = radius, touching, at_cap
         net.branch, net.kn, net.kt, net.kept = branch, kn, kt, kept
         wp.launch(assemble_rows, dim=n_total, inputs=[n_disc, capacity, net, first_kept],
                   outputs=[row_end, block_disc, block_value, rhs, load, diagonal_stiffness])

@@ -47,8 +47,12 @@ __all__ = [
 #: the RVEs' tangents: the objective one (symmetric Kruyt–Rothenburg plus the stress's spin,
 #: see granular_material.dem.homogenization.objective_tangent), Kruyt–Rothenburg as Wu et al.
 #: publish it, forward differences of the RVE's own response, or the condensed stiffness of
-#: its contact network (granular_material.dem.condensed, plus the stress's spin)
-TANGENTS = ("objective", "kruyt-rothenburg", "perturbation", "condensed")
+#: its contact network (granular_material.dem.condensed, plus the stress's spin), with the
+#: contacts at their Coulomb cap free to slide or (condensed-sticking) keeping kt
+TANGENTS = ("objective", "kruyt-rothenburg", "perturbation", "condensed", "condensed-sticking")
+#: the condensed tangents and how each treats a contact at its Coulomb cap
+#: (granular_material.dem.condensed.SLIDING_MODES)
+CONDENSED_SLIDING = {"condensed": "free", "condensed-sticking": "stick"}
 #: how an RVE that must move is driven to a new trial ∇u: from the committed state along the
 #: whole path of the step (``restart``, Guo & Zhao), or from its last trial state by the change
 DRIVES = ("restart", "continue")
@@ -156,18 +160,21 @@ def _nan_like(h: Homogenized) -> Homogenized:
                                                np.nan) for f in fields(h)})
 
 
-def _with_condensed(batch: DEMBatch, h: Homogenized, moved: np.ndarray) -> Homogenized:
-    """``h`` with the condensed tangent [Pa] of the ``moved`` RVEs' current states: on a
-    CUDA batch by the warp CG on its device, its systems assembled there too (float64) or on
-    the host (float32); on the CPU by scipy's LU."""
+def _with_condensed(batch: DEMBatch, h: Homogenized, moved: np.ndarray,
+                    sliding: str = "free") -> Homogenized:
+    """``h`` with the condensed tangent [Pa] of the ``moved`` RVEs' current states, contacts
+    at their cap treated as ``sliding`` says ("free" or "stick"): on a CUDA batch by the
+    warp CG on its device, its systems assembled there too (float64) or on the host
+    (float32); on the CPU by scipy's LU."""
     tangent = np.array(h.tangent, dtype=np.float64, copy=True)
     rves = np.flatnonzero(moved)
     if str(batch.device).startswith("cuda") and batch.dtype == "float64":
-        result = condensed_tangent_of_batch(batch, rves=rves)
+        result = condensed_tangent_of_batch(batch, rves=rves, sliding=sliding)
     elif str(batch.device).startswith("cuda"):
-        result = condensed_tangent_cg(batch.to_data(), rves=rves, device=batch.device)
+        result = condensed_tangent_cg(batch.to_data(), rves=rves, device=batch.device,
+                                      sliding=sliding)
     else:
-        result = condensed_tangent(batch.to_data(), rves=rves)
+        result = condensed_tangent(batch.to_data(), rves=rves, sliding=sliding)
     tangent[moved] = result.tangent
     return replace(h, tangent=tangent)
 
@@ -229,7 +236,10 @@ class InProcessBackend:
             forward differences: four more runs from the committed state, with ∇u + h E_kl,
             h = max(perturbation · max|∇u|, min_perturbation) per RVE) or "condensed" (the
             contact network's stiffness with the discs' fluctuations condensed out,
-            :mod:`granular_material.dem.condensed`: no DEM run, a sparse LU per RVE).
+            :mod:`granular_material.dem.condensed`: no DEM run, a sparse LU per RVE; a
+            contact at its Coulomb cap slides freely) or "condensed-sticking" (the same,
+            every touching contact keeping kt: an upper bound of the RVE's incremental
+            stiffness, with which plain Newton does not overshoot).
         perturbation: relative size of the perturbation [-].
         min_perturbation: smallest perturbation [-].
         reuse_tol: largest change of ∇u [-] (max over the components) for which an RVE keeps
@@ -359,10 +369,10 @@ class InProcessBackend:
 
     def hold_tangent(self, hold: bool) -> None:
         """``hold``: the next evaluation measures the tangent and the later ones, up to the
-        next commit or revert, return that one instead of measuring it again: no condensation
-        (``condensed``) and no four perturbed drives (``perturbation``), for a Newton driver
-        that keeps the first tangent of an increment anyway. The other tangents cost
-        nothing extra and are measured as always."""
+        next commit or revert, return that one instead of measuring it again: no
+        condensation (``condensed``, ``condensed-sticking``) and no four perturbed drives
+        (``perturbation``), for a Newton driver that keeps the first tangent of an increment
+        anyway. The other tangents cost nothing extra and are measured as always."""
         self._hold = bool(hold)
         self._held = None
 
@@ -419,12 +429,13 @@ class InProcessBackend:
                 tangent[moved, :, :, row, col] = ((sigma[moved] - stress[moved])
                                                   / size[moved, None, None])
             new = replace(new, tangent=tangent)
-        if self.tangent == "condensed" and moved.any() and held is None:
+        if self.tangent in CONDENSED_SLIDING and moved.any() and held is None:
             with self._times.phase("tangent"):
-                new = _with_condensed(self.batch, new, moved)
+                new = _with_condensed(self.batch, new, moved, CONDENSED_SLIDING[self.tangent])
         if held is not None:
             new = replace(new, tangent=held)
-        elif self._hold and self.tangent in ("condensed", "perturbation"):
+        elif self._hold and (self.tangent in CONDENSED_SLIDING
+                             or self.tangent == "perturbation"):
             self._held = np.array(new.tangent, dtype=np.float64, copy=True)
         self._reached[moved] = target[moved]
         self._current = new
@@ -440,7 +451,7 @@ class InProcessBackend:
         corrected to first order when asked (σ + D : Δ∇u), with the objective tangent
         where it is chosen (the condensed one gets the stress's spin added: it is
         objective already, C:W = 0)."""
-        if self.tangent in ("objective", "condensed"):
+        if self.tangent == "objective" or self.tangent in CONDENSED_SLIDING:
             stress = np.asarray(current.stress, dtype=np.float64)
             symmetric = 0.5 * (stress + np.swapaxes(stress, 1, 2))
             tangent = (objective_tangent(current.tangent, symmetric)

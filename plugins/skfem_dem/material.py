@@ -155,8 +155,9 @@ class DEMMaterial(ScikitFemInterface):
             min_steps: fewest DEM steps of one evaluation (default 2).
             shards: CPU threads of the batch (None: one per core).
             progress: show a progress bar while packings are prepared.
-            tangent: "objective" (default), "kruyt-rothenburg", "perturbation" or
-                "condensed" (see :class:`DEMMaterialParameters`); the spec's ``tangent``.
+            tangent: "objective" (default), "kruyt-rothenburg", "perturbation",
+                "condensed" or "condensed-sticking" (see :class:`DEMMaterialParameters`);
+                the spec's ``tangent``.
             perturbation: relative perturbation of ∇u [-] of the "perturbation" tangent.
             reuse_tol: strain [-] under which a point keeps its last response (0: never).
             reuse_correction: "none" or "tangent".

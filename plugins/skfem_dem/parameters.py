@@ -54,8 +54,10 @@ class DEMMaterialParameters:
             nothing), "kruyt-rothenburg" (Wu et al. eq. 6 as published), "perturbation"
             (forward differences of the RVE response, four extra DEM runs per evaluation) or
             "condensed" (fluctuations condensed out of the contact network's stiffness, plus
-            the stress's spin; see
-            :class:`~granular_material_skfem.backend.InProcessBackend`).
+            the stress's spin; contacts at their Coulomb cap slide freely) or
+            "condensed-sticking" (the same with every touching contact sticking: an upper
+            bound of the RVE's incremental stiffness); see
+            :class:`~granular_material_skfem.backend.InProcessBackend`.
         perturbation: relative perturbation of ∇u for the "perturbation" tangent [-].
         reuse_tol: strain [-]: an RVE whose ∇u moved by at most this (every component) since
             it was last driven keeps its response instead of being stepped (see

@@ -54,7 +54,8 @@ class DEMParameters:
             load step (:meth:`DEMMaterial.make_isotropic`; a packing consolidated by a normal
             servo keeps some shear stress).
         tangent: condensed (default: the contact network's stiffness with the discs'
-            rearrangement condensed out), objective, kruyt-rothenburg or perturbation.
+            rearrangement condensed out), condensed-sticking (the same, contacts at their
+            Coulomb cap sticking), objective, kruyt-rothenburg or perturbation.
         perturbation: relative perturbation of ∇u of the perturbation tangent [-].
         reuse_tol: strain under which a point keeps its last response [-]; 0: never.
         reuse_correction: none or tangent (a reused response corrected to first order).
