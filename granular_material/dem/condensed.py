@@ -80,6 +80,7 @@ from granular_material.dem.rve_file import RVEData, _touching_pairs
 
 __all__ = [
     "SLIDING_MODES",
+    "SYMMETRIC_SLIDING",
     "CondensedTangent",
     "ContactNetwork",
     "condensed_tangent",
