@@ -239,7 +239,8 @@ class InProcessBackend:
             :mod:`granular_material.dem.condensed`: no DEM run, a sparse LU per RVE; a
             contact at its Coulomb cap slides freely) or "condensed-sticking" (the same,
             every touching contact keeping kt: an upper bound of the RVE's incremental
-            stiffness, with which plain Newton does not overshoot).
+            stiffness at its contacts, so that a Newton correction does not overshoot where
+            a contact at its cap sticks again).
         perturbation: relative size of the perturbation [-].
         min_perturbation: smallest perturbation [-].
         reuse_tol: largest change of ∇u [-] (max over the components) for which an RVE keeps
