@@ -288,6 +288,32 @@ def _blocks(system) -> _Blocks:
                    rhs.reshape(N_SOLVE, n_kept, 3), k_gu.reshape(4, n_kept, 3))
 
 
+def _check_tolerance(tolerance: float) -> None:
+    """Raise ValueError unless the CG's relative tolerance is a number > 0."""
+    if not (math.isfinite(tolerance) and tolerance > 0):
+        raise ValueError(f"tolerance must be a number > 0, got {tolerance!r}")
+
+
+def _iteration_cap(max_iterations: int | None, unknowns: np.ndarray) -> int:
+    """``max_iterations``, or by default 4 × the most unknowns of an RVE, at least 1000."""
+    if max_iterations is not None:
+        return max_iterations
+    return max(1000, 4 * int(unknowns.max(initial=0)))
+
+
+def _raise_unless_converged(index: np.ndarray, failed: np.ndarray, active: np.ndarray,
+                            residual: np.ndarray, tolerance: float,
+                            max_iterations: int) -> None:
+    """:class:`CGNotConvergedError` naming the RVEs ``index`` whose systems (rows of the
+    (B, 3) flags) broke down or are still active."""
+    bad = np.flatnonzero(failed.any(axis=1) | active.any(axis=1))
+    if len(bad):
+        raise CGNotConvergedError(
+            f"condensed tangent: CG did not reach ‖r‖/‖b‖ <= {tolerance:g} within "
+            f"{max_iterations} iterations (or broke down) for RVEs {index[bad].tolist()} "
+            f"(relative residuals {residual[bad].max(axis=1).tolist()})")
+
+
 def condensed_tangent_cg(data: RVEData, rves: np.ndarray | None = None, device: str = "cpu",
                          tolerance: float = 1e-10, max_iterations: int | None = None,
                          regularization: float = 1e-9,
@@ -304,8 +330,7 @@ def condensed_tangent_cg(data: RVEData, rves: np.ndarray | None = None, device: 
     launched between the host's checks for active systems. ``seconds`` is each RVE's
     assembly plus an equal share of the batch's solve [s]; ``assembly_seconds`` and
     ``solve_seconds`` split the batch's between the two."""
-    if not (math.isfinite(tolerance) and tolerance > 0):
-        raise ValueError(f"tolerance must be a number > 0, got {tolerance!r}")
+    _check_tolerance(tolerance)
     _check_sliding(sliding, SYMMETRIC_SLIDING)
     index = _selected(data.n_rve, rves, regularization)
     count = len(index)
@@ -324,19 +349,13 @@ def condensed_tangent_cg(data: RVEData, rves: np.ndarray | None = None, device: 
         n_unknowns[slot] = 0 if system.k_uu is None else system.k_uu.shape[0]
         n_contacts[slot], n_sliding[slot] = len(net.a), int(net.sliding.sum())
         seconds[slot] = time.perf_counter() - start
-    if max_iterations is None:
-        max_iterations = max(1000, 4 * int(n_unknowns.max(initial=0)))
+    max_iterations = _iteration_cap(max_iterations, n_unknowns)
     start = time.perf_counter()
     product, iterations, residual, failed, active = _solve(parts, device, tolerance,
                                                            max_iterations, check_every)
     solve_seconds = time.perf_counter() - start
     seconds += solve_seconds / max(count, 1)
-    bad = np.flatnonzero(failed.any(axis=1) | active.any(axis=1))
-    if len(bad):
-        raise CGNotConvergedError(
-            f"condensed tangent: CG did not reach ‖r‖/‖b‖ <= {tolerance:g} within "
-            f"{max_iterations} iterations (or broke down) for RVEs {index[bad].tolist()} "
-            f"(relative residuals {residual[bad].max(axis=1).tolist()})")
+    _raise_unless_converged(index, failed, active, residual, tolerance, max_iterations)
     # C = (K_GG − K_Gu X) / V, X's columns per G_kl
     condensed = affine - product[:, :, _COLUMN_OF]
     tangent = condensed / volume[:, None, None]

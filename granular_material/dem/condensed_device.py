@@ -45,10 +45,12 @@ from granular_material.dem.condensed import (
 from granular_material.dem.condensed_cg import (
     _COLUMN_OF,
     _CPU_LOCK,
-    CGNotConvergedError,
     CondensedTangentCG,
     DeviceSystem,
+    _check_tolerance,
+    _iteration_cap,
     _NoLock,
+    _raise_unless_converged,
     solve_on_device,
 )
 from granular_material.dem.laws import ContactLaw, branch_vector, pair_stiffness
@@ -352,8 +354,7 @@ def condensed_tangent_on_device(model: Model, state: State, rves: np.ndarray | N
     ``assembly_seconds`` is the assembly's, ``solve_seconds`` the CG's [s]."""
     if model.dtype != "float64":
         raise ValueError(f"the device assembly reads float64 states, got {model.dtype}")
-    if not (math.isfinite(tolerance) and tolerance > 0):
-        raise ValueError(f"tolerance must be a number > 0, got {tolerance!r}")
+    _check_tolerance(tolerance)
     _check_sliding(sliding, SYMMETRIC_SLIDING)
     free_slip = 1 if sliding == "free" else 0
     n_rve, n_disc, capacity = model.n_rve, model.n_disc, model.capacity
@@ -423,8 +424,7 @@ def condensed_tangent_on_device(model: Model, state: State, rves: np.ndarray | N
             row_end=row_end, block_disc=block_disc, block_value=block_value,
             inverse_diagonal=inverse, rhs=rhs, load=load, count=n_rve, n_total=n_total)
         tallies = counters.numpy().reshape(n_rve, 4)[index].astype(np.int64)
-        if max_iterations is None:
-            max_iterations = max(1000, 4 * int(tallies[:, 3].max(initial=0)))
+        max_iterations = _iteration_cap(max_iterations, tallies[:, 3])
         wp.synchronize_device(device)
         assembled = time.perf_counter()
         product, iterations, residual, failed, active = solve_on_device(
@@ -434,12 +434,8 @@ def condensed_tangent_on_device(model: Model, state: State, rves: np.ndarray | N
         cells = state.cell.numpy()[index]
     solved = time.perf_counter()
     product, iterations, residual = product[index], iterations[index], residual[index]
-    bad = np.flatnonzero(failed[index].any(axis=1) | active[index].any(axis=1))
-    if len(bad):
-        raise CGNotConvergedError(
-            f"condensed tangent: CG did not reach ‖r‖/‖b‖ <= {tolerance:g} within "
-            f"{max_iterations} iterations (or broke down) for RVEs {index[bad].tolist()} "
-            f"(relative residuals {residual[bad].max(axis=1).tolist()})")
+    _raise_unless_converged(index, failed[index], active[index], residual, tolerance,
+                            max_iterations)
     volume = (np.linalg.det(cells) * model.meta.thickness)[:, None, None]
     tangent = (k_gg - product[:, :, _COLUMN_OF]) / volume
     return CondensedTangentCG(
