@@ -8,7 +8,7 @@ Usage::
     python benchmarks/gpu_check.py agreement --out DIR [--device cuda] [--reference cpu]
         [--batch 16] [--particles 400] [--strain 2e-3] [--dtypes float64,float32]
     python benchmarks/gpu_check.py condensed --out DIR [--device cuda] [--batch 8]
-        [--particles 400] [--strain 2e-3]
+        [--particles 400] [--strain 2e-3] [--sliding free|stick]
 
 ``agreement`` prepares one packing (seed 1, 100 kPa, on the reference device, float64),
 gives each of the B copies its own displacement gradient (simple and pure shear,
@@ -26,6 +26,8 @@ paths' seconds (the CG's split into its assembly on the host and its solve, time
 first call has compiled the kernels), the same with the systems assembled on ``--device``
 from the batch's own arrays (``granular_material.dem.condensed_device``; its difference to
 the LU too) and, beside them, 200 DEM steps of the same batch on ``--device``.
+``--sliding`` is the contacts at their Coulomb cap (``free``: no tangential stiffness,
+``--tangent condensed``; ``stick``: kt, ``--tangent condensed-sticking``).
 Measures; exit 1 only where the agreement is outside the tolerance.
 """
 
@@ -140,7 +142,7 @@ def agreement(out: Path, device: str = "cuda", reference: str = "cpu", n_rve: in
 
 
 def condensed(out: Path, device: str = "cuda", n_rve: int = 8, particles: int = 400,
-              strain: float = 2e-3) -> dict:
+              strain: float = 2e-3, sliding: str = "free") -> dict:
     """The condensed tangents of a sheared batch by the warp CG on ``device`` against
     scipy's LU; writes ``condensed.json`` under ``out`` and returns it."""
     quiet_warp()
@@ -159,17 +161,17 @@ def condensed(out: Path, device: str = "cuda", n_rve: int = 8, particles: int = 
     drive_grad_u(batch, gradients(n_rve, strain))
     data = batch.to_data()
     t0 = time.perf_counter()
-    lu = condensed_tangent(data)
+    lu = condensed_tangent(data, sliding=sliding)
     t1 = time.perf_counter()
-    condensed_tangent_cg(data.select(0), device=device)  # the kernels compiled and loaded
+    condensed_tangent_cg(data.select(0), device=device, sliding=sliding)  # compiled, loaded
     t2 = time.perf_counter()
-    cg = condensed_tangent_cg(data, device=device)
+    cg = condensed_tangent_cg(data, device=device, sliding=sliding)
     t3 = time.perf_counter()
     # the same, its systems assembled on the device from the batch's own arrays
     on_device = DEMBatch(data, device=device)
-    condensed_tangent_of_batch(on_device, rves=np.array([0]))  # compiled and loaded
+    condensed_tangent_of_batch(on_device, rves=np.array([0]), sliding=sliding)  # compiled
     t4 = time.perf_counter()
-    assembled = condensed_tangent_of_batch(on_device)
+    assembled = condensed_tangent_of_batch(on_device, sliding=sliding)
     t5 = time.perf_counter()
     # beside them, what the DEM of one evaluation costs on the same device: DEM_STEPS steps
     # of the same batch (an evaluation of the paper's specimen takes 100–560)
@@ -184,6 +186,7 @@ def condensed(out: Path, device: str = "cuda", n_rve: int = 8, particles: int = 
     rel_assembled = np.abs(assembled.tangent - lu.tangent).max(axis=(1, 2, 3, 4)) / scale
     iterations = np.asarray(cg.iterations)
     summary = {"device": device, "n_rve": n_rve, "particles": particles, "strain": strain,
+               "sliding": sliding,
                "max_rel_diff": float(rel.max()), "rel_diff": rel.tolist(),
                "cg_iterations": iterations.tolist(),
                "cg_iterations_median": float(np.median(iterations)),
@@ -221,6 +224,9 @@ def main(argv: list[str] | None = None) -> int:
     tangent.add_argument("--batch", type=int, default=8)
     tangent.add_argument("--particles", type=int, default=400)
     tangent.add_argument("--strain", type=float, default=2e-3)
+    tangent.add_argument("--sliding", choices=("free", "stick"), default="free",
+                         help="contacts at their Coulomb cap: no tangential stiffness "
+                              "(free) or kt (stick)")
     args = parser.parse_args(argv)
     if args.command == "require-cuda":
         print(require_cuda())
@@ -228,9 +234,11 @@ def main(argv: list[str] | None = None) -> int:
     if args.command == "condensed":
         if args.device.startswith("cuda"):
             require_cuda()
-        summary = condensed(args.out, args.device, args.batch, args.particles, args.strain)
+        summary = condensed(args.out, args.device, args.batch, args.particles, args.strain,
+                            args.sliding)
         sec = summary["seconds"]
-        print(f"condensed tangent: CG on {args.device} against the LU, {args.batch} RVEs: "
+        print(f"condensed tangent ({args.sliding}): CG on {args.device} against the LU, "
+              f"{args.batch} RVEs: "
               f"rel. diff <= {summary['max_rel_diff']:.3g} (tolerance "
               f"{CONDENSED_TOLERANCE:g}: {'within' if summary['within_tolerance'] else 'OUTSIDE'}"
               f"); CG {sec['cg']:.3g} s (assembly on the host {sec['cg_assembly_host']:.3g} s, "

@@ -13,7 +13,7 @@ from test_condensed_cg import _honeycomb_with_rattlers
 
 from granular_material.dem import DEMBatch, RVEData
 from granular_material.dem.condensed import condensed_tangent
-from granular_material.dem.condensed_cg import condensed_tangent_cg
+from granular_material.dem.condensed_cg import CGNotConvergedError, condensed_tangent_cg
 from granular_material.dem.condensed_device import (
     condensed_tangent_of_batch,
     condensed_tangent_on_device,
@@ -82,6 +82,17 @@ def test_chosen_rves_come_back_in_their_order_bit_for_bit(sheared: DEMBatch) -> 
     assert nothing.tangent.shape == (0, 2, 2, 2, 2) and nothing.iterations.shape == (0, 3)
 
 
+def test_an_unconverged_rve_is_named_or_flagged(sheared: DEMBatch) -> None:
+    """Past the iteration cap: the error names the RVEs across shards, or, asked not to
+    raise, ``converged`` says which (the backend then takes the LU for those)."""
+    with pytest.raises(CGNotConvergedError, match=r"RVEs \[1, 3\]"):
+        condensed_tangent_of_batch(sheared, rves=np.array([1, 3]), max_iterations=3)
+    told = condensed_tangent_of_batch(sheared, rves=np.array([3, 1]), max_iterations=3,
+                                      raise_unconverged=False)
+    assert told.converged.shape == (2,) and not told.converged.any()
+    assert condensed_tangent_of_batch(sheared, rves=np.array([3, 1])).converged.all()
+
+
 def test_lattice_mechanisms_rattlers_and_an_empty_rve(two_discs) -> None:
     """The honeycomb's gear mode (regularised), its rattler and dangler (left out) and an
     RVE whose two discs do not touch (C = 0, no error), from lists the engine built."""
@@ -137,13 +148,15 @@ def test_the_dem_backend_assembles_on_a_float64_cuda_batch(sheared: DEMBatch,
         def __getattr__(self, name: str):
             return getattr(sheared, name)
 
-    def device_path(batch, rves, sliding):
+    def device_path(batch, rves, sliding, raise_unconverged):
         calls.append(("device", sliding))
-        return condensed_tangent_of_batch(sheared, rves=rves, sliding=sliding)
+        return condensed_tangent_of_batch(sheared, rves=rves, sliding=sliding,
+                                          raise_unconverged=raise_unconverged)
 
-    def host_cg(data, rves, device, sliding):
+    def host_cg(data, rves, device, sliding, raise_unconverged):
         calls.append(("host-cg", sliding))
-        return condensed_tangent_cg(data, rves=rves, sliding=sliding)
+        return condensed_tangent_cg(data, rves=rves, sliding=sliding,
+                                    raise_unconverged=raise_unconverged)
 
     @dataclass
     class H:

@@ -56,6 +56,7 @@ from granular_material.dem.condensed import (
 from granular_material.dem.rve_file import RVEData
 
 __all__ = [
+    "CGFallbackWarning",
     "CGNotConvergedError",
     "CondensedTangentCG",
     "condensed_tangent_cg",
@@ -77,6 +78,10 @@ class CGNotConvergedError(RuntimeError):
     """Some RVEs' CG did not reach the tolerance within the iteration cap (or broke down)."""
 
 
+class CGFallbackWarning(RuntimeWarning):
+    """Some RVEs' CG did not converge and their tangents were taken from the host's LU."""
+
+
 @dataclass(frozen=True)
 class CondensedTangentCG(CondensedTangent):
     """:class:`CondensedTangent` of the CG path, with its convergence.
@@ -85,12 +90,15 @@ class CondensedTangentCG(CondensedTangent):
         iterations: CG iterations of each RVE's three systems (G_00, sym G_01, G_11),
             (B, 3).
         residual: their final relative residuals ‖r‖/‖b‖ (0 where b = 0), (B, 3).
+        converged: whether all three reached the tolerance, (B,); where not (returned only
+            with ``raise_unconverged=False``) the RVE's tangent is the CG's last iterate's.
         assembly_seconds: the batch's assembly on the host [s].
         solve_seconds: the batch's solve on the device, transfers included [s].
     """
 
     iterations: np.ndarray
     residual: np.ndarray
+    converged: np.ndarray
     assembly_seconds: float = 0.0
     solve_seconds: float = 0.0
 
@@ -301,12 +309,22 @@ def _iteration_cap(max_iterations: int | None, unknowns: np.ndarray) -> int:
     return max(1000, 4 * int(unknowns.max(initial=0)))
 
 
-def _raise_unless_converged(index: np.ndarray, failed: np.ndarray, active: np.ndarray,
-                            residual: np.ndarray, tolerance: float,
-                            max_iterations: int) -> None:
-    """:class:`CGNotConvergedError` naming the RVEs ``index`` whose systems (rows of the
-    (B, 3) flags) broke down or are still active."""
-    bad = np.flatnonzero(failed.any(axis=1) | active.any(axis=1))
+def _converged_or_raise(index: np.ndarray, failed: np.ndarray, active: np.ndarray,
+                        residual: np.ndarray, tolerance: float, max_iterations: int,
+                        raise_unconverged: bool) -> np.ndarray:
+    """Which RVEs ``index`` converged (B,): none of their systems (rows of the (B, 3) flags)
+    broke down or is still active; with ``raise_unconverged``, :class:`CGNotConvergedError`
+    naming those that did not."""
+    converged = ~(failed.any(axis=1) | active.any(axis=1))
+    if raise_unconverged:
+        _raise_unless_converged(index, converged, residual, tolerance, max_iterations)
+    return converged
+
+
+def _raise_unless_converged(index: np.ndarray, converged: np.ndarray, residual: np.ndarray,
+                            tolerance: float, max_iterations: int) -> None:
+    """:class:`CGNotConvergedError` naming the RVEs ``index`` that did not converge."""
+    bad = np.flatnonzero(~converged)
     if len(bad):
         raise CGNotConvergedError(
             f"condensed tangent: CG did not reach ‖r‖/‖b‖ <= {tolerance:g} within "
@@ -318,7 +336,8 @@ def condensed_tangent_cg(data: RVEData, rves: np.ndarray | None = None, device: 
                          tolerance: float = 1e-10, max_iterations: int | None = None,
                          regularization: float = 1e-9,
                          cap_tolerance: float = SLIDING_TOLERANCE,
-                         check_every: int = 32, sliding: str = "free") -> CondensedTangentCG:
+                         check_every: int = 32, sliding: str = "free",
+                         raise_unconverged: bool = True) -> CondensedTangentCG:
     """The condensed tangent C [Pa] (B, 2, 2, 2, 2) of every RVE of ``data`` (or of the
     indices ``rves``), as :func:`condensed.condensed_tangent` with ``sliding`` ("free" or
     "stick"), its solves by a batched block-Jacobi CG on the warp ``device`` (module
@@ -326,7 +345,8 @@ def condensed_tangent_cg(data: RVEData, rves: np.ndarray | None = None, device: 
 
     ``tolerance``: relative residual ‖r‖/‖b‖ at which each system stops. ``max_iterations``
     (default 4 × the largest number of unknowns of an RVE, at least 1000): past it, or on a
-    breakdown, :class:`CGNotConvergedError` names the RVEs. ``check_every``: iterations
+    breakdown, :class:`CGNotConvergedError` names the RVEs (with ``raise_unconverged=False``
+    the result says which in ``converged`` instead). ``check_every``: iterations
     launched between the host's checks for active systems. ``seconds`` is each RVE's
     assembly plus an equal share of the batch's solve [s]; ``assembly_seconds`` and
     ``solve_seconds`` split the batch's between the two."""
@@ -355,7 +375,8 @@ def condensed_tangent_cg(data: RVEData, rves: np.ndarray | None = None, device: 
                                                            max_iterations, check_every)
     solve_seconds = time.perf_counter() - start
     seconds += solve_seconds / max(count, 1)
-    _raise_unless_converged(index, failed, active, residual, tolerance, max_iterations)
+    converged = _converged_or_raise(index, failed, active, residual, tolerance,
+                                    max_iterations, raise_unconverged)
     # C = (K_GG − K_Gu X) / V, X's columns per G_kl
     condensed = affine - product[:, :, _COLUMN_OF]
     tangent = condensed / volume[:, None, None]
@@ -364,7 +385,8 @@ def condensed_tangent_cg(data: RVEData, rves: np.ndarray | None = None, device: 
         affine=(affine_all / volume[:, None, None]).reshape(count, 2, 2, 2, 2),
         n_contacts=n_contacts, n_sliding=n_sliding, n_left_out=n_left_out,
         n_unknowns=n_unknowns, seconds=seconds, iterations=iterations, residual=residual,
-        assembly_seconds=float(seconds.sum() - solve_seconds), solve_seconds=solve_seconds,
+        converged=converged, assembly_seconds=float(seconds.sum() - solve_seconds),
+        solve_seconds=solve_seconds,
     )
 
 

@@ -48,6 +48,7 @@ from granular_material.dem.condensed_cg import (
     CondensedTangentCG,
     DeviceSystem,
     _check_tolerance,
+    _converged_or_raise,
     _iteration_cap,
     _NoLock,
     _raise_unless_converged,
@@ -345,7 +346,8 @@ def condensed_tangent_on_device(model: Model, state: State, rves: np.ndarray | N
                                 regularization: float = 1e-9,
                                 cap_tolerance: float = SLIDING_TOLERANCE,
                                 check_every: int = 32,
-                                sliding: str = "free") -> CondensedTangentCG:
+                                sliding: str = "free",
+                                raise_unconverged: bool = True) -> CondensedTangentCG:
     """The condensed tangent C [Pa] (B, 2, 2, 2, 2) of the RVEs ``rves`` (default all) of
     one shard's ``model`` and ``state`` (float64), as
     :func:`~granular_material.dem.condensed_cg.condensed_tangent_cg` gives it for
@@ -434,8 +436,8 @@ def condensed_tangent_on_device(model: Model, state: State, rves: np.ndarray | N
         cells = state.cell.numpy()[index]
     solved = time.perf_counter()
     product, iterations, residual = product[index], iterations[index], residual[index]
-    _raise_unless_converged(index, failed[index], active[index], residual, tolerance,
-                            max_iterations)
+    converged = _converged_or_raise(index, failed[index], active[index], residual, tolerance,
+                                    max_iterations, raise_unconverged)
     volume = (np.linalg.det(cells) * model.meta.thickness)[:, None, None]
     tangent = (k_gg - product[:, :, _COLUMN_OF]) / volume
     return CondensedTangentCG(
@@ -443,7 +445,8 @@ def condensed_tangent_on_device(model: Model, state: State, rves: np.ndarray | N
         affine=(k_gg_all / volume).reshape(count, 2, 2, 2, 2),
         n_contacts=tallies[:, 0], n_sliding=tallies[:, 1], n_left_out=tallies[:, 2],
         n_unknowns=tallies[:, 3], seconds=np.full(count, (solved - start) / max(count, 1)),
-        iterations=iterations, residual=residual, assembly_seconds=assembled - start,
+        iterations=iterations, residual=residual, converged=converged,
+        assembly_seconds=assembled - start,
         solve_seconds=solved - assembled,
     )
 
@@ -452,14 +455,17 @@ def condensed_tangent_of_batch(batch: DEMBatch, rves: np.ndarray | None = None,
                                **options: Any) -> CondensedTangentCG:
     """:func:`condensed_tangent_on_device` of the RVEs ``rves`` (distinct batch indices,
     default all) of a float64 :class:`~granular_material.dem.batch.DEMBatch`, shard by
-    shard, returned in the order of ``rves``; ``options`` are that function's."""
+    shard, returned in the order of ``rves``; ``options`` are that function's (an
+    unconverged RVE is named by its index in the batch)."""
     index = _selected(batch.n_rve, rves, options.get("regularization", 1e-9))
+    raise_unconverged = options.pop("raise_unconverged", True)
     parts, order = [], []
     for shard in batch.shards:
         inside = index[(index >= shard.first) & (index < shard.first + shard.model.n_rve)]
         if len(inside):
             parts.append(condensed_tangent_on_device(shard.model, shard.state,
-                                                     rves=inside - shard.first, **options))
+                                                     rves=inside - shard.first,
+                                                     raise_unconverged=False, **options))
             order.append(inside)
     if not parts:  # nothing asked for: nothing launched
         none = np.zeros(0, dtype=np.int64)
@@ -467,16 +473,21 @@ def condensed_tangent_of_batch(batch: DEMBatch, rves: np.ndarray | None = None,
             tangent=np.zeros((0, 2, 2, 2, 2)), affine=np.zeros((0, 2, 2, 2, 2)),
             n_contacts=none, n_sliding=none, n_left_out=none, n_unknowns=none,
             seconds=np.zeros(0), iterations=np.zeros((0, 3), dtype=np.int64),
-            residual=np.zeros((0, 3)))
+            residual=np.zeros((0, 3)), converged=np.zeros(0, dtype=bool))
     where = {int(rve): k for k, rve in enumerate(np.concatenate(order))}
     wanted = np.array([where[int(rve)] for rve in index], dtype=int)  # rves' order
 
     def joined(name: str) -> np.ndarray:
         return np.concatenate([getattr(p, name) for p in parts])[wanted]
 
-    return CondensedTangentCG(
+    result = CondensedTangentCG(
         **{name: joined(name) for name in (
             "tangent", "affine", "n_contacts", "n_sliding", "n_left_out", "n_unknowns",
-            "seconds", "iterations", "residual")},
+            "seconds", "iterations", "residual", "converged")},
         assembly_seconds=sum(p.assembly_seconds for p in parts),
         solve_seconds=sum(p.solve_seconds for p in parts))
+    if raise_unconverged:
+        cap = _iteration_cap(options.get("max_iterations"), result.n_unknowns)
+        _raise_unless_converged(index, result.converged, result.residual,
+                                options.get("tolerance", 1e-10), cap)
+    return result
