@@ -88,7 +88,7 @@ def test_a_cached_femxdem_run_is_keyed_by_the_defaults_it_ran_under(monkeypatch)
     flat = {"test": "biaxial", "rve": "rve.npz", "elements": [2, 4], "steps": 30,
             "axial_strain": 0.03, "out": "run", "element": "quad8"}
     today = engine_runner._resolved(flat)
-    assert today["tangent"] == "condensed"
+    assert today["tangent"] == "condensed-sticking"
     assert today["newton_settings"]["relaxation"] == "aitken"
     monkeypatch.setattr(defaults, "NOISY_DEFAULTS", {})
     assert engine_runner._resolved(flat) != today

@@ -53,9 +53,10 @@ class DEMParameters:
         isotropic: relax every RVE to the isotropic stress −confining I before the first
             load step (:meth:`DEMMaterial.make_isotropic`; a packing consolidated by a normal
             servo keeps some shear stress).
-        tangent: condensed (default: the contact network's stiffness with the discs'
-            rearrangement condensed out), condensed-sticking (the same, contacts at their
-            Coulomb cap sticking), objective, kruyt-rothenburg or perturbation.
+        tangent: condensed-sticking (default: the contact network's stiffness with the
+            discs' rearrangement condensed out, contacts at their Coulomb cap sticking),
+            condensed (the same, those contacts sliding freely), objective,
+            kruyt-rothenburg or perturbation.
         perturbation: relative perturbation of ∇u of the perturbation tangent [-].
         reuse_tol: strain under which a point keeps its last response [-]; 0: never.
         reuse_correction: none or tangent (a reused response corrected to first order).
@@ -79,7 +80,7 @@ class DEMParameters:
     independent: bool = False
     compare_dem: bool = False
     isotropic: bool = False
-    tangent: str = "condensed"
+    tangent: str = "condensed-sticking"
     perturbation: float = 0.1
     reuse_tol: float = 0.0
     reuse_correction: str = "none"
