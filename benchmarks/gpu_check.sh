@@ -9,7 +9,8 @@
 #   2. throughput.csv/.json: particle-steps/s at B = 1, 16, 64, 256, 1024, 4096 RVEs x 400
 #      discs, float64 and float32, one process per case (undamped, sheared at 1e-5 a step)
 #   3. agreement.csv/.json: CUDA against the CPU on a sheared batch of 16 RVEs, per float type
-#   4. condensed.json: the condensed tangent's batched CG on CUDA against scipy's LU on the
+#   4. condensed.json: the default tangent's condensation (condensed-sticking: --sliding
+#      stick) by the batched CG on CUDA against scipy's LU on the
 #      host, 600 sheared RVEs of 400 discs, the specimen's batch (iterations, largest
 #      difference; seconds of the CG's host assembly and device solve, of the LU, of the
 #      same assembled on the device, and of 200 DEM steps of the same batch on CUDA)
@@ -30,12 +31,12 @@ T_CONDENSED=${T_CONDENSED:-90} T_SPECIMEN=${T_SPECIMEN:-80}
 if [ "${GPU_CHECK_SMOKE:-0}" = 1 ]; then  # the script itself, on the CPU, at toy sizes
     DEV=cpu DEVICE="cpu (smoke)" TESTS=(tests/test_dem_cuda.py) BATCHES=1,2 PARTICLES=30
     AGREE=(--batch 2 --particles 30 --strain 2e-4) SPECIMEN=(--elements 1 1 --particles 30)
-    CONDENSED=(--batch 2 --particles 30 --strain 2e-4)
+    CONDENSED=(--batch 2 --particles 30 --strain 2e-4 --sliding stick)
 else
     DEVICE=$("$PYTHON" benchmarks/gpu_check.py require-cuda | tail -n 1) || exit 2
     DEV=cuda TESTS=(tests/test_dem_cuda.py tests/test_cuda_compile.py)
     BATCHES=1,16,64,256,1024,4096 PARTICLES=400 AGREE=(--batch 16 --particles 400)
-    CONDENSED=(--batch 600 --particles 400)
+    CONDENSED=(--batch 600 --particles 400 --sliding stick)
     SPECIMEN=(--scale full)
 fi
 mkdir -p "$OUT"

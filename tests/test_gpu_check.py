@@ -91,11 +91,14 @@ def test_whole_script_at_smoke_size_on_the_cpu(tmp_path):
         assert (out / name).exists(), name
 
 
-def test_condensed_cg_against_the_lu_on_the_cpu(tmp_path):
+@pytest.mark.parametrize("sliding", ["free", "stick"])
+def test_condensed_cg_against_the_lu_on_the_cpu(tmp_path, sliding):
     summary = _module().condensed(tmp_path, device="cpu", n_rve=2, particles=30,
-                                  strain=2e-4)
+                                  strain=2e-4, sliding=sliding)
     assert summary["within_tolerance"] and summary["max_rel_diff"] <= 1e-8
-    assert json.loads((tmp_path / "condensed.json").read_text())["n_rve"] == 2
+    assert summary["device_assembly_max_rel_diff"] <= 1e-8
+    written = json.loads((tmp_path / "condensed.json").read_text())
+    assert written["n_rve"] == 2 and written["sliding"] == sliding
     seconds = summary["seconds"]
     assert 0 < seconds["cg_assembly_host"] and 0 < seconds["cg_solve"]
     assert seconds["cg_assembly_host"] + seconds["cg_solve"] == pytest.approx(seconds["cg"],
