@@ -174,16 +174,19 @@ def _with_condensed(batch: DEMBatch, h: Homogenized, moved: np.ndarray,
     if not str(batch.device).startswith("cuda"):
         tangent[moved] = condensed_tangent(batch.to_data(), rves=rves, sliding=sliding).tangent
         return replace(h, tangent=tangent)
+    data = None  # a host copy of the batch, made once where it is needed
     if batch.dtype == "float64":
         result = condensed_tangent_of_batch(batch, rves=rves, sliding=sliding,
                                             raise_unconverged=False)
     else:
-        result = condensed_tangent_cg(batch.to_data(), rves=rves, device=batch.device,
+        data = batch.to_data()
+        result = condensed_tangent_cg(data, rves=rves, device=batch.device,
                                       sliding=sliding, raise_unconverged=False)
     tangent[moved] = result.tangent
     unconverged = rves[~result.converged]
     if len(unconverged):
-        redo = condensed_tangent(batch.to_data(), rves=unconverged, sliding=sliding)
+        data = batch.to_data() if data is None else data
+        redo = condensed_tangent(data, rves=unconverged, sliding=sliding)
         tangent[unconverged] = redo.tangent
         warnings.warn(
             f"condensed tangent: the CG on {batch.device} did not converge for "
