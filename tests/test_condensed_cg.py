@@ -14,6 +14,7 @@ from granular_material.dem.condensed import condensed_tangent
 from granular_material.dem.condensed_cg import (
     CGFallbackWarning,
     CGNotConvergedError,
+    _raise_unless_converged,
     condensed_tangent_cg,
 )
 from granular_material.procedures import drive_grad_u, prepare_packing
@@ -88,7 +89,7 @@ def test_each_rve_stops_at_its_own_tolerance(packings: RVEData, both: tuple) -> 
 
 def test_not_converging_is_an_error_naming_the_rves(packings: RVEData) -> None:
     """Past the iteration cap: an error that names the RVEs, not a NaN or a wrong C."""
-    with pytest.raises(CGNotConvergedError, match=r"RVEs \[1, 2\]"):
+    with pytest.raises(CGNotConvergedError, match=r"within 5 iterations .*RVEs \[1, 2\]"):
         condensed_tangent_cg(packings, rves=[1, 2], max_iterations=5)
     told = condensed_tangent_cg(packings, rves=[1, 2], max_iterations=5,
                                 raise_unconverged=False)
@@ -96,6 +97,18 @@ def test_not_converging_is_an_error_naming_the_rves(packings: RVEData) -> None:
     assert condensed_tangent_cg(packings, rves=[1, 2]).converged.all()
     with pytest.raises(ValueError, match="tolerance"):
         condensed_tangent_cg(packings, rves=[1], tolerance=0.0)
+
+
+def test_the_error_quotes_the_cap_each_rve_ran_under() -> None:
+    """RVEs from shards with different iteration caps: the error gives the caps of those
+    that did not converge, not one cap for all."""
+    index, residual = np.array([7, 8, 9]), np.full((3, 3), 1e-3)
+    caps = np.array([1000, 1600, 2400])
+    with pytest.raises(CGNotConvergedError, match=r"caps of \[1000, 2400\] iterations.*"
+                                                  r"RVEs \[7, 9\]"):
+        _raise_unless_converged(index, np.array([False, True, False]), residual, 1e-10, caps)
+    with pytest.raises(CGNotConvergedError, match=r"within 1600 iterations .*RVEs \[8\]"):
+        _raise_unless_converged(index, np.array([True, False, True]), residual, 1e-10, caps)
 
 
 def _honeycomb_with_rattlers() -> RVEData:

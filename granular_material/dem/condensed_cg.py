@@ -322,13 +322,17 @@ def _converged_or_raise(index: np.ndarray, failed: np.ndarray, active: np.ndarra
 
 
 def _raise_unless_converged(index: np.ndarray, converged: np.ndarray, residual: np.ndarray,
-                            tolerance: float, max_iterations: int) -> None:
-    """:class:`CGNotConvergedError` naming the RVEs ``index`` that did not converge."""
+                            tolerance: float, max_iterations: int | np.ndarray) -> None:
+    """:class:`CGNotConvergedError` naming the RVEs ``index`` that did not converge;
+    ``max_iterations``: the iteration cap they ran under, one for all or one per RVE (B,)."""
     bad = np.flatnonzero(~converged)
     if len(bad):
+        caps = np.unique(np.broadcast_to(np.asarray(max_iterations), converged.shape)[bad])
+        within = (f"{caps[0]} iterations" if len(caps) == 1
+                  else f"their caps of {caps.tolist()} iterations")
         raise CGNotConvergedError(
-            f"condensed tangent: CG did not reach ‖r‖/‖b‖ <= {tolerance:g} within "
-            f"{max_iterations} iterations (or broke down) for RVEs {index[bad].tolist()} "
+            f"condensed tangent: CG did not reach ‖r‖/‖b‖ <= {tolerance:g} within {within} "
+            f"(or broke down) for RVEs {index[bad].tolist()} "
             f"(relative residuals {residual[bad].max(axis=1).tolist()})")
 
 

@@ -486,8 +486,9 @@ def condensed_tangent_of_batch(batch: DEMBatch, rves: np.ndarray | None = None,
             "seconds", "iterations", "residual", "converged")},
         assembly_seconds=sum(p.assembly_seconds for p in parts),
         solve_seconds=sum(p.solve_seconds for p in parts))
-    if raise_unconverged:
-        cap = _iteration_cap(options.get("max_iterations"), result.n_unknowns)
+    if raise_unconverged:  # each shard ran under the cap of its own RVEs
+        caps = np.concatenate([np.full(len(p.n_unknowns), _iteration_cap(
+            options.get("max_iterations"), p.n_unknowns)) for p in parts])[wanted]
         _raise_unless_converged(index, result.converged, result.residual,
-                                options.get("tolerance", 1e-10), cap)
+                                options.get("tolerance", 1e-10), caps)
     return result
