@@ -44,7 +44,7 @@ from granular_material.fem.forms import gauss_points_grad, internal_force, stiff
 from granular_material.fem.kinematics import FORMULATIONS, Kinematics
 from granular_material.fem.loading import Loading
 from granular_material.fem.material import Material, MaterialResponse
-from granular_material.procedures.progress import progress_bar
+from granular_material.progress import progress_bar
 from granular_material.timing import PhaseTimes
 
 __all__ = [

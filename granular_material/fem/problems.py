@@ -53,7 +53,7 @@ from skfem import (
 
 from granular_material.fem.layout import to_points
 from granular_material.fem.loading import Loading
-from granular_material.procedures.packing import DEFAULT_PRESSURE
+from granular_material.reference_values import DEFAULT_PRESSURE
 
 __all__ = ["DEFAULT_GAUSS", "ELEMENTS", "PLATENS", "TRIANGLES", "TRIANGLE_RULES", "BiaxialProblem",
            "BiaxialSetup", "build_biaxial", "element_of"]

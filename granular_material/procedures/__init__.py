@@ -5,7 +5,6 @@ independently), and :func:`progress_bar`, the one progress bar every layer uses.
 from granular_material.procedures.driven_path import DrivenPath, drive_path
 from granular_material.procedures.element_tests import biaxial_test
 from granular_material.procedures.packing import PackingParameters, prepare_packing, random_gas
-from granular_material.procedures.progress import progress_bar
 from granular_material.procedures.servo import consolidate, servo_steps
 from granular_material.procedures.strain_path import (
     CellTooThinError,
@@ -17,6 +16,7 @@ from granular_material.procedures.strain_path import (
     path_steps,
     plan_path,
 )
+from granular_material.progress import progress_bar
 
 __all__ = [
     "CellTooThinError",

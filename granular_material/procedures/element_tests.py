@@ -10,9 +10,9 @@ import pandas as pd
 
 from granular_material.dem import DEMBatch
 from granular_material.procedures.packing import DEFAULT_PRESSURE, given_as
-from granular_material.procedures.progress import progress_bar
 from granular_material.procedures.servo import CONTROL_STRAIN, CONTROL_STRESS, servo_steps
 from granular_material.procedures.strain_path import DEFAULT_STRAIN_PER_STEP, STEP_LIMIT
+from granular_material.progress import progress_bar
 
 __all__ = ["BIAXIAL_NAMES", "DEFAULT_AXIAL_STRAIN", "DEFAULT_RECORD_EVERY", "MAX_AXIAL_STRAIN",
            "BiaxialInterrupted", "biaxial_steps", "biaxial_test", "check_biaxial",

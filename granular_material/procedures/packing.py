@@ -11,6 +11,7 @@ import numpy as np
 from granular_material.dem import DEMBatch, RVEData, RVEMeta
 from granular_material.dem.model import FLOAT32_MAX_RESOLUTION, SKIN_FRACTION
 from granular_material.procedures.servo import consolidate
+from granular_material.reference_values import DEFAULT_DISCS, DEFAULT_PRESSURE
 
 __all__ = ["DEFAULT_DISCS", "DEFAULT_PRESSURE", "DEFAULT_RADIUS_RANGE", "MAX_OVERLAP",
            "MIN_OVERLAP", "PACKING_NAMES", "VOID_RATIO_TOLERANCE", "PackingParameters",
@@ -21,11 +22,6 @@ __all__ = ["DEFAULT_DISCS", "DEFAULT_PRESSURE", "DEFAULT_RADIUS_RANGE", "MAX_OVE
 #: (r_min, r_max) [m] of the uniform disc radii: Wu et al. (2025) Table 1; Guo & Zhao rMean
 #: 5 mm ± 40 %
 DEFAULT_RADIUS_RANGE = (3.0e-3, 7.0e-3)
-#: isotropic consolidation pressure p0 of a packing [Pa] (Wu et al. 2025: 100 kPa), and the
-#: confining pressure the RVEs are then tested and run at
-DEFAULT_PRESSURE = 100.0e3
-#: discs per prepared RVE (Wu et al. 2025, Guo & Zhao 2014: 400)
-DEFAULT_DISCS = 400
 
 #: solid fraction of the densest consolidated packing :func:`min_discs` allows for (e = 0.11;
 #: random frictionless disc packings consolidate to 0.84–0.86, pressure adds a little)

@@ -8,7 +8,7 @@ from collections.abc import Callable
 import numpy as np
 
 from granular_material.dem import CONTROL_STRAIN, CONTROL_STRESS, DEMBatch
-from granular_material.procedures.progress import progress_bar
+from granular_material.progress import progress_bar
 
 __all__ = ["CONTROL_STRAIN", "CONTROL_STRESS", "consolidate", "servo_steps"]
 
