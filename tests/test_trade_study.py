@@ -168,7 +168,7 @@ def test_restarted_study_runs_nothing_again(smoke_study, capsys):
 
 # -- the presets the commands take -----------------------------------------------------------
 def test_command_presets_are_the_committed_study_s():
-    from granular_material.fem.presets import PRESETS_FILE
+    from granular_material.runs.presets import PRESETS_FILE
 
     committed = Path(__file__).parents[1] / "docs" / "trade-study" / "presets.json"
     assert json.loads(PRESETS_FILE.read_text()) == json.loads(committed.read_text())
@@ -178,7 +178,7 @@ def test_command_presets_are_the_committed_study_s():
 def test_preset_sets_the_options_left_at_their_defaults(tmp_path, capsys):
     from granular_material.cli import build_parser
     from granular_material.cli.fem import spec_from_args
-    from granular_material.fem.presets import load_presets
+    from granular_material.runs.presets import load_presets
 
     quick = load_presets()["quick"]
     args = build_parser().parse_args(["single-element", "--preset", "quick",
@@ -202,8 +202,7 @@ def test_preset_sets_the_options_left_at_their_defaults(tmp_path, capsys):
     ("condensed-hold", {"tangent": "condensed", "tangent_update": "hold"}),
 ])
 def test_a_tangent_knob_value_names_the_tangent_and_its_update(value, settings):
-    from granular_material.fem.presets import tangent_settings
-    from granular_material.runs.presets import preset_fields
+    from granular_material.runs.presets import preset_fields, tangent_settings
 
     assert tangent_settings(value) == settings
     for name in PRESETS:  # every committed preset's tangent reads as one of these

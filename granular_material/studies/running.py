@@ -13,12 +13,12 @@ import numpy as np
 import pandas as pd
 
 from granular_material.dem import DEMBatch, RVEData, critical_timestep, load_rve, save_rve
-from granular_material.fem.presets import tangent_settings
 from granular_material.procedures import biaxial_test, prepare_packing
 from granular_material.procedures.element_tests import biaxial_steps
 from granular_material.results import band_summary
 from granular_material.runs import from_flat
 from granular_material.runs import run as run_spec
+from granular_material.runs.presets import tangent_settings
 from granular_material.studies.plan import StudyScale
 
 __all__ = ["RunResult"]
