@@ -64,7 +64,6 @@ ESCAPED_BARS = {
     "granular_material.dem.condensed.SLIDING_TOLERANCE": ["|fs|"],
     "granular_material.dem.condensed.contact_network": ["|fs|"],
     "granular_material.dem.homogenization.Homogenized": ["|net disc force|", "|contact force|"],
-    "granular_material.dem.rve_file.FRACTIONAL_TOLERANCE": ["|H·s − x|"],
     "granular_material.procedures.element_tests.lateral_stress_error": ["|σxx/(−confining) − 1|"],
     "granular_material.procedures.strain_path.drive_grad_u": ["|H01/H11|"],
 }
