@@ -17,7 +17,7 @@ import pytest
 import granular_material.procedures.driven_path as driven_path
 import granular_material.procedures.element_tests as element_tests
 from granular_material.cli import main
-from granular_material.cli.options import Terminated, stop_signals_as_interrupt
+from granular_material.cli.signals import Terminated, stop_signals_as_interrupt
 from granular_material.dem import save_rve
 from granular_material.procedures import prepare_packing
 

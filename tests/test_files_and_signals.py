@@ -20,7 +20,7 @@ import pandas as pd
 import pytest
 
 from granular_material.cli import main
-from granular_material.cli.options import (
+from granular_material.cli.signals import (
     Terminated,
     interrupt_exit_code,
     stop_signals_as_interrupt,
@@ -258,7 +258,7 @@ def test_a_stop_swallowed_by_a_finaliser_is_sent_again() -> None:
     "Exception ignored in WeakKeyDictionary ... Terminated", and the run went on) stops the
     command all the same, a moment later, instead of being lost with every later signal
     ignored."""
-    from granular_material.cli.options import Terminated, stop_signals_as_interrupt
+    from granular_material.cli.signals import Terminated, stop_signals_as_interrupt
 
     with stop_signals_as_interrupt(), pytest.raises(Terminated):
         dying = _StoppedInItsFinaliser()

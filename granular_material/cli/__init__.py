@@ -4,10 +4,10 @@ The core commands are registered here directly: ``prepare``, ``biaxial-dem`` and
 ``dem-drive`` (:mod:`granular_material.cli.dem`), ``single-element`` and ``biaxial``
 (:mod:`granular_material.cli.fem`), and ``run`` (:mod:`granular_material.cli.scene`: one of
 them described by a TOML scene file); their shared options are defined once in
-:mod:`granular_material.cli.options`. Plugins add sub-commands through the
-``granular_material.commands`` entry-point group; each entry point is a
-``register(subparsers)`` callable that adds its parsers and sets ``func`` (a callable
-taking the parsed arguments and returning the exit code).
+:mod:`granular_material.cli.options`, the stop signals in :mod:`granular_material.cli.signals`.
+Plugins add sub-commands through the ``granular_material.commands`` entry-point group; each
+entry point is a ``register(subparsers)`` callable that adds its parsers and sets ``func`` (a
+callable taking the parsed arguments and returning the exit code).
 """
 
 from __future__ import annotations
@@ -20,6 +20,7 @@ import warnings
 from typing import Any
 
 from granular_material import __version__
+from granular_material.cli.signals import interrupt_exit_code, stop_signals_as_interrupt
 from granular_material.entry_points import entry_point_names, load_entry_point
 
 #: the entry-point group of plugin commands (each a ``register(subparsers)`` callable)
@@ -161,8 +162,6 @@ def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     if not _names_a_command(argv):  # --help, --version or nothing: no command to import
         command_parser().parse_args(argv)
-    from granular_material.cli.options import interrupt_exit_code, stop_signals_as_interrupt
-
     quiet_warp()  # keep stdout clean for --json
     parser = build_parser(argv[0])
     args = parser.parse_args(argv)

@@ -23,7 +23,6 @@ from granular_material.cli.options import (
     check_memory,
     check_output_file,
     emit,
-    interrupt_exit_code,
     make_parents,
     packing_parameters,
     positive,
@@ -32,6 +31,7 @@ from granular_material.cli.options import (
     scalar_or_list,
     warn,
 )
+from granular_material.cli.signals import interrupt_exit_code
 from granular_material.procedures.element_tests import (
     DEFAULT_AXIAL_STRAIN,
     DEFAULT_RECORD_EVERY,

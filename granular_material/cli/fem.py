@@ -23,11 +23,11 @@ from granular_material.cli.options import (
     add_progress,
     add_rve_material_options,
     emit,
-    interrupt_exit_code,
     positive,
     positive_int,
     progress_enabled,
 )
+from granular_material.cli.signals import interrupt_exit_code
 from granular_material.fem import available_materials, available_postprocessors, load_material
 from granular_material.fem.kinematics import FORMULATIONS
 from granular_material.fem.linear_elastic import LinearElasticRunParameters

@@ -15,11 +15,11 @@ from granular_material.cli.options import (
     add_progress,
     check_output_dir,
     emit,
-    interrupt_exit_code,
     positive,
     positive_int,
     progress_enabled,
 )
+from granular_material.cli.signals import interrupt_exit_code
 from granular_material.results import write_json
 
 from .scales import SCALES

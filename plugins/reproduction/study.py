@@ -23,7 +23,7 @@ from typing import Any
 
 import pandas as pd
 
-from granular_material.cli.options import Terminated
+from granular_material.cli.signals import Terminated
 from granular_material.dem import load_rve, save_rve
 from granular_material.results import write_csv, write_json
 
