@@ -42,7 +42,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from granular_material.cli import quiet_warp
+from granular_material import verbose
 
 #: relative tolerance on stress between devices (same kernels; the compilers' FMA choices)
 TOLERANCE = {"float64": 1e-6, "float32": 1e-3}
@@ -56,7 +56,7 @@ def require_cuda() -> str:
     """The name of CUDA device 0; exits 2 with a message where there is none."""
     import warp as wp
 
-    quiet_warp()  # warp >= 1.10 ignores config.quiet: its banner went into summary.json
+    verbose(False)  # warp >= 1.10 ignores config.quiet: its banner went into summary.json
     wp.init()
     if not wp.is_cuda_available():
         print("gpu_check: no CUDA device (warp sees none: no NVIDIA driver or GPU here); "
@@ -89,7 +89,7 @@ def agreement(out: Path, device: str = "cuda", reference: str = "cpu", n_rve: in
               dtypes: tuple[str, ...] = ("float64", "float32")) -> dict:
     """Compare ``device`` with ``reference`` on a sheared batch; writes ``agreement.csv``
     and ``agreement.json`` under ``out`` and returns the summary."""
-    quiet_warp()
+    verbose(False)
     from granular_material.dem import DEMBatch, load_rve, save_rve
     from granular_material.procedures import drive_grad_u, prepare_packing
     from granular_material.procedures.packing import DEFAULT_PRESSURE
@@ -145,7 +145,7 @@ def condensed(out: Path, device: str = "cuda", n_rve: int = 8, particles: int = 
               strain: float = 2e-3, sliding: str = "free") -> dict:
     """The condensed tangents of a sheared batch by the warp CG on ``device`` against
     scipy's LU; writes ``condensed.json`` under ``out`` and returns it."""
-    quiet_warp()
+    verbose(False)
     from granular_material.dem import DEMBatch
     from granular_material.dem.condensed import condensed_tangent
     from granular_material.dem.condensed_cg import condensed_tangent_cg

@@ -262,9 +262,9 @@ def _parse(argv: list[str] | None) -> argparse.Namespace:
 def main(argv: list[str] | None = None) -> dict[str, pd.DataFrame] | None:
     """Run the benchmark; prints and returns its tables."""
     args = _parse(argv)
-    from granular_material.cli import quiet_warp
+    from granular_material import verbose
 
-    quiet_warp()
+    verbose(False)
     if args.child == "evaluate":
         sys.exit(_evaluate_child(args))
     if args.child == "exchange":

@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 import warp as wp
 
-from granular_material.cli import quiet_warp
+import granular_material
 from granular_material.dem import RVEData, RVEMeta
 
-quiet_warp()
+granular_material.verbose(False)  # whatever GRANULAR_MATERIAL_VERBOSE says
 wp.init()
 
 

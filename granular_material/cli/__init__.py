@@ -7,7 +7,9 @@ them described by a TOML scene file); their shared options are defined once in
 :mod:`granular_material.cli.options`, the stop signals in :mod:`granular_material.cli.signals`.
 Plugins add sub-commands through the ``granular_material.commands`` entry-point group; each
 entry point is a ``register(subparsers)`` callable that adds its parsers and sets ``func`` (a
-callable taking the parsed arguments and returning the exit code).
+callable taking the parsed arguments and returning the exit code). warp prints nothing on
+stdout (which ``--json`` keeps for the report): the package keeps it quiet
+(:func:`granular_material.verbose`).
 """
 
 from __future__ import annotations
@@ -26,7 +28,7 @@ from granular_material.entry_points import entry_point_names, load_entry_point
 #: the entry-point group of plugin commands (each a ``register(subparsers)`` callable)
 COMMAND_GROUP = "granular_material.commands"
 
-__all__ = ["UsageError", "build_parser", "entry", "main", "quiet_warp"]
+__all__ = ["UsageError", "build_parser", "entry", "main"]
 
 #: the one-line help of every command, in the order of ``granular-material --help``: what
 #: the top-level help shows without importing the commands (numpy, warp, scikit-fem,
@@ -75,16 +77,6 @@ def _register_plugins(subparsers: argparse._SubParsersAction,
         register(subparsers)
 
 
-def quiet_warp() -> None:
-    """Silence warp's start-up banner and module-load messages (they go to stdout)."""
-    import warp as wp
-
-    if hasattr(wp, "LOG_WARNING"):
-        wp.config.log_level = wp.LOG_WARNING
-    else:  # warp < 1.10
-        wp.config.quiet = True
-
-
 def _top_parser() -> tuple[argparse.ArgumentParser, argparse._SubParsersAction]:
     parser = argparse.ArgumentParser(
         prog="granular-material",
@@ -127,7 +119,7 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
         modules, names = [], [command]
     else:
         modules, names = list(dict.fromkeys(_CORE_MODULES.values())), plugins
-    for module in modules:  # imported here: quiet_warp imports light
+    for module in modules:  # imported here: the top-level help imports light
         importlib.import_module(f"granular_material.cli.{module}").register(subparsers)
     _register_plugins(subparsers, names)
     return parser
@@ -162,7 +154,6 @@ def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     if not _names_a_command(argv):  # --help, --version or nothing: no command to import
         command_parser().parse_args(argv)
-    quiet_warp()  # keep stdout clean for --json
     parser = build_parser(argv[0])
     args = parser.parse_args(argv)
     with stop_signals_as_interrupt():  # the reports below too: a later signal is ignored
