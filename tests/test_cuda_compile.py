@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 import warp as wp
 
-from granular_material.dem import condensed_cg, condensed_device
+from granular_material.dem import condensed_cg_kernels, condensed_device_kernels
 from granular_material.dem.kernels import DTYPES, STEP_VARIANTS, kernel_modules
 
 ARCH = 90  #: Hopper (H100, H200)
@@ -28,7 +28,7 @@ pytestmark = pytest.mark.skipif(
 )
 
 #: the packages whose warp kernels must all be covered by ``kernel_modules``
-PACKAGES = ("granular_material", "granular_material_skfem", "granular_material_pore_fractal",
+PACKAGES = ("granular_material", "granular_material_pore_fractal",
             "granular_material_reproduction", "granular_material_validation")
 
 
@@ -36,8 +36,8 @@ def _all_modules() -> dict[str, wp.Module]:
     """The engine's modules (every float type and step variant) and the condensed tangent's
     CG and device assembly (float64 only: the CG's relative residual of 1e-10 is below
     float32's resolution)."""
-    return {**kernel_modules(), **condensed_cg.kernel_modules(),
-            **condensed_device.kernel_modules()}
+    return {**kernel_modules(), **condensed_cg_kernels.kernel_modules(),
+            **condensed_device_kernels.kernel_modules()}
 
 
 def _base_name(name: str) -> str:
