@@ -15,6 +15,7 @@ import pytest
 from granular_material.cli import main
 from granular_material.results.compare import curve_errors, mean_curve
 from granular_material.results.trade_plots import pareto_front
+from granular_material.runs.presets import Preset
 from granular_material.studies import SCALES, plan_runs
 from granular_material.studies.trade import PRESETS, accuracy, knobs, read_trade_table, recommend
 
@@ -136,6 +137,8 @@ def test_smoke_study_writes_every_row_figure_and_section(smoke_study):
     dem = table[table["test"] == "dem"]
     assert dem["inertial_number"].gt(0).all() and dem["seed_scatter_pct"].notna().all()
     assert set(presets) == set(PRESETS)
+    for name, values in presets.items():  # the record the commands read
+        assert Preset(name=name, **values).tangent_update in ("none", "secant", "hold")
     assert len(table[table["knob"] == "preset"]) == 2 * len(PRESETS)
     report = (out / "report.md").read_text()
     for heading in ("## strain_per_step", "## mesh", "## preset", "## Recommended settings"):
@@ -202,9 +205,10 @@ def test_preset_sets_the_options_left_at_their_defaults(tmp_path, capsys):
     ("condensed-hold", {"tangent": "condensed", "tangent_update": "hold"}),
 ])
 def test_a_tangent_knob_value_names_the_tangent_and_its_update(value, settings):
-    from granular_material.runs.presets import preset_fields, tangent_settings
+    from granular_material.runs.presets import preset_fields
+    from granular_material.studies.trade import tangent_settings
 
     assert tangent_settings(value) == settings
-    for name in PRESETS:  # every committed preset's tangent reads as one of these
+    for name in PRESETS:  # every committed preset names one of these updates
         fields = preset_fields(name, 100e3)
         assert fields["tangent_update"] in ("none", "secant", "hold")

@@ -5,9 +5,10 @@ user gives.
 ``presets.json`` beside this module is the ``presets.json`` of the committed CPU trade study
 (``docs/trade-study/``, whose ``report.md`` gives each preset's measured error and cost); a
 test keeps the two the same. ``quick``, ``engineering`` and ``publication`` differ in the
-discs per RVE, the strain per DEM step, the Newton stress floor, the tangent, predictor and
-relaxation and the reuse of undisturbed RVEs: the knobs the study found to trade speed for
-accuracy (see :func:`granular_material.studies.scoring.recommend` for the rule).
+discs per RVE, the strain per DEM step, the Newton stress floor, the tangent and its update,
+predictor and relaxation and the reuse of undisturbed RVEs: the knobs the study found to
+trade speed for accuracy (see :func:`granular_material.studies.scoring.recommend` for the
+rule).
 """
 
 from __future__ import annotations
@@ -18,8 +19,7 @@ from functools import cache
 from pathlib import Path
 from typing import Any
 
-__all__ = ["PRESETS_FILE", "PRESET_NAMES", "Preset", "load_presets", "preset_fields",
-           "tangent_settings"]
+__all__ = ["PRESETS_FILE", "PRESET_NAMES", "Preset", "load_presets", "preset_fields"]
 
 PRESETS_FILE = Path(__file__).with_name("presets.json")
 
@@ -35,9 +35,11 @@ class Preset:
         rtol: Newton's relative residual tolerance.
         stress_floor: Newton's absolute stress tolerance as a fraction of the confining
             pressure [-].
-        tangent: a material tangent (objective, kruyt-rothenburg, perturbation,
-            condensed), "secant" (the objective tangent with Broyden updates) or
-            "<tangent>-hold" (held over each increment): :func:`tangent_settings`.
+        tangent: the material tangent (objective, kruyt-rothenburg, perturbation,
+            condensed, condensed-sticking).
+        tangent_update: Newton's update of it between evaluations: none (the material's
+            tangent at every iterate), secant (Broyden updates) or hold (held over each
+            increment).
         acceleration: "predictor/relaxation", e.g. "extrapolate/aitken".
         reuse_tol: reuse tolerance of undisturbed RVEs [-].
     """
@@ -48,20 +50,9 @@ class Preset:
     rtol: float
     stress_floor: float
     tangent: str
+    tangent_update: str
     acceleration: str
     reuse_tol: float
-
-
-def tangent_settings(value: str) -> dict[str, str]:
-    """The material tangent and Newton's tangent update of a tangent knob ``value`` of the
-    trade study and the presets: "secant" is the objective tangent with Broyden updates,
-    "<tangent>-hold" that tangent held over each increment, any other the material tangent
-    of every iterate."""
-    if value == "secant":
-        return {"tangent": "objective", "tangent_update": "secant"}
-    if value.endswith("-hold"):
-        return {"tangent": value.removesuffix("-hold"), "tangent_update": "hold"}
-    return {"tangent": value, "tangent_update": "none"}
 
 
 @cache
@@ -81,14 +72,13 @@ _MEASURED_WITH = {"convergence": "force", "max_iterations": 25}
 def preset_fields(name: str, confining: float, with_discs: bool = True) -> dict[str, Any]:
     """The flat spec fields of preset ``name`` for a run at ``confining`` [Pa] (its stress
     floor is a fraction of it); ``with_discs``: the discs per prepared RVE too (not for a
-    run of an RVE file, whose discs are the file's). Its tangent is read as
-    :func:`tangent_settings` says."""
+    run of an RVE file, whose discs are the file's)."""
     preset = load_presets()[name]
     predictor, relaxation = preset.acceleration.split("/")
     values: dict[str, Any] = {
         **_MEASURED_WITH, "rtol": preset.rtol, "stress_tol": preset.stress_floor * confining,
-        **tangent_settings(preset.tangent), "predictor": predictor,
-        "relaxation": relaxation, "reuse_tol": preset.reuse_tol,
+        "tangent": preset.tangent, "tangent_update": preset.tangent_update,
+        "predictor": predictor, "relaxation": relaxation, "reuse_tol": preset.reuse_tol,
         "max_strain_per_step": preset.strain_per_step,
     }
     if with_discs:

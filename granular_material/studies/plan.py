@@ -15,7 +15,7 @@ from typing import Any
 from granular_material.procedures.packing import DEFAULT_PRESSURE
 
 __all__ = ["NOISE", "REFERENCE", "SCALES", "SPECIMEN_NEWTON", "Knob", "PlannedRow",
-           "StudyScale", "knobs", "plan_runs", "run_key"]
+           "StudyScale", "knobs", "plan_runs", "run_key", "tangent_settings"]
 
 
 @dataclass(frozen=True)
@@ -124,6 +124,17 @@ class Knob:
     test: str
     values: tuple[Any, ...]
     reference: Any
+
+
+def tangent_settings(value: str) -> dict[str, str]:
+    """The material tangent and Newton's tangent update that a value of the tangent knob
+    names: "secant" is the objective tangent with Broyden updates, "<tangent>-hold" that
+    tangent held over each increment, any other the material tangent of every iterate."""
+    if value == "secant":
+        return {"tangent": "objective", "tangent_update": "secant"}
+    if value.endswith("-hold"):
+        return {"tangent": value.removesuffix("-hold"), "tangent_update": "hold"}
+    return {"tangent": value, "tangent_update": "none"}
 
 
 def knobs(scale: StudyScale) -> list[Knob]:

@@ -1,8 +1,9 @@
-"""The trade study's ``report.md``: the reference, a table per knob, the presets
-measured."""
+"""What the trade study reports: ``report.md`` (the reference, a table per knob, the presets
+measured) and ``presets.json`` (the presets as the commands read them)."""
 
 from __future__ import annotations
 
+import json
 import math
 from typing import Any
 
@@ -16,10 +17,22 @@ from granular_material.studies.plan import (
     StudyScale,
     _reference,
     knobs,
+    tangent_settings,
 )
 from granular_material.studies.scoring import PRESETS, accuracy
 
-__all__ = ["report"]
+__all__ = ["presets_file", "report"]
+
+
+def presets_file(presets: dict[str, dict[str, Any]]) -> str:
+    """``presets.json``: each preset's knob values, the tangent knob's as the material tangent
+    and Newton's tangent update it names (:func:`tangent_settings`), so that each preset
+    holds the fields of :class:`~granular_material.runs.presets.Preset`."""
+    entries = {name: {field: value for knob, chosen in values.items()
+                      for field, value in (tangent_settings(chosen) if knob == "tangent"
+                                           else {knob: chosen}).items()}
+               for name, values in presets.items()}
+    return json.dumps(entries, indent=2) + "\n"
 
 
 def report(table: pd.DataFrame, presets: dict[str, dict[str, Any]], scale: StudyScale,

@@ -18,8 +18,7 @@ from granular_material.procedures.element_tests import biaxial_steps
 from granular_material.results import band_summary
 from granular_material.runs import from_flat
 from granular_material.runs import run as run_spec
-from granular_material.runs.presets import tangent_settings
-from granular_material.studies.plan import StudyScale
+from granular_material.studies.plan import StudyScale, tangent_settings
 
 __all__ = ["RunResult"]
 

@@ -31,7 +31,6 @@ them in order (:func:`run_trade_study`) and gives their public names.
 
 from __future__ import annotations
 
-import json
 from collections.abc import Callable
 from pathlib import Path
 
@@ -51,15 +50,17 @@ from granular_material.studies.plan import (
     knobs,
     plan_runs,
     run_key,
+    tangent_settings,
 )
-from granular_material.studies.report import report
+from granular_material.studies.report import presets_file, report
 from granular_material.studies.running import RunResult, _Runner
 from granular_material.studies.running import _dem_equivalent as _dem_equivalent
 from granular_material.studies.scoring import PRESET_KNOBS, PRESETS, accuracy, recommend
 
 __all__ = ["NOISE", "PRESETS", "PRESET_KNOBS", "REFERENCE", "SCALES", "SPECIMEN_NEWTON", "Knob",
            "PlannedRow", "RunResult", "StudyScale", "accuracy", "knobs", "plan_runs",
-           "read_trade_table", "recommend", "report", "run_key", "run_trade_study"]
+           "presets_file", "read_trade_table", "recommend", "report", "run_key",
+           "run_trade_study", "tangent_settings"]
 
 
 def run_trade_study(scale: str | StudyScale, out: str | Path, device: str = "cpu",
@@ -89,7 +90,7 @@ def run_trade_study(scale: str | StudyScale, out: str | Path, device: str = "cpu
         {run_key(r.settings) for r in preset_rows}))
     _measure(preset_rows, runner, out, device, commit, progress, log)
     table = read_trade_table(out / "trade.csv")
-    (out / "presets.json").write_text(json.dumps(presets, indent=2) + "\n")
+    (out / "presets.json").write_text(presets_file(presets))
     plot_pareto(table, accuracy(table), out / "pareto.png")
     for name in dict.fromkeys(k.name for k in knobs(study)):
         plot_knob(table[table["knob"] == name], name, out / f"knob_{name}.png")
