@@ -22,6 +22,7 @@ import warnings
 from typing import Any
 
 from granular_material import __version__
+from granular_material.cli.parsers import CommandParser
 from granular_material.cli.signals import interrupt_exit_code, stop_signals_as_interrupt
 from granular_material.entry_points import entry_point_names, load_entry_point
 
@@ -77,8 +78,8 @@ def _register_plugins(subparsers: argparse._SubParsersAction,
         register(subparsers)
 
 
-def _top_parser() -> tuple[argparse.ArgumentParser, argparse._SubParsersAction]:
-    parser = argparse.ArgumentParser(
+def _top_parser() -> tuple[CommandParser, argparse._SubParsersAction]:
+    parser = CommandParser(
         prog="granular-material",
         description="Multiscale FEM x DEM simulation of granular geomaterials.",
     )
@@ -87,7 +88,7 @@ def _top_parser() -> tuple[argparse.ArgumentParser, argparse._SubParsersAction]:
     return parser, subparsers
 
 
-def command_parser() -> argparse.ArgumentParser:
+def command_parser() -> CommandParser:
     """The top-level parser alone (commands listed with their one-line help, no options),
     built without importing any command: what ``granular-material --help``, ``--version``
     and a missing command use."""
@@ -106,7 +107,7 @@ def _names_a_command(argv: list[str]) -> bool:
     return bool(argv) and not argv[0].startswith("-")
 
 
-def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+def build_parser(command: str | None = None) -> CommandParser:
     """The full argument parser, plugin commands included; with ``command`` (an installed
     command's name) only that command's, so that running or asking for the help of one
     command imports no other (the plugins' matplotlib and scipy.stats among them). An

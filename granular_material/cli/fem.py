@@ -27,6 +27,7 @@ from granular_material.cli.options import (
     positive_int,
     progress_enabled,
 )
+from granular_material.cli.parsers import CommandParser
 from granular_material.cli.signals import interrupt_exit_code
 from granular_material.fem import available_materials, available_postprocessors, load_material
 from granular_material.fem.kinematics import FORMULATIONS
@@ -52,7 +53,7 @@ _DEM = load_material(DEFAULT_MATERIAL).Parameters()
 TANGENTS = _DEM.tangents
 DEFAULT_PARTICLES = _DEM.default_particles
 #: the command parsers, for their defaults (:func:`_given`)
-_PARSERS: dict[str, argparse.ArgumentParser] = {}
+_PARSERS: dict[str, CommandParser] = {}
 
 
 def _newton_arguments(parser: argparse.ArgumentParser) -> None:
@@ -369,7 +370,7 @@ def command_line(spec: RunSpec) -> str:
     command's default (the spec's own defaults where the command has no option)."""
     test = spec.problem.test
     parser = _PARSERS[test]
-    dests = {a.dest: a for a in parser._actions if a.option_strings}
+    dests = {a.dest: a for a in parser.arguments if a.option_strings}
     words = ["granular-material", test]
     flat = to_flat(spec)
     material = flat.pop("material")

@@ -1,6 +1,7 @@
-"""The keys of a scene, read from the command parsers: every option of a command is a key
-(its long name without dashes), its TOML value converted and checked by the parser's own
-``type`` and ``choices``."""
+"""The keys of a scene, read from the command parsers (each a
+:class:`~granular_material.cli.parsers.CommandParser`, which records its options): every
+option of a command is a key (its long name without dashes), its TOML value converted and
+checked by the parser's own ``type`` and ``choices``."""
 
 from __future__ import annotations
 
@@ -9,19 +10,20 @@ import difflib
 from pathlib import Path
 from typing import Any
 
+from granular_material.cli.parsers import CommandParser
 from granular_material.cli.scene_toml import toml_repr
 
 __all__ = ["command_parsers", "convert", "help_of", "kind_of", "scene_keys", "suggest"]
 
 
-def command_parsers() -> dict[str, argparse.ArgumentParser]:
+def command_parsers() -> dict[str, CommandParser]:
     """The sub-command parsers of ``granular-material`` (plugins included), by name."""
     from granular_material.cli import build_parser
 
-    for action in build_parser()._actions:
-        if isinstance(action, argparse._SubParsersAction):
-            return dict(action.choices)
-    raise RuntimeError("granular-material has no sub-commands")
+    parsers = build_parser().commands
+    if not parsers:
+        raise RuntimeError("granular-material has no sub-commands")
+    return parsers
 
 
 def _key_name(action: argparse.Action) -> str:
@@ -33,10 +35,11 @@ def _key_name(action: argparse.Action) -> str:
     return action.dest
 
 
-def scene_keys(parser: argparse.ArgumentParser) -> dict[str, argparse.Action]:
+def scene_keys(parser: CommandParser) -> dict[str, argparse.Action]:
     """Every scene key of the command ``parser`` with its action (``help`` left out; the
-    options of :data:`_NOT_KEYS` included, they are refused with advice)."""
-    return {_key_name(a): a for a in parser._actions
+    options of :data:`_NOT_KEYS` included, they are refused with advice), in the order the
+    options were added (:attr:`CommandParser.arguments`)."""
+    return {_key_name(a): a for a in parser.arguments
             if not isinstance(a, (argparse._HelpAction, argparse._VersionAction))}
 
 
