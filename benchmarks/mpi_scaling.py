@@ -78,7 +78,7 @@ def _grad_u(n_points: int, strain: float) -> np.ndarray:
 # -- the measuring processes -------------------------------------------------------------------
 def _evaluate_child(args: argparse.Namespace) -> int:
     """``--child evaluate``: time the DEM material's evaluations; JSON on rank 0's stdout."""
-    from granular_material_skfem import DEMMaterial
+    from granular_material.multiscale import DEMMaterial
 
     def main() -> int:
         material = DEMMaterial(rve=args.rve, replicate=True, device=args.device,
@@ -111,7 +111,7 @@ def _evaluate_child(args: argparse.Namespace) -> int:
 
 def _exchange_child(args: argparse.Namespace) -> int:
     """``--child exchange``: the messages alone for each of SIZES points; JSON on rank 0."""
-    from granular_material_skfem.mpi import exchange_time
+    from granular_material.multiscale.mpi import exchange_time
 
     times = {n: exchange_time(n, args.repeats) for n in SIZES}
     from mpi4py import MPI
@@ -199,7 +199,7 @@ def _measure(args: argparse.Namespace, rve: Path) -> tuple[pd.DataFrame, dict]:
 
 
 def _messages() -> pd.DataFrame:
-    from granular_material_skfem.mpi import message_bytes
+    from granular_material.multiscale.mpi import message_bytes
 
     rows = []
     for n in SIZES:
@@ -214,7 +214,7 @@ def _estimate(table: pd.DataFrame, exchange: dict[str, float], particles: int,
     evaluation, on K ranks: DEM time = ⌈8192/K⌉·particles·steps / rate; exchange = the
     measured 2-rank exchange of 8192 points + K·LATENCY + the bytes not of rank 0's own
     shard / BANDWIDTH."""
-    from granular_material_skfem.mpi import message_bytes
+    from granular_material.multiscale.mpi import message_bytes
 
     mpi = table[table["variant"].str.startswith("mpi")].iloc[-1]  # the most ranks measured
     # one rank's own rate: its share of the particle-steps over its median compute time

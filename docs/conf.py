@@ -103,7 +103,7 @@ def _check_escapes(app, env):
 # page fails the build.
 API_PACKAGES = ["granular_material.runs", "granular_material.fem", "granular_material.dem",
                 "granular_material.procedures", "granular_material.results",
-                "granular_material_skfem", "granular_material_pore_fractal"]
+                "granular_material.multiscale", "granular_material_pore_fractal"]
 
 
 def _check_api_complete(app, env):

@@ -153,12 +153,12 @@ def test_lattice_mechanisms_rattlers_and_an_empty_rve() -> None:
 
 def test_the_dem_backend_takes_the_lu_where_the_cg_does_not_converge(
         packings: RVEData, monkeypatch) -> None:
-    """``_with_condensed`` on "cuda…" (float32: the host-assembled CG): an RVE whose CG
+    """``condense`` on "cuda…" (float32: the host-assembled CG): an RVE whose CG
     stops short of the tolerance takes scipy's LU's tangent, with a CGFallbackWarning that
     names it, instead of ending the run; the CG's other RVEs keep their own."""
     from dataclasses import dataclass
 
-    from granular_material_skfem import backend
+    from granular_material.dem import condensation
 
     calls = []
 
@@ -180,19 +180,12 @@ def test_the_dem_backend_takes_the_lu_where_the_cg_does_not_converge(
         def to_data(self) -> RVEData:
             return packings
 
-    @dataclass
-    class H:
-        tangent: np.ndarray
-
-    monkeypatch.setattr(backend, "condensed_tangent_cg", short_cg)
-    moved = np.array([False, True, False, False, True, False])
-    h = H(np.zeros((6, 2, 2, 2, 2)))
+    monkeypatch.setattr(condensation, "condensed_tangent_cg", short_cg)
     lu = condensed_tangent(packings, rves=[1, 4]).tangent
     with pytest.warns(CGFallbackWarning, match=r"1 of 2 RVEs \(\[4\]"):
-        on_cuda = backend._with_condensed(Fake("cuda:0"), h, moved).tangent
+        on_cuda = condensation.condense(Fake("cuda:0"), np.array([1, 4]), "free")
     assert calls == [("cuda:0", False)]
-    assert np.all(on_cuda[~moved] == 0.0)
-    assert _relative(on_cuda[moved], lu).max() < 1e-8
+    assert _relative(on_cuda, lu).max() < 1e-8
 
 
 def test_cost_benchmark_times_both_solvers(tmp_path) -> None:

@@ -134,9 +134,9 @@ def test_a_float32_state_is_refused_by_name(sheared: DEMBatch) -> None:
 
 def test_the_dem_backend_assembles_on_a_float64_cuda_batch(sheared: DEMBatch,
                                                              monkeypatch) -> None:
-    """``_with_condensed``: a float64 batch on "cuda…" takes the device assembly, a float32
+    """``condense``: a float64 batch on "cuda…" takes the device assembly, a float32
     one the host-assembled CG, a CPU batch scipy's LU."""
-    from granular_material_skfem import backend
+    from granular_material.dem import condensation
 
     calls = []
 
@@ -158,23 +158,16 @@ def test_the_dem_backend_assembles_on_a_float64_cuda_batch(sheared: DEMBatch,
         return condensed_tangent_cg(data, rves=rves, sliding=sliding,
                                     raise_unconverged=raise_unconverged)
 
-    @dataclass
-    class H:
-        tangent: np.ndarray
-
-    monkeypatch.setattr(backend, "condensed_tangent_of_batch", device_path)
-    monkeypatch.setattr(backend, "condensed_tangent_cg", host_cg)
-    moved = np.array([False, True, False, True])
-    h = H(np.zeros((4, 2, 2, 2, 2)))
+    monkeypatch.setattr(condensation, "condensed_tangent_of_batch", device_path)
+    monkeypatch.setattr(condensation, "condensed_tangent_cg", host_cg)
+    rves = np.array([1, 3])
     for sliding in ("free", "stick"):  # each path is told how contacts at the cap respond
         calls.clear()
-        assembled = backend._with_condensed(OnCuda("float64"), h, moved, sliding).tangent
-        host = backend._with_condensed(OnCuda("float32"), h, moved, sliding).tangent
-        direct = backend._with_condensed(sheared, h, moved, sliding).tangent
+        assembled = condensation.condense(OnCuda("float64"), rves, sliding)
+        host = condensation.condense(OnCuda("float32"), rves, sliding)
+        direct = condensation.condense(sheared, rves, sliding)
         assert calls == [("device", sliding), ("host-cg", sliding)]
-        assert np.all(assembled[~moved] == 0.0)
-        assert _relative(assembled[moved], direct[moved]).max() < 1e-8
-        assert _relative(host[moved], direct[moved]).max() < 1e-8
-    reference = condensed_tangent(sheared.to_data(), rves=np.flatnonzero(moved),
-                                  sliding="stick").tangent
-    assert _relative(direct[moved], reference).max() < 1e-14
+        assert _relative(assembled, direct).max() < 1e-8
+        assert _relative(host, direct).max() < 1e-8
+    reference = condensed_tangent(sheared.to_data(), rves=rves, sliding="stick").tangent
+    assert _relative(direct, reference).max() < 1e-14

@@ -244,9 +244,8 @@ def test_condensed_predicts_the_relaxed_dem_response() -> None:
 def test_dem_material_returns_the_condensed_tangent(sheared: RVEData, tmp_path) -> None:
     """``tangent="condensed"``: the material's tangent is the condensed tangent of each
     RVE's trial state, at no DEM run beyond the evaluation's own."""
-    from granular_material_skfem import DEMMaterial
-
     from granular_material.dem import save_rve
+    from granular_material.multiscale import DEMMaterial
 
     path = tmp_path / "sheared.npz"
     save_rve(path, sheared)
@@ -273,9 +272,8 @@ def test_dem_material_returns_the_condensed_tangent(sheared: RVEData, tmp_path) 
 def test_dem_material_returns_the_sticking_tangent(sheared: RVEData, tmp_path) -> None:
     """``tangent="condensed-sticking"``: the condensed tangent with every touching contact
     sticking, plus the stress's spin; the same stress as any other tangent."""
-    from granular_material_skfem import DEMMaterial
-
     from granular_material.dem import save_rve
+    from granular_material.multiscale import DEMMaterial
 
     path = tmp_path / "sheared.npz"
     save_rve(path, sheared)
@@ -301,8 +299,6 @@ def test_a_held_tangent_is_condensed_once_an_increment(sheared: RVEData, tmp_pat
     ∇u) return that tangent, plus the rotation of their own stress, without condensing
     again; a revert or commit ends the hold. Under the Newton driver's ``tangent_update=
     "hold"`` the material holds and the run is the same, with one condensation a step."""
-    from granular_material_skfem import DEMMaterial, backend
-
     from granular_material.dem import save_rve
     from granular_material.fem import (
         BiaxialSetup,
@@ -310,12 +306,13 @@ def test_a_held_tangent_is_condensed_once_an_increment(sheared: RVEData, tmp_pat
         NewtonSolver,
         build_biaxial,
     )
+    from granular_material.multiscale import DEMMaterial, backend
 
     path = tmp_path / "sheared.npz"
     save_rve(path, sheared)
     condensations = []
-    original = backend._with_condensed
-    monkeypatch.setattr(backend, "_with_condensed",
+    original = backend.condense
+    monkeypatch.setattr(backend, "condense",
                         lambda *a: condensations.append(1) or original(*a))
     material = DEMMaterial(rve=path, device="cpu", replicate=True, tangent="condensed")
     material.allocate(2)

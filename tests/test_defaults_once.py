@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import re
+from dataclasses import fields
 from types import SimpleNamespace
 
 import numpy as np
@@ -14,6 +15,7 @@ from granular_material.checks import RVE_MATERIAL_DEFAULTS, UsageError, packing_
 from granular_material.cli import build_parser
 from granular_material.dem import RVEMeta
 from granular_material.dem.rve_file import FRICTMAT_STIFFNESS
+from granular_material.procedures.driven_path import plan_path
 from granular_material.procedures.element_tests import (
     DEFAULT_AXIAL_STRAIN,
     DEFAULT_RECORD_EVERY,
@@ -25,11 +27,7 @@ from granular_material.procedures.packing import (
     DEFAULT_RADIUS_RANGE,
     check_packing,
 )
-from granular_material.procedures.strain_path import (
-    DEFAULT_MAX_DEM_STEPS,
-    DEFAULT_STRAIN_PER_STEP,
-    plan_path,
-)
+from granular_material.procedures.strain_path import DEFAULT_MAX_DEM_STEPS, DEFAULT_STRAIN_PER_STEP
 
 
 def _defaults(command: str) -> dict[str, object]:
@@ -100,3 +98,39 @@ def test_one_path_plan() -> None:
         plan_path(grad, 3, max_steps=101)
     with pytest.raises(ValueError, match="inverts the cell at increment 1 of 1"):
         plan_path(np.array([[-2.5, 0.0], [0.0, 0.0]]), 1)
+
+
+def test_each_dem_material_setting_is_declared_once() -> None:
+    """The DEM material's settings are fields of one chain of frozen dataclasses, each
+    declared in one of them; the material and its backend take them only as that object. The
+    one field declared twice is the run's tangent (RUN_TANGENT, documented beside it)."""
+    import inspect
+
+    from granular_material.multiscale import (
+        DEMDriving,
+        DEMMaterial,
+        DEMMaterialParameters,
+        DEMParameters,
+        DEMRVEs,
+        InProcessBackend,
+    )
+    from granular_material.multiscale.run_hooks import RUN_TANGENT
+
+    declared: dict[str, list[str]] = {}
+    for cls in (DEMDriving, DEMRVEs, DEMMaterialParameters, DEMParameters):
+        for name in inspect.get_annotations(cls):
+            if not name.startswith("_") and name not in ("tangents", "drives",
+                                                         "reuse_corrections",
+                                                         "default_particles"):
+                declared.setdefault(name, []).append(cls.__name__)
+    twice = {name: where for name, where in declared.items() if len(where) > 1}
+    assert twice == {"tangent": ["DEMDriving", "DEMParameters"]}
+    assert DEMParameters().tangent == RUN_TANGENT != DEMDriving().tangent
+    assert list(inspect.signature(DEMMaterial.__init__).parameters) == [
+        "self", "parameters", "progress", "pressure", "settings"]
+    assert list(inspect.signature(InProcessBackend.__init__).parameters) == [
+        "self", "batch", "driving"]
+    # the spec's fields and the material's share DEMRVEs' declarations, nothing else
+    spec = {f.name for f in fields(DEMParameters)}
+    material = {f.name for f in fields(DEMMaterialParameters)}
+    assert spec & material == {f.name for f in fields(DEMRVEs)}

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from granular_material_skfem import DEMMaterial
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
@@ -29,6 +28,7 @@ from granular_material.fem.kinematics import (
     reference_tangent,
 )
 from granular_material.fem.problems import follower_traction
+from granular_material.multiscale import DEMMaterial
 from granular_material.procedures import prepare_packing
 
 EYE = np.eye(2)

@@ -22,7 +22,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-from granular_material_skfem.mpi import (
+
+from granular_material.dem import DEMBatch, Homogenized, load_rve, save_rve
+from granular_material.multiscale.mpi import (
     FAULT_VARIABLE,
     HEADER,
     ROW,
@@ -31,8 +33,6 @@ from granular_material_skfem.mpi import (
     message_bytes,
     shard_bounds,
 )
-
-from granular_material.dem import DEMBatch, Homogenized, load_rve, save_rve
 from granular_material.procedures import drive_grad_u, prepare_packing
 
 
@@ -287,13 +287,13 @@ import sys
 from pathlib import Path
 
 import numpy as np
-import granular_material_skfem.backend as backend
-from granular_material_skfem.mpi import MPIBackend, launch
-from granular_material_skfem.parameters import DEMMaterialParameters
+import granular_material.multiscale.backend as backend
+from granular_material.multiscale.mpi import MPIBackend, launch
+from granular_material.multiscale.parameters import DEMMaterialParameters
 from granular_material.dem import load_rve
 
 condensations = 0
-condense = backend._with_condensed
+condense = backend.condense
 
 
 def counting(*args, **kwargs):
@@ -302,7 +302,7 @@ def counting(*args, **kwargs):
     return condense(*args, **kwargs)
 
 
-backend._with_condensed = counting
+backend.condense = counting
 
 
 def main():

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from granular_material_skfem import DEMMaterial
 
 from granular_material.dem import DEMBatch, DEMInstabilityError, RVEFileError, RVEMeta, load_rve
 from granular_material.dem.homogenization import objective_tangent
@@ -19,6 +18,7 @@ from granular_material.fem import (
     create_material,
     run_biaxial,
 )
+from granular_material.multiscale import DEMMaterial
 from granular_material.procedures import PackingParameters, biaxial_test, drive_grad_u
 from granular_material.results import summarize_biaxial
 
@@ -193,11 +193,11 @@ def test_perturbation_tangent_stops_at_the_first_dem_run_that_fails(small_rve_pa
     material.allocate(2)
     calls = []
 
-    def blow_up(batch, grad_u, **kwargs):  # the first DEM run (a perturbed one) blows up
-        calls.append(np.array(grad_u))
+    def blow_up(batch, plan):  # the first DEM run (a perturbed one) blows up
+        calls.append(plan)
         raise DEMInstabilityError([1], ["test: RVE 1 blew up"])
 
-    monkeypatch.setattr("granular_material_skfem.backend.drive_grad_u", blow_up)
+    monkeypatch.setattr("granular_material.multiscale.backend.drive_planned", blow_up)
     response = material.evaluate(np.repeat(GRAD[:1], 2, axis=0))
     assert len(calls) == 1 and not response.ok
     # the whole batch went back to its committed state: RVE 1 blew up, RVE 0 is aborted

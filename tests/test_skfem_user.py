@@ -8,8 +8,6 @@ import warnings
 
 import numpy as np
 import pytest
-from granular_material_skfem import DEMMaterial
-from granular_material_skfem.material import UnconfinedWarning
 from skfem import Basis, ElementQuad1, ElementVector, MeshQuad
 
 from granular_material.fem import (
@@ -25,6 +23,7 @@ from granular_material.fem import (
     to_points,
     to_quadrature,
 )
+from granular_material.multiscale import DEMMaterial, UnconfinedWarning
 from granular_material.results.summary import run_summary
 
 RNG = np.random.default_rng(5)

@@ -51,6 +51,7 @@ from skfem import (
     MeshTri,
 )
 
+from granular_material.errors import ParameterError
 from granular_material.fem.layout import to_points
 from granular_material.fem.loading import Loading
 from granular_material.reference_values import DEFAULT_PRESSURE
@@ -75,7 +76,7 @@ TRIANGLE_RULES = {1: 1, 3: 2, 6: 4, 7: 5, 12: 6}
 def element_of(name: str) -> ElementVector:
     """The vector (u_x, u_y) scikit-fem element of the element named ``name``."""
     if name not in ELEMENTS:
-        raise ValueError(f"element must be one of {', '.join(ELEMENTS)}, got {name!r}")
+        raise ParameterError("element", f"must be one of {', '.join(ELEMENTS)}, got {name!r}")
     return ElementVector(ELEMENTS[name]())
 
 
@@ -109,31 +110,33 @@ class BiaxialSetup:
 
     def __post_init__(self) -> None:
         if self.element not in ELEMENTS:
-            raise ValueError(f"element must be one of {', '.join(ELEMENTS)}, "
-                             f"got {self.element!r}")
+            raise ParameterError("element", f"must be one of {', '.join(ELEMENTS)}, "
+                                            f"got {self.element!r}")
         if self.element in TRIANGLES:
             if self.gauss is not None and self.gauss not in TRIANGLE_RULES:
-                raise ValueError(f"gauss of a triangle must be one of "
-                                 f"{', '.join(map(str, TRIANGLE_RULES))} (points per "
-                                 f"triangle), got {self.gauss!r}")
+                raise ParameterError("gauss", "of a triangle must be one of "
+                                              f"{', '.join(map(str, TRIANGLE_RULES))} (points "
+                                              f"per triangle), got {self.gauss!r}")
         elif self.gauss is not None and (int(self.gauss) != self.gauss
                                          or not 1 <= self.gauss <= 10):
-            raise ValueError(f"gauss must be an integer in [1, 10] (points per direction), "
-                             f"got {self.gauss!r}")
+            raise ParameterError("gauss", "must be an integer in [1, 10] (points per "
+                                          f"direction), got {self.gauss!r}")
         if self.platens not in PLATENS:
-            raise ValueError(f"platens must be 'smooth' or 'rough', got {self.platens!r}")
+            raise ParameterError("platens", f"must be 'smooth' or 'rough', got {self.platens!r}")
         for name in ("width", "height"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
-                raise ValueError(f"{name} must be a positive length in m, got {value!r}")
+                raise ParameterError(name, f"must be a positive length in m, got {value!r}")
         for name in ("nx", "ny"):
             value = getattr(self, name)
             if int(value) != value or value < 1:
-                raise ValueError(f"{name} must be an integer >= 1, got {value!r}")
+                raise ParameterError(name, f"must be an integer >= 1, got {value!r}")
         if not (math.isfinite(self.confining) and self.confining >= 0):
-            raise ValueError(f"confining must be a pressure >= 0 Pa, got {self.confining!r}")
+            raise ParameterError("confining",
+                                 f"must be a pressure >= 0 Pa, got {self.confining!r}")
         if not (math.isfinite(self.axial_strain) and 0 < self.axial_strain <= 0.5):
-            raise ValueError(f"axial_strain must lie in (0, 0.5], got {self.axial_strain!r}")
+            raise ParameterError("axial_strain",
+                                 f"must lie in (0, 0.5], got {self.axial_strain!r}")
 
     @property
     def gauss_per_direction(self) -> int:

@@ -3,7 +3,7 @@
 Rank 0 runs the program (the FEM, Newton, every file written and every line printed). Every
 rank, rank 0 included, owns a contiguous shard of the Gauss points' RVEs, points
 ``start:stop`` (:func:`shard_bounds`), as an
-:class:`~granular_material_skfem.backend.InProcessBackend` of its own on its own device:
+:class:`~granular_material.multiscale.backend.InProcessBackend` of its own on its own device:
 CUDA device ``local_rank % n_gpus`` (ranks numbered within their node), or the CPU with the
 node's cores shared among its ranks. The other ranks run :func:`serve`: they wait for rank
 0's commands and answer them. :func:`launch` starts both sides and tells the workers to stop
@@ -52,12 +52,13 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from granular_material_skfem.backend import Evaluation, InProcessBackend
-from granular_material_skfem.parameters import DEMMaterialParameters, in_process_backend
 
-from granular_material.dem import Homogenized, RVEData, resolve_device, save_rve
+from granular_material.dem import DEMBatch, Homogenized, RVEData, resolve_device, save_rve
 from granular_material.fem.material import FailureReason
 from granular_material.filesafe import deferred_signals
+from granular_material.multiscale.backend import InProcessBackend
+from granular_material.multiscale.evaluation import Evaluation
+from granular_material.multiscale.parameters import DEMMaterialParameters
 from granular_material.timing import MATERIAL_PHASES
 
 __all__ = [
@@ -85,7 +86,7 @@ _FIELD_SHAPES: dict[str, tuple[int, ...]] = {
 }
 _INTEGER_FIELDS = frozenset({"n_contacts"})
 if [f.name for f in fields(Homogenized)] != list(_FIELD_SHAPES):
-    raise ImportError("granular_material_skfem.mpi: the row layout does not match "
+    raise ImportError("granular_material.multiscale.mpi: the row layout does not match "
                       "Homogenized's fields")
 
 #: float64 a point in the gathered rows: the failed flag and the homogenised fields
@@ -240,7 +241,7 @@ class _Shard:
         device = _device(parameters.device, self.world.local_rank)
         threads = _threads(parameters.shards, device, self.world.local_size)
         states = InProcessBackend.without_backend_arrays(data) if resume else data
-        backend = in_process_backend(states, parameters, device, threads)
+        backend = InProcessBackend(DEMBatch(states, device=device, shards=threads), parameters)
         if resume:
             backend.resume_from(data)
         self.backend = backend
@@ -568,7 +569,7 @@ class ExchangeTiming:
 
 class MPIBackend:
     """The RVEs of every rank of an MPI job behind the calls of
-    :class:`~granular_material_skfem.backend.DEMBackend`, for rank 0.
+    :class:`~granular_material.multiscale.evaluation.DEMBackend`, for rank 0.
 
     Each rank's shard is an :class:`InProcessBackend` that reuses, drives on (``continue``)
     and commits its own RVEs exactly as the whole batch would in process, so the response

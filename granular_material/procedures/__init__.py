@@ -2,7 +2,7 @@
 element tests (each takes a :class:`~granular_material.dem.DEMBatch` and treats its RVEs
 independently), and :func:`progress_bar`, the one progress bar every layer uses."""
 
-from granular_material.procedures.driven_path import DrivenPath, drive_path
+from granular_material.procedures.driven_path import DrivenPath, drive_path, plan_path
 from granular_material.procedures.element_tests import biaxial_test
 from granular_material.procedures.packing import PackingParameters, prepare_packing, random_gas
 from granular_material.procedures.servo import consolidate, servo_steps
@@ -14,7 +14,6 @@ from granular_material.procedures.strain_path import (
     over_step_cap,
     path_increment,
     path_steps,
-    plan_path,
 )
 from granular_material.progress import progress_bar
 

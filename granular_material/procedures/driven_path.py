@@ -1,5 +1,5 @@
 """A ∇u path in increments, each RVE's state recorded after every one: what ``dem-drive``
-runs and tabulates (:func:`drive_path`)."""
+plans (:func:`plan_path`), runs and tabulates (:func:`drive_path`)."""
 
 from __future__ import annotations
 
@@ -11,14 +11,18 @@ import numpy as np
 import pandas as pd
 
 from granular_material.dem import DEMBatch, DEMInstabilityError
+from granular_material.procedures.packing import given_as
 from granular_material.procedures.strain_path import (
     DEFAULT_MAX_DEM_STEPS,
+    DEFAULT_MIN_STEPS,
     DEFAULT_STRAIN_PER_STEP,
     drive_grad_u,
+    has_real_logarithm,
     path_increment,
+    path_steps,
 )
 
-__all__ = ["DrivenPath", "drive_path"]
+__all__ = ["PATH_NAMES", "DrivenPath", "drive_path", "plan_path"]
 
 
 @dataclass
@@ -106,3 +110,55 @@ def drive_path(batch: DEMBatch, grad_u: np.ndarray, increments: int,
         done.failure = exc
     done.table = pd.concat(rows, ignore_index=True)
     return done
+
+
+#: how :func:`plan_path` names the values in its messages by default (a library caller's
+#: keywords); the command line names its options instead
+PATH_NAMES = {"grad_u": "grad_u", "increments": "increments",
+              "max_strain_per_step": "max_strain_per_step", "max_steps": "max_steps"}
+
+
+def plan_path(grad_u: np.ndarray, increments: int,
+              max_strain_per_step: float = DEFAULT_STRAIN_PER_STEP,
+              max_steps: int = DEFAULT_MAX_DEM_STEPS, min_steps: int = DEFAULT_MIN_STEPS,
+              names: dict[str, str] | None = None) -> list[int]:
+    """The DEM steps of each of the ``increments`` equal increments of the path to ∇u (2, 2)
+    (:func:`path_increment`, each driven by :func:`drive_grad_u`), checked before any work:
+    ``ValueError`` naming the values (as ``names`` does: :data:`PATH_NAMES` where it gives
+    none) when an increment inverts the cell or has no real logarithm, or the path needs
+    more than ``max_steps`` DEM steps in all."""
+    names = {**PATH_NAMES, **(names or {})}
+    g = np.asarray(grad_u, dtype=np.float64)
+    grad = given_as(names["grad_u"], ",".join(f"{v:g}" for v in g.ravel()))
+    cap = given_as(names["max_steps"], max_steps)
+    per_step = given_as(names["max_strain_per_step"], max_strain_per_step)
+    n = increments
+    if n * min_steps > max_steps:  # before a loop over them: 10⁷ would take minutes
+        raise ValueError(f"{given_as(names['increments'], n)} needs at least {n * min_steps} "
+                         f"DEM steps ({min_steps} an increment), more than {cap}; use fewer "
+                         f"{names['increments']}")
+    plan = []
+    for k in range(1, n + 1):
+        det = float(np.linalg.det(np.eye(2) + g * k / n))
+        if not det > 0:
+            raise ValueError(f"{grad} inverts the cell at increment {k} of {n}: "
+                             f"det(I + {k}/{n}·∇u) = {det:.4g} <= 0")
+        increment = path_increment(g, k, n)[None]
+        try:
+            plan.append(int(path_steps(increment, max_strain_per_step, min_steps,
+                                       max_steps)[0]))
+        except ValueError:
+            wanted = float(np.abs(increment).max()) / max_strain_per_step
+            raise ValueError(
+                f"{grad} needs more than {cap} DEM steps: increment {k} of {n} alone takes "
+                f"{wanted:.4g} at {per_step}; raise {names['max_steps']} or "
+                f"{names['max_strain_per_step']}") from None
+        if not has_real_logarithm(np.eye(2) + increment)[0]:
+            raise ValueError(f"increment {k} of {n} of {grad} has no real logarithm (it turns "
+                             f"the cell by half a turn or more); use more "
+                             f"{names['increments']}")
+    if sum(plan) > max_steps:
+        raise ValueError(f"{grad} needs {sum(plan)} DEM steps in {n} increments at "
+                         f"{per_step}, more than {cap}; raise {names['max_steps']} or "
+                         f"{names['max_strain_per_step']}")
+    return plan

@@ -7,29 +7,30 @@ while the others go on), so an RVE's result never depends on its batch neighbour
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
 from granular_material.dem import DEMBatch, DEMInstabilityError
 from granular_material.dem.loading import expm_2x2
 from granular_material.dem.model import cell_heights
-from granular_material.procedures.packing import given_as
 
 __all__ = [
     "DEFAULT_MAX_DEM_STEPS",
     "DEFAULT_MIN_STEPS",
     "DEFAULT_STRAIN_PER_STEP",
-    "PATH_NAMES",
     "STEP_LIMIT",
     "CellTooThinError",
+    "DrivePlan",
     "RVECollapseError",
     "drive_grad_u",
+    "drive_planned",
     "has_real_logarithm",
     "log_deformation",
     "over_step_cap",
     "path_increment",
     "path_steps",
-    "plan_path",
+    "plan_drive",
 ]
 
 
@@ -237,58 +238,6 @@ def path_steps(grad_u: np.ndarray, max_strain_per_step: float = DEFAULT_STRAIN_P
     return wanted.astype(np.int64)
 
 
-#: how :func:`plan_path` names the values in its messages by default (a library caller's
-#: keywords); the command line names its options instead
-PATH_NAMES = {"grad_u": "grad_u", "increments": "increments",
-              "max_strain_per_step": "max_strain_per_step", "max_steps": "max_steps"}
-
-
-def plan_path(grad_u: np.ndarray, increments: int,
-              max_strain_per_step: float = DEFAULT_STRAIN_PER_STEP,
-              max_steps: int = DEFAULT_MAX_DEM_STEPS, min_steps: int = DEFAULT_MIN_STEPS,
-              names: dict[str, str] | None = None) -> list[int]:
-    """The DEM steps of each of the ``increments`` equal increments of the path to ∇u (2, 2)
-    (:func:`path_increment`, each driven by :func:`drive_grad_u`), checked before any work:
-    ``ValueError`` naming the values (as ``names`` does: :data:`PATH_NAMES` where it gives
-    none) when an increment inverts the cell or has no real logarithm, or the path needs
-    more than ``max_steps`` DEM steps in all."""
-    names = {**PATH_NAMES, **(names or {})}
-    g = np.asarray(grad_u, dtype=np.float64)
-    grad = given_as(names["grad_u"], ",".join(f"{v:g}" for v in g.ravel()))
-    cap = given_as(names["max_steps"], max_steps)
-    per_step = given_as(names["max_strain_per_step"], max_strain_per_step)
-    n = increments
-    if n * min_steps > max_steps:  # before a loop over them: 10⁷ would take minutes
-        raise ValueError(f"{given_as(names['increments'], n)} needs at least {n * min_steps} "
-                         f"DEM steps ({min_steps} an increment), more than {cap}; use fewer "
-                         f"{names['increments']}")
-    plan = []
-    for k in range(1, n + 1):
-        det = float(np.linalg.det(np.eye(2) + g * k / n))
-        if not det > 0:
-            raise ValueError(f"{grad} inverts the cell at increment {k} of {n}: "
-                             f"det(I + {k}/{n}·∇u) = {det:.4g} <= 0")
-        increment = path_increment(g, k, n)[None]
-        try:
-            plan.append(int(path_steps(increment, max_strain_per_step, min_steps,
-                                       max_steps)[0]))
-        except ValueError:
-            wanted = float(np.abs(increment).max()) / max_strain_per_step
-            raise ValueError(
-                f"{grad} needs more than {cap} DEM steps: increment {k} of {n} alone takes "
-                f"{wanted:.4g} at {per_step}; raise {names['max_steps']} or "
-                f"{names['max_strain_per_step']}") from None
-        if not has_real_logarithm(np.eye(2) + increment)[0]:
-            raise ValueError(f"increment {k} of {n} of {grad} has no real logarithm (it turns "
-                             f"the cell by half a turn or more); use more "
-                             f"{names['increments']}")
-    if sum(plan) > max_steps:
-        raise ValueError(f"{grad} needs {sum(plan)} DEM steps in {n} increments at "
-                         f"{per_step}, more than {cap}; raise {names['max_steps']} or "
-                         f"{names['max_strain_per_step']}")
-    return plan
-
-
 def drive_grad_u(
     batch: DEMBatch,
     grad_u: np.ndarray,
@@ -327,12 +276,70 @@ def drive_grad_u(
     n_steps = np.where(active, path_steps(g, max_strain_per_step, min_steps, max_steps), 0)
     if not active.any():
         return 0
-    dt = batch.dt
     real = has_real_logarithm(np.eye(2) + g)
     if not real.all():
         b = int(np.argmax(~real))
         raise ValueError(f"grad_u of RVE {b} has no real logarithm (I + grad_u turns by half a "
                          f"turn or more, or has a negative eigenvalue): {g[b].tolist()}")
+    return drive_planned(batch, DrivePlan(g, n_steps.astype(np.int64), active,
+                                          np.zeros(n_rve, bool), np.zeros(n_rve, bool)))
+
+
+@dataclass(frozen=True)
+class DrivePlan:
+    """Each RVE's path to a ∇u, planned once before any step (:func:`plan_drive`) and handed
+    to :func:`drive_planned`.
+
+    Attributes:
+        grad_u: ∇u [-] of the driven RVEs, zero for the others, shape (B, 2, 2), float64.
+        steps: DEM steps of each driven RVE's path, 0 for the others, shape (B,), int64.
+        driven: the RVEs that are stepped, shape (B,), bool.
+        inverted: RVEs asked to move whose I + ∇u has no real logarithm (it inverts the
+            cell or turns it by half a turn or more), shape (B,), bool.
+        capped: RVEs asked to move, not inverted, whose path needs more DEM steps than the
+            cap, shape (B,), bool.
+    """
+
+    grad_u: np.ndarray
+    steps: np.ndarray
+    driven: np.ndarray
+    inverted: np.ndarray
+    capped: np.ndarray
+
+    def particle_steps(self, n_disc: int) -> int:
+        """Disc-steps [-] of the plan: Σ over the driven RVEs of their steps × ``n_disc``."""
+        return int(self.steps[self.driven].sum()) * n_disc
+
+
+def plan_drive(grad_u: np.ndarray, active: np.ndarray,
+               max_strain_per_step: float = DEFAULT_STRAIN_PER_STEP,
+               min_steps: int = DEFAULT_MIN_STEPS, max_steps: int | None = None) -> DrivePlan:
+    """The paths of the ``active`` RVEs (B,) to ∇u [-] (B, 2, 2, finite): those that cannot
+    take it (no real logarithm; over ``max_steps``) are marked instead of refused, and the
+    others are planned as :func:`drive_grad_u` steps them."""
+    g = np.asarray(grad_u, dtype=np.float64)
+    active = np.asarray(active, dtype=bool)
+    inverted = active & ~has_real_logarithm(np.eye(2) + g)
+    capped = active & ~inverted & over_step_cap(g, max_strain_per_step, min_steps, max_steps)
+    driven = active & ~inverted & ~capped
+    g = np.where(driven[:, None, None], g, 0.0)
+    steps = np.zeros(len(g), dtype=np.int64)
+    if driven.any():
+        steps = np.where(driven, path_steps(g, max_strain_per_step, min_steps, max_steps), 0)
+    return DrivePlan(g, steps, driven, inverted, capped)
+
+
+def drive_planned(batch: DEMBatch, plan: DrivePlan) -> int:
+    """Step the driven RVEs of ``plan`` along their paths from their current states, each by
+    the constant velocity gradient log(I + ∇u)/(n_b·dt) (see :func:`drive_grad_u`); the
+    others are left exactly as they are. Returns the largest step count run (0: none).
+    :class:`CellTooThinError` or :class:`RVECollapseError` before any step for a path the
+    cell cannot take."""
+    active, g, n_steps = plan.driven, plan.grad_u, plan.steps
+    n_rve = batch.n_rve
+    if not active.any():
+        return 0
+    dt = batch.dt
     _check_collapse(batch, g, active)
     log_f = log_deformation(g)
     _check_path_heights(batch, log_f, active)

@@ -21,6 +21,7 @@ from dataclasses import dataclass, field, fields, is_dataclass, replace
 from pathlib import Path
 from typing import Any
 
+from granular_material.errors import ParameterError
 from granular_material.fem.defaults import COMMAND_DEFAULTS
 from granular_material.fem.newton import NewtonSettings
 from granular_material.fem.problems import BiaxialSetup
@@ -47,13 +48,8 @@ _SIZES = {"single-element": (1.0, 1.0), "biaxial": (0.05, 0.10)}
 _SETUP_NAMES = {"nx": "elements", "ny": "elements", "gauss": "quadrature"}
 
 
-class SpecError(ValueError):
+class SpecError(ParameterError):
     """A value of a run specification that cannot run; ``field`` is its flat name."""
-
-    def __init__(self, name: str, message: str) -> None:
-        super().__init__(f"{name} {message}")
-        self.field = name
-        self.message = message
 
 
 def _at_least(name: str, value: Any, lowest: int) -> None:
@@ -132,9 +128,8 @@ class ProblemSpec:
                                 confining=self.confining, axial_strain=self.axial_strain,
                                 platens=self.platens, element=self.element,
                                 gauss=self.quadrature)
-        except ValueError as exc:
-            name, message = str(exc).split(" ", 1)
-            raise SpecError(_SETUP_NAMES.get(name, name), message) from None
+        except ParameterError as exc:
+            raise SpecError(_SETUP_NAMES.get(exc.field, exc.field), exc.message) from None
 
     def resolved_scale(self, device: str) -> str:
         """The biaxial scale that runs on ``device``: the given one, else full on CUDA."""
@@ -252,7 +247,12 @@ class MaterialSpec:
         if unknown:
             raise SpecError(unknown[0], f"is no parameter of the material {self.name} "
                                         f"(it has {', '.join(sorted(known))})")
-        object.__setattr__(self, "parameters", kind(**dict(given or {})))
+        try:
+            object.__setattr__(self, "parameters", kind(**dict(given or {})))
+        except SpecError:
+            raise
+        except ParameterError as exc:  # the material's own check, named as the spec's field
+            raise SpecError(exc.field, exc.message) from None
 
     @property
     def cls(self) -> type:

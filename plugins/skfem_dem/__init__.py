@@ -1,16 +1,23 @@
-"""The scikit-fem DEM material plugin: one periodic DEM RVE per Gauss point.
+"""The DEM material's former home, kept so that old imports go on working.
 
-Registered as the ``dem`` entry point of ``granular_material.materials``::
-
-    from granular_material.fem import create_material
-    material = create_material("dem", particles=400, seed=1, confining=100e3)
-
-A scikit-fem user calls ``material.response(basis.interpolate(u))`` with the total
-displacement (see docs/guide/scikit-fem.md).
+The DEM material is part of the core now: :mod:`granular_material.multiscale` (registered as
+the ``dem`` entry point of ``granular_material.materials``). Import it from there; this name
+will be removed in a later version.
 """
 
-from granular_material_skfem.backend import DEMBackend, Evaluation, InProcessBackend
-from granular_material_skfem.material import DEMMaterial, DEMMaterialParameters, UnconfinedWarning
+import warnings
+
+from granular_material.multiscale import (
+    DEMBackend,
+    DEMMaterial,
+    DEMMaterialParameters,
+    Evaluation,
+    InProcessBackend,
+    UnconfinedWarning,
+)
 
 __all__ = ["DEMBackend", "DEMMaterial", "DEMMaterialParameters", "Evaluation",
            "InProcessBackend", "UnconfinedWarning"]
+
+warnings.warn("granular_material_skfem is deprecated: import the DEM material from "
+              "granular_material.multiscale", DeprecationWarning, stacklevel=2)

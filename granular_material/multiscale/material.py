@@ -1,0 +1,402 @@
+"""DEMMaterial: one periodic DEM RVE per Gauss point as a constitutive model.
+
+The material is driven by the displacement gradient since its last commit (the
+strain-driven protocol of Guo & Zhao 2014): every RVE is restored to its committed state,
+deformed by ∇u over n = max(⌈max|∇u| / 1e-5⌉, 2) DEM steps, and homogenised into the Love
+stress σ = (1/V) Σ_c f^c ⊗ d^c, symmetrised (its antisymmetric part, the RVE's imbalance of
+moments, is reported as the field ``stress_skew``), and a tangent: by default the objective
+one, the Kruyt–Rothenburg D = (1/V) Σ_c (k_n n⊗d⊗n⊗d + k_t t⊗d⊗t⊗d) (Wu, Fu & Zhou 2025,
+eqs. 5–6) applied to sym ∇u plus the stress's rotation by the spin.
+
+∇u is the displacement gradient since the last commit, measured on the configuration the
+RVE was committed in (the FEM's updated-Lagrangian formulation hands over exactly that; see
+:mod:`granular_material.fem.kinematics`); the stress is the Cauchy stress of the deformed
+RVE, the tangent D_ijkl = ∂σ_ij/∂(∂u_k/∂x_l) on that configuration. D has the first minor
+symmetry (D_ijkl = D_jikl: σ is symmetrised) but not the second (D_ijkl ≠ D_ijlk): the spin
+term responds to skw ∇u. Keep the full (2, 2, 2, 2) tangent; a Voigt/Mandel 3 × 3 user
+takes ½ (D_ijkl + D_ijlk) and loses the stress's rotation (see
+:mod:`granular_material.fem.material`).
+
+A scikit-fem user calls :meth:`DEMMaterial.response` with the *total* ∇u, in scikit-fem's
+quadrature-last layout if they like (see
+:class:`~granular_material.fem.material.ScikitFemInterface`); :meth:`DEMMaterial.evaluate`
+keeps the protocol's increment.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import warnings
+from collections.abc import Callable
+from dataclasses import fields, replace
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from granular_material.dem import RVEData, load_rve, save_rve
+from granular_material.errors import ParameterError
+from granular_material.fem.material import (
+    FailureReason,
+    MaterialResponse,
+    PointStatus,
+    ScikitFemInterface,
+)
+from granular_material.multiscale.backend import InProcessBackend
+from granular_material.multiscale.evaluation import Evaluation
+from granular_material.multiscale.isotropic import relax_to_isotropic
+from granular_material.multiscale.parameters import BACKENDS, DEMMaterialParameters
+from granular_material.multiscale.preparation import initial_rves
+from granular_material.multiscale.run_hooks import (
+    DEMParameters,
+    check_run,
+    material_keywords,
+    run_summary,
+)
+
+if TYPE_CHECKING:
+    import pandas as pd
+
+    from granular_material.multiscale.mpi import MPIBackend
+    from granular_material.runs.context import RunContext
+
+__all__ = ["UNCONFINED_FRACTION", "DEMMaterial", "UnconfinedWarning"]
+
+#: a point whose mean pressure −tr σ / 2 falls below this fraction of the material's
+#: confining pressure has lost its confinement (:class:`UnconfinedWarning`)
+UNCONFINED_FRACTION = 0.01
+#: the checkpoint's array of the committed total ∇u (a ``backend_*`` array: the RVE states
+#: of a checkpoint are read without it)
+_GRAD_KEY = "backend_material_grad_u"
+#: the material's settings, by name (:class:`DEMMaterialParameters`' fields)
+_SETTINGS = frozenset(f.name for f in fields(DEMMaterialParameters))
+
+
+class UnconfinedWarning(UserWarning):
+    """A DEM RVE has (nearly) no confining stress: with none, a granular RVE relaxes into a
+    stress-free gas of discs (zero stress, zero stiffness) and a Newton loop "converges" to
+    nothing. Confine the specimen (a pressure on its boundary, as
+    ``examples/skfem_material_swap.py`` does) or load RVEs prepared at a pressure."""
+
+
+def _user_stacklevel() -> int:
+    """The ``stacklevel`` of a warning issued by the caller of this function that points at
+    the first frame outside granular_material (the user's line)."""
+    import granular_material
+
+    root = os.path.dirname(granular_material.__file__) + os.sep
+    frame, level = sys._getframe(1), 1
+    while frame is not None and frame.f_code.co_filename.startswith(root):
+        frame, level = frame.f_back, level + 1
+    return level
+
+
+def _sym(stress: np.ndarray) -> np.ndarray:
+    return 0.5 * (stress + np.swapaxes(stress, 1, 2))
+
+
+def _parameters(given: DEMMaterialParameters | str | Path | None, pressure: float | None,
+                settings: dict[str, Any]) -> DEMMaterialParameters:
+    """The material's parameters of :class:`DEMMaterial`'s arguments."""
+    unknown = sorted(set(settings) - _SETTINGS)
+    if unknown:
+        raise TypeError(f"DEMMaterial() got an unexpected keyword {unknown[0]!r} (its settings "
+                        f"are {', '.join(sorted(_SETTINGS))})")
+    if pressure is not None:
+        if "confining" in settings:
+            raise ParameterError("confining", "is given twice: give confining (pressure is "
+                                              "its deprecated name), not both")
+        warnings.warn("DEMMaterial(pressure=...) is deprecated: call it confining= (the "
+                      "run specification's and the command line's name)",
+                      DeprecationWarning, stacklevel=_user_stacklevel())
+        settings = {**settings, "confining": pressure}
+    if isinstance(given, DEMMaterialParameters):
+        return replace(given, **settings) if settings else given
+    if given is not None:  # the RVE file, the first positional argument of old
+        settings = {**settings, "rve": given}
+    if settings.get("packing") is None:
+        settings.pop("packing", None)
+    return DEMMaterialParameters(**settings)
+
+
+class DEMMaterial(ScikitFemInterface):
+    """The DEM material: owns one RVE batch, one RVE per Gauss point (batch-first), held in
+    this process or, with ``backend="mpi"``, in shards on the ranks of an MPI job.
+
+    Build it with its settings as keywords (the fields of :class:`DEMMaterialParameters`,
+    each documented there: ``rve``, ``particles``, ``seed``, ``confining``, ``tangent``,
+    ``drive``, ``reuse_tol``, ``device``, ...) or with a :class:`DEMMaterialParameters`;
+    ``progress`` shows a bar while packings are prepared; ``pressure`` is the deprecated name
+    of ``confining``. SI units (m, N, Pa, kg, s; angles in rad); strains dimensionless. It is
+    not allocated yet: :meth:`allocate` prepares or loads the RVEs.
+
+    In a run specification its parameters are :class:`DEMParameters` (``Parameters``), and
+    ``check_run``, ``for_run`` and ``run_summary`` are its run hooks (see
+    :mod:`granular_material.runs.context`); its stress carries noise (``noisy``).
+    """
+
+    #: the parameters of the material in a run specification
+    Parameters = DEMParameters
+    #: DEM stress carries noise: the Newton defaults of noisy materials apply
+    noisy = True
+    check_run = staticmethod(check_run)
+    run_summary = staticmethod(run_summary)
+
+    def __init__(self, parameters: DEMMaterialParameters | str | Path | None = None, *,
+                 progress: bool = False, pressure: float | None = None,
+                 **settings: Any) -> None:
+        self.parameters = _parameters(parameters, pressure, settings)
+        self.progress = progress
+        self.backend: InProcessBackend | MPIBackend | None = None
+        #: the response of the committed state (None until known: a commit, or a failure)
+        self._committed_response: MaterialResponse | None = None
+        self._last_response: MaterialResponse | None = None
+        self._warned_unconfined = False
+
+    @property
+    def confining(self) -> float:
+        """Consolidation pressure of prepared RVEs [Pa], compression positive."""
+        return self.parameters.confining
+
+    @property
+    def isotropic(self) -> bool:
+        """Whether :meth:`allocate` relaxes the RVEs to the isotropic stress."""
+        return self.parameters.isotropic
+
+    @staticmethod
+    def launch(backend: str, main: Callable[[], int]) -> int:
+        """Run a program whose DEM materials use ``backend``; returns this process's exit
+        code. In process that is ``main()``; with ``"mpi"`` rank 0 runs ``main`` and every
+        other rank serves its RVE shard to rank 0 until ``main`` has ended, however it ends
+        (see :func:`granular_material.multiscale.mpi.launch`)."""
+        if backend not in BACKENDS:
+            raise ParameterError("backend", f"must be one of {', '.join(BACKENDS)}, got "
+                                            f"{backend!r}")
+        if backend == "inprocess":
+            return main()
+        from granular_material.multiscale.mpi import launch
+
+        return launch(main)
+
+    @property
+    def n_points(self) -> int:
+        """Number of Gauss points (RVEs) allocated."""
+        return 0 if self.backend is None else self.backend.n_rve
+
+    def _allocated(self) -> InProcessBackend | MPIBackend:
+        if self.backend is None:
+            raise RuntimeError("allocate() the DEM material first")
+        return self.backend
+
+    @classmethod
+    def for_run(cls, parameters: DEMParameters, context: RunContext) -> DEMMaterial:
+        """The material of a run specification (not yet allocated): the run hook of
+        :mod:`granular_material.runs.context`."""
+        keywords = material_keywords(parameters, context)
+        return cls(progress=keywords.pop("progress"), **keywords)
+
+    def reference_curve(self, axial_strain: float, confining: float, device: str | None,
+                        progress: bool = False) -> pd.DataFrame:
+        """The drained biaxial test of RVE 0 in pure DEM, from its committed state, to
+        ``axial_strain`` [-] (compression positive) at ``confining`` [Pa]: the curve a
+        single element is compared with (one row per recorded DEM step)."""
+        from granular_material.dem import DEMBatch
+        from granular_material.procedures import biaxial_test
+
+        batch = DEMBatch(self.committed_rves().take([0]), device=device, shards=1)
+        curve = biaxial_test(batch, axial_strain=axial_strain, confining=confining,
+                             progress=progress)
+        return curve[curve["rve"] == 0].reset_index(drop=True)
+
+    def committed_rves(self, points: np.ndarray | None = None) -> RVEData:
+        """The committed RVE states, one per Gauss point or of the point indices ``points``
+        (contact history included)."""
+        return self._allocated().committed_rves(points)
+
+    def _backend(self, data: RVEData, resume: bool = False) -> InProcessBackend | MPIBackend:
+        """The backend of the chosen kind holding ``data`` (a checkpoint's, with its
+        ``backend_*`` arrays, when ``resume``)."""
+        p = self.parameters
+        if p.backend == "mpi":
+            from granular_material.multiscale.mpi import MPIBackend
+
+            return MPIBackend(data, p, resume=resume)
+        from granular_material.dem import DEMBatch
+
+        states = InProcessBackend.without_backend_arrays(data) if resume else data
+        backend = InProcessBackend(DEMBatch(states, device=p.device, shards=p.shards), p)
+        if resume:
+            backend.resume_from(data)
+        return backend
+
+    def allocate(self, n_points: int) -> None:
+        """Load or prepare ``n_points`` RVEs in their consolidated state (and relax them to
+        the isotropic stress where ``isotropic``)."""
+        data = initial_rves(self.parameters, n_points, self.progress)
+        self.backend = self._backend(data)
+        self._reset_state(n_points)
+        if self.parameters.isotropic:
+            self.make_isotropic()
+
+    def make_isotropic(self, tol: float = 0.01, max_iterations: int = 30) -> int:
+        """Relax every committed RVE to the isotropic stress −``confining`` I and commit it as
+        the new reference (``committed_grad_u`` is zero again: the strain of the relaxation
+        is not the specimen's); returns the iterations used. See
+        :func:`~granular_material.multiscale.isotropic.relax_to_isotropic`."""
+        iterations = relax_to_isotropic(self, self.confining, tol, max_iterations)
+        self._committed_grad = np.zeros((self._allocated().n_rve, 2, 2))
+        return iterations
+
+    def _reset_state(self, n_points: int) -> None:
+        self._track_allocate(n_points)
+        self._committed_response = self._last_response = None
+
+    def evaluate(self, grad_u: np.ndarray) -> MaterialResponse:
+        """Symmetrised Love stress and the tangent for ∇u (n, 2, 2) since the commit.
+
+        The protocol's evaluation: ∇u [-] is the *increment* ∂Δu_k/∂x_l since the last
+        commit, batch-first, on the configuration of the last commit (``response`` takes the
+        total, and scikit-fem's layout). Stress: Cauchy σ [Pa], tension positive;
+        tangent: D_ijkl = ∂σ_ij/∂(∂u_k/∂x_l) [Pa], no second minor symmetry.
+
+        ``costs`` holds ``dem_steps`` (DEM steps run: the longest RVE path of each drive,
+        summed over the drives), ``rve_evaluations`` (RVE paths run; points not stepped,
+        e.g. reused, do not count) and ``particle_steps`` (disc-steps run, Σ steps × discs
+        over the paths); ``fields`` holds ``void_ratio``,
+        ``coordination`` and ``stress_skew`` (σxy − σyx of the Love sum over 2 [Pa], what
+        the symmetrisation removed). A point that fails has ``PointStatus.FAILED``, a reason
+        in ``reasons`` (:class:`~granular_material.fem.material.FailureReason`:
+        ``max_dem_steps``, ``cell_inverted``, ``cell_too_thin``, ``blow_up``,
+        ``overcompressed``, ``coincident_discs``, ``non_finite_input``; ``aborted`` for
+        the other points when an RVE of the batch blew up, which sends the whole batch back
+        to its committed state), and the stress, tangent and fields of its committed state
+        (never NaN). A :class:`UnconfinedWarning` is issued (once) when a point's mean
+        pressure falls below 1 % of ``confining``.
+        """
+        if self.backend is None:
+            raise RuntimeError("allocate() the DEM material before evaluate()")
+        grad_u = np.asarray(grad_u, dtype=np.float64)
+        if grad_u.shape != (self.n_points, 2, 2):
+            raise ValueError(
+                f"evaluate() takes grad_u batch-first, shape ({self.n_points}, 2, 2) (the "
+                f"increment since the commit), got {grad_u.shape}; response() also takes "
+                "scikit-fem's quadrature-last (2, 2, nelems, nqp) or a DiscreteField (or "
+                "convert with granular_material.fem.to_points / to_quadrature)")
+        self._track_evaluate(grad_u)
+        ev = self.backend.evaluate(grad_u)
+        response = self._response_of(ev)
+        self._last_response = response
+        self._check_confinement(response)
+        return response
+
+    def _response_of(self, ev: Evaluation) -> MaterialResponse:
+        """The material response of a backend's evaluation; failed points (all points of an
+        incomplete one) get their committed state's response and a reason."""
+        h = ev.homogenized
+        reasons = ev.failure_reasons()
+        failed = np.asarray(ev.failed, dtype=bool).copy()
+        if not ev.complete:
+            reasons[~failed] = FailureReason.ABORTED.value
+            failed[:] = True
+        status = np.where(failed, PointStatus.FAILED, PointStatus.OK).astype(np.int8)
+
+        def f64(values: np.ndarray) -> np.ndarray:
+            return np.asarray(values, dtype=np.float64)
+
+        love = f64(h.stress)
+        stress, tangent = _sym(love), f64(h.tangent).copy()
+        fields = {"void_ratio": f64(h.void_ratio).copy(),
+                  "coordination": f64(h.coordination).copy(),
+                  "stress_skew": 0.5 * (love[:, 0, 1] - love[:, 1, 0])}
+        if failed.any():
+            committed = self._committed()
+            stress[failed] = committed.stress[failed]
+            tangent[failed] = committed.tangent[failed]
+            for name, values in fields.items():
+                values[failed] = np.asarray(committed.fields[name])[failed]
+        return MaterialResponse(
+            stress=stress, tangent=tangent, status=status,
+            costs={"dem_steps": ev.dem_steps, "rve_evaluations": ev.rve_evaluations,
+                   "particle_steps": ev.particle_steps},
+            fields=fields, reasons=reasons, timings=ev.timings,
+        )
+
+    def _committed(self) -> MaterialResponse:
+        """The response of the committed state: the last committed evaluation's, else
+        measured on the committed RVEs (homogenised, not stepped; objective tangent, which
+        needs no condensation of the committed states)."""
+        if self._committed_response is None:
+            from granular_material.dem import DEMBatch
+            from granular_material.dem.homogenization import objective_tangent
+
+            p = self.parameters
+            batch = DEMBatch(self.committed_rves(), device=p.device, shards=p.shards)
+            h = batch.homogenize()
+            love = np.asarray(h.stress, dtype=np.float64)
+            stress = _sym(love)
+            n = len(stress)
+            self._committed_response = MaterialResponse(
+                stress=stress,
+                tangent=np.asarray(objective_tangent(np.asarray(h.tangent, dtype=np.float64),
+                                                     stress), dtype=np.float64),
+                status=np.zeros(n, dtype=np.int8),
+                fields={"void_ratio": np.asarray(h.void_ratio, dtype=np.float64),
+                        "coordination": np.asarray(h.coordination, dtype=np.float64),
+                        "stress_skew": 0.5 * (love[:, 0, 1] - love[:, 1, 0])})
+        return self._committed_response
+
+    def _check_confinement(self, response: MaterialResponse) -> None:
+        if self._warned_unconfined:
+            return
+        ok = response.status == PointStatus.OK
+        pressure = -0.5 * np.trace(response.stress, axis1=1, axis2=2)
+        loose = np.flatnonzero(ok & (pressure < UNCONFINED_FRACTION * self.confining))
+        if loose.size:
+            self._warned_unconfined = True
+            warnings.warn(
+                f"{loose.size} of {len(pressure)} DEM points have lost their confinement "
+                f"(mean pressure below {UNCONFINED_FRACTION:.0%} of {self.confining:g} Pa, "
+                f"e.g. {pressure[loose[0]]:.3g} Pa at point {loose[0]}): an unconfined RVE "
+                "relaxes into a stress-free gas of discs. Apply a confining pressure on the "
+                "boundary of the specimen (see docs/guide/scikit-fem.md)",
+                UnconfinedWarning, stacklevel=_user_stacklevel())
+
+    def hold_tangent(self, hold: bool) -> None:
+        """``hold``: the next evaluation's tangent is returned by the later ones too, up to
+        the next commit or revert, without measuring it again (the condensed and
+        perturbation tangents cost a condensation or four DEM drives each time). Asked by
+        the Newton driver's ``tangent_update="hold"``, which uses that tangent alone; both
+        backends hold it (on MPI every rank its shard's)."""
+        self._allocated().hold_tangent(hold)
+
+    def commit(self) -> None:
+        """The RVE states of the last evaluation become the committed states (and its total
+        ∇u :attr:`committed_grad_u`)."""
+        self._allocated().commit()
+        self._track_commit()
+        self._committed_response = self._last_response
+
+    def revert(self) -> None:
+        """Every RVE back to its committed state."""
+        if self.backend is not None:
+            self.backend.revert()
+        self._track_revert()
+
+    def checkpoint(self, path: str | Path) -> None:
+        """Write the committed RVE states (an RVE file, B = n_points) to ``path``, with the
+        committed total ∇u; with the ``mpi`` backend rank 0 gathers the shards and writes
+        the one file, which either backend, on any number of ranks, restores."""
+        data = self._allocated().checkpoint_data()
+        extra = {**data.extra, _GRAD_KEY: self.committed_grad_u}
+        # a run's own state, checked whole when a resume reads it: written fast
+        save_rve(path, replace(data, extra=extra), compress=False, validate=False)
+
+    def restore(self, path: str | Path) -> None:
+        """Load the committed state written by :meth:`checkpoint` (RVE states with contact
+        history, what reuse and ``continue`` carry between steps, the committed total ∇u)."""
+        data = load_rve(path)
+        self.backend = self._backend(data, resume=True)
+        self._reset_state(self.backend.n_rve)
+        if _GRAD_KEY in data.extra:
+            self._committed_grad = np.array(data.extra[_GRAD_KEY], dtype=np.float64)

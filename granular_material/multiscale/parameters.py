@@ -1,0 +1,209 @@
+"""The DEM material's settings, each declared once, in three frozen layers.
+
+- :class:`DEMDriving`: how the RVEs are driven and measured (tangent, drive, reuse, strain
+  per DEM step, cap on a path's steps): all a backend takes, in this process or on each
+  rank of an MPI job.
+- :class:`DEMRVEs`: those plus where the RVEs come from (a file, or packings of a number of
+  discs from a seed) and whether they are first relaxed to an isotropic stress; the part a
+  run specification and a Python material share.
+- :class:`DEMMaterialParameters`: those plus what a material built in Python is told
+  directly and a run takes from its problem and its ``[run]`` fields (the confining pressure,
+  replication, device, CPU shards, backend, the packings' material).
+
+The run specification's own :class:`~granular_material.multiscale.run_hooks.DEMParameters`
+extends :class:`DEMRVEs` in the same way. Every check is made here, once, as a
+:class:`~granular_material.errors.ParameterError` naming the field.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from numbers import Real
+from pathlib import Path
+
+from granular_material.dem import resolve_device
+from granular_material.dem.tangents import TangentMethod, tangent_method
+from granular_material.errors import ParameterError
+from granular_material.procedures.packing import PackingParameters, min_discs
+from granular_material.procedures.strain_path import DEFAULT_MAX_DEM_STEPS, DEFAULT_STRAIN_PER_STEP
+from granular_material.reference_values import DEFAULT_DISCS, DEFAULT_PRESSURE
+
+__all__ = ["BACKENDS", "DRIVES", "MIN_PERTURBATION", "REUSE_CORRECTIONS", "DEMDriving",
+           "DEMMaterialParameters", "DEMRVEs"]
+
+#: how an RVE that must move is driven to a new trial ∇u: from the committed state along the
+#: whole path of the step (``restart``, Guo & Zhao), or from its last trial state by the change
+DRIVES = ("restart", "continue")
+#: what a reused RVE returns: its last response as it is, or corrected to first order by
+#: its tangent for the change of ∇u
+REUSE_CORRECTIONS = ("none", "tangent")
+#: who holds the RVEs: this process (``inprocess``), or contiguous shards of them on the ranks
+#: of an MPI job (``mpi``, :mod:`granular_material.multiscale.mpi`)
+BACKENDS = ("inprocess", "mpi")
+#: the smallest perturbation of ∇u the perturbation tangent takes [-]
+MIN_PERTURBATION = 1.0e-4
+
+
+def _one_of(name: str, value: object, choices: tuple[str, ...]) -> None:
+    if value not in choices:
+        raise ParameterError(name, f"must be one of {', '.join(choices)}, got {value!r}")
+
+
+def _count(name: str, value: object, lowest: int, what: str = "") -> None:
+    """``value`` is an integer >= ``lowest``; else a ParameterError naming ``name``."""
+    if isinstance(value, bool) or not isinstance(value, Real) \
+            or int(value) != value or value < lowest:
+        raise ParameterError(name, f"must be an integer >= {lowest}{what}, got {value!r}")
+
+
+@dataclass(frozen=True, kw_only=True)
+class DEMDriving:
+    """How the RVEs are driven to a ∇u and what they answer (SI; strains dimensionless).
+
+    Attributes:
+        tangent: the RVEs' tangent (:data:`~granular_material.dem.tangents.TANGENTS`):
+            "objective" (Kruyt–Rothenburg applied to sym ∇u plus the stress's spin),
+            "kruyt-rothenburg" (Wu et al. 2025, eq. 6 as published), "perturbation" (forward
+            differences of the RVE's response: four more DEM runs an evaluation),
+            "condensed" (the discs' fluctuations condensed out of the contact network,
+            contacts at their Coulomb cap sliding freely) or "condensed-sticking" (every
+            touching contact keeping kt: an upper bound of the RVE's stiffness). A material
+            built in Python defaults to "objective": a user's own Newton loop asks for the
+            tangent at every iterate, and a condensation costs more than the DEM run itself;
+            a run specification (and so the commands) defaults to "condensed-sticking",
+            held over each increment by its Newton loop
+            (:data:`~granular_material.fem.defaults.NOISY_DEFAULTS`).
+        perturbation: relative perturbation of ∇u of the "perturbation" tangent [-], > 0
+            (at least :data:`MIN_PERTURBATION` in absolute terms).
+        reuse_tol: strain [-]: an RVE whose ∇u moved by at most this (every component) since
+            it was last driven keeps its response instead of being stepped; 0: never.
+        reuse_correction: "none" or "tangent" (a reused response corrected to first order).
+        drive: "restart" (every trial from the committed state, Guo & Zhao) or "continue"
+            (from the last trial state by the change of ∇u).
+        max_strain_per_step: largest strain of one DEM step along ∇u [-] (Guo & Zhao: 1e-5).
+        max_dem_steps: cap on one RVE path's DEM steps in one evaluation: a point whose path
+            needs more is reported failed (Newton cuts back); None: no cap but 10¹⁵.
+    """
+
+    tangent: str = "objective"
+    perturbation: float = 0.1
+    reuse_tol: float = 0.0
+    reuse_correction: str = "none"
+    drive: str = "restart"
+    max_strain_per_step: float = DEFAULT_STRAIN_PER_STEP
+    max_dem_steps: int | None = DEFAULT_MAX_DEM_STEPS
+
+    def __post_init__(self) -> None:
+        try:
+            tangent_method(self.tangent)
+        except ValueError as exc:
+            raise ParameterError("tangent", str(exc).split(" ", 1)[1]) from None
+        for name in ("perturbation", "max_strain_per_step"):
+            value = getattr(self, name)
+            if not (isinstance(value, Real) and math.isfinite(value) and value > 0):
+                raise ParameterError(name, f"must be a finite number > 0, got {value!r}")
+        if not (isinstance(self.reuse_tol, Real) and math.isfinite(self.reuse_tol)
+                and self.reuse_tol >= 0):
+            raise ParameterError("reuse_tol", f"must be a finite strain >= 0 (0: off), got "
+                                              f"{self.reuse_tol!r}")
+        _one_of("reuse_correction", self.reuse_correction, REUSE_CORRECTIONS)
+        _one_of("drive", self.drive, DRIVES)
+        if self.drive == "continue" and self.tangent == "perturbation":
+            raise ParameterError("drive", "'continue' does not combine with the "
+                                          "'perturbation' tangent (its perturbed runs start "
+                                          "from the committed state)")
+        if self.max_dem_steps is not None:
+            _count("max_dem_steps", self.max_dem_steps, 1, " or None")
+
+    @property
+    def method(self) -> TangentMethod:
+        """The tangent as a strategy (what it costs, whether it can be held)."""
+        return tangent_method(self.tangent)
+
+
+@dataclass(frozen=True, kw_only=True)
+class DEMRVEs(DEMDriving):
+    """:class:`DEMDriving` and where the RVEs come from.
+
+    Attributes:
+        rve: RVE file (``.npz``, ``granular-material prepare``) holding one RVE (copied to
+            every Gauss point) or one per Gauss point; None: prepare packings.
+        particles: discs per prepared RVE (ignored with ``rve``); None: 400
+            (:data:`~granular_material.reference_values.DEFAULT_DISCS`), in a run of the
+            biaxial specimen its scale's.
+        seed: seed of the first prepared RVE; RVE p uses seed + p (independent packings).
+        isotropic: relax every RVE to the isotropic stress −confining I before the first
+            load step (a packing consolidated by a normal stress servo keeps a shear stress:
+            σxy ≈ −14 kPa for 64 discs, −7.7 kPa for 400, seed 1, at 100 kPa).
+    """
+
+    rve: Path | None = None
+    particles: int | None = None
+    seed: int = 1
+    isotropic: bool = False
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if self.rve is not None:
+            object.__setattr__(self, "rve", Path(self.rve))
+
+
+@dataclass(frozen=True, kw_only=True)
+class DEMMaterialParameters(DEMRVEs):
+    """Everything a :class:`~granular_material.multiscale.DEMMaterial` is made of: what its
+    backends (in process, or every MPI rank) receive unchanged.
+
+    Attributes:
+        confining: isotropic pressure [Pa], > 0, compression positive, at which prepared
+            RVEs are consolidated; also the scale of the
+            :class:`~granular_material.multiscale.UnconfinedWarning`. Default 100 kPa.
+        replicate: one RVE (the file's first, or one prepared with ``seed``) copied to every
+            Gauss point; False: one independent RVE per point.
+        device: "cpu", "cuda", "cuda:N" or None (CUDA when present).
+        shards: CPU shards (threads) of the batch, per rank with the ``mpi`` backend; None:
+            one per core (with ``mpi`` the cores of a node shared by its ranks). With 1,
+            independent RVEs are also prepared one at a time.
+        backend: "inprocess" (every RVE in this process) or "mpi" (contiguous shards on the
+            ranks of an MPI job; the same results bit for bit).
+        packing: the material of prepared RVEs (contact law, friction, damping, density,
+            thickness) and how they are packed (radii, target void ratio e0); ignored with
+            ``rve`` (the file carries its own). Default: Wu et al.'s Table 1.
+    """
+
+    confining: float = DEFAULT_PRESSURE
+    replicate: bool = False
+    device: str | None = None
+    shards: int | None = None
+    backend: str = "inprocess"
+    packing: PackingParameters = field(default_factory=PackingParameters)
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        _one_of("backend", self.backend, BACKENDS)
+        if self.shards is not None:
+            _count("shards", self.shards, 1, " or None")
+        if not isinstance(self.packing, PackingParameters):
+            raise ParameterError("packing", f"must be PackingParameters, got {self.packing!r}")
+        fewest = min_discs(self.packing.radius_range)
+        particles = self.discs
+        if isinstance(particles, bool) or int(particles) != particles or particles < fewest:
+            raise ParameterError("particles", f"must be an integer >= {fewest} (the periodic "
+                                              "cell must stay wider than twice the contact "
+                                              f"cut-off), got {particles!r}")
+        if not (isinstance(self.confining, Real) and math.isfinite(self.confining)
+                and self.confining > 0):
+            raise ParameterError("confining", f"must be a positive number of Pa, got "
+                                              f"{self.confining!r}")
+        if self.device is not None:
+            resolve_device(self.device)  # the engine's one device check
+
+    @property
+    def discs(self) -> int:
+        """Discs per prepared RVE: ``particles``, else 400."""
+        return DEFAULT_DISCS if self.particles is None else self.particles
+
+    @property
+    def pressure(self) -> float:
+        """Deprecated name of :attr:`confining` [Pa]."""
+        return self.confining

@@ -1,0 +1,163 @@
+"""The DEM material in a run specification: its own parameters (:class:`DEMParameters`) and
+what a run asks of it before any work (checks, the discs it will hold, its summary) and to
+build it (:func:`material_keywords`). :class:`~granular_material.multiscale.DEMMaterial` offers
+these as its ``Parameters`` and its run hooks."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+from typing import TYPE_CHECKING, Any, ClassVar
+
+from granular_material.checks import (
+    RVE_MATERIAL_DEFAULTS,
+    UsageError,
+    packing_parameters,
+    rve_file_shape,
+    rve_material_given,
+)
+from granular_material.dem.tangents import TANGENTS
+from granular_material.multiscale.parameters import DRIVES, REUSE_CORRECTIONS, DEMRVEs
+from granular_material.reference_values import DEFAULT_DISCS
+
+if TYPE_CHECKING:
+    from granular_material.procedures.packing import PackingParameters
+    from granular_material.runs.context import RunContext
+
+__all__ = ["RUN_TANGENT", "DEMParameters", "check_run", "material_keywords", "run_summary"]
+
+#: the tangent of a run (and so of the commands) where its spec names none: the condensed
+#: tangent with every touching contact sticking, held over each increment with Aitken
+#: relaxation by the commands' Newton loop (:data:`~granular_material.fem.defaults.NOISY_DEFAULTS`;
+#: issue 26: plain Newton reaches 10 % with it too). A material built in Python defaults to
+#: the objective tangent instead (:class:`~granular_material.multiscale.parameters.DEMDriving`):
+#: a user's own loop asks for a tangent at every iterate, and a condensation costs more than
+#: the DEM run of an evaluation.
+RUN_TANGENT = "condensed-sticking"
+
+
+@dataclass(frozen=True, kw_only=True)
+class DEMParameters(DEMRVEs):
+    """The DEM material of a run (SI units, angles in rad): the fields of
+    :class:`~granular_material.multiscale.parameters.DEMRVEs` (how the RVEs are driven and
+    where they come from, each documented there; the tangent defaults to
+    :data:`RUN_TANGENT`), and
+
+    Attributes:
+        independent: single element: four independent RVEs instead of one replicated.
+        compare_dem: single element: also the pure-DEM drained biaxial test of RVE 0.
+        target_void_ratio … thickness: the material and packing of prepared RVEs (those of
+            ``granular-material prepare``; Wu et al. 2025, Table 1 by default).
+
+    The run's problem gives the confining pressure, its ``[run]`` fields the device, CPU
+    shards and backend (:func:`material_keywords`).
+    """
+
+    #: the RVE tangents the material offers, its drives and corrections of reused responses
+    tangents: ClassVar[tuple[str, ...]] = tuple(TANGENTS)
+    drives: ClassVar[tuple[str, ...]] = DRIVES
+    reuse_corrections: ClassVar[tuple[str, ...]] = REUSE_CORRECTIONS
+    #: discs per prepared RVE where neither the spec nor the specimen's scale says
+    default_particles: ClassVar[int] = DEFAULT_DISCS
+
+    tangent: str = RUN_TANGENT
+    independent: bool = False
+    compare_dem: bool = False
+    target_void_ratio: float | None = RVE_MATERIAL_DEFAULTS["target_void_ratio"]
+    radius_min: float = RVE_MATERIAL_DEFAULTS["radius_min"]
+    radius_max: float = RVE_MATERIAL_DEFAULTS["radius_max"]
+    law: str = RVE_MATERIAL_DEFAULTS["law"]
+    kn: float = RVE_MATERIAL_DEFAULTS["kn"]
+    kt: float = RVE_MATERIAL_DEFAULTS["kt"]
+    young: float = RVE_MATERIAL_DEFAULTS["young"]
+    kt_over_kn: float = RVE_MATERIAL_DEFAULTS["kt_over_kn"]
+    friction_angle: float = RVE_MATERIAL_DEFAULTS["friction_angle"]
+    damping: float = RVE_MATERIAL_DEFAULTS["damping"]
+    density: float = RVE_MATERIAL_DEFAULTS["density"]
+    thickness: float = RVE_MATERIAL_DEFAULTS["thickness"]
+
+
+def _particles(p: DEMParameters, context: RunContext) -> int:
+    """The discs per RVE the run holds: the file's, else the spec's, the scale's or 400."""
+    if p.rve is not None:
+        return rve_file_shape(p.rve)[1]
+    return p.particles or context.scale_discs or DEFAULT_DISCS
+
+
+def _replicate(p: DEMParameters, context: RunContext) -> bool:
+    """single-element: whether one RVE is copied to the element's points (else one each)."""
+    n_points = context.n_points
+    if context.test != "single-element":
+        return False
+    if p.rve is None:
+        return not p.independent
+    n_rve, _ = rve_file_shape(p.rve)
+    if n_rve == n_points:
+        return False
+    if n_rve != 1:
+        raise UsageError(f"--rve {p.rve} holds {n_rve} RVEs; single-element takes 1 "
+                         f"(replicated to the {n_points} Gauss points) or {n_points} (one per "
+                         "point)")
+    if p.independent:
+        raise UsageError(f"--independent needs {n_points} RVEs, --rve {p.rve} holds 1")
+    return True
+
+
+def _packing(p: DEMParameters, context: RunContext) -> PackingParameters | None:
+    """The material and packing of the RVEs the run prepares (None with an RVE file, which
+    carries its own: then no RVE material field may be set)."""
+    if p.rve is None:
+        return packing_parameters(p, _particles(p, context), context.confining, "--confining")
+    given = rve_material_given(p)
+    if given:
+        raise UsageError(f"{', '.join(given)} set{'s' if len(given) == 1 else ''} the "
+                         f"material of the RVEs a run prepares, but --rve {p.rve} carries its "
+                         "own (give them to `granular-material prepare` instead)")
+    return None
+
+
+def check_run(p: DEMParameters, context: RunContext) -> int:
+    """Before any work: the parameters can run in ``context``; the discs per Gauss point."""
+    if p.rve is not None and not p.rve.exists():
+        raise FileNotFoundError(f"--rve {p.rve} does not exist")
+    if p.reuse_tol > 0 and context.convergence in ("displacement", "residual-displacement"):
+        raise UsageError(f"--reuse-tol {p.reuse_tol:g} needs --convergence force (with "
+                         "--relaxation aitken, as measured): a reused RVE answers the same "
+                         "stress for any change of grad u below the tolerance, so the Newton "
+                         "corrections stall above --rtol and no increment passes the "
+                         "displacement test")
+    for name in ("independent", "compare_dem"):
+        if getattr(p, name) and context.test != "single-element":
+            raise UsageError(f"--{name.replace('_', '-')} is single-element's")
+    return _particles(p, context)
+
+
+def material_keywords(p: DEMParameters, context: RunContext) -> dict[str, Any]:
+    """The keywords of :class:`~granular_material.multiscale.DEMMaterial` for the run (the
+    spec's own settings, each passed on as it is, and the run's), its inputs checked first
+    (its ``for_run`` hook builds the material of them)."""
+    driving = {f.name: getattr(p, f.name) for f in fields(DEMRVEs)}
+    return {**driving, "particles": _particles(p, context), "confining": context.confining,
+            "replicate": _replicate(p, context), "device": context.device,
+            "shards": context.shards, "backend": context.backend,
+            "packing": _packing(p, context), "progress": context.progress}
+
+
+def run_summary(p: DEMParameters, context: RunContext) -> dict[str, Any]:
+    """What the run's summary says of the material: its RVEs' (``rve_material``), SI units,
+    angles in rad."""
+    packing = _packing(p, context)
+    if packing is None:
+        from granular_material.dem import load_rve
+
+        data = load_rve(p.rve)
+        meta, source, target = data.meta, str(p.rve), None
+        radii = (float(data.radius.min()), float(data.radius.max()))
+    else:
+        meta, source, target = packing.meta, "prepared", packing.target_void_ratio
+        radii = packing.radius_range
+    return {"rve_material": {
+        "source": source, "radius_min": radii[0], "radius_max": radii[1],
+        "target_void_ratio": target, "stiffness": dict(meta.stiffness),
+        "friction_angle": meta.friction_angle, "damping": meta.damping,
+        "density": meta.density, "thickness": meta.thickness}}
+
