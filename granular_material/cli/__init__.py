@@ -130,6 +130,19 @@ def build_parser(command: str | None = None) -> CommandParser:
 _STOPPED_CODES = frozenset({128 + 1, 128 + 2, 128 + 15})
 
 
+def _named(exc: BaseException) -> str:
+    """The message of ``exc``; a library's ParameterError with its field named as the option
+    (:func:`~granular_material.cli.options.flag_of`; a run specification's SpecError is
+    named by the scene or command that read it)."""
+    from granular_material.errors import ParameterError
+
+    if type(exc) is ParameterError:
+        from granular_material.cli.options import flag_of
+
+        return f"{flag_of(exc.field)} {exc.message}"
+    return str(exc)
+
+
 def _usage_error() -> type[Exception]:
     from granular_material.cli.options import UsageError
 
@@ -168,7 +181,7 @@ def main(argv: list[str] | None = None) -> int:
                   "were complete", file=sys.stderr)
             return code
         except (_usage_error(), ValueError, OSError) as exc:
-            print(f"granular-material {args.command}: error: {exc}", file=sys.stderr)
+            print(f"granular-material {args.command}: error: {_named(exc)}", file=sys.stderr)
             return 2
         except RuntimeError as exc:  # e.g. DEMInstabilityError naming the RVEs
             print(f"granular-material {args.command}: failed: {exc}", file=sys.stderr)

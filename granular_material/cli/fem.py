@@ -23,6 +23,7 @@ from granular_material.cli.options import (
     add_progress,
     add_rve_material_options,
     emit,
+    flag_of,
     positive,
     positive_int,
     progress_enabled,
@@ -309,15 +310,11 @@ def _check_rve_options(material: str, given: dict[str, Any]) -> None:
     """An RVE material option given with a material that prepares no RVEs is refused (the
     other options of another material are left unused)."""
     own = set(load_material(material).Parameters.__dataclass_fields__)
-    rve_options = [_flag(k) for k in given if k in RVE_MATERIAL_DEFAULTS and k not in own]
+    rve_options = [flag_of(k) for k in given if k in RVE_MATERIAL_DEFAULTS and k not in own]
     if rve_options:
         raise UsageError(f"{', '.join(rve_options)} set{'s' if len(rve_options) == 1 else ''} "
                          "the material of the RVEs a run prepares, but --material "
                          f"{material} has no RVEs")
-
-
-def _flag(name: str) -> str:
-    return f"--{name.replace('_', '-')}"
 
 
 def spec_from_args(args: argparse.Namespace) -> RunSpec:
@@ -342,7 +339,7 @@ def spec_from_args(args: argparse.Namespace) -> RunSpec:
     try:  # another material's options, given or not, are no fields of this run
         return from_flat(flat, strict=False)
     except SpecError as exc:
-        raise UsageError(f"{_flag(exc.field)} {exc.message}") from None
+        raise UsageError(f"{flag_of(exc.field)} {exc.message}") from None
 
 
 def report(args: argparse.Namespace, summary: dict[str, Any],

@@ -49,6 +49,7 @@ __all__ = [
     "check_output_file",
     "cleanup_on_rejection",
     "emit",
+    "flag_of",
     "make_parents",
     "packing_parameters",
     "positive",
@@ -60,6 +61,14 @@ __all__ = [
     "scalar_or_list",
     "warn",
 ]
+
+def flag_of(field: str) -> str:
+    """The command-line option of a field of the library (a
+    :class:`~granular_material.errors.ParameterError`'s ``field``, a run specification's flat
+    name): ``max_strain_per_step`` → ``--max-strain-per-step``. The one place where the
+    library's names become the command line's."""
+    return f"--{field.replace('_', '-')}"
+
 
 def positive(text: str) -> float:
     """argparse type: a positive finite number."""
