@@ -10,39 +10,25 @@ R = ∫ Bᵀσ dV − f_ext is compared with the step's load, ‖R‖₂ / ‖R�
 converge is reverted (the material returns to its committed state) and retried with half the
 increment, down to a limit.
 
-The convergence test is a choice (:attr:`NewtonSettings.convergence`):
-
-- ``force`` (default, above): ‖R‖₂ ≤ rtol·‖R₀‖₂ on the free degrees of freedom, or
-  ‖R‖₂ ≤ atol (the commands set atol from a stress floor, ``--stress-tol``);
-- ``displacement`` (Guo & Zhao's FEM×DEM code): ‖δu‖ ≤ rtol·‖Δu‖, δu the Newton correction
-  of the iteration and Δu the increment of the load step so far (δu included), both in the
-  L² norm over the specimen (‖v‖² = ∫ v·v dV, as escript's ``util.L2`` that Guo & Zhao
-  use). As in their code, the material is evaluated once more at the corrected
-  displacement and that evaluation is the converged state: the test judges the correction,
-  not the residual left after it, and takes at least two evaluations per increment;
-- ``residual-displacement`` (the commands' default): the same ratio, taken of the correction
-  the current iterate's residual asks for (relaxed, when a relaxation is on) before it is
-  applied; when it is within rtol, that iterate, already evaluated, is the converged state.
-  The tolerance then bounds the accepted state's own equilibrium error (as the displacement
-  it would take to remove it), and the evaluation that ``displacement`` spends on a
-  correction already known to be within rtol is saved: one DEM run per increment. An
-  increment can converge on its predictor.
-
-The settings, :class:`NewtonSettings`, are in :mod:`granular_material.fem.newton_settings`; the
+The convergence tests and the other rules that end an increment (stall, small correction,
+divergence, growth limit, iterations spent) are in :mod:`granular_material.fem.convergence`;
+the settings, :class:`NewtonSettings`, in :mod:`granular_material.fem.newton_settings`; the
 step records, committed state and error in :mod:`granular_material.fem.newton_records`.
 """
 
 from __future__ import annotations
 
+import itertools
 import math
 import time
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from skfem import Basis, BilinearForm, condense, solve
 
 from granular_material.fem.acceleration import AitkenRelaxation, SecantTangent
+from granular_material.fem.convergence import RULES, IterationState, Outcome, Verdict, judge
 from granular_material.fem.forms import gauss_points_grad, internal_force, stiffness
 from granular_material.fem.kinematics import Kinematics
 from granular_material.fem.loading import Loading
@@ -65,19 +51,19 @@ __all__ = [
     "StepRecord",
 ]
 
+
 @dataclass
 class _Attempt:
-    converged: bool
+    """One try at an increment: the verdict that ended it and what it cost."""
+
+    verdict: Verdict
     du: np.ndarray
-    response: MaterialResponse | None
+    response: MaterialResponse
     f_int: np.ndarray | None
     history: list[float]
+    corrections: list[float]
     iterations: int
     cost: dict[str, int | float]  # the material's costs, summed over the evaluations
-    reason: str
-    stalled: bool = False
-    by: str = ""
-    corrections: list[float] = field(default_factory=list)
     failures: dict[str, int] = field(default_factory=dict)  # failed points by reason
 
 
@@ -90,32 +76,6 @@ def _add_costs(total: dict[str, int | float], costs: Mapping[str, int | float]) 
     """Add ``costs`` to ``total`` name by name (a name new to ``total`` starts at 0)."""
     for name, value in costs.items():
         total[name] = total.get(name, 0) + value
-
-
-def _no_progress(history: list[float], window: int) -> bool:
-    """The smallest value of ``history`` has not dropped by 10 % over its last ``window``."""
-    return len(history) > window and min(history[-window:]) >= 0.9 * min(history[:-window])
-
-
-def _stalled(history: list[float], settings: NewtonSettings) -> bool:
-    """The last relative residual is within stall_rtol, and the smallest one has not dropped
-    by 10 % over the last stall_window iterations."""
-    if settings.stall_rtol <= 0 or not history or history[-1] > settings.stall_rtol:
-        return False
-    return _no_progress(history, settings.stall_window)
-
-
-def _small_correction(history: list[float], corrections: list[float], iteration: int,
-                      settings: NewtonSettings) -> bool:
-    """``accept_correction``: the last correction is within it, and the force residual has
-    stalled (no 10 % drop over ``stall_window`` iterations) or the iterations are spent."""
-    if settings.accept_correction <= 0 or not corrections:
-        return False
-    if corrections[-1] > settings.accept_correction:
-        return False
-    if iteration >= settings.max_iterations:
-        return True
-    return _no_progress(history, settings.stall_window)
 
 
 class NewtonSolver:
@@ -241,9 +201,32 @@ class NewtonSolver:
         """Total ∇u [-] at the Gauss points, committed state, shape (n, 2, 2)."""
         return gauss_points_grad(self.basis, self.u)
 
+    def _tangents(self) -> Callable[[np.ndarray, MaterialResponse], np.ndarray]:
+        """The tangent [Pa] of an increment's corrections, from its iterate's ∇u [-] and the
+        material's response there, as ``tangent_update`` asks (a fresh one per increment)."""
+        s = self.settings
+        if s.tangent_update == "hold":
+            hold_tangent = getattr(self.material, "hold_tangent", None)
+            if callable(hold_tangent):
+                hold_tangent(True)  # the material need not measure the later iterates' tangents
+            held: list[np.ndarray] = []  # the first evaluation's
+
+            def first(grad_u: np.ndarray, response: MaterialResponse) -> np.ndarray:
+                if not held:
+                    held.append(response.tangent)
+                return held[0]
+            return first
+        if s.tangent_update == "secant":
+            stress = self.response.stress
+            secant = SecantTangent(np.zeros_like(stress), stress, self.response.tangent,
+                                   s.secant_min_change)
+            return lambda grad_u, response: secant.update(grad_u, response.stress)
+        return lambda grad_u, response: response.tangent
+
     def _increment(self, target: float, times: PhaseTimes) -> _Attempt:
-        """One increment to load factor ``target`` from the committed state; its phases'
-        seconds are added to ``times``."""
+        """One increment to load factor ``target`` from the committed state, ended by the
+        first verdict of the convergence rules (:mod:`granular_material.fem.convergence`);
+        its phases' seconds are added to ``times``."""
         s, D, kin = self.settings, self.loading.dirichlet_dofs, self.kinematics
         grad_n = self._grad_committed
         response = self.response
@@ -262,21 +245,12 @@ class NewtonSolver:
             du[interior] = (target - self.load_factor) / last_step * last_du[interior]
         predicted = self.l2_norm(du)  # the first iterate's increment, for max_growth
         history: list[float] = []
-        cost: dict[str, int | float] = {}
-        aitken = AitkenRelaxation() if s.relaxation == "aitken" else None
         corrections: list[float] = []
-        by_displacement = s.convergence == "displacement"
-        ahead = s.convergence == "residual-displacement"
-        secant = None
-        held = None
-        hold_tangent = getattr(self.material, "hold_tangent", None)
-        if s.tangent_update == "hold" and callable(hold_tangent):
-            hold_tangent(True)  # the material need not measure the later iterates' tangents
-        if s.tangent_update == "secant":
-            stress = self.response.stress
-            secant = SecantTangent(np.zeros_like(stress), stress, self.response.tangent,
-                                   s.secant_min_change)
-        for it in range(1, s.max_iterations + 1):
+        cost: dict[str, int | float] = {}
+        rules = RULES[s.convergence]
+        aitken = AitkenRelaxation() if s.relaxation == "aitken" else None
+        tangent_of = self._tangents()
+        for it in itertools.count(1):  # the rule ``spent`` ends it at max_iterations
             grad_step = gauss_points_grad(self.basis, du)
             grad_u = kin.material_gradient(grad_n, grad_step)
             with times.phase("material"):
@@ -287,9 +261,10 @@ class NewtonSolver:
                 bad = response.failed_points()
                 counts = response.failure_counts()
                 why = ", ".join(f"{name}: {k}" for name, k in counts.items())
-                return _Attempt(False, du, None, None, history, it, cost,
-                                f"material failed at points {bad[:8].tolist()} ({why})",
-                                failures=counts)
+                reason = f"material failed at points {bad[:8].tolist()} ({why})"
+                # as before, the corrections of an attempt the material failed are not kept
+                return _Attempt(Verdict(Outcome.FAILED, reason=reason), du, response, None,
+                                history, [], it, cost, failures=counts)
             grad_total = grad_n + grad_step
             with times.phase("assembly"):
                 f_int = internal_force(self.basis, kin.assembled_stress(response.stress,
@@ -299,38 +274,11 @@ class NewtonSolver:
             residual = f_int - f_ext
             r = float(np.linalg.norm(residual[interior]))
             history.append(r / r0 if r0 > 0 else r)
-            by = ""
-            if by_displacement:
-                if corrections and corrections[-1] <= s.rtol:
-                    by = "displacement"
-                elif _stalled(corrections, s):
-                    by = "stall"
-            elif ahead:
-                pass  # judged below, once the correction this iterate asks for is known
-            elif r0 > 0 and r <= s.rtol * r0:
-                by = "force"
-            elif r <= s.atol:
-                by = "force-atol"
-            elif _stalled(history, s):
-                by = "stall"
-            elif _small_correction(history, corrections, it, s):
-                by = "correction"
-            if by:
-                return _Attempt(True, du, response, f_int, history, it, cost, "",
-                                stalled=by in ("stall", "correction"), by=by,
-                                corrections=corrections)
-            if not math.isfinite(r) or (r0 > 0 and r > s.divergence * r0):
-                return _Attempt(False, du, None, None, history, it, cost, "diverged",
-                                corrections=corrections)
-            if it == s.max_iterations and not ahead:
-                break
-            if s.tangent_update == "hold":
-                if held is None:
-                    held = response.tangent
-                tangent = held
-            else:
-                tangent = (response.tangent if secant is None
-                           else secant.update(grad_u, response.stress))
+            state = IterationState(it, r0, r, tuple(history), tuple(corrections), predicted)
+            verdict = judge(rules.evaluated, state, s)
+            if verdict.outcome is not Outcome.GO_ON:
+                return _Attempt(verdict, du, response, f_int, history, corrections, it, cost)
+            tangent = tangent_of(grad_u, response)
             with times.phase("assembly"):
                 K = stiffness(self.basis, kin.assembled_tangent(tangent, response.stress,
                                                                 grad_n, grad_total))
@@ -341,25 +289,12 @@ class NewtonSolver:
             step_norm = self.l2_norm(proposed)
             change = self.l2_norm(proposed - du)
             corrections.append(change / step_norm if step_norm > 0 else 0.0)
-            if predicted > 0 and step_norm > s.max_growth * predicted:
-                return _Attempt(False, du, None, None, history, it, cost,
-                                f"diverged: the corrections grew the increment to "
-                                f"{step_norm / predicted:.3g} times the first iterate's "
-                                f"(max_growth {s.max_growth:g})", corrections=corrections)
-            if ahead:  # the test judges the correction this iterate asks for, before it
-                if corrections[-1] <= s.rtol:
-                    by = "residual-displacement"
-                elif _stalled(corrections, s):
-                    by = "stall"
-                if by:
-                    return _Attempt(True, du, response, f_int, history, it, cost, "",
-                                    stalled=by == "stall", by=by, corrections=corrections)
-                if it == s.max_iterations:
-                    break
+            state = replace(state, corrections=tuple(corrections), step_norm=step_norm)
+            verdict = judge(rules.corrected, state, s)
+            if verdict.outcome is not Outcome.GO_ON:
+                return _Attempt(verdict, du, response, f_int, history, corrections, it, cost)
             du = proposed
-        return _Attempt(False, du, None, None, history, s.max_iterations, cost,
-                        f"not converged in {s.max_iterations} iterations",
-                        corrections=corrections)
+        raise AssertionError("unreachable: the rules end every increment")
 
     def step(self, target: float, step: int) -> StepRecord:
         """Advance the committed state to load factor ``target``, cutting back as needed.
@@ -381,14 +316,14 @@ class NewtonSolver:
             _add_costs(record.failures, attempt.failures)  # type: ignore[arg-type]
             record.residual_history.append(attempt.history)
             record.correction_history.append(attempt.corrections)
-            if attempt.converged:
-                record.converged_by.append(attempt.by)
+            if attempt.verdict.accepted:
+                record.converged_by.append(attempt.verdict.by)
                 self.material.commit()
                 self.u = self.u + attempt.du
                 self._grad_committed = gauss_points_grad(self.basis, self.u)
                 self.response, self.f_int = attempt.response, attempt.f_int
                 self._last = (end - self.load_factor, attempt.du)
-                record.stalled += int(attempt.stalled)
+                record.stalled += int(attempt.verdict.stalled)
                 self.load_factor = end
                 increment = min(2 * increment, nominal) if record.cutbacks else increment
                 continue
@@ -400,7 +335,7 @@ class NewtonSolver:
                 record.timings = times.as_dict()
                 raise NewtonError(
                     f"load step {step} (load factor {self.load_factor:.6g} -> {target:.6g}) "
-                    f"did not converge ({attempt.reason}) even with the increment halved "
+                    f"did not converge ({attempt.verdict.reason}) even with the increment halved "
                     f"{self.settings.max_cutbacks} times; the state committed at load factor "
                     f"{self.load_factor:.6g} is kept",
                     [*self.records, record],

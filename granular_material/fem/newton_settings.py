@@ -77,7 +77,7 @@ class NewtonSettings:
             (Guo & Zhao: ‖δu‖_L2 / ‖Δu‖_L2 ≤ rtol of the correction just applied, then one
             more evaluation) or "residual-displacement" (that ratio of the correction the
             current iterate asks for, which is then not applied); see
-            :mod:`granular_material.fem.newton`.
+            :mod:`granular_material.fem.convergence`.
             With either displacement test atol is not used and the stall test, when on,
             applies to the displacement ratios.
         formulation: "small-strain" (default here: the textbook problem) or
