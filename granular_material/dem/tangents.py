@@ -24,6 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from granular_material.dem.homogenization import objective_tangent, spin_tangent
+from granular_material.errors import ParameterError
 
 __all__ = ["TANGENTS", "TangentMethod", "tangent_method"]
 
@@ -83,8 +84,10 @@ TANGENTS: dict[str, TangentMethod] = {
 
 
 def tangent_method(name: str) -> TangentMethod:
-    """The tangent called ``name``; ``ValueError`` naming the field ``tangent`` otherwise."""
+    """The tangent called ``name``; a :class:`~granular_material.errors.ParameterError`
+    naming the field ``tangent`` otherwise."""
     try:
         return TANGENTS[name]
     except (KeyError, TypeError):
-        raise ValueError(f"tangent must be one of {', '.join(TANGENTS)}, got {name!r}") from None
+        raise ParameterError("tangent", f"must be one of {', '.join(TANGENTS)}, "
+                                        f"got {name!r}") from None

@@ -7,6 +7,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from granular_material.errors import ParameterError
 from granular_material.fem.kinematics import FORMULATIONS
 
 __all__ = [
@@ -114,35 +115,33 @@ class NewtonSettings:
 
     def __post_init__(self) -> None:
         if self.formulation not in FORMULATIONS:
-            raise ValueError(f"formulation must be one of {', '.join(FORMULATIONS)}, "
-                             f"got {self.formulation!r}")
+            raise ParameterError("formulation", f"must be one of {', '.join(FORMULATIONS)}, "
+                                                f"got {self.formulation!r}")
         if not (0 <= self.accept_correction < 1):
-            raise ValueError(f"accept_correction must be 0 (off) or lie in (0, 1), "
-                             f"got {self.accept_correction!r}")
+            raise ParameterError("accept_correction", "must be 0 (off) or lie in (0, 1), "
+                                                      f"got {self.accept_correction!r}")
         for name, choices in (("convergence", CONVERGENCE_TESTS), ("predictor", PREDICTORS),
                               ("relaxation", RELAXATIONS), ("tangent_update", TANGENT_UPDATES)):
             if getattr(self, name) not in choices:
-                raise ValueError(f"{name} must be one of {', '.join(choices)}, got "
-                                 f"{getattr(self, name)!r}")
+                raise ParameterError(name, f"must be one of {', '.join(choices)}, got "
+                                           f"{getattr(self, name)!r}")
         if not (self.secant_min_change > 0 and math.isfinite(self.secant_min_change)):
-            raise ValueError(
-                f"secant_min_change must be a finite number > 0, got {self.secant_min_change!r}"
-            )
+            raise ParameterError("secant_min_change", "must be a finite number > 0, got "
+                                                      f"{self.secant_min_change!r}")
         if not (0 < self.rtol < 1):
-            raise ValueError(f"rtol must lie in (0, 1), got {self.rtol!r}")
+            raise ParameterError("rtol", f"must lie in (0, 1), got {self.rtol!r}")
         if not (self.stall_rtol == 0 or self.rtol <= self.stall_rtol < 1):
-            raise ValueError(
-                f"stall_rtol must be 0 (off) or lie in [rtol, 1), got {self.stall_rtol!r}"
-            )
+            raise ParameterError("stall_rtol", "must be 0 (off) or lie in [rtol, 1), got "
+                                               f"{self.stall_rtol!r}")
         if self.stall_window < 2:
-            raise ValueError(f"stall_window must be >= 2, got {self.stall_window!r}")
+            raise ParameterError("stall_window", f"must be >= 2, got {self.stall_window!r}")
         if not (self.atol >= 0 and math.isfinite(self.atol)):
-            raise ValueError(f"atol must be a finite number >= 0, got {self.atol!r}")
+            raise ParameterError("atol", f"must be a finite number >= 0, got {self.atol!r}")
         if self.max_iterations < 1:
-            raise ValueError(f"max_iterations must be >= 1, got {self.max_iterations!r}")
+            raise ParameterError("max_iterations", f"must be >= 1, got {self.max_iterations!r}")
         if self.max_cutbacks < 0:
-            raise ValueError(f"max_cutbacks must be >= 0, got {self.max_cutbacks!r}")
+            raise ParameterError("max_cutbacks", f"must be >= 0, got {self.max_cutbacks!r}")
         if not self.divergence > 1:
-            raise ValueError(f"divergence must be > 1, got {self.divergence!r}")
+            raise ParameterError("divergence", f"must be > 1, got {self.divergence!r}")
         if not self.max_growth > 1:
-            raise ValueError(f"max_growth must be > 1, got {self.max_growth!r}")
+            raise ParameterError("max_growth", f"must be > 1, got {self.max_growth!r}")

@@ -198,10 +198,9 @@ class NewtonSpec:
         values = {f.name: getattr(self, f.name) for f in fields(self) if f.name != "stress_tol"}
         try:
             return default_settings(noisy, **values)
-        except ValueError as exc:
-            name = str(exc).split(" ", 1)[0]
-            if name in values:
-                raise SpecError(name, str(exc).split(" ", 1)[1]) from None
+        except ParameterError as exc:
+            if exc.field in values:
+                raise SpecError(exc.field, exc.message) from None
             raise
 
     def stress_tolerance(self, noisy: bool, confining: float) -> float:
