@@ -18,8 +18,8 @@ from run_helpers import without_clock
 
 from granular_material.cli import main
 from granular_material.dem import save_rve
-from granular_material.fem.checkpoint import RunCheckpoint
 from granular_material.procedures import prepare_packing
+from granular_material.runs.checkpoint import RunCheckpoint
 
 #: a 16-disc single element of three load steps: a second of DEM per run
 ARGV = ["single-element", "--steps", "3", "--axial-strain", "0.003", "--device", "cpu",

@@ -28,7 +28,6 @@ from granular_material.cli import main
 from granular_material.fem import (
     BiaxialSetup,
     NewtonSettings,
-    RunCheckpoint,
     build_biaxial,
     create_material,
     default_settings,
@@ -38,6 +37,7 @@ from granular_material.fem import (
 )
 from granular_material.fem.forms import gauss_points_grad, internal_force, stiffness
 from granular_material.fem.problems import DEFAULT_GAUSS, ELEMENTS, TRIANGLES, element_of
+from granular_material.runs import RunCheckpoint
 
 ELEMENT_NAMES = tuple(ELEMENTS)
 E, NU, P = 60e6, 0.3, 100e3

@@ -178,7 +178,7 @@ def test_a_default_changed_since_the_run_started_is_refused_by_name(tmp_path, ca
     assert record["newton"]["relaxation"] == "none" and record["spec"]["newton"][
         "relaxation"] is None
     record["newton"]["relaxation"] = "aitken"  # what an older version's default made of it
-    from granular_material.fem import RunCheckpoint
+    from granular_material.runs import RunCheckpoint
 
     (out / "checkpoint" / "state.npz").unlink()  # as if killed before it saved a step
     RunCheckpoint(out / "checkpoint").write_options(record)
@@ -201,7 +201,7 @@ def test_a_checkpoint_of_the_options_era_resumes(tmp_path, capsys):
            "convergence": "displacement", "formulation": "updated-lagrangian",
            "postprocess": ["pore-fractal"], "track": None, "preset": None, "json": False,
            "accept_correction": None, "stall_rtol": None, "stress_tol": None}
-    from granular_material.fem import RunCheckpoint
+    from granular_material.runs import RunCheckpoint
 
     def started_with(record: dict) -> None:  # a run killed before it saved a step
         (out / "checkpoint" / "state.npz").unlink(missing_ok=True)

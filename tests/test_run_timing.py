@@ -8,8 +8,8 @@ import json
 import pytest
 
 from granular_material.cli import main
-from granular_material.fem import RunCheckpoint
-from granular_material.fem import checkpoint as checkpoint_module
+from granular_material.runs import RunCheckpoint
+from granular_material.runs import checkpoint as checkpoint_module
 from granular_material.timing import RUN_PHASES, PhaseTimes, phase_table
 
 

@@ -4,11 +4,11 @@ A material is anything that follows :class:`Material` (found by name through the
 ``granular_material.materials`` entry points: ``linear-elastic``, ``dem``); the
 :class:`NewtonSolver` drives it on a scikit-fem basis; :func:`run_biaxial` runs the drained
 biaxial test (one element or a specimen) and collects its tables (written, plotted and
-summarised by :mod:`granular_material.results`). :func:`default_settings` holds the Newton
-settings the commands use.
+summarised by :mod:`granular_material.results`), saving them into a :class:`RunStore` (the
+run folder's checkpoint is :mod:`granular_material.runs.checkpoint`).
+:func:`default_settings` holds the Newton settings the commands use.
 """
 
-from granular_material.fem.checkpoint import CheckpointError, RunCheckpoint, SavedRun
 from granular_material.fem.defaults import (
     default_settings,
     default_stress_tol,
@@ -36,6 +36,7 @@ from granular_material.fem.newton import (
     StepRecord,
 )
 from granular_material.fem.problems import BiaxialProblem, BiaxialSetup, build_biaxial
+from granular_material.fem.run_store import RunStore, SavedRun, SavedStep
 from granular_material.fem.runner import BiaxialResult, RunObserver, run_biaxial
 from granular_material.fem.tracking import (
     Tracking,
@@ -48,7 +49,6 @@ __all__ = [
     "BiaxialProblem",
     "BiaxialResult",
     "BiaxialSetup",
-    "CheckpointError",
     "CommittedState",
     "FailureReason",
     "Layout",
@@ -62,9 +62,10 @@ __all__ = [
     "NewtonSolver",
     "PointStatus",
     "QuadratureResponse",
-    "RunCheckpoint",
     "RunObserver",
+    "RunStore",
     "SavedRun",
+    "SavedStep",
     "ScikitFemInterface",
     "StepRecord",
     "Tracking",

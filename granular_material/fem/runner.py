@@ -43,11 +43,11 @@ from typing import Any, Protocol
 import numpy as np
 import pandas as pd
 
-from granular_material.fem.checkpoint import RunCheckpoint, SavedRun
 from granular_material.fem.layout import to_points
 from granular_material.fem.material import Material
 from granular_material.fem.newton import NewtonError, NewtonSettings, NewtonSolver, StepRecord
 from granular_material.fem.problems import BiaxialProblem, BiaxialSetup, build_biaxial
+from granular_material.fem.run_store import RunStore, SavedRun
 from granular_material.fem.tracking import Tracking
 from granular_material.timing import PhaseTimes
 
@@ -196,7 +196,7 @@ class _Collector:
 
     def __init__(self, problem: BiaxialProblem, material: Material, n_steps: int,
                  observer: RunObserver | None, tracking: Tracking | None,
-                 checkpoint: RunCheckpoint | None,
+                 checkpoint: RunStore | None,
                  on_step: Callable[[NewtonSolver, StepRecord, pd.DataFrame], None] | None,
                  ) -> None:
         self.problem, self.material, self.n_steps = problem, material, n_steps
@@ -270,7 +270,7 @@ def run_biaxial(
     stress_tol: float = 0.0,
     observer: RunObserver | None = None,
     tracking: Tracking | None = None,
-    checkpoint: RunCheckpoint | None = None,
+    checkpoint: RunStore | None = None,
     resume: bool = False,
     progress: bool = False,
     on_step: Callable[[NewtonSolver, StepRecord, pd.DataFrame], None] | None = None,
@@ -288,11 +288,13 @@ def run_biaxial(
     ``on_step(solver, record, points)`` is called after every committed load step.
     ``tracking`` runs post-processors on chosen points' committed RVEs (``result.tracked``).
 
-    ``checkpoint`` saves every committed step and, every ``checkpoint.every`` steps, the
-    committed state of solver and material. ``resume`` continues from its last whole
-    checkpoint (the material is restored from it: it need not be allocated) and gives the
-    same steps, tables and final state as a run that never stopped; with no state saved yet
-    the run starts from the beginning. The observer sees the saved steps again first.
+    ``checkpoint`` (a :class:`~granular_material.fem.run_store.RunStore`, e.g. the run
+    folder's :class:`granular_material.runs.RunCheckpoint`) saves every committed step and,
+    when it says a save is due, the committed state of solver and material. ``resume``
+    continues from its last whole checkpoint (the material is restored from it: it need not
+    be allocated) and gives the same steps, tables and final state as a run that never
+    stopped; with no state saved yet the run starts from the beginning. The observer sees the
+    saved steps again first.
     """
     problem = build_biaxial(setup)
     if tracking is not None:

@@ -1,6 +1,8 @@
 """Runs as data: the typed run specification (:mod:`~granular_material.runs.spec`), its
 forms as dicts, JSON, TOML and flat option names (:mod:`~granular_material.runs.serial`),
-and :func:`run`, the one entry point of a FEM run (:mod:`~granular_material.runs.execute`).
+and :func:`run`, the one entry point of a FEM run (:mod:`~granular_material.runs.execute`),
+which keeps the run's checkpoint in its folder (:class:`RunCheckpoint`,
+:mod:`~granular_material.runs.checkpoint`) to resume from.
 
 ::
 
@@ -12,6 +14,7 @@ and :func:`run`, the one entry point of a FEM run (:mod:`~granular_material.runs
     outcome.result.steps[["axial_strain", "stress_ratio"]]
 """
 
+from granular_material.runs.checkpoint import CheckpointError, RunCheckpoint
 from granular_material.runs.context import RunContext
 from granular_material.runs.execute import RunOutcome, RunPlan, check, run
 from granular_material.runs.resume import differences_from_saved
@@ -25,6 +28,7 @@ from granular_material.runs.spec import (
     SpecError,
 )
 
-__all__ = ["MaterialSpec", "NewtonSpec", "OutputSpec", "ProblemSpec", "RunContext",
-           "RunOutcome", "RunPlan", "RunSpec", "SpecError", "check", "differences_from_saved",
-           "from_dict", "from_flat", "load", "run", "save", "to_dict", "to_flat"]
+__all__ = ["CheckpointError", "MaterialSpec", "NewtonSpec", "OutputSpec", "ProblemSpec",
+           "RunCheckpoint", "RunContext", "RunOutcome", "RunPlan", "RunSpec", "SpecError",
+           "check", "differences_from_saved", "from_dict", "from_flat", "load", "run", "save",
+           "to_dict", "to_flat"]

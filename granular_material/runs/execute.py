@@ -28,7 +28,6 @@ from granular_material.fem import (
     BiaxialResult,
     BiaxialSetup,
     Material,
-    RunCheckpoint,
     Tracking,
     run_biaxial,
 )
@@ -43,6 +42,7 @@ from granular_material.results import (
     write_outputs,
 )
 from granular_material.results.lock import FolderLock
+from granular_material.runs.checkpoint import RunCheckpoint
 from granular_material.runs.context import RunContext
 from granular_material.runs.resume import open_checkpoint, start_checkpoint
 from granular_material.runs.spec import FULL_SCALE, REDUCED_SCALE, RunSpec
@@ -181,7 +181,7 @@ def run(spec: RunSpec, observer: RunObserver | None = None, *,
         resume: bool = False, keep_stopped: bool = False) -> RunOutcome:
     """Run ``spec``: check it (:func:`check`), lock and write its output folder as it goes
     (tables, fields, figures, ``summary.json``; checkpoints of the committed state, see
-    :class:`~granular_material.fem.checkpoint.RunCheckpoint`), and return the outcome.
+    :class:`~granular_material.runs.checkpoint.RunCheckpoint`), and return the outcome.
     ``resume`` continues the run whose checkpoint is in ``output.out`` (its spec must be this
     one, but for where and how it reports; with no saved step it starts afresh); a fresh run
     replaces the folder's checkpoint, but with ``keep_stopped`` (the commands' choice) not

@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from granular_material.checks import RVE_MATERIAL_DEFAULTS, UsageError
-from granular_material.fem import CheckpointError, RunCheckpoint
+from granular_material.runs.checkpoint import CheckpointError, RunCheckpoint
 from granular_material.runs.serial import from_dict, from_flat, to_dict, to_flat
 from granular_material.runs.spec import RunSpec
 
