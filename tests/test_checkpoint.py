@@ -25,10 +25,9 @@ from granular_material.fem import (
     create_material,
     default_settings,
     default_stress_tol,
-    run_biaxial,
 )
 from granular_material.procedures import prepare_packing
-from granular_material.runs import CheckpointError, RunCheckpoint
+from granular_material.runs import CheckpointError, RunCheckpoint, run_biaxial
 
 SETUP = BiaxialSetup(width=1.0, height=1.0, nx=1, ny=1, confining=100e3, axial_strain=0.003)
 #: columns that hold a clock time [s], the only ones a resumed run may change

@@ -32,7 +32,6 @@ from granular_material.fem import (
     NewtonError,
     NewtonSettings,
     NewtonSolver,
-    run_biaxial,
 )
 from granular_material.procedures import (
     CellTooThinError,
@@ -43,6 +42,7 @@ from granular_material.procedures import (
 )
 from granular_material.procedures import packing as packing_module
 from granular_material.procedures.packing import max_pressure
+from granular_material.runs import run_biaxial
 
 P0 = 100.0e3  #: consolidation pressure of the shared packings [Pa]
 #: σ1/σ3 bound for the deviatoric cases: the stiffest frictional packing measured here

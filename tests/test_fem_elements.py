@@ -32,12 +32,11 @@ from granular_material.fem import (
     create_material,
     default_settings,
     default_stress_tol,
-    run_biaxial,
     to_points,
 )
 from granular_material.fem.forms import gauss_points_grad, internal_force, stiffness
 from granular_material.fem.problems import DEFAULT_GAUSS, ELEMENTS, TRIANGLES, element_of
-from granular_material.runs import RunCheckpoint
+from granular_material.runs import RunCheckpoint, run_biaxial
 
 ELEMENT_NAMES = tuple(ELEMENTS)
 E, NU, P = 60e6, 0.3, 100e3

@@ -19,7 +19,6 @@ from granular_material.fem import (
     NewtonSettings,
     NewtonSolver,
     build_biaxial,
-    run_biaxial,
 )
 from granular_material.fem.kinematics import (
     Kinematics,
@@ -30,6 +29,7 @@ from granular_material.fem.kinematics import (
 from granular_material.fem.problems import follower_traction
 from granular_material.multiscale import DEMMaterial
 from granular_material.procedures import prepare_packing
+from granular_material.runs import run_biaxial
 
 EYE = np.eye(2)
 small = arrays(np.float64, (2, 2), elements=st.floats(-0.2, 0.2))

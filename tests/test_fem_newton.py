@@ -20,11 +20,10 @@ from granular_material.fem import (
     NewtonSolver,
     PointStatus,
     build_biaxial,
-    run_biaxial,
 )
 from granular_material.fem.linear_elastic import isotropic_tangent
-from granular_material.fem.runner import COST_COLUMNS
-from granular_material.results import BiaxialWriter
+from granular_material.results import COST_COLUMNS, BiaxialWriter
+from granular_material.runs import run_biaxial
 
 
 def _distorted_mesh() -> MeshQuad:

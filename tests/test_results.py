@@ -12,9 +12,9 @@ from granular_material.fem import (
     NewtonSettings,
     default_settings,
     default_stress_tol,
-    run_biaxial,
 )
 from granular_material.results import BiaxialWriter, find_peak, summarize_biaxial
+from granular_material.runs import run_biaxial
 
 
 def test_find_peak_with_window_one_is_the_largest_value_nans_skipped():

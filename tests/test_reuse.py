@@ -15,9 +15,10 @@ import pytest
 from granular_material.cli import main
 from granular_material.dem import DEMBatch, load_rve
 from granular_material.dem.homogenization import objective_tangent
-from granular_material.fem import BiaxialSetup, NewtonSettings, Tracking, run_biaxial
+from granular_material.fem import BiaxialSetup, NewtonSettings, Tracking
 from granular_material.multiscale import DEMMaterial
 from granular_material.procedures import drive_grad_u, path_steps
+from granular_material.runs import run_biaxial
 
 GRAD = np.array([
     [[0.0, 0.0], [0.0, -2e-4]],

@@ -16,11 +16,11 @@ from granular_material.fem import (
     NewtonSettings,
     PointStatus,
     create_material,
-    run_biaxial,
 )
 from granular_material.multiscale import DEMMaterial
 from granular_material.procedures import PackingParameters, biaxial_test, drive_grad_u
 from granular_material.results import summarize_biaxial
+from granular_material.runs import run_biaxial
 
 GRAD = np.array([
     [[0.0, 0.0], [0.0, -2e-4]],

@@ -19,12 +19,12 @@ from granular_material.fem import (
     PointStatus,
     QuadratureResponse,
     create_material,
-    run_biaxial,
     to_points,
     to_quadrature,
 )
 from granular_material.multiscale import DEMMaterial, UnconfinedWarning
 from granular_material.results.summary import run_summary
+from granular_material.runs import run_biaxial
 
 RNG = np.random.default_rng(5)
 

@@ -1,12 +1,12 @@
-"""FEM side of the FEM×DEM coupling: material protocol, Newton driver, problems, runner.
+"""FEM side of the FEM×DEM coupling: material protocol, Newton driver, problems.
 
 A material is anything that follows :class:`Material` (found by name through the
 ``granular_material.materials`` entry points: ``linear-elastic``, ``dem``); the
-:class:`NewtonSolver` drives it on a scikit-fem basis; :func:`run_biaxial` runs the drained
-biaxial test (one element or a specimen) and collects its tables (written, plotted and
-summarised by :mod:`granular_material.results`), saving them into a :class:`RunStore` (the
-run folder's checkpoint is :mod:`granular_material.runs.checkpoint`).
-:func:`default_settings` holds the Newton settings the commands use.
+:class:`NewtonSolver` drives it on a scikit-fem basis, on the drained biaxial problems of
+:func:`build_biaxial` (one element or a specimen); :class:`Tracking` names the
+post-processors run on chosen Gauss points. :func:`default_settings` holds the Newton settings
+the commands use. The run loop that collects a run's tables and keeps its checkpoint is
+:func:`granular_material.runs.run_biaxial`.
 """
 
 from granular_material.fem.defaults import (
@@ -36,8 +36,6 @@ from granular_material.fem.newton import (
     StepRecord,
 )
 from granular_material.fem.problems import BiaxialProblem, BiaxialSetup, build_biaxial
-from granular_material.fem.run_store import RunStore, SavedRun, SavedStep
-from granular_material.fem.runner import BiaxialResult, RunObserver, run_biaxial
 from granular_material.fem.tracking import (
     Tracking,
     available_postprocessors,
@@ -47,7 +45,6 @@ from granular_material.fem.tracking import (
 __all__ = [
     "MEASURES",
     "BiaxialProblem",
-    "BiaxialResult",
     "BiaxialSetup",
     "CommittedState",
     "FailureReason",
@@ -62,10 +59,6 @@ __all__ = [
     "NewtonSolver",
     "PointStatus",
     "QuadratureResponse",
-    "RunObserver",
-    "RunStore",
-    "SavedRun",
-    "SavedStep",
     "ScikitFemInterface",
     "StepRecord",
     "Tracking",
@@ -78,7 +71,6 @@ __all__ = [
     "grad_points",
     "load_material",
     "load_postprocessor",
-    "run_biaxial",
     "to_points",
     "to_quadrature",
 ]

@@ -1,7 +1,9 @@
-"""Results floor: tables and their writers (CSV, XDMF), figures, localisation (shear-band)
-measures, peak finding and the summaries the commands report. Reads what the procedures and
+"""Results floor: what a biaxial run produces (:class:`BiaxialResult`, its tables), their
+writers (CSV, XDMF), figures, localisation (shear-band) measures, peak finding and the
+summaries the commands report. Reads what the procedures and
 the FEM produce; imports nothing above it."""
 
+from granular_material.results.biaxial import COST_COLUMNS, BiaxialResult
 from granular_material.results.localization import (
     ShearBand,
     mohr_coulomb_inclination,
@@ -30,6 +32,8 @@ from granular_material.results.writers import (
 )
 
 __all__ = [
+    "COST_COLUMNS",
+    "BiaxialResult",
     "BiaxialSummary",
     "BiaxialWriter",
     "FieldWriter",

@@ -18,7 +18,7 @@ from granular_material.filesafe import write_whole
 from granular_material.results.localization import shear_band
 
 if TYPE_CHECKING:
-    from granular_material.fem.runner import BiaxialResult
+    from granular_material.results.biaxial import BiaxialResult
 
 __all__ = ["plot_biaxial_curves", "plot_maps", "plot_stress_strain", "pyplot", "save_figure"]
 

@@ -9,11 +9,12 @@ from typing import TYPE_CHECKING, Any
 
 import pandas as pd
 
+from granular_material.results.biaxial import COST_COLUMNS
 from granular_material.results.localization import mohr_coulomb_inclination, shear_band
 from granular_material.results.peaks import find_peak
 
 if TYPE_CHECKING:
-    from granular_material.fem.runner import BiaxialResult
+    from granular_material.results.biaxial import BiaxialResult
 
 __all__ = ["BiaxialSummary", "band_summary", "run_summary", "summarize_biaxial"]
 
@@ -42,12 +43,10 @@ def summarize_biaxial(curve: pd.DataFrame) -> BiaxialSummary:
 
 def run_summary(result: BiaxialResult, wall: float) -> dict[str, Any]:
     """The summary of a FEM biaxial run: peak, Newton cost, the material's costs (each cost
-    column of :data:`~granular_material.fem.runner.COST_COLUMNS` summed over the steps), the
+    column of :data:`~granular_material.results.biaxial.COST_COLUMNS` summed over the steps), the
     failed point-evaluations by reason (``failed_points``, e.g. ``{"max_dem_steps": 4}``:
     points whose evaluation failed and cut an increment back, the step that stopped the run
     included; empty when none failed), wall time [s], error."""
-    from granular_material.fem.runner import COST_COLUMNS  # a result means fem is loaded
-
     steps = result.steps
     peak, ratio = find_peak(steps["axial_strain"].to_numpy(), steps["stress_ratio"].to_numpy())
     done = steps[steps["step"] > 0]

@@ -20,7 +20,7 @@ from granular_material.results.plots import plot_maps, plot_stress_strain
 
 if TYPE_CHECKING:
     from granular_material.fem.problems import BiaxialProblem
-    from granular_material.fem.runner import BiaxialResult
+    from granular_material.results.biaxial import BiaxialResult
 
 __all__ = ["BiaxialWriter", "FieldWriter", "write_csv", "write_json", "write_outputs",
            "write_tables"]
@@ -115,7 +115,7 @@ class FieldWriter:
 
 class BiaxialWriter:
     """Writes a biaxial run under ``out_dir`` while it goes: an observer of
-    :func:`~granular_material.fem.run_biaxial`, used as a context manager::
+    :func:`~granular_material.runs.run_biaxial`, used as a context manager::
 
         with BiaxialWriter(out) as writer:
             result = run_biaxial(setup, material, n_steps, observer=writer)

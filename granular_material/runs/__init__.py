@@ -2,7 +2,8 @@
 forms as dicts, JSON, TOML and flat option names (:mod:`~granular_material.runs.serial`),
 and :func:`run`, the one entry point of a FEM run (:mod:`~granular_material.runs.execute`),
 which keeps the run's checkpoint in its folder (:class:`RunCheckpoint`,
-:mod:`~granular_material.runs.checkpoint`) to resume from.
+:mod:`~granular_material.runs.checkpoint`) to resume from; :func:`run_biaxial`
+(:mod:`~granular_material.runs.runner`) is its run loop, for any material.
 
 ::
 
@@ -14,10 +15,12 @@ which keeps the run's checkpoint in its folder (:class:`RunCheckpoint`,
     outcome.result.steps[["axial_strain", "stress_ratio"]]
 """
 
-from granular_material.runs.checkpoint import CheckpointError, RunCheckpoint
+from granular_material.results.biaxial import BiaxialResult
+from granular_material.runs.checkpoint import CheckpointError, RunCheckpoint, SavedRun
 from granular_material.runs.context import RunContext
 from granular_material.runs.execute import RunOutcome, RunPlan, check, run
 from granular_material.runs.resume import differences_from_saved
+from granular_material.runs.runner import RunObserver, run_biaxial
 from granular_material.runs.serial import from_dict, from_flat, load, save, to_dict, to_flat
 from granular_material.runs.spec import (
     MaterialSpec,
@@ -28,7 +31,7 @@ from granular_material.runs.spec import (
     SpecError,
 )
 
-__all__ = ["CheckpointError", "MaterialSpec", "NewtonSpec", "OutputSpec", "ProblemSpec",
-           "RunCheckpoint", "RunContext", "RunOutcome", "RunPlan", "RunSpec", "SpecError",
-           "check", "differences_from_saved", "from_dict", "from_flat", "load", "run", "save",
-           "to_dict", "to_flat"]
+__all__ = ["BiaxialResult", "CheckpointError", "MaterialSpec", "NewtonSpec", "OutputSpec",
+           "ProblemSpec", "RunCheckpoint", "RunContext", "RunObserver", "RunOutcome", "RunPlan",
+           "RunSpec", "SavedRun", "SpecError", "check", "differences_from_saved", "from_dict",
+           "from_flat", "load", "run", "run_biaxial", "save", "to_dict", "to_flat"]

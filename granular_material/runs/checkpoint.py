@@ -22,9 +22,9 @@ swapped file) leaves the folder as it was; :meth:`RunCheckpoint.load` tidies the
 after that check has passed.
 
 Every file is written under a temporary name and renamed into place; how each is stored and
-read back is :mod:`granular_material.runs.checkpoint_files`. A :class:`RunCheckpoint` is the
-:class:`~granular_material.fem.RunStore` that :func:`~granular_material.fem.run_biaxial`
-saves into and resumes from (:class:`~granular_material.fem.SavedRun`).
+read back is :mod:`granular_material.runs.checkpoint_files`.
+:func:`~granular_material.runs.runner.run_biaxial` saves into a :class:`RunCheckpoint` and
+resumes from the :class:`SavedRun` it loads.
 """
 
 from __future__ import annotations
@@ -40,12 +40,14 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from granular_material.fem import Material, NewtonSolver, SavedRun, SavedStep
+from granular_material.fem import Material, NewtonSolver
 from granular_material.runs.checkpoint_files import (
     MANIFEST_VERSION,
     OPTIONS,
     STATE,
     CheckpointError,
+    SavedRun,
+    SavedStep,
     cell_kind,
     file_sha256,
     frame,
@@ -61,7 +63,7 @@ from granular_material.runs.checkpoint_files import (
     write_npz,
 )
 
-__all__ = ["SAVE_SPACING", "CheckpointError", "RunCheckpoint"]
+__all__ = ["SAVE_SPACING", "CheckpointError", "RunCheckpoint", "SavedRun", "SavedStep"]
 
 #: by elapsed time, the committed state is saved once this many times the last save's
 #: duration has passed since it ended: a cheap save is made after every step, and saving

@@ -1,6 +1,7 @@
 """The files of a run's checkpoint (:mod:`granular_material.runs.checkpoint` keeps the folder):
 their names, how rows, tables, the solver's committed state and its Newton records are
-stored in ``.npz`` files, and how each file is read back and checked, every fault a
+stored in ``.npz`` files, and how each file is read back (:class:`SavedStep`,
+:class:`SavedRun`) and checked, every fault a
 :class:`CheckpointError` naming the file and what is wrong (never a traceback of the zip or
 JSON reader).
 
@@ -19,14 +20,14 @@ import math
 import re
 import zipfile
 from collections.abc import Iterator
-from dataclasses import MISSING, asdict, fields
+from dataclasses import MISSING, asdict, dataclass, fields
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pandas as pd
 
-from granular_material.fem import CommittedState, MaterialResponse, SavedStep, StepRecord
+from granular_material.fem import CommittedState, MaterialResponse, StepRecord
 from granular_material.filesafe import write_whole
 
 __all__ = [
@@ -35,6 +36,8 @@ __all__ = [
     "OPTIONS",
     "STATE",
     "CheckpointError",
+    "SavedRun",
+    "SavedStep",
     "cell_kind",
     "dumps",
     "file_sha256",
@@ -72,6 +75,40 @@ _STATE_ARRAYS = ("step", "material", "u", "load_factor", "run_start", "has_last"
 
 class CheckpointError(ValueError):
     """A checkpoint folder that cannot be resumed (missing, incomplete, or another run's)."""
+
+
+@dataclass
+class SavedStep:
+    """One committed load step as the run's observer saw it.
+
+    Attributes:
+        row: the step's row of the ``steps`` table.
+        points: its Gauss-point table.
+        u: nodal displacement [m], shape (ndofs,), float64.
+        tracked: its tracked post-processor rows, or None when the step was not tracked.
+    """
+
+    row: dict[str, Any]
+    points: pd.DataFrame
+    u: np.ndarray
+    tracked: pd.DataFrame | None
+
+
+@dataclass
+class SavedRun:
+    """The last whole checkpoint of a run.
+
+    Attributes:
+        step: the last committed load step it holds.
+        steps: steps 0 … ``step``, in order.
+        state: the solver's committed state after ``step``.
+        material_path: the material's committed state (for :meth:`Material.restore`).
+    """
+
+    step: int
+    steps: list[SavedStep]
+    state: CommittedState
+    material_path: Path
 
 
 def _native(value: Any) -> Any:

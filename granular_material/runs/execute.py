@@ -24,15 +24,9 @@ from granular_material.checks import (
     check_output_dir,
     cleanup_on_rejection,
 )
-from granular_material.fem import (
-    BiaxialResult,
-    BiaxialSetup,
-    Material,
-    Tracking,
-    run_biaxial,
-)
-from granular_material.fem.runner import RunObserver
+from granular_material.fem import BiaxialSetup, Material, Tracking
 from granular_material.results import (
+    BiaxialResult,
     BiaxialWriter,
     band_summary,
     find_peak,
@@ -45,6 +39,7 @@ from granular_material.results.lock import FolderLock
 from granular_material.runs.checkpoint import RunCheckpoint
 from granular_material.runs.context import RunContext
 from granular_material.runs.resume import open_checkpoint, start_checkpoint
+from granular_material.runs.runner import RunObserver, run_biaxial
 from granular_material.runs.spec import FULL_SCALE, REDUCED_SCALE, RunSpec
 from granular_material.timing import PhaseTimes, phase_table
 
@@ -187,7 +182,7 @@ def run(spec: RunSpec, observer: RunObserver | None = None, *,
     replaces the folder's checkpoint, but with ``keep_stopped`` (the commands' choice) not
     that of a run stopped before its last step (a UsageError, nothing changed). ``observer``
     follows every committed
-    step as :class:`~granular_material.fem.runner.RunObserver`. A Newton failure or an
+    step as :class:`~granular_material.runs.runner.RunObserver`. A Newton failure or an
     interrupt ends the run early with the steps so far (``outcome.result.error``,
     ``outcome.interrupt``); bad input is a ``ValueError`` before any work."""
     started = time.perf_counter()

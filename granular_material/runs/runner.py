@@ -1,63 +1,37 @@
-"""Run a biaxial problem with any material and collect its per-step results.
-
-Tables (tension positive unless the column says otherwise):
-
-``steps`` — one row per load step (step 0 is the initial state):
-    step, load_factor, axial_strain (compression +, the top platen's displacement over the
-    initial height), platen_stress [Pa] (axial stress from the top platen reaction over the
-    platen's width — its current width in the finite-strain formulation — compression +),
-    confining [Pa] (compression +), stress_ratio (platen_stress / confining), sxx, syy, sxy
-    [Pa] (averages over the Gauss points' current volumes of the Cauchy stress),
-    volumetric_strain (small strain: tr ε volume average; finite strain: the specimen's area
-    change A/A0 − 1; contraction negative), void_ratio (mean, NaN if
-    the material has none), iterations, the cost columns :data:`COST_COLUMNS` (the step's
-    :attr:`StepRecord.costs <granular_material.fem.newton.StepRecord.costs>` of those names,
-    0 for a name the material does not report: the DEM material's dem_steps (DEM steps run:
-    each evaluation's longest RVE path, summed), rve_evaluations (RVE paths run) and
-    particle_steps (DEM disc-steps run)), cutbacks, stalled (increments accepted on a
-    stalled residual), wall_time [s],
-    residual_history (JSON list of lists of ‖R‖/‖R₀‖), converged_by (the test that accepted
-    each increment of the step, joined by "+": force, force-atol, displacement or stall; empty
-    for step 0), correction_history (JSON list of lists of ‖δu‖_L2/‖Δu‖_L2, one per
-    Newton correction).
-
-``points`` — one row per load step and Gauss point:
-    step, axial_strain, point (``element · nqp + q``, nqp = gauss² points per element, see
-    :mod:`granular_material.fem.problems`), element, x, y [m] (the Gauss point's reference
-    coordinates), sxx, syy, sxy [Pa] (Cauchy), exx, eyy, exy (sym ∇u in small strain, the
-    Hencky strain ½ ln(F Fᵀ) in finite strain), volumetric_strain (tr ε; finite strain:
-    J − 1, the area change), shear_strain (γ = √((ε_xx − ε_yy)² + (2ε_xy)²)), plus the
-    material's own fields (void_ratio, coordination, stress_skew, ...).
-
-``tracked`` — with a :class:`~granular_material.fem.tracking.Tracking`: one row per tracked
-    step, point and post-processor (see :mod:`granular_material.fem.tracking`).
+"""The run loop: drive any material through a biaxial problem and collect its per-step
+tables (:mod:`granular_material.results.biaxial` says what each column is) into a
+:class:`~granular_material.results.BiaxialResult`, shown to an observer as they come, with
+the tracked points' post-processors run and the run's checkpoint kept
+(:mod:`granular_material.runs.checkpoint`).
 """
 
 from __future__ import annotations
 
 import json
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 from typing import Any, Protocol
 
 import numpy as np
 import pandas as pd
 
-from granular_material.fem.layout import to_points
-from granular_material.fem.material import Material
-from granular_material.fem.newton import NewtonError, NewtonSettings, NewtonSolver, StepRecord
-from granular_material.fem.problems import BiaxialProblem, BiaxialSetup, build_biaxial
-from granular_material.fem.run_store import RunStore, SavedRun
-from granular_material.fem.tracking import Tracking
+from granular_material.fem import (
+    BiaxialProblem,
+    BiaxialSetup,
+    Material,
+    NewtonError,
+    NewtonSettings,
+    NewtonSolver,
+    StepRecord,
+    Tracking,
+    build_biaxial,
+    to_points,
+)
+from granular_material.results.biaxial import COST_COLUMNS, BiaxialResult
+from granular_material.runs.checkpoint import RunCheckpoint, SavedRun
 from granular_material.timing import PhaseTimes
 
-__all__ = ["COST_COLUMNS", "BiaxialResult", "RunObserver", "run_biaxial"]
-
-#: the cost columns that every ``steps`` table carries, in this order, after
-#: ``iterations``: each is the step's ``StepRecord.costs`` entry of that name, 0 when the
-#: material does not report it (so the tables of every material have the same columns).
-#: Costs of other names stay in the records and make no column.
-COST_COLUMNS: tuple[str, ...] = ("dem_steps", "rve_evaluations", "particle_steps")
+__all__ = ["RunObserver", "run_biaxial"]
 
 
 class RunObserver(Protocol):
@@ -78,51 +52,6 @@ class RunObserver(Protocol):
     def finish(self, result: BiaxialResult) -> None:
         """Called once with what the run produced, however it ended."""
         ...
-
-
-@dataclass
-class BiaxialResult:
-    """Everything a biaxial run produced.
-
-    Attributes:
-        problem: the boundary-value problem.
-        steps: global table (see module docstring).
-        points: Gauss-point table (see module docstring).
-        displacements: nodal displacement [m] after every step, shape (S + 1, ndofs).
-        records: the Newton records of the committed steps.
-        error: why the run stopped early (the :class:`NewtonError` message, or an
-            interrupt), if it did.
-        tracked: the tracked post-processors' rows (empty without tracking).
-        resumed_from: the load step of the checkpoint the run was resumed from, or None.
-        interrupt: the ``KeyboardInterrupt`` (Ctrl-C, or SIGTERM where the caller maps it
-            to one) that stopped the run, or None.
-        failures: failed point-evaluations by reason over the run, the step that did not
-            converge included (the records' ``failures`` summed; empty when no point
-            failed). A failed point never reaches ``points``: a step commits only when
-            every point succeeded.
-        timings: wall-clock seconds [s] by phase of the load steps (the records'
-            ``timings`` summed, the step that did not converge included, with ``steps``
-            their whole wall time) and of what this process did between them
-            (``initial_state``, ``tables``, ``tracking``, ``checkpoint``); a resumed run's
-            steps before the resume count with the time they took then.
-            :func:`granular_material.timing.phase_table` makes the run's table of them.
-    """
-
-    problem: BiaxialProblem
-    steps: pd.DataFrame
-    points: pd.DataFrame
-    displacements: np.ndarray
-    records: list[StepRecord] = field(default_factory=list)
-    error: str | None = None
-    tracked: pd.DataFrame = field(default_factory=pd.DataFrame)
-    resumed_from: int | None = None
-    interrupt: KeyboardInterrupt | None = None
-    failures: dict[str, int] = field(default_factory=dict)
-    timings: dict[str, float] = field(default_factory=dict)
-
-    def row_nearest(self, axial_strain: float) -> int:
-        """Row of ``steps`` (and of ``displacements``) whose axial strain [-] is nearest."""
-        return int(np.argmin(np.abs(self.steps["axial_strain"].to_numpy() - axial_strain)))
 
 
 def _rows(solver: NewtonSolver, problem: BiaxialProblem, record: StepRecord | None):
@@ -196,7 +125,7 @@ class _Collector:
 
     def __init__(self, problem: BiaxialProblem, material: Material, n_steps: int,
                  observer: RunObserver | None, tracking: Tracking | None,
-                 checkpoint: RunStore | None,
+                 checkpoint: RunCheckpoint | None,
                  on_step: Callable[[NewtonSolver, StepRecord, pd.DataFrame], None] | None,
                  ) -> None:
         self.problem, self.material, self.n_steps = problem, material, n_steps
@@ -270,7 +199,7 @@ def run_biaxial(
     stress_tol: float = 0.0,
     observer: RunObserver | None = None,
     tracking: Tracking | None = None,
-    checkpoint: RunStore | None = None,
+    checkpoint: RunCheckpoint | None = None,
     resume: bool = False,
     progress: bool = False,
     on_step: Callable[[NewtonSolver, StepRecord, pd.DataFrame], None] | None = None,
@@ -288,9 +217,9 @@ def run_biaxial(
     ``on_step(solver, record, points)`` is called after every committed load step.
     ``tracking`` runs post-processors on chosen points' committed RVEs (``result.tracked``).
 
-    ``checkpoint`` (a :class:`~granular_material.fem.run_store.RunStore`, e.g. the run
-    folder's :class:`granular_material.runs.RunCheckpoint`) saves every committed step and,
-    when it says a save is due, the committed state of solver and material. ``resume``
+    ``checkpoint`` saves every committed step and, when it says a save is due (every
+    ``checkpoint.every`` steps, or by elapsed time), the committed state of solver and
+    material. ``resume``
     continues from its last whole checkpoint (the material is restored from it: it need not
     be allocated) and gives the same steps, tables and final state as a run that never
     stopped; with no state saved yet the run starts from the beginning. The observer sees the
