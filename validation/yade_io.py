@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from granular_material.dem.rve_checks import validate_rve
 from granular_material.dem.rve_file import RVEData, RVEMeta, load_rve, save_rve
 
 __all__ = [
@@ -135,7 +136,7 @@ def scene_to_rve(scene: dict[str, Any]) -> RVEData:
     )
     data = RVEData(radius=radius[None], position=position[None], cell=cell[None],
                    velocity=velocity[None], angular_velocity=omega[None], meta=meta)
-    data.validate()
+    validate_rve(data)
     return data
 
 

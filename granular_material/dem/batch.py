@@ -22,6 +22,7 @@ import numpy as np
 from granular_material.dem.homogenization import Homogenized, MeasureBuffers, homogenize
 from granular_material.dem.loading import LoadingControl, ServoSettings
 from granular_material.dem.model import Model, build_model, resolve_device
+from granular_material.dem.rve_checks import validate_rve
 from granular_material.dem.rve_file import RVEData
 from granular_material.dem.solver import DEMInstabilityError, Solver
 from granular_material.dem.state import State, state_from_data, state_to_data
@@ -93,7 +94,7 @@ class DEMBatch:
         timestep: float | None = None,
         shards: int | None = None,
     ) -> None:
-        data.validate()
+        validate_rve(data)
         device = resolve_device(device)
         if shards is None:
             shards = (os.cpu_count() or 1) if device == "cpu" else 1

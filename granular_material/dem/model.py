@@ -10,6 +10,7 @@ import numpy as np
 import warp as wp
 
 from granular_material.dem.laws import LAW_CONSTANT, LAW_FRICTMAT, ContactLaw
+from granular_material.dem.rve_checks import validate_rve
 from granular_material.dem.rve_file import RVEData, RVEFileError, RVEMeta, _touching_pairs
 
 __all__ = [
@@ -266,7 +267,7 @@ def build_model(
     """
     if isinstance(capacity, bool) or not isinstance(capacity, int) or capacity < 1:
         raise ValueError(f"capacity must be a positive integer, got {capacity!r}")
-    data.validate(capacity=capacity)
+    validate_rve(data, capacity)
     device = resolve_device(device)
     ft = float_type(dtype)
     meta = data.meta

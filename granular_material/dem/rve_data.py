@@ -7,7 +7,6 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from granular_material.dem.rve_checks import validate_rve
 from granular_material.dem.rve_format import _BATCH_ARRAYS, RVEMeta
 
 __all__ = ["RVEData"]
@@ -81,12 +80,3 @@ class RVEData:
         extra = {k: np.concatenate([p.extra[k] for p in parts]) for k in first.extra}
         return replace(first, **arrays, extra=extra)
 
-    def validate(self, capacity: int | None = None) -> None:
-        """Raise ``RVEFileError`` naming the first array or value that is not a valid RVE.
-
-        Checked: shapes, dtypes and finite values of every array, positive radii, cells and
-        the meta, and the contact history if present
-        (:func:`~granular_material.dem.rve_checks.validate_rve`); with ``capacity`` also that
-        every contact list fits ``capacity`` slots a disc.
-        """
-        validate_rve(self, capacity)

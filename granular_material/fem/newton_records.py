@@ -69,7 +69,7 @@ class StepRecord:
 class CommittedState:
     """What a :class:`~granular_material.fem.newton.NewtonSolver` carries from one load step
     to the next, beside the material's own committed state: enough to resume a run exactly (see
-    :mod:`granular_material.fem.checkpoint`).
+    :mod:`granular_material.runs.checkpoint`).
 
     Attributes:
         u: nodal displacement [m], shape (ndofs,), float64.

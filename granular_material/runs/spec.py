@@ -285,7 +285,7 @@ class OutputSpec:
         every: with ``track``: every this many load steps.
         postprocess: with ``track``: the post-processors; None: every installed one.
         checkpoint_every: save the committed state every this many load steps (with out);
-            None: by elapsed time (:class:`~granular_material.fem.checkpoint.RunCheckpoint`:
+            None: by elapsed time (:class:`~granular_material.runs.checkpoint.RunCheckpoint`:
             after every step while saving is cheap, at most every ``checkpoint_minutes``).
         checkpoint_minutes: with ``checkpoint_every`` None, the longest time [min] between
             two saves of the committed state.
