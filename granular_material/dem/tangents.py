@@ -5,16 +5,14 @@ four extra DEM runs (forward differences of the RVE's own response), whether it 
 the contact network (:func:`~granular_material.dem.condensation.condense`), whether it may
 be held over a Newton increment, and what the stress's spin adds to it.
 
-=====================  ===========================================================
-``objective``           Kruyt–Rothenburg applied to sym ∇u plus the stress's spin
-                        (:func:`~granular_material.dem.homogenization.objective_tangent`)
-``kruyt-rothenburg``    the contact network's estimate as Wu et al. (2025, eq. 6) publish it
-``perturbation``        forward differences of the RVE's response: four more DEM runs
-``condensed``           the discs' fluctuations condensed out of the contact network,
-                        plus the stress's spin; contacts at their Coulomb cap slide freely
-``condensed-sticking``  the same with every touching contact keeping kt: an upper bound
-                        of the RVE's incremental stiffness
-=====================  ===========================================================
+- ``objective``: Kruyt–Rothenburg applied to sym ∇u plus the stress's spin
+  (:func:`~granular_material.dem.homogenization.objective_tangent`);
+- ``kruyt-rothenburg``: the contact network's estimate as Wu et al. (2025, eq. 6) publish it;
+- ``perturbation``: forward differences of the RVE's response, four more DEM runs;
+- ``condensed``: the discs' fluctuations condensed out of the contact network, plus the
+  stress's spin; contacts at their Coulomb cap slide freely;
+- ``condensed-sticking``: the same with every touching contact keeping kt, an upper bound of
+  the RVE's incremental stiffness.
 """
 
 from __future__ import annotations
