@@ -116,9 +116,19 @@ class InProcessBackend:
     def __init__(self, batch: DEMBatch, driving: DEMDriving | None = None) -> None:
         self.batch = batch
         self.driving = DEMDriving() if driving is None else driving
-        zeros = np.zeros((batch.n_rve, 2, 2))
-        self._committed = Committed(batch.snapshot(), zeros)
-        self._trial = Trial(zeros.copy(), zeros.copy())
+        self._committed = Committed(batch.snapshot(), np.zeros((batch.n_rve, 2, 2)))
+        self._trial = self._fresh_trial()
+
+    @classmethod
+    def holding(cls, data: RVEData, driving: DEMDriving, device: str | None,
+                shards: int | None, resume: bool = False) -> InProcessBackend:
+        """The RVEs ``data`` in one batch on ``device`` with ``shards`` CPU threads; with
+        ``resume``, ``data`` is a :meth:`checkpoint`'s and the backend continues from it."""
+        states = cls.without_backend_arrays(data) if resume else data
+        backend = cls(DEMBatch(states, device=device, shards=shards), driving)
+        if resume:
+            backend.resume_from(data)
+        return backend
 
     @property
     def n_rve(self) -> int:

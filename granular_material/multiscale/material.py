@@ -222,13 +222,7 @@ class DEMMaterial(ScikitFemInterface):
             from granular_material.multiscale.mpi import MPIBackend
 
             return MPIBackend(data, p, resume=resume)
-        from granular_material.dem import DEMBatch
-
-        states = InProcessBackend.without_backend_arrays(data) if resume else data
-        backend = InProcessBackend(DEMBatch(states, device=p.device, shards=p.shards), p)
-        if resume:
-            backend.resume_from(data)
-        return backend
+        return InProcessBackend.holding(data, p, p.device, p.shards, resume)
 
     def allocate(self, n_points: int) -> None:
         """Load or prepare ``n_points`` RVEs in their consolidated state (and relax them to

@@ -53,7 +53,7 @@ from typing import Any
 
 import numpy as np
 
-from granular_material.dem import DEMBatch, Homogenized, RVEData, resolve_device, save_rve
+from granular_material.dem import Homogenized, RVEData, resolve_device, save_rve
 from granular_material.fem.material import FailureReason
 from granular_material.filesafe import deferred_signals
 from granular_material.multiscale.backend import InProcessBackend
@@ -240,11 +240,7 @@ class _Shard:
             return
         device = _device(parameters.device, self.world.local_rank)
         threads = _threads(parameters.shards, device, self.world.local_size)
-        states = InProcessBackend.without_backend_arrays(data) if resume else data
-        backend = InProcessBackend(DEMBatch(states, device=device, shards=threads), parameters)
-        if resume:
-            backend.resume_from(data)
-        self.backend = backend
+        self.backend = InProcessBackend.holding(data, parameters, device, threads, resume)
 
     def evaluate(self, grad_u: np.ndarray) -> tuple[np.ndarray, np.ndarray, str | None]:
         """The header and rows of this rank's answer to ∇u (size, 2, 2), and its error."""
