@@ -20,7 +20,8 @@ from granular_material.results.localization import shear_band
 if TYPE_CHECKING:
     from granular_material.results.biaxial import BiaxialResult
 
-__all__ = ["plot_biaxial_curves", "plot_maps", "plot_stress_strain", "pyplot", "save_figure"]
+__all__ = ["deformed_triangles", "plot_biaxial_curves", "plot_maps", "plot_stress_strain", "pyplot",
+           "save_figure"]
 
 
 def pyplot() -> ModuleType:
@@ -90,6 +91,34 @@ def plot_stress_strain(steps: pd.DataFrame, path: str | Path, reference: pd.Data
         plt.close(fig)
 
 
+def deformed_triangles(xy: np.ndarray, cells: np.ndarray, kind: str, ux: np.ndarray,
+                       uy: np.ndarray) -> tuple[np.ndarray, ...]:
+    """The deformed mesh as straight triangles for a map: (x, y, ux, uy) at its nodes [m]
+    (a centre node added to each quad8), the triangles (k, 3) and the element of each.
+
+    ``xy`` (nodes, 2) [m], ``cells`` in meshio order of the meshio cell type ``kind``
+    ("quad", "triangle", "triangle6", "quad8", "quad9"), ``ux``/``uy`` nodal displacements.
+    """
+    x, y = xy[:, 0] + ux, xy[:, 1] + uy
+    if kind == "quad":
+        triangles = np.vstack([cells[:, [0, 1, 2]], cells[:, [0, 2, 3]]])
+        element = np.concatenate([np.arange(cells.shape[0])] * 2)
+    elif kind == "triangle":
+        triangles, element = cells, np.arange(cells.shape[0])
+    elif kind == "triangle6":  # four triangles through the midside nodes
+        triangles = np.vstack([cells[:, [0, 3, 5]], cells[:, [3, 1, 4]], cells[:, [5, 4, 2]],
+                               cells[:, [3, 4, 5]]])
+        element = np.tile(np.arange(cells.shape[0]), 4)
+    else:  # midside (and centre) nodes: each element as triangles fanned from its centre
+        triangles, element = _fan(cells)
+        if kind == "quad8":  # no centre node: add one, at the mean of the corners
+            x = np.concatenate([x, x[cells[:, :4]].mean(axis=1)])
+            y = np.concatenate([y, y[cells[:, :4]].mean(axis=1)])
+            ux = np.concatenate([ux, ux[cells[:, :4]].mean(axis=1)])
+            uy = np.concatenate([uy, uy[cells[:, :4]].mean(axis=1)])
+    return x, y, ux, uy, triangles, element
+
+
 def _fan(cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Triangles of quad8/quad9 cells (meshio order) fanned from each element's centre: node
     8 of a quad9, or a node appended per element (index ``n_nodes + e``) for a quad8; and
@@ -118,26 +147,10 @@ def plot_maps(result: BiaxialResult, axial_strain: float, path: str | Path) -> P
     step = int(steps["step"].iloc[row])
     u = result.displacements[row]
     xy, cells, kind, dofs = result.problem.nodes()
-    ux, uy = u[dofs[0]], u[dofs[1]]
-    x, y = xy[:, 0] + ux, xy[:, 1] + uy
     points = result.points[result.points["step"] == step]
     gamma = points.groupby("element")["shear_strain"].mean().to_numpy()
-    if kind == "quad":
-        triangles = np.vstack([cells[:, [0, 1, 2]], cells[:, [0, 2, 3]]])
-        element = np.concatenate([np.arange(cells.shape[0])] * 2)
-    elif kind == "triangle":
-        triangles, element = cells, np.arange(cells.shape[0])
-    elif kind == "triangle6":  # four triangles through the midside nodes
-        triangles = np.vstack([cells[:, [0, 3, 5]], cells[:, [3, 1, 4]], cells[:, [5, 4, 2]],
-                               cells[:, [3, 4, 5]]])
-        element = np.tile(np.arange(cells.shape[0]), 4)
-    else:  # midside (and centre) nodes: each element as triangles fanned from its centre
-        triangles, element = _fan(cells)
-        if kind == "quad8":  # no centre node: add one, at the mean of the corners
-            x = np.concatenate([x, x[cells[:, :4]].mean(axis=1)])
-            y = np.concatenate([y, y[cells[:, :4]].mean(axis=1)])
-            ux = np.concatenate([ux, ux[cells[:, :4]].mean(axis=1)])
-            uy = np.concatenate([uy, uy[cells[:, :4]].mean(axis=1)])
+    x, y, ux, uy, triangles, element = deformed_triangles(xy, cells, kind, u[dofs[0]],
+                                                          u[dofs[1]])
     tri = Triangulation(1e3 * x, 1e3 * y, triangles)
     fig, axes = plt.subplots(1, 3, figsize=(12, 5), constrained_layout=True)
     for ax, values, title in ((axes[0], 1e3 * ux, "u_x [mm]"), (axes[1], 1e3 * uy, "u_y [mm]")):
