@@ -44,6 +44,7 @@ COMMAND_HELP: dict[str, str] = {
     "biaxial": "biaxial specimen (50 mm x 100 mm) of DEM Gauss points",
     "run": "run the scene of a TOML file into one folder",
     "trade-study": "speed against accuracy: every knob against a reference run",
+    "calibrate": "Mohr–Coulomb parameters from drained biaxial DEM tests of an RVE file",
     "fractal": "pore image and multifractal spectrum (D0, alpha0) of an RVE file",
     "reproduce": "rerun a paper's study: each claim beside our measurement",
     "rve-size-study": "how many discs an RVE needs: pore spectra and biaxial tests by size",
@@ -52,7 +53,7 @@ COMMAND_HELP: dict[str, str] = {
 #: the module of :mod:`granular_material.cli` that registers each core command
 _CORE_MODULES = {"prepare": "dem", "biaxial-dem": "dem", "dem-drive": "dem",
                  "single-element": "fem", "biaxial": "fem", "run": "scene",
-                 "trade-study": "study"}
+                 "trade-study": "study", "calibrate": "calibrate"}
 _CORE = tuple(_CORE_MODULES)
 #: commands that run the others (a scene names any command): built with the full parser
 _RUNS_OTHER_COMMANDS = frozenset({"run"})
