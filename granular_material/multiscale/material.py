@@ -47,7 +47,11 @@ from granular_material.multiscale.backend import InProcessBackend
 from granular_material.multiscale.evaluation import Evaluation
 from granular_material.multiscale.isotropic import relax_to_isotropic
 from granular_material.multiscale.parameters import BACKENDS, DEMMaterialParameters
-from granular_material.multiscale.preparation import initial_rves
+from granular_material.multiscale.preparation import (
+    StressPreparation,
+    initial_rves,
+    rves_at_stress,
+)
 from granular_material.multiscale.run_hooks import (
     DEMParameters,
     check_run,
@@ -153,6 +157,9 @@ class DEMMaterial(ScikitFemInterface):
         self._committed_response: MaterialResponse | None = None
         self._last_response: MaterialResponse | None = None
         self._warned_unconfined = False
+        #: how the RVEs were brought to ``initial_stress`` (None without it, or before
+        #: :meth:`allocate`): the targets, clamped points, groups and errors
+        self.preparation: StressPreparation | None = None
 
     @property
     def confining(self) -> float:
@@ -226,8 +233,25 @@ class DEMMaterial(ScikitFemInterface):
 
     def allocate(self, n_points: int) -> None:
         """Load or prepare ``n_points`` RVEs in their consolidated state (and relax them to
-        the isotropic stress where ``isotropic``)."""
-        data = initial_rves(self.parameters, n_points, self.progress)
+        the isotropic stress where ``isotropic``), or, with ``initial_stress``, each at its
+        point's stress (:attr:`preparation` says how; a :class:`UserWarning` names the points
+        whose target was clamped to the lowest prepared pressure). ParameterError naming
+        ``initial_stress`` unless it holds ``n_points`` tensors."""
+        if self.parameters.initial_stress is not None:
+            self.preparation = rves_at_stress(self.parameters, n_points, self.progress)
+            data = self.preparation.data
+            clamped = self.preparation.clamped
+            if clamped.size:
+                least = -np.linalg.eigvalsh(self.preparation.prepared[clamped[0]])[1]
+                warnings.warn(
+                    f"{clamped.size} of {n_points} points have an initial stress below the "
+                    f"lowest an RVE is prepared to ({least:.3g} Pa, least principal "
+                    f"compression): their targets were scaled up to it, ratios kept (points "
+                    f"{clamped[:10].tolist()}{' …' if clamped.size > 10 else ''}; "
+                    "material.preparation.clamped lists them all)",
+                    UserWarning, stacklevel=_user_stacklevel())
+        else:
+            data = initial_rves(self.parameters, n_points, self.progress)
         self.backend = self._backend(data)
         self._reset_state(n_points)
         if self.parameters.isotropic:
@@ -345,12 +369,17 @@ class DEMMaterial(ScikitFemInterface):
             return
         ok = response.status == PointStatus.OK
         pressure = -0.5 * np.trace(response.stress, axis1=1, axis2=2)
-        loose = np.flatnonzero(ok & (pressure < UNCONFINED_FRACTION * self.confining))
+        scale: float | np.ndarray = self.confining
+        named = f"{self.confining:g} Pa"
+        if self.preparation is not None:  # each point's own initial mean pressure
+            scale = -0.5 * np.trace(self.preparation.prepared, axis1=1, axis2=2)
+            named = "its initial mean pressure"
+        loose = np.flatnonzero(ok & (pressure < UNCONFINED_FRACTION * scale))
         if loose.size:
             self._warned_unconfined = True
             warnings.warn(
                 f"{loose.size} of {len(pressure)} DEM points have lost their confinement "
-                f"(mean pressure below {UNCONFINED_FRACTION:.0%} of {self.confining:g} Pa, "
+                f"(mean pressure below {UNCONFINED_FRACTION:.0%} of {named}, "
                 f"e.g. {pressure[loose[0]]:.3g} Pa at point {loose[0]}): an unconfined RVE "
                 "relaxes into a stress-free gas of discs. Apply a confining pressure on the "
                 "boundary of the specimen (see docs/guide/scikit-fem.md)",

@@ -7,8 +7,9 @@
   discs from a seed) and whether they are first relaxed to an isotropic stress; the part a
   run specification and a Python material share.
 - :class:`DEMMaterialParameters`: those plus what a material built in Python is told
-  directly and a run takes from its problem and its ``[run]`` fields (the confining pressure,
-  replication, device, CPU shards, backend, the packings' material).
+  directly and a run takes from its problem and its ``[run]`` fields (the confining pressure
+  or the initial stress of every point, replication, device, CPU shards, backend, the
+  packings' material).
 
 The run specification's own :class:`~granular_material.multiscale.run_hooks.DEMParameters`
 extends :class:`DEMRVEs` in the same way. Every check is made here, once, as a
@@ -22,10 +23,13 @@ from dataclasses import dataclass, field
 from numbers import Real
 from pathlib import Path
 
+import numpy as np
+
 from granular_material.dem import resolve_device
 from granular_material.dem.tangents import TangentMethod, tangent_method
 from granular_material.errors import ParameterError
 from granular_material.procedures.packing import PackingParameters, min_discs
+from granular_material.procedures.servo import check_stress_targets
 from granular_material.procedures.strain_path import DEFAULT_MAX_DEM_STEPS, DEFAULT_STRAIN_PER_STEP
 from granular_material.reference_values import DEFAULT_DISCS, DEFAULT_PRESSURE
 
@@ -166,6 +170,22 @@ class DEMMaterialParameters(DEMRVEs):
         packing: the material of prepared RVEs (contact law, friction, damping, density,
             thickness) and how they are packed (radii, target void ratio e0); ignored with
             ``rve`` (the file carries its own). Default: Wu et al.'s Table 1.
+        initial_stress: None (the RVEs start at the isotropic ``confining``), or the stress
+            tensor σ* [Pa] every Gauss point starts at (a geostatic σv, σh = K0·σv, say):
+            shape (n, 2, 2), tension positive, symmetric, both principal stresses < 0, n the
+            points :meth:`~granular_material.multiscale.DEMMaterial.allocate` is given
+            (checked there). Kept as nested tuples (the parameters compare and hash);
+            :attr:`initial_stress_array` is the array. Each point's RVE (prepared, or the
+            file's) is brought to its σ* (every component within 2 % of its σv, the shear
+            included: :func:`~granular_material.procedures.servo.servo_to_stress`); targets
+            below :func:`~granular_material.procedures.anisotropic.lowest_target_pressure`
+            are clamped to it (see :mod:`granular_material.procedures.anisotropic`). Does
+            not combine with ``isotropic``.
+        share_tolerance: with ``initial_stress``: None, one RVE per point (independent
+            packings unless ``replicate``); a fraction s >= 0: points whose targets agree
+            within s of their σv share one preparation, brought to the midrange of their
+            targets (each point's target then missed by at most s/2 of its σv more;
+            :func:`~granular_material.procedures.anisotropic.group_targets`).
     """
 
     confining: float = DEFAULT_PRESSURE
@@ -174,10 +194,13 @@ class DEMMaterialParameters(DEMRVEs):
     shards: int | None = None
     backend: str = "inprocess"
     packing: PackingParameters = field(default_factory=PackingParameters)
+    initial_stress: tuple[tuple[tuple[float, float], tuple[float, float]], ...] | None = None
+    share_tolerance: float | None = None
 
     def __post_init__(self) -> None:
         super().__post_init__()
         _one_of("backend", self.backend, BACKENDS)
+        self._check_initial_stress()
         if self.shards is not None:
             _count("shards", self.shards, 1, " or None")
         if not isinstance(self.packing, PackingParameters):
@@ -194,6 +217,40 @@ class DEMMaterialParameters(DEMRVEs):
                                               f"{self.confining!r}")
         if self.device is not None:
             resolve_device(self.device)  # the engine's one device check
+
+    def _check_initial_stress(self) -> None:
+        """``initial_stress`` as nested tuples of compressive symmetric tensors, and
+        ``share_tolerance``; ParameterErrors naming them."""
+        share = self.share_tolerance
+        if share is not None and not (isinstance(share, Real) and math.isfinite(share)
+                                      and share >= 0):
+            raise ParameterError("share_tolerance", f"must be None or a finite fraction >= 0, "
+                                                    f"got {share!r}")
+        if self.initial_stress is None:
+            return
+        if self.isotropic:
+            raise ParameterError("initial_stress", "does not combine with isotropic (which "
+                                                   "relaxes every RVE to -confining I)")
+        try:
+            given = np.asarray(self.initial_stress, dtype=np.float64)
+        except (TypeError, ValueError) as exc:
+            raise ParameterError("initial_stress", f"must be an array of shape (n, 2, 2) "
+                                                   f"[Pa]: {exc}") from None
+        if given.ndim != 3 or given.shape[1:] != (2, 2) or given.shape[0] < 1:
+            raise ParameterError("initial_stress", f"must be an array of shape (n, 2, 2) [Pa], "
+                                                   f"one tensor per Gauss point, got shape "
+                                                   f"{given.shape}")
+        check_stress_targets(given, len(given), "initial_stress")
+        object.__setattr__(self, "initial_stress",
+                           tuple(tuple(tuple(float(v) for v in row) for row in tensor)
+                                 for tensor in given))
+
+    @property
+    def initial_stress_array(self) -> np.ndarray | None:
+        """``initial_stress`` as an array (n, 2, 2) [Pa], or None."""
+        if self.initial_stress is None:
+            return None
+        return np.array(self.initial_stress, dtype=np.float64)
 
     @property
     def discs(self) -> int:
