@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+import textwrap
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -46,17 +47,24 @@ def calibration_toml(calibration: Calibration) -> str:
     lines = ["# Mohr–Coulomb parameters calibrated from drained biaxial DEM tests",
              "# (granular-material calibrate); the readings in full: calibration.json",
              f"# RVE file: {c.source}", f"# confining pressure P = {c.pressure:g} Pa",
-             "# test: " + ", ".join(f"{k} = {v}" for k, v in c.settings.items()),
+             *textwrap.wrap("test: " + ", ".join(f"{k} = {v}" for k, v in c.settings.items()),
+                            92, initial_indent="# ", subsequent_indent="#   "),
              "# each value: the mean over the RVEs; ± their standard deviation, [min, max];",
              "# windows in axial strain (engineering, compression positive)"]
-    lines += [f"# note: {note}" for note in c.notes]
+    for note in c.notes:
+        lines += textwrap.wrap(f"note: {note}", 92, initial_indent="# ",
+                               subsequent_indent="#   ")
     for name, unit in PARAMETER_UNITS.items():
         r = c.readings[name]
         lo, hi = min(w[0] for w in r.windows), max(w[1] for w in r.windows)
-        lines += ["", f"# {name} [{unit}]: {r.method}",
+        lines += ["", *textwrap.wrap(f"{name} [{unit}]: {r.method}", 92,
+                                     initial_indent="# ", subsequent_indent="#   "),
                   f"#   read {r.value:.6g} ± {r.std:.3g} [{r.min:.6g}, {r.max:.6g}] over "
-                  f"{len(r.per_rve)} RVE(s), axial strain {lo:.4g} to {hi:.4g}",
-                  f"{name} = {float(c.parameters[name])!r}"]
+                  f"{len(r.per_rve)} RVE(s), axial strain {lo:.4g} to {hi:.4g}"]
+        if name == "phi_cs" and c.material_keywords()["critical_friction_angle"] is None:
+            lines.append("# phi_cs left out: no softening read (φcs = φ)")
+        else:
+            lines.append(f"{name} = {float(c.parameters[name])!r}")
     return "\n".join(lines) + "\n"
 
 

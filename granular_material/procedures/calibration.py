@@ -12,10 +12,11 @@ Three parts, each usable alone:
 
 Strains are read as logarithmic strains of the cell, compression positive:
 ε1 = −ln(1 − εa), ε3 = −ln(1 + εlat), εv = ε1 + ε3 (the DEM test moves the cell in equal
-logarithmic steps, and the point driver hands the material those same logarithmic
-increments). Stresses are compression positive in the readings: σ1 = −σyy and σ3 = −σxx on
-the axes for the elastic constants; the friction angles use the principal stresses (the
-RVE's own shear stress σxy included), R = σ1/σ3 their ratio.
+logarithmic steps, and the point driver moves its point the same way, ∇u on the committed
+configuration, as the FEM hands it to a finite-strain material). Stresses are compression
+positive in the readings: σ1 = −σyy and σ3 = −σxx on the axes for the elastic constants;
+the friction angles use the principal stresses (the RVE's own shear stress σxy included),
+R = σ1/σ3 their ratio.
 """
 
 from __future__ import annotations
@@ -114,10 +115,12 @@ class Calibration:
         """The keywords of ``MohrCoulomb`` for these parameters at the pressure P
         (``initial_stress`` −P)."""
         p = self.parameters
+        softens = p["softening_strain"] > 0 and p["phi_cs"] < p["phi"]
         return {"young": p["E"], "poisson": p["nu"], "friction_angle": p["phi"],
                 "dilation_angle": p["psi"], "cohesion": p["cohesion"],
-                "critical_friction_angle": p["phi_cs"],
-                "softening_strain": p["softening_strain"], "initial_stress": -self.pressure}
+                "critical_friction_angle": p["phi_cs"] if softens else None,
+                "softening_strain": p["softening_strain"] if softens else 0.0,
+                "initial_stress": -self.pressure}
 
     def as_dict(self) -> dict[str, Any]:
         """JSON-able: parameters, readings, pressure, source, settings and notes."""
@@ -303,6 +306,12 @@ def read_parameters(curve: pd.DataFrame, pressure: float,
     if parameters["phi_cs"] > parameters["phi"]:  # no softening: the peak is the end
         parameters["phi_cs"] = parameters["phi"]
         all_notes.append("φcs read above φ (no descent): φcs = φ")
+    if parameters["psi"] < 0:
+        parameters["psi"] = 0.0
+        all_notes.append(f"ψ read below 0 ({readings['psi'].value:.3g}°, contraction at the "
+                         "peak): ψ = 0")
+    if parameters["softening_strain"] <= 0 or parameters["phi_cs"] >= parameters["phi"]:
+        parameters["softening_strain"], parameters["phi_cs"] = 0.0, parameters["phi"]
     if parameters["psi"] > parameters["phi"]:
         parameters["psi"] = parameters["phi"]
         all_notes.append(f"ψ read above φ ({readings['psi'].value:.3g}°): ψ = φ "
@@ -324,14 +333,16 @@ def drained_point_curve(material: Any, pressure: float, axial_strain: float,
 
     Each increment shortens the axis y by the same logarithmic strain (n increments of at
     most ``strain_per_increment`` ending at the engineering ``axial_strain``, compression
-    positive) and solves the lateral ∂u_x/∂x for σxx = −``pressure`` [Pa] by Newton's
-    method on the material's tangent D_xxxx (``|σxx + P| ≤ tolerance·P``), then commits.
+    positive), as the DEM test moves its cell: ∇u on the committed configuration,
+    ∂u_y/∂y = exp(−Δ) − 1; it solves the lateral ∂u_x/∂x for σxx = −``pressure`` [Pa] by
+    Newton's method on the material's tangent D_xxxx (``|σxx + P| ≤ tolerance·P``), then
+    commits.
     The material's starting stress is its own (a Mohr–Coulomb or linear-elastic material
     made with ``initial_stress = −P`` starts on the path).
 
     Returns the table of :func:`~granular_material.procedures.biaxial_test` (``rve`` 0,
     ``step`` the increment, ``axial_strain``, ``lateral_strain``, ``volumetric_strain`` of
-    the stretches exp(Σ∇u), ``sxx``, ``syy``, ``sxy`` [Pa], ``stress_ratio`` syy/sxx) and
+    the stretches Π(1 + ∇u), ``sxx``, ``syy``, ``sxy`` [Pa], ``stress_ratio`` syy/sxx) and
     ``iterations`` (Newton's per increment). ``RuntimeError`` when a point fails or the
     lateral strain does not converge.
     """
@@ -344,7 +355,7 @@ def drained_point_curve(material: Any, pressure: float, axial_strain: float,
                              f"must be a positive number, got {strain_per_increment!r}")
     log_total = -math.log1p(-axial_strain)
     n = math.ceil(log_total / strain_per_increment)
-    step_y = -log_total / n
+    step_y = math.expm1(-log_total / n)  # ∇u_yy of one increment on the committed cell
     material.allocate(1)
     ex = ey = 0.0
     gx = 0.0
@@ -374,7 +385,7 @@ def drained_point_curve(material: Any, pressure: float, axial_strain: float,
             raise RuntimeError(f"σxx not held at −{pressure:g} Pa at increment {step} in "
                                f"{max_iterations} iterations (residual {residual:.3g} Pa)")
         material.commit()
-        ex, ey = ex + gx, ey + step_y
+        ex, ey = ex + math.log1p(gx), ey + math.log1p(step_y)
         record(step, response.stress[0], iteration)
     return pd.DataFrame(rows)
 
