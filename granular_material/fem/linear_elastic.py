@@ -9,7 +9,14 @@ from typing import Any
 
 import numpy as np
 
-from granular_material.fem.material import MaterialResponse, PointStatus, ScikitFemInterface
+from granular_material.errors import ParameterError
+from granular_material.fem.material import (
+    FailureReason,
+    MaterialResponse,
+    PointStatus,
+    ScikitFemInterface,
+)
+from granular_material.filesafe import write_whole
 
 __all__ = ["LinearElastic", "LinearElasticParameters", "LinearElasticRunParameters",
            "isotropic_tangent"]
@@ -17,28 +24,63 @@ __all__ = ["LinearElastic", "LinearElasticParameters", "LinearElasticRunParamete
 _I2 = np.eye(2)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class LinearElasticParameters:
     """Parameters of :class:`LinearElastic`.
 
     Attributes:
         young: Young's modulus E [Pa], > 0.
         poisson: Poisson's ratio ν [-], in (-1, 0.5).
-        initial_stress: isotropic stress at zero strain [Pa], tension positive (e.g.
-            ``-100e3`` for a specimen consolidated to 100 kPa).
+        initial_stress: stress at zero strain [Pa], tension positive: a number (the
+            isotropic σ0 I, e.g. ``-100e3`` for a specimen consolidated to 100 kPa), a
+            (2, 2) tensor for every point, or one (n, 2, 2) tensor per Gauss point (a
+            geostatic state, :func:`granular_material.fem.geostatic.geostatic_stress`);
+            tensors must be finite and symmetric and are kept as a read-only float64 copy.
+            Two parameter sets are equal when their moduli and initial stresses are.
     """
 
     young: float = 60.0e6
     poisson: float = 0.3
-    initial_stress: float = 0.0
+    initial_stress: float | np.ndarray = 0.0
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.young) and self.young > 0):
-            raise ValueError(f"young must be a positive number of Pa, got {self.young!r}")
+            raise ParameterError("young", f"must be a positive number of Pa, got {self.young!r}")
         if not (math.isfinite(self.poisson) and -1.0 < self.poisson < 0.5):
-            raise ValueError(f"poisson must lie in (-1, 0.5), got {self.poisson!r}")
-        if not math.isfinite(self.initial_stress):
-            raise ValueError(f"initial_stress must be finite, got {self.initial_stress!r}")
+            raise ParameterError("poisson", f"must lie in (-1, 0.5), got {self.poisson!r}")
+        if np.ndim(self.initial_stress) == 0:
+            if not math.isfinite(self.initial_stress):
+                raise ParameterError("initial_stress", f"must be finite, got "
+                                                       f"{self.initial_stress!r}")
+            return
+        sigma = np.array(self.initial_stress, dtype=np.float64)
+        if sigma.shape != (2, 2) and (sigma.ndim != 3 or sigma.shape[1:] != (2, 2)):
+            raise ParameterError("initial_stress", "must be a number, a (2, 2) tensor or an "
+                                                   f"(n, 2, 2) array [Pa], got shape {sigma.shape}")
+        if not np.isfinite(sigma).all():
+            raise ParameterError("initial_stress", "must be finite everywhere")
+        skew = np.abs(sigma[..., 0, 1] - sigma[..., 1, 0])
+        if np.any(skew > 1e-9 * max(float(np.abs(sigma).max()), 1.0)):
+            raise ParameterError("initial_stress", "must be symmetric (a Cauchy stress): "
+                                                   f"σ_xy − σ_yx up to {skew.max():.3g} Pa")
+        sigma.setflags(write=False)
+        object.__setattr__(self, "initial_stress", sigma)
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, LinearElasticParameters):
+            return NotImplemented
+        a, b = self.initial_stress, other.initial_stress
+        same = (np.ndim(a) == np.ndim(b) == 0 and a == b) or (
+            np.ndim(a) > 0 and np.ndim(b) > 0 and np.array_equal(a, b))
+        return bool(self.young == other.young and self.poisson == other.poisson and same)
+
+    __hash__ = None  # type: ignore[assignment]  # equal by value, holding an array
+
+    @property
+    def per_point(self) -> int | None:
+        """The number of points an (n, 2, 2) initial stress is given for, else None."""
+        sigma = self.initial_stress
+        return int(sigma.shape[0]) if np.ndim(sigma) == 3 else None
 
     @property
     def lame(self) -> tuple[float, float]:
@@ -93,15 +135,22 @@ class LinearElastic(ScikitFemInterface):
     Args:
         young: Young's modulus E [Pa], > 0 (default 60 MPa); ``E`` is the same.
         poisson: Poisson's ratio ν [-], in (−1, 0.5) (default 0.3); ``nu`` is the same.
-        initial_stress: isotropic stress σ0 at zero strain [Pa], tension positive (e.g.
-            ``-100e3`` for a specimen consolidated to 100 kPa; default 0).
+        initial_stress: stress at zero strain [Pa], tension positive: a number σ0 (the
+            isotropic σ0 I, e.g. ``-100e3`` for a specimen consolidated to 100 kPa; default
+            0), a (2, 2) tensor, or an (n, 2, 2) array, one per Gauss point (checked
+            against n at :meth:`allocate`).
+
+    A point whose ∇u is not finite fails (``PointStatus.FAILED``,
+    ``FailureReason.NON_FINITE_INPUT``): it keeps its committed strain, so its stress is the
+    committed one (never NaN), and a ``commit`` keeps it there.
     """
 
     #: the parameters of the material in a run specification
     Parameters = LinearElasticRunParameters
 
     def __init__(
-        self, young: float = 60.0e6, poisson: float = 0.3, initial_stress: float = 0.0,
+        self, young: float = 60.0e6, poisson: float = 0.3,
+        initial_stress: float | np.ndarray = 0.0,
         *, E: float | None = None, nu: float | None = None,
     ) -> None:
         if E is not None:
@@ -130,10 +179,22 @@ class LinearElastic(ScikitFemInterface):
         """Committed total strain [-], shape (n, 2, 2), float64 (a copy)."""
         return self._strain.copy()
 
+    @property
+    def initial_stress(self) -> float | np.ndarray:
+        """The stress at zero strain [Pa], as given (a number, (2, 2) or (n, 2, 2))."""
+        return self.parameters.initial_stress
+
+    def _check_points(self, n_points: int) -> None:
+        given = self.parameters.per_point
+        if given is not None and given != n_points:
+            raise ParameterError("initial_stress", f"holds {given} points' stresses, the "
+                                                   f"material has {n_points} Gauss points")
+
     def allocate(self, n_points: int) -> None:
-        """Start ``n_points`` points at zero strain."""
+        """Start ``n_points`` points at zero strain (at the initial stress)."""
         if n_points < 1:
             raise ValueError(f"n_points must be >= 1, got {n_points}")
+        self._check_points(n_points)
         self._strain = np.zeros((n_points, 2, 2))
         self._trial = None
         self._track_allocate(n_points)
@@ -142,16 +203,28 @@ class LinearElastic(ScikitFemInterface):
         """σ [Pa] (n, 2, 2) and C [Pa] (n, 2, 2, 2, 2) for ∇u [-] (n, 2, 2) since the
         commit (the increment; ``response`` takes totals)."""
         grad_u = _check_grad(grad_u, self.n_points)
+        n = self.n_points
+        finite = np.isfinite(grad_u).all(axis=(1, 2))
+        status = np.full(n, PointStatus.OK, dtype=np.int8)
+        reasons = None
+        if not finite.all():  # those points stay where they were committed
+            grad_u = np.where(finite[:, None, None], grad_u, 0.0)
+            status[~finite] = PointStatus.FAILED
+            reasons = np.where(finite, FailureReason.NONE.value,
+                               FailureReason.NON_FINITE_INPUT.value)
         self._track_evaluate(grad_u)
         strain = self._strain + 0.5 * (grad_u + np.swapaxes(grad_u, 1, 2))
         stress = np.einsum("ijkl,nkl->nij", self._tangent, strain)
-        stress += self.parameters.initial_stress * _I2
+        sigma0 = self.parameters.initial_stress
+        if np.ndim(sigma0) == 0:
+            stress += sigma0 * _I2
+        else:
+            stress += sigma0
         self._trial = strain
-        n = self.n_points
         return MaterialResponse(
             stress=stress,
             tangent=np.broadcast_to(self._tangent, (n, 2, 2, 2, 2)).copy(),
-            status=np.full(n, PointStatus.OK, dtype=np.int8),
+            status=status, reasons=reasons,
         )
 
     def commit(self) -> None:
@@ -167,22 +240,34 @@ class LinearElastic(ScikitFemInterface):
         self._track_revert()
 
     def checkpoint(self, path: str | Path) -> None:
-        """Write the committed strain, total ∇u and the parameters to ``path`` (.npz)."""
+        """Write the committed strain, total ∇u and the parameters (the initial stress as
+        given: a number or its array) to ``path`` (.npz), whole or not at all (a temporary
+        file renamed into place: a failed write keeps the previous file)."""
         p = self.parameters
-        with open(path, "wb") as fh:
-            np.savez(fh, strain=self._strain, young=p.young, poisson=p.poisson,
-                     initial_stress=p.initial_stress, grad_u=self.committed_grad_u)
+        arrays = {"strain": self._strain, "young": p.young, "poisson": p.poisson,
+                  "initial_stress": np.asarray(p.initial_stress),
+                  "grad_u": self.committed_grad_u}
+
+        def write(tmp: Path) -> None:
+            with open(tmp, "wb") as fh:
+                np.savez(fh, **arrays)
+
+        write_whole(path, write)
 
     def restore(self, path: str | Path) -> None:
         """Read a checkpoint; its parameters must match this material's."""
         with np.load(path) as data:
+            sigma0 = data["initial_stress"]
             saved = LinearElasticParameters(
-                float(data["young"]), float(data["poisson"]), float(data["initial_stress"])
+                float(data["young"]), float(data["poisson"]),
+                float(sigma0) if sigma0.ndim == 0 else np.array(sigma0, dtype=np.float64),
             )
             if saved != self.parameters:
                 raise ValueError(f"{path}: checkpoint parameters {saved} differ from "
                                  f"{self.parameters}")
-            self._strain = np.array(data["strain"], dtype=np.float64)
+            strain = np.array(data["strain"], dtype=np.float64)
+            self._check_points(strain.shape[0])
+            self._strain = strain
             self._track_allocate(self._strain.shape[0])
             if "grad_u" in data:  # checkpoints before the total form hold none
                 self._committed_grad = np.array(data["grad_u"], dtype=np.float64)
