@@ -1,0 +1,72 @@
+"""Initial stress states per Gauss point: geostatic (self-weight and a surcharge) or uniform.
+
+Tension positive, Pa, batch-first (n, 2, 2), plane strain (the 2D stress only).
+
+Geostatic: σ_yy = −(q + γ (y_s − y)), σ_xx = K0 σ_yy, σ_xy = 0 at a point of height y [m]
+below the surface y_s [m], for a surcharge q [Pa] and a unit weight γ [N/m³] (both
+compression positive). This field is in equilibrium with the body force −γ e_y and the
+surcharge on a horizontal surface (div σ = (0, γ)); with rollers on vertical sides and a
+fixed or rollered base it is the K0 state of a level ground. A finite-element mesh carries
+it in *discrete* equilibrium (a zero residual at step 0) when its Gauss rule integrates
+∇v : σ and the body force exactly: straight-sided triangles (tri3 with 1 point, tri6 with 3)
+and parallelogram quadrilaterals (quad4, quad8 with 2 × 2, quad9 with 3 × 3).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from granular_material.errors import ParameterError
+
+__all__ = ["geostatic_stress", "uniform_stress"]
+
+
+def _check(name: str, value: float, low: float = 0.0) -> float:
+    if not (math.isfinite(value) and value >= low):
+        raise ParameterError(name, f"must be a finite number >= {low:g}, got {value!r}")
+    return float(value)
+
+
+def geostatic_stress(points_xy: np.ndarray, surface_y: float, unit_weight: float,
+                     surcharge: float = 0.0, k0: float = 1.0) -> np.ndarray:
+    """σ [Pa] (n, 2, 2), tension positive, of the K0 state at the points ``points_xy`` [m]
+    (n, 2): σ_yy = −(q + γ (y_s − y)), σ_xx = K0 σ_yy, no shear.
+
+    Args:
+        points_xy: coordinates [m], shape (n, 2).
+        surface_y: height of the ground surface y_s [m]; every point must lie at or below it.
+        unit_weight: γ [N/m³], >= 0.
+        surcharge: q [Pa] on the surface, compression positive, >= 0.
+        k0: coefficient of earth pressure at rest σ_h/σ_v [-], > 0.
+    """
+    xy = np.asarray(points_xy, dtype=np.float64)
+    if xy.ndim != 2 or xy.shape[1] != 2:
+        raise ParameterError("points_xy", f"must have shape (n, 2), got {xy.shape}")
+    gamma = _check("unit_weight", unit_weight)
+    q = _check("surcharge", surcharge)
+    if not (math.isfinite(k0) and k0 > 0):
+        raise ParameterError("k0", f"must be a positive number, got {k0!r}")
+    if not math.isfinite(surface_y):
+        raise ParameterError("surface_y", f"must be a finite height in m, got {surface_y!r}")
+    depth = surface_y - xy[:, 1]
+    above = depth < -1e-9 * max(1.0, abs(surface_y))
+    if np.any(above):
+        raise ParameterError("surface_y", f"{surface_y!r} m lies below {int(above.sum())} "
+                                          f"points (highest y {xy[:, 1].max():.6g} m)")
+    sigma_v = -(q + gamma * np.maximum(depth, 0.0))
+    out = np.zeros((xy.shape[0], 2, 2))
+    out[:, 1, 1] = sigma_v
+    out[:, 0, 0] = k0 * sigma_v
+    return out
+
+
+def uniform_stress(n: int, p: float) -> np.ndarray:
+    """σ = −p I [Pa] (n, 2, 2) at ``n`` points: the isotropic pressure ``p`` [Pa],
+    compression positive (Guo & Zhao's start: every RVE at the surcharge)."""
+    if int(n) != n or n < 1:
+        raise ParameterError("n", f"must be an integer >= 1, got {n!r}")
+    if not math.isfinite(p):
+        raise ParameterError("p", f"must be a finite pressure in Pa, got {p!r}")
+    return np.broadcast_to(-float(p) * np.eye(2), (int(n), 2, 2)).copy()
