@@ -1,0 +1,453 @@
+"""Plane-strain Mohr–Coulomb elastoplasticity with friction softening and its exact tangent.
+
+The return mapping in principal stresses is in
+:mod:`granular_material.fem.mohr_coulomb_return`; this module holds the state, the
+kinematics (spin of the committed stress, elastic trial), the spectral decomposition of the
+in-plane stress and the assembly of the consistent tangent.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from granular_material.errors import ParameterError
+from granular_material.fem.linear_elastic import isotropic_tangent
+from granular_material.fem.material import (
+    FailureReason,
+    MaterialResponse,
+    PointStatus,
+    ScikitFemInterface,
+)
+from granular_material.fem.mohr_coulomb_return import (
+    ELASTIC,
+    Strength,
+    principal_return,
+    yield_function,
+)
+from granular_material.filesafe import write_whole
+
+__all__ = ["MohrCoulomb", "MohrCoulombParameters", "MohrCoulombRunParameters"]
+
+_I2 = np.eye(2)
+_NAME = "mohr-coulomb"
+
+
+def _number(field: str, value: Any) -> float:
+    try:
+        value = float(value)
+    except (TypeError, ValueError):
+        raise ParameterError(field, f"must be a number, got {value!r}") from None
+    if not math.isfinite(value):
+        raise ParameterError(field, f"must be finite, got {value!r}")
+    return value
+
+
+@dataclass(frozen=True)
+class MohrCoulombParameters:
+    """The constants of :class:`MohrCoulomb` (angles in degrees, stresses in Pa).
+
+    Attributes:
+        young: Young's modulus E [Pa], > 0.
+        poisson: Poisson's ratio ν [-], in (−1, 0.5).
+        friction_angle: peak friction angle φ [°], in (0, 90).
+        dilation_angle: peak dilation angle ψ [°], 0 ≤ ψ ≤ φ.
+        cohesion: c [Pa], ≥ 0.
+        critical_friction_angle: φcs [°], 0 < φcs ≤ φ, or None (no softening).
+        softening_strain: plastic shear strain γp [-] over which φ falls linearly to φcs and
+            ψ to 0 (constant after); > 0 when φcs is given.
+    """
+
+    young: float = 60.0e6
+    poisson: float = 0.3
+    friction_angle: float = 30.0
+    dilation_angle: float = 0.0
+    cohesion: float = 0.0
+    critical_friction_angle: float | None = None
+    softening_strain: float = 0.0
+
+    def __post_init__(self) -> None:
+        for name in ("young", "poisson", "friction_angle", "dilation_angle", "cohesion",
+                     "softening_strain"):
+            object.__setattr__(self, name, _number(name, getattr(self, name)))
+        if self.young <= 0:
+            raise ParameterError("young", f"must be a positive number of Pa, got {self.young!r}")
+        if not -1.0 < self.poisson < 0.5:
+            raise ParameterError("poisson", f"must lie in (-1, 0.5), got {self.poisson!r}")
+        if not 0 < self.friction_angle < 90:
+            raise ParameterError("friction_angle", "must lie in (0, 90) degrees, got "
+                                                   f"{self.friction_angle!r}")
+        if not 0 <= self.dilation_angle <= self.friction_angle:
+            raise ParameterError("dilation_angle", "must lie in [0, friction_angle] degrees, "
+                                                   f"got {self.dilation_angle!r}")
+        if self.cohesion < 0:
+            raise ParameterError("cohesion", f"must be >= 0 Pa, got {self.cohesion!r}")
+        if self.softening_strain < 0:
+            raise ParameterError("softening_strain", "must be >= 0, got "
+                                                     f"{self.softening_strain!r}")
+        if self.critical_friction_angle is not None:
+            phi_cs = _number("critical_friction_angle", self.critical_friction_angle)
+            object.__setattr__(self, "critical_friction_angle", phi_cs)
+            if not 0 < phi_cs <= self.friction_angle:
+                raise ParameterError("critical_friction_angle", "must lie in (0, "
+                                     f"friction_angle] degrees, got {phi_cs!r}")
+            if self.softening_strain <= 0:
+                raise ParameterError("softening_strain", "must be > 0 when "
+                                     "critical_friction_angle is given, got "
+                                     f"{self.softening_strain!r}")
+
+    @property
+    def lame(self) -> tuple[float, float]:
+        """Lamé constants (λ, μ) [Pa]."""
+        e, nu = self.young, self.poisson
+        return e * nu / ((1 + nu) * (1 - 2 * nu)), e / (2 * (1 + nu))
+
+    def strength(self) -> Strength:
+        """The constants of the return mapping (radians)."""
+        lam, mu = self.lame
+        phi_cs = (self.friction_angle if self.critical_friction_angle is None
+                  else self.critical_friction_angle)
+        return Strength(mu, lam, math.radians(self.friction_angle),
+                        math.radians(self.dilation_angle), self.cohesion,
+                        math.radians(phi_cs),
+                        self.softening_strain if self.critical_friction_angle is not None
+                        else 0.0)
+
+
+@dataclass(frozen=True, kw_only=True)
+class MohrCoulombRunParameters:
+    """The material of a run specification (its initial stress is the run's confining
+    pressure): ``E`` [Pa], ``nu`` [-], ``phi``, ``psi``, ``phi_cs`` [°], ``cohesion`` [Pa],
+    ``softening_strain`` [-] (see :class:`MohrCoulombParameters`)."""
+
+    E: float = 60.0e6
+    nu: float = 0.3
+    phi: float = 30.0
+    psi: float = 0.0
+    cohesion: float = 0.0
+    phi_cs: float | None = None
+    softening_strain: float = 0.0
+
+
+class MohrCoulomb(ScikitFemInterface):
+    """Plane-strain Mohr–Coulomb material: linear isotropic elasticity, the full hexagon on
+    the principal stresses (the in-plane pair and the out-of-plane σzz, tracked), a
+    non-associated potential (ψ), friction softening with the plastic shear strain γp.
+
+    Kinematics (as the DEM material under finite strain): ``evaluate(G)`` takes G = ∇u, the
+    increment since the last commit on the committed configuration. The committed stress is
+    spun by W = skw G to first order, σrot = σn + W σn − σn W (σzz unchanged), then the
+    elastic trial σtr = σrot + C : sym G, σzz,tr = σzz,n + λ tr sym G, then the implicit
+    return in principal stresses
+    (:func:`~granular_material.fem.mohr_coulomb_return.principal_return`).
+    The tangent D_ijkl = ∂σ_ij/∂G_kl [Pa] is the exact derivative of that whole map: the
+    return's algorithmic Jacobian, the rotation of the in-plane principal directions (with
+    its limit at equal eigenvalues) and the spin term.
+
+    Signs: tension positive; the plastic shear strain γp = ε1p − ε3p ≥ 0 and, on the face,
+    the plastic volumetric strain (tension positive: dilation > 0) grows as
+    dεvp/dγp = sin ψ (−sin ψ with compression positive).
+
+    With c = 0 the apex is the origin: a point returned there (e.g. pulled into tension) is
+    stress-free with status OK and a zero tangent; it has no strength there.
+
+    Failures: a non-finite ∇u fails its point (``non_finite_input``), a local Newton that
+    does not converge fails it (``failed``); a failed point answers its committed stress and
+    the elastic tangent, never NaN. :meth:`commit` refuses an evaluation with failed points
+    (RuntimeError) and keeps the committed state.
+
+    Args:
+        young, poisson, friction_angle, dilation_angle, cohesion, critical_friction_angle,
+            softening_strain: see :class:`MohrCoulombParameters`; ``E`` and ``nu`` are
+            aliases of ``young`` and ``poisson``.
+        initial_stress: the stress at allocation [Pa], tension positive: a number
+            (isotropic), a (2, 2) array (every point) or an (n, 2, 2) array (per Gauss
+            point, checked at :meth:`allocate`).
+        initial_stress_zz: σzz at allocation [Pa]: a number or an (n,) array; default the
+            initial σxx (a geostatic K0 state has both horizontal stresses K0·σv).
+    """
+
+    #: the parameters of the material in a run specification
+    Parameters = MohrCoulombRunParameters
+
+    def __init__(
+        self, young: float = 60.0e6, poisson: float = 0.3, friction_angle: float = 30.0,
+        dilation_angle: float = 0.0, cohesion: float = 0.0,
+        critical_friction_angle: float | None = None, softening_strain: float = 0.0,
+        initial_stress: float | np.ndarray = 0.0,
+        initial_stress_zz: float | np.ndarray | None = None,
+        *, E: float | None = None, nu: float | None = None,
+    ) -> None:
+        self.parameters = MohrCoulombParameters(
+            young if E is None else E, poisson if nu is None else nu, friction_angle,
+            dilation_angle, cohesion, critical_friction_angle, softening_strain)
+        self._strength = self.parameters.strength()
+        lam, mu = self.parameters.lame
+        self._lam = lam
+        self._c = isotropic_tangent(lam, mu)
+        self._initial = _initial_array("initial_stress", initial_stress, (2, 2))
+        if self._initial.ndim >= 2 and not np.allclose(
+                self._initial, np.swapaxes(self._initial, -1, -2), rtol=0, atol=1e-9 * (
+                    1 + np.abs(self._initial).max())):
+            raise ParameterError("initial_stress", "must be symmetric")
+        self._initial_zz = (None if initial_stress_zz is None
+                            else _initial_array("initial_stress_zz", initial_stress_zz, ()))
+        self._stress = np.zeros((0, 2, 2))
+        self._zz = np.zeros(0)
+        self._gamma = np.zeros(0)
+        self._yielding = np.zeros(0, dtype=bool)
+        self._trial: tuple[np.ndarray, ...] | None = None
+        self._trial_failed = np.zeros(0, dtype=bool)
+
+    @staticmethod
+    def for_run(parameters: MohrCoulombRunParameters, context: Any) -> MohrCoulomb:
+        """The material of a run: isotropic at the run's confining pressure (a
+        :class:`~granular_material.runs.context.RunContext`), not yet allocated."""
+        return MohrCoulomb(young=parameters.E, poisson=parameters.nu,
+                           friction_angle=parameters.phi, dilation_angle=parameters.psi,
+                           cohesion=parameters.cohesion,
+                           critical_friction_angle=parameters.phi_cs,
+                           softening_strain=parameters.softening_strain,
+                           initial_stress=-context.confining)
+
+    # -- read-only state -------------------------------------------------------------
+    @property
+    def n_points(self) -> int:
+        """Number of Gauss points allocated."""
+        return int(self._stress.shape[0])
+
+    @property
+    def stress(self) -> np.ndarray:
+        """Committed in-plane Cauchy stress [Pa], (n, 2, 2) (a copy)."""
+        return self._stress.copy()
+
+    @property
+    def stress_zz(self) -> np.ndarray:
+        """Committed out-of-plane stress σzz [Pa], (n,) (a copy)."""
+        return self._zz.copy()
+
+    @property
+    def plastic_shear_strain(self) -> np.ndarray:
+        """Committed plastic shear strain γp [-], (n,) (a copy)."""
+        return self._gamma.copy()
+
+    @property
+    def yielding(self) -> np.ndarray:
+        """Whether each point yielded in the last committed increment, (n,) bool."""
+        return self._yielding.copy()
+
+    @property
+    def friction_angle_now(self) -> np.ndarray:
+        """Friction angle after softening at the committed γp [°], (n,)."""
+        return np.degrees(self._strength.angles(self._gamma)[0])
+
+    # -- protocol --------------------------------------------------------------------
+    def allocate(self, n_points: int) -> None:
+        """Start ``n_points`` points at the initial stress, γp = 0; ParameterError when an
+        initial stress has the wrong shape or lies outside the yield surface."""
+        if n_points < 1:
+            raise ValueError(f"n_points must be >= 1, got {n_points}")
+        stress = _per_point("initial_stress", self._initial, n_points, (2, 2))
+        zz = (stress[:, 0, 0].copy() if self._initial_zz is None
+              else _per_point("initial_stress_zz", self._initial_zz, n_points, ()))
+        principal, _, _ = _principal(stress, zz)
+        principal = -np.sort(-principal, axis=1)
+        f = yield_function(principal, self._strength.phi, self._strength.cohesion)
+        tol = 1e-9 * (np.abs(principal).max(axis=1) + self._strength.cohesion + 1.0)
+        outside = np.flatnonzero(f > tol)
+        if outside.size:
+            worst = outside[np.argmax(f[outside])]
+            raise ParameterError("initial_stress", (
+                f"lies outside the Mohr-Coulomb surface at {outside.size} of {n_points} "
+                f"points; the worst, point {worst}, has f = {f[worst]:.6g} Pa (principal "
+                f"stresses {principal[worst].tolist()} Pa)"))
+        self._stress, self._zz = stress, zz
+        self._gamma = np.zeros(n_points)
+        self._yielding = np.zeros(n_points, dtype=bool)
+        self._trial = None
+        self._track_allocate(n_points)
+
+    def evaluate(self, grad_u: np.ndarray) -> MaterialResponse:
+        """σ [Pa] (n, 2, 2) and D = ∂σ/∂∇u [Pa] (n, 2, 2, 2, 2) for ∇u [-] (n, 2, 2), the
+        increment since the last commit on the committed configuration."""
+        n = self.n_points
+        if n == 0:
+            raise RuntimeError("allocate() the material before evaluate()")
+        grad = np.asarray(grad_u, dtype=np.float64)
+        if grad.shape != (n, 2, 2):
+            raise ValueError(f"evaluate() takes grad_u batch-first, shape ({n}, 2, 2) (the "
+                             f"increment since the commit), got {grad.shape}")
+        self._track_evaluate(grad)
+        finite = np.isfinite(grad).all(axis=(1, 2))
+        grad = np.where(finite[:, None, None], grad, 0.0)
+        eps = 0.5 * (grad + np.swapaxes(grad, 1, 2))
+        spin = 0.5 * (grad - np.swapaxes(grad, 1, 2))
+        tr = eps[:, 0, 0] + eps[:, 1, 1]
+        s_n = self._stress
+        trial = s_n + spin @ s_n - s_n @ spin + np.einsum("ijkl,nkl->nij", self._c, eps)
+        trial_zz = self._zz + self._lam * tr
+        principal, m_a, m_b = _principal(trial, trial_zz)
+        order = np.argsort(-principal, axis=1, kind="stable")
+        ret = principal_return(np.take_along_axis(principal, order, axis=1), self._gamma,
+                               self._strength)
+        out = np.empty_like(principal)
+        np.put_along_axis(out, order, ret.stress, axis=1)
+        perm = np.zeros((n, 3, 3))
+        np.put_along_axis(perm, order[:, :, None], 1.0, axis=2)  # sorted = perm @ principal
+        jac = np.swapaxes(perm, 1, 2) @ ret.jacobian @ perm
+        stress = out[:, 0, None, None] * m_a + out[:, 1, None, None] * m_b
+        gap = principal[:, 0] - principal[:, 1]
+        close = np.abs(gap) <= 1e-10 * (np.abs(principal).max(axis=1) + 1.0)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            omega = np.where(close, jac[:, 0, 0] - jac[:, 0, 1], (out[:, 0] - out[:, 1]) / gap)
+        tangent = self._tangent(jac, omega, m_a, m_b, s_n)
+        ok = finite & ret.converged
+        ok &= np.isfinite(stress).all(axis=(1, 2)) & np.isfinite(out[:, 2])
+        ok &= np.isfinite(tangent).all(axis=(1, 2, 3, 4))
+        reasons = np.full(n, FailureReason.NONE.value, dtype=object)
+        reasons[~ret.converged] = FailureReason.FAILED.value
+        reasons[~ok & (reasons == "")] = FailureReason.NON_FINITE.value
+        reasons[~finite] = FailureReason.NON_FINITE_INPUT.value
+        gamma, region = ret.gamma, ret.region.copy()
+        if not ok.all():  # failed points answer their committed state and C (+ spin)
+            bad = ~ok
+            stress[bad], out[bad, 2], gamma[bad], region[bad] = (
+                s_n[bad], self._zz[bad], self._gamma[bad], ELASTIC)
+            tangent[bad] = self._tangent(
+                np.broadcast_to(np.eye(3), (n, 3, 3)), np.ones(n), m_a, m_b, s_n)[bad]
+        self._trial = (stress.copy(), out[:, 2].copy(), gamma.copy(), region != ELASTIC)
+        self._trial_failed = ~ok
+        status = np.where(ok, PointStatus.OK, PointStatus.FAILED).astype(np.int8)
+        fields = {"stress_zz": out[:, 2].copy(), "plastic_shear_strain": gamma.copy(),
+                  "friction_angle": np.degrees(self._strength.angles(gamma)[0]),
+                  "return_region": region.astype(np.float64)}
+        return MaterialResponse(stress=stress, tangent=tangent, status=status,
+                                costs={"return_iterations": ret.iterations}, fields=fields,
+                                reasons=reasons)
+
+    def _tangent(self, jac: np.ndarray, omega: np.ndarray, m_a: np.ndarray, m_b: np.ndarray,
+                 s_n: np.ndarray) -> np.ndarray:
+        """D = ∂σ/∂G [Pa] (n, 2, 2, 2, 2) from the principal Jacobian ``jac`` (n, 3, 3) in
+        the order (a, b, zz), the spectral factor ``omega`` (n,), the eigenprojections and
+        the committed stress (spin term)."""
+        proj = np.stack([m_a, m_b], axis=1)  # (n, 2, 2, 2)
+        sym4 = 0.5 * (np.einsum("ik,jl->ijkl", _I2, _I2) + np.einsum("il,jk->ijkl", _I2, _I2))
+        spectral = (np.einsum("nAB,nAij,nBpq->nijpq", jac[:, :2, :2], proj, proj)
+                    + omega[:, None, None, None, None]
+                    * (sym4 - np.einsum("nAij,nApq->nijpq", proj, proj)))
+        to_zz = np.einsum("nA,nAij->nij", jac[:, :2, 2], proj)
+        # ∂σtr_pq/∂G_kl: elasticity plus the spin of the committed stress
+        spin = 0.5 * (np.einsum("pk,nlq->npqkl", _I2, s_n) - np.einsum("pl,nkq->npqkl", _I2, s_n)
+                      - np.einsum("npk,ql->npqkl", s_n, _I2)
+                      + np.einsum("npl,qk->npqkl", s_n, _I2))
+        d_trial = self._c[None] + spin
+        return (np.einsum("nijpq,npqkl->nijkl", spectral, d_trial)
+                + self._lam * np.einsum("nij,kl->nijkl", to_zz, _I2))
+
+    def commit(self) -> None:
+        """Make the state of the last evaluation the committed state; RuntimeError (and the
+        committed state kept) when that evaluation failed at some point."""
+        if self._trial is None:
+            raise RuntimeError("commit() needs an evaluate() since the last commit/revert")
+        if self._trial_failed.any():
+            bad = np.flatnonzero(self._trial_failed)
+            raise RuntimeError(f"commit() refuses an evaluation that failed at {bad.size} "
+                               f"points (first {bad[:8].tolist()}); revert() it")
+        self._stress, self._zz, self._gamma, self._yielding = self._trial
+        self._trial = None
+        self._track_commit()
+
+    def revert(self) -> None:
+        """Drop the trial state."""
+        self._trial = None
+        self._track_revert()
+
+    def checkpoint(self, path: str | Path) -> None:
+        """Write the committed state (stress, σzz, γp, yielding, total ∇u) and the
+        parameters to ``path`` (.npz), whole or not at all (a temporary file renamed)."""
+        p = asdict(self.parameters)
+        p["critical_friction_angle"] = (np.nan if p["critical_friction_angle"] is None
+                                        else p["critical_friction_angle"])
+        arrays = {"material": np.array(_NAME), "stress": self._stress, "stress_zz": self._zz,
+                  "gamma": self._gamma, "yielding": self._yielding,
+                  "grad_u": self.committed_grad_u, **{f"p_{k}": v for k, v in p.items()}}
+
+        def write(tmp: Path) -> None:
+            with open(tmp, "wb") as fh:
+                np.savez(fh, **arrays)
+        write_whole(path, write)
+
+    def restore(self, path: str | Path) -> None:
+        """Read a :meth:`checkpoint`; ValueError for another material's checkpoint or other
+        parameters (the initial stress is not compared: the state holds the stress)."""
+        with np.load(path, allow_pickle=False) as data:
+            if "material" not in data.files or str(data["material"]) != _NAME:
+                raise ValueError(f"{path} is not a checkpoint of the {_NAME} material")
+            kw = {k[2:]: float(data[k]) for k in data.files if k.startswith("p_")}
+            if math.isnan(kw.get("critical_friction_angle", math.nan)):
+                kw["critical_friction_angle"] = None
+            try:
+                saved = MohrCoulombParameters(**kw)
+            except TypeError as exc:
+                raise ValueError(f"{path}: unreadable parameters ({exc})") from None
+            if saved != self.parameters:
+                raise ValueError(f"{path}: checkpoint parameters {saved} differ from "
+                                 f"{self.parameters}")
+            stress = np.array(data["stress"], dtype=np.float64)
+            n = stress.shape[0]
+            state = (stress, np.array(data["stress_zz"], dtype=np.float64),
+                     np.array(data["gamma"], dtype=np.float64),
+                     np.array(data["yielding"], dtype=bool))
+            grad = np.array(data["grad_u"], dtype=np.float64)
+        shapes = [(n, 2, 2), (n,), (n,), (n,)]
+        if [a.shape for a in state] != shapes or grad.shape != (n, 2, 2) or not all(
+                np.isfinite(a).all() for a in (*state[:3], grad)):
+            raise ValueError(f"{path}: the state's arrays are inconsistent or not finite")
+        self._stress, self._zz, self._gamma, self._yielding = state
+        self._track_allocate(n)
+        self._committed_grad = grad
+        self._trial = None
+
+
+def _principal(stress: np.ndarray, zz: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(principal (n, 3) = (a, b, zz) with a ≥ b the in-plane eigenvalues, the
+    eigenprojections M_a and M_b (n, 2, 2)) of symmetric in-plane stresses."""
+    xx, yy = stress[:, 0, 0], stress[:, 1, 1]
+    xy = 0.5 * (stress[:, 0, 1] + stress[:, 1, 0])
+    mean, radius = 0.5 * (xx + yy), np.hypot(0.5 * (xx - yy), xy)
+    angle = 0.5 * np.arctan2(2 * xy, xx - yy)
+    c, s = np.cos(angle), np.sin(angle)
+    m_a = np.stack([np.stack([c * c, c * s], -1), np.stack([c * s, s * s], -1)], -2)
+    return np.stack([mean + radius, mean - radius, zz], axis=1), m_a, _I2 - m_a
+
+
+def _initial_array(field: str, value: Any, shape: tuple[int, ...]) -> np.ndarray:
+    """A number or an array of ``shape`` or (n, *shape), finite; ParameterError otherwise."""
+    try:
+        array = np.array(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ParameterError(field, f"must be a number or an array, got {value!r}") from None
+    if array.shape not in ((), shape, (array.shape[0] if array.ndim else 0, *shape)):
+        raise ParameterError(field, f"must be a number, shape {shape} or (n, *{shape}), got "
+                                    f"shape {array.shape}")
+    if not np.isfinite(array).all():
+        raise ParameterError(field, "must be finite")
+    return array
+
+
+def _per_point(field: str, array: np.ndarray, n: int, shape: tuple[int, ...]) -> np.ndarray:
+    """``array`` (number, ``shape`` or (n, *shape)) for ``n`` points, shape (n, *shape)."""
+    if array.ndim == 0:
+        base = array * (_I2 if shape == (2, 2) else 1.0)
+        return np.broadcast_to(base, (n, *shape)).copy()
+    if array.shape == shape and shape:
+        return np.broadcast_to(array, (n, *shape)).copy()
+    if array.shape != (n, *shape):
+        raise ParameterError(field, f"has shape {array.shape}, the material has {n} points: "
+                                    f"give a number, {shape} or {(n, *shape)}")
+    return array.copy()
