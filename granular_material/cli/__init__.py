@@ -2,8 +2,9 @@
 
 The core commands are registered here directly: ``prepare``, ``biaxial-dem`` and
 ``dem-drive`` (:mod:`granular_material.cli.dem`), ``single-element`` and ``biaxial``
-(:mod:`granular_material.cli.fem`), and ``run`` (:mod:`granular_material.cli.scene`: one of
-them described by a TOML scene file); their shared options are defined once in
+(:mod:`granular_material.cli.fem`), ``run`` (:mod:`granular_material.cli.scene`: one of
+them described by a TOML scene file), ``trade-study`` (:mod:`granular_material.cli.study`)
+and ``calibrate`` (:mod:`granular_material.cli.calibrate`); their shared options are defined once in
 :mod:`granular_material.cli.options`, the stop signals in :mod:`granular_material.cli.signals`.
 Plugins add sub-commands through the ``granular_material.commands`` entry-point group; each
 entry point is a ``register(subparsers)`` callable that adds its parsers and sets ``func`` (a
