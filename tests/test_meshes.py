@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import meshio
 import numpy as np
 import pytest
 
@@ -247,3 +248,23 @@ def test_rectangle_mesh_sides_and_grading(element):
     np.testing.assert_allclose(basis.dx.sum(), 0.24, rtol=1e-12)
     with pytest.raises(ParameterError, match="grading"):
         rectangle_mesh(1, 1, 2, 2, element, grading=(0.0, 1.0))
+
+
+def test_cell_sets_of_other_formats(tmp_path):
+    # meshio's Abaqus reader keeps element sets as cell sets: lines → boundaries, cells →
+    # subdomains
+    points = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]])
+    none = np.array([], dtype=int)
+    mesh = meshio.Mesh(points, [("line", np.array([[0, 1]])),
+                                ("triangle", np.array([[0, 1, 2], [0, 2, 3]]))],
+                       cell_sets={"bottom": [np.array([0]), none],
+                                  "soil": [none, np.array([0, 1])]})
+    meshio.write(tmp_path / "m.inp", mesh)
+    data = read_mesh(tmp_path / "m.inp")
+    assert data.element == "tri3" and list(data.boundaries) == ["bottom"]
+    np.testing.assert_array_equal(_ends(data, data.boundaries["bottom"])[1], 0.0)
+    assert data.subdomains["soil"].tolist() == [0, 1]
+
+
+def _ends(data, facets):
+    return data.mesh.p[:, data.mesh.facets[:, facets]].reshape(2, -1)

@@ -270,8 +270,9 @@ def _check_rigid_modes(basis: Basis, prescribed: dict[int, tuple[float, int]]) -
 def build_problem(mesh_data: MeshData, conditions: Sequence[Condition],
                   gauss: int | None = None) -> Problem:
     """Basis, loading, Gauss weights and points, and boundary dofs of ``mesh_data`` under
-    ``conditions`` (module docstring); ``gauss`` as :func:`~granular_material.fem.meshes.
-    make_basis` takes it (None: the element's default, tri6 3 points, quad8 2 × 2)."""
+    ``conditions`` (see the module docstring); ``gauss`` as
+    :func:`~granular_material.fem.meshes.make_basis` takes it (None: the element's default,
+    tri6 3 points, quad8 2 × 2)."""
     conditions = tuple(conditions)
     for c in conditions:
         if not isinstance(c, Fixed | Roller | Displacement | RigidBody | Pressure | Gravity):

@@ -8,8 +8,12 @@ compression positive). This field is in equilibrium with the body force −γ e_
 surcharge on a horizontal surface (div σ = (0, γ)); with rollers on vertical sides and a
 fixed or rollered base it is the K0 state of a level ground. A finite-element mesh carries
 it in *discrete* equilibrium (a zero residual at step 0) when its Gauss rule integrates
-∇v : σ and the body force exactly: straight-sided triangles (tri3 with 1 point, tri6 with 3)
-and parallelogram quadrilaterals (quad4, quad8 with 2 × 2, quad9 with 3 × 3).
+∇v : σ det J and the body force exactly. It does for the default rules of straight-sided
+elements: triangles (tri3 with 1 point, tri6 with 3: polynomials of degree 1 and 2) and
+quadrilaterals of any shape (quad4 and quad8 with 2 × 2, quad9 with 3 × 3: with a bilinear
+map, ∇v det J is a polynomial, of degree at most 2 per direction for quad8, times σ of
+degree 1). Measured on 12 × 8 meshes with every interior node moved at random (quad4,
+quad8, quad9) and on Guo & Zhao's footing.msh: ‖R‖/‖f_ext‖ ≤ 5e-15.
 """
 
 from __future__ import annotations
