@@ -7,13 +7,14 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from skfem import MeshQuad1
 
 from granular_material.errors import ParameterError
 from granular_material.fem.boundaries import select_boundaries
 from granular_material.fem.conditions import Fixed, Gravity, Pressure, Roller, build_problem
 from granular_material.fem.geostatic import geostatic_stress, uniform_stress
 from granular_material.fem.linear_elastic import LinearElastic
-from granular_material.fem.meshes import read_mesh, rectangle_mesh
+from granular_material.fem.meshes import MeshData, read_mesh, rectangle_mesh
 from granular_material.fem.newton import NewtonSettings, NewtonSolver
 
 FOOTING = Path("/usr/share/doc/yade/examples/FEMxDEM/footing.msh")
@@ -50,6 +51,11 @@ def _meshes():
                                   origin=(0, -0.4))
     yield "quad9", rectangle_mesh(0.6, 0.4, 5, 3, "quad9", origin=(0, -0.4))
     yield "tri3", rectangle_mesh(0.6, 0.4, 5, 3, "tri3", origin=(0, -0.4))
+    grid = rectangle_mesh(0.6, 0.4, 6, 4, "quad8", origin=(0, -0.4))
+    p = grid.mesh.p.copy()
+    inner = (p[0] > 1e-9) & (p[0] < 0.6 - 1e-9) & (p[1] > -0.4 + 1e-9) & (p[1] < -1e-9)
+    p[:, inner] += np.random.default_rng(3).uniform(-0.02, 0.02, size=(2, int(inner.sum())))
+    yield "quad8-distorted", MeshData(MeshQuad1(p, grid.mesh.t), "quad8", grid.boundaries)
     if FOOTING.exists():
         data = read_mesh(FOOTING)
         yield "footing.msh", select_boundaries(data, {"left": "x = left", "right": "x = right",
@@ -57,7 +63,8 @@ def _meshes():
 
 
 @pytest.mark.parametrize("formulation", ["small-strain", "updated-lagrangian"])
-@pytest.mark.parametrize("name", ["tri6", "quad8", "quad9", "tri3", "footing.msh"])
+@pytest.mark.parametrize("name", ["tri6", "quad8", "quad9", "tri3", "quad8-distorted",
+                                  "footing.msh"])
 def test_geostatic_start_is_in_equilibrium(name, formulation):
     meshes = dict(_meshes())
     if name not in meshes:
