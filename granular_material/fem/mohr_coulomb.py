@@ -25,8 +25,11 @@ from granular_material.fem.material import (
 )
 from granular_material.fem.mohr_coulomb_return import (
     ELASTIC,
+    SYM4,
     Strength,
+    in_plane_principal,
     principal_return,
+    spectral_derivative,
     yield_function,
 )
 from granular_material.filesafe import write_whole
@@ -148,9 +151,16 @@ class MohrCoulomb(ScikitFemInterface):
     return's algorithmic Jacobian, the rotation of the in-plane principal directions (with
     its limit at equal eigenvalues) and the spin term.
 
-    Signs: tension positive; the plastic shear strain γp = ε1p − ε3p ≥ 0 and, on the face,
-    the plastic volumetric strain (tension positive: dilation > 0) grows as
-    dεvp/dγp = sin ψ (−sin ψ with compression positive).
+    Signs: tension positive. The plastic shear strain γp ≥ 0 grows by 2 Σ Δγ^i over the
+    active planes (the principal plastic shear Δε1p − Δε3p on the face; see
+    :mod:`~granular_material.fem.mohr_coulomb_return`); on the face the plastic volumetric
+    strain (tension positive: dilation > 0) grows as dεvp/dγp = sin ψ (−sin ψ with
+    compression positive).
+
+    A response carries ``costs`` ``{"return_iterations": n}`` (local Newton iterations,
+    0 without softening) and ``fields``: ``stress_zz`` [Pa], ``plastic_shear_strain`` [-],
+    ``friction_angle`` [°] (after softening) and ``return_region`` (0 elastic, 1 face,
+    2 edge σ1 = σ2, 3 edge σ2 = σ3, 4 apex).
 
     With c = 0 the apex is the origin: a point returned there (e.g. pulled into tension) is
     stress-free with status OK and a zero tangent; it has no strength there.
@@ -160,10 +170,12 @@ class MohrCoulomb(ScikitFemInterface):
     the elastic tangent, never NaN. :meth:`commit` refuses an evaluation with failed points
     (RuntimeError) and keeps the committed state.
 
+    The constants ``young``, ``poisson``, ``friction_angle``, ``dilation_angle``,
+    ``cohesion``, ``critical_friction_angle`` and ``softening_strain`` are those of
+    :class:`MohrCoulombParameters` (degrees, Pa); ``E`` and ``nu`` are aliases of ``young``
+    and ``poisson``. The run specification's names are :class:`MohrCoulombRunParameters`.
+
     Args:
-        young, poisson, friction_angle, dilation_angle, cohesion, critical_friction_angle,
-            softening_strain: see :class:`MohrCoulombParameters`; ``E`` and ``nu`` are
-            aliases of ``young`` and ``poisson``.
         initial_stress: the stress at allocation [Pa], tension positive: a number
             (isotropic), a (2, 2) array (every point) or an (n, 2, 2) array (per Gauss
             point, checked at :meth:`allocate`).
@@ -254,7 +266,7 @@ class MohrCoulomb(ScikitFemInterface):
         stress = _per_point("initial_stress", self._initial, n_points, (2, 2))
         zz = (stress[:, 0, 0].copy() if self._initial_zz is None
               else _per_point("initial_stress_zz", self._initial_zz, n_points, ()))
-        principal, _, _ = _principal(stress, zz)
+        principal, _, _ = in_plane_principal(stress, zz)
         principal = -np.sort(-principal, axis=1)
         f = yield_function(principal, self._strength.phi, self._strength.cohesion)
         tol = 1e-9 * (np.abs(principal).max(axis=1) + self._strength.cohesion + 1.0)
@@ -288,9 +300,10 @@ class MohrCoulomb(ScikitFemInterface):
         spin = 0.5 * (grad - np.swapaxes(grad, 1, 2))
         tr = eps[:, 0, 0] + eps[:, 1, 1]
         s_n = self._stress
-        trial = s_n + spin @ s_n - s_n @ spin + np.einsum("ijkl,nkl->nij", self._c, eps)
+        trial = (s_n + spin @ s_n - s_n @ spin
+                 + (eps.reshape(n, 4) @ self._c.reshape(4, 4).T).reshape(n, 2, 2))
         trial_zz = self._zz + self._lam * tr
-        principal, m_a, m_b = _principal(trial, trial_zz)
+        principal, m_a, m_b = in_plane_principal(trial, trial_zz)
         order = np.argsort(-principal, axis=1, kind="stable")
         ret = principal_return(np.take_along_axis(principal, order, axis=1), self._gamma,
                                self._strength)
@@ -300,11 +313,7 @@ class MohrCoulomb(ScikitFemInterface):
         np.put_along_axis(perm, order[:, :, None], 1.0, axis=2)  # sorted = perm @ principal
         jac = np.swapaxes(perm, 1, 2) @ ret.jacobian @ perm
         stress = out[:, 0, None, None] * m_a + out[:, 1, None, None] * m_b
-        gap = principal[:, 0] - principal[:, 1]
-        close = np.abs(gap) <= 1e-10 * (np.abs(principal).max(axis=1) + 1.0)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            omega = np.where(close, jac[:, 0, 0] - jac[:, 0, 1], (out[:, 0] - out[:, 1]) / gap)
-        tangent = self._tangent(jac, omega, m_a, m_b, s_n)
+        tangent = self._tangent(*spectral_derivative(jac, principal, out, m_a, m_b), s_n)
         ok = finite & ret.converged
         ok &= np.isfinite(stress).all(axis=(1, 2)) & np.isfinite(out[:, 2])
         ok &= np.isfinite(tangent).all(axis=(1, 2, 3, 4))
@@ -317,8 +326,8 @@ class MohrCoulomb(ScikitFemInterface):
             bad = ~ok
             stress[bad], out[bad, 2], gamma[bad], region[bad] = (
                 s_n[bad], self._zz[bad], self._gamma[bad], ELASTIC)
-            tangent[bad] = self._tangent(
-                np.broadcast_to(np.eye(3), (n, 3, 3)), np.ones(n), m_a, m_b, s_n)[bad]
+            tangent[bad] = self._tangent(np.broadcast_to(SYM4, (n, 4, 4)), np.zeros((n, 4)),
+                                         s_n)[bad]
         self._trial = (stress.copy(), out[:, 2].copy(), gamma.copy(), region != ELASTIC)
         self._trial_failed = ~ok
         status = np.where(ok, PointStatus.OK, PointStatus.FAILED).astype(np.int8)
@@ -327,26 +336,24 @@ class MohrCoulomb(ScikitFemInterface):
                   "return_region": region.astype(np.float64)}
         return MaterialResponse(stress=stress, tangent=tangent, status=status,
                                 costs={"return_iterations": ret.iterations}, fields=fields,
-                                reasons=reasons)
+                                reasons=None if ok.all() else reasons)
 
-    def _tangent(self, jac: np.ndarray, omega: np.ndarray, m_a: np.ndarray, m_b: np.ndarray,
-                 s_n: np.ndarray) -> np.ndarray:
-        """D = ∂σ/∂G [Pa] (n, 2, 2, 2, 2) from the principal Jacobian ``jac`` (n, 3, 3) in
-        the order (a, b, zz), the spectral factor ``omega`` (n,), the eigenprojections and
-        the committed stress (spin term)."""
-        proj = np.stack([m_a, m_b], axis=1)  # (n, 2, 2, 2)
-        sym4 = 0.5 * (np.einsum("ik,jl->ijkl", _I2, _I2) + np.einsum("il,jk->ijkl", _I2, _I2))
-        spectral = (np.einsum("nAB,nAij,nBpq->nijpq", jac[:, :2, :2], proj, proj)
-                    + omega[:, None, None, None, None]
-                    * (sym4 - np.einsum("nAij,nApq->nijpq", proj, proj)))
-        to_zz = np.einsum("nA,nAij->nij", jac[:, :2, 2], proj)
-        # ∂σtr_pq/∂G_kl: elasticity plus the spin of the committed stress
-        spin = 0.5 * (np.einsum("pk,nlq->npqkl", _I2, s_n) - np.einsum("pl,nkq->npqkl", _I2, s_n)
-                      - np.einsum("npk,ql->npqkl", s_n, _I2)
-                      + np.einsum("npl,qk->npqkl", s_n, _I2))
-        d_trial = self._c[None] + spin
-        return (np.einsum("nijpq,npqkl->nijkl", spectral, d_trial)
-                + self._lam * np.einsum("nij,kl->nijkl", to_zz, _I2))
+    def _tangent(self, spectral: np.ndarray, to_zz: np.ndarray, s_n: np.ndarray
+                 ) -> np.ndarray:
+        """D = ∂σ/∂G [Pa] (n, 2, 2, 2, 2) from ∂σ/∂σtr (n, 4, 4) and ∂σ/∂σzz,tr (n, 4) of
+        :func:`~granular_material.fem.mohr_coulomb_return.spectral_derivative` and the
+        committed stress ``s_n`` (the spin term)."""
+        n = s_n.shape[0]
+        # ∂σtr_pq/∂G_kl: elasticity plus the spin of the committed stress,
+        # ½ (δ_pk σ_lq − δ_pl σ_kq − σ_pk δ_ql + σ_pl δ_qk)
+        s_t = np.swapaxes(s_n, 1, 2)  # axes below: (n, p, q, k, l)
+        spin = 0.5 * (_I2[None, :, None, :, None] * s_t[:, None, :, None, :]
+                      - _I2[None, :, None, None, :] * s_t[:, None, :, :, None]
+                      - s_n[:, :, None, :, None] * _I2[None, None, :, None, :]
+                      + s_n[:, :, None, None, :] * _I2[None, None, :, :, None])
+        d_trial = self._c.reshape(1, 4, 4) + spin.reshape(n, 4, 4)
+        tangent = spectral @ d_trial + self._lam * to_zz[:, :, None] * _I2.reshape(1, 1, 4)
+        return tangent.reshape(n, 2, 2, 2, 2)
 
     def commit(self) -> None:
         """Make the state of the last evaluation the committed state; RuntimeError (and the
@@ -411,19 +418,6 @@ class MohrCoulomb(ScikitFemInterface):
         self._track_allocate(n)
         self._committed_grad = grad
         self._trial = None
-
-
-def _principal(stress: np.ndarray, zz: np.ndarray
-               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(principal (n, 3) = (a, b, zz) with a ≥ b the in-plane eigenvalues, the
-    eigenprojections M_a and M_b (n, 2, 2)) of symmetric in-plane stresses."""
-    xx, yy = stress[:, 0, 0], stress[:, 1, 1]
-    xy = 0.5 * (stress[:, 0, 1] + stress[:, 1, 0])
-    mean, radius = 0.5 * (xx + yy), np.hypot(0.5 * (xx - yy), xy)
-    angle = 0.5 * np.arctan2(2 * xy, xx - yy)
-    c, s = np.cos(angle), np.sin(angle)
-    m_a = np.stack([np.stack([c * c, c * s], -1), np.stack([c * s, s * s], -1)], -2)
-    return np.stack([mean + radius, mean - radius, zz], axis=1), m_a, _I2 - m_a
 
 
 def _initial_array(field: str, value: Any, shape: tuple[int, ...]) -> np.ndarray:

@@ -43,9 +43,12 @@ __all__ = [
     "ELASTIC",
     "FACE",
     "REGIONS",
+    "SYM4",
     "ReturnResult",
     "Strength",
+    "in_plane_principal",
     "principal_return",
+    "spectral_derivative",
     "yield_function",
 ]
 
@@ -56,6 +59,10 @@ REGIONS = {ELASTIC: "elastic", FACE: "face", EDGE_MAJOR: "edge σ1=σ2",
 # the active planes of each region as (major, minor) indices into σ1 ≥ σ2 ≥ σ3
 _PLANES = {FACE: ((0, 2),), EDGE_MAJOR: ((0, 2), (1, 2)), EDGE_MINOR: ((0, 2), (0, 1))}
 _EYE3 = np.eye(3)
+_EYE2 = np.eye(2)
+#: the symmetric fourth-order identity ½ (δ_ik δ_jl + δ_il δ_jk) as a 4 × 4 matrix (ij, kl)
+SYM4 = 0.5 * (np.einsum("ik,jl->ijkl", _EYE2, _EYE2)
+              + np.einsum("il,jk->ijkl", _EYE2, _EYE2)).reshape(4, 4)
 
 
 @dataclass(frozen=True)
@@ -288,3 +295,39 @@ def principal_return(trial: np.ndarray, gamma_n: np.ndarray, st: Strength,
 def _take(sol: _Planes, mask: np.ndarray) -> _Planes:
     return _Planes(*(getattr(sol, name)[mask] for name in _FIELDS))
 
+
+def in_plane_principal(stress: np.ndarray, zz: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(principal (n, 3) = (a, b, zz) with a ≥ b the in-plane eigenvalues, the
+    eigenprojections M_a and M_b (n, 2, 2)) of symmetric in-plane stresses."""
+    xx, yy = stress[:, 0, 0], stress[:, 1, 1]
+    xy = 0.5 * (stress[:, 0, 1] + stress[:, 1, 0])
+    mean, radius = 0.5 * (xx + yy), np.hypot(0.5 * (xx - yy), xy)
+    angle = 0.5 * np.arctan2(2 * xy, xx - yy)
+    c, s = np.cos(angle), np.sin(angle)
+    m_a = np.stack([np.stack([c * c, c * s], -1), np.stack([c * s, s * s], -1)], -2)
+    return np.stack([mean + radius, mean - radius, zz], axis=1), m_a, _EYE2 - m_a
+
+
+def spectral_derivative(jac: np.ndarray, principal: np.ndarray, returned: np.ndarray,
+                        m_a: np.ndarray, m_b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The derivative of σ = s_a M_a + s_b M_b (the in-plane stress rebuilt from returned
+    principal values ``returned`` (n, 3) on the trial's eigenprojections) with respect to
+    the in-plane trial stress and σzz,tr: (∂σ_ij/∂σtr_pq as (n, 4, 4) (ij, pq),
+    ∂σ_ij/∂σzz,tr as (n, 4)).
+
+    ``jac`` (n, 3, 3) is ∂(s_a, s_b, s_zz)/∂(t_a, t_b, t_zz), ``principal`` (n, 3) the trial
+    values (t_a ≥ t_b, t_zz). The eigenvector term is (s_a − s_b)/(t_a − t_b)
+    (I_s − M_a⊗M_a − M_b⊗M_b), whose factor tends to ∂s_a/∂t_a − ∂s_a/∂t_b as the in-plane
+    eigenvalues meet (the return is symmetric in them).
+    """
+    n = jac.shape[0]
+    gap = principal[:, 0] - principal[:, 1]
+    close = np.abs(gap) <= 1e-10 * (np.abs(principal).max(axis=1) + 1.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        omega = np.where(close, jac[:, 0, 0] - jac[:, 0, 1],
+                         (returned[:, 0] - returned[:, 1]) / gap)
+    proj = np.stack([m_a, m_b], axis=1).reshape(n, 2, 4)  # (n, A, ij)
+    proj_t = np.swapaxes(proj, 1, 2)
+    spectral = proj_t @ jac[:, :2, :2] @ proj + omega[:, None, None] * (SYM4 - proj_t @ proj)
+    return spectral, (jac[:, None, :2, 2] @ proj)[:, 0, :]
