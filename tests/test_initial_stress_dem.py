@@ -210,6 +210,8 @@ def test_low_pressure_rule_unload_below_floor_and_clamp_below_lowest():
     assert np.all(-response.stress[0, 0, 0] < floor)  # really below the old floor
     clamped, which = clamp_targets(target, lowest)
     assert which.tolist() == [1]
+    assert -np.linalg.eigvalsh(clamped[1])[1] == pytest.approx(lowest)
+    np.testing.assert_array_equal(clamped[0], target[0])
     with pytest.raises(ParameterError, match="clamp_targets"):
         prepare_to_stress(target, DISCS, device="cpu", shards=1)
 

@@ -53,7 +53,9 @@ __all__ = ["LOWEST_FRACTION", "STARTS", "StressGroups", "bring_to_stress", "clam
 #: see the module's docstring)
 LOWEST_FRACTION = 0.02
 #: the isotropic pressure a packing is consolidated to before its servo to the target:
-#: the target's mean pressure −tr σ*/2, or its major principal compression
+#: the target's mean pressure −tr σ*/2 (the default: fewer servo steps), or its major
+#: principal compression. Measured (32 RVEs of 64 discs, σv 20–28 kPa, mean / major servo
+#: steps per RVE): K0 = 0.5: 594 / 1131; K0 = 0.4: 2914 / 3747; K0 = 0.7: 436 / 475
 STARTS = ("mean", "major")
 
 

@@ -111,6 +111,8 @@ class StressServoResult:
 
     Attributes:
         steps: DEM steps run (the slowest RVE's).
+        rve_steps: the steps each RVE ran before it was done and frozen (``steps`` for those
+            never done), shape (B,), int.
         reached: whether each RVE met its target (shape (B,), bool).
         stress: the symmetrised Love stress at the end [Pa], shape (B, 2, 2).
         error: ``|σ − σ*|`` of xx, yy and xy over the target's scale
@@ -119,6 +121,7 @@ class StressServoResult:
     """
 
     steps: int
+    rve_steps: np.ndarray
     reached: np.ndarray
     stress: np.ndarray
     error: np.ndarray
@@ -192,6 +195,7 @@ def servo_to_stress(
     diagonal = np.stack([goal[:, 0, 0], goal[:, 1, 1]], axis=1)
     control = np.full((b, 2), CONTROL_STRESS)
     done = np.zeros(b, dtype=bool)
+    rve_steps = np.zeros(b, dtype=np.int64)
     bar = progress_bar(b, "servo to the target stresses", progress, unit="rve")
 
     def measure() -> tuple[np.ndarray, np.ndarray, np.ndarray, Homogenized]:
@@ -207,6 +211,7 @@ def servo_to_stress(
         ok &= (error[:, 2] <= aim * shear_tolerance) & (h.unbalanced_force <= max_unbalanced)
         newly = ok & ~done
         done[newly] = True
+        rve_steps[newly] = steps_done
         bar.update(int(newly.sum()))
         batch.set_active(~done)
         if done.all():
@@ -229,8 +234,10 @@ def servo_to_stress(
         bar.close()
         batch.set_active(np.ones(b))
     stress, _, error, h = measure()
+    rve_steps[~done] = steps
     done &= (error[:, :2] <= tolerance).all(axis=1) & (error[:, 2] <= shear_tolerance)
-    result = StressServoResult(steps=steps, reached=done.copy(), stress=stress, error=error,
+    result = StressServoResult(steps=steps, rve_steps=rve_steps, reached=done.copy(),
+                               stress=stress, error=error,
                                unbalanced_force=np.asarray(h.unbalanced_force))
     if strict and not done.all():
         missing = np.flatnonzero(~done)
