@@ -11,6 +11,11 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from granular_material.cli.material_options import (
+    add_material_arguments,
+    check_material_options,
+    material_file_values,
+)
 from granular_material.cli.options import (
     RVE_MATERIAL_DEFAULTS,
     UsageError,
@@ -30,9 +35,8 @@ from granular_material.cli.options import (
 )
 from granular_material.cli.parsers import CommandParser
 from granular_material.cli.signals import interrupt_exit_code
-from granular_material.fem import available_materials, available_postprocessors, load_material
+from granular_material.fem import available_postprocessors, load_material
 from granular_material.fem.kinematics import FORMULATIONS
-from granular_material.fem.linear_elastic import LinearElasticRunParameters
 from granular_material.fem.newton import PREDICTORS, RELAXATIONS, TANGENT_UPDATES
 from granular_material.fem.problems import PLATENS
 from granular_material.runs import OutputSpec, RunSpec, SpecError, from_flat, run, to_flat
@@ -47,7 +51,6 @@ _NEWTON = NewtonSpec()
 _OUTPUT = OutputSpec()
 _PROBLEM = {f: ProblemSpec.__dataclass_fields__[f].default
             for f in ("axial_strain", "confining", "steps")}
-_ELASTIC = LinearElasticRunParameters()
 #: the material the FEM commands run by default, and its parameters' defaults
 DEFAULT_MATERIAL = "dem"
 _DEM = load_material(DEFAULT_MATERIAL).Parameters()
@@ -238,12 +241,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                     "--confining of the RVE material options. Stresses tension positive in "
                     "tables; plots compression positive.",
     )
-    p.add_argument("--material", choices=available_materials(), default=DEFAULT_MATERIAL,
-                   help="material at the Gauss points (default dem)")
-    p.add_argument("--E", type=float, default=_ELASTIC.E,
-                   help=f"linear-elastic: Young's modulus [Pa] (default {_ELASTIC.E:g})")
-    p.add_argument("--nu", type=float, default=_ELASTIC.nu,
-                   help=f"linear-elastic: Poisson's ratio (default {_ELASTIC.nu:g})")
+    add_material_arguments(p, DEFAULT_MATERIAL)
     p.add_argument("--rve", type=Path, default=None,
                    help="dem: RVE file (one RVE, replicated to the 4 points, or four)")
     p.add_argument("--particles", type=int, default=None,
@@ -284,6 +282,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="specimen width [m] (default 0.05)")
     b.add_argument("--height", type=float, default=None,
                    help="specimen height [m] (default 0.10)")
+    add_material_arguments(b, DEFAULT_MATERIAL)
     b.add_argument("--platens", choices=PLATENS, default=PLATENS[0],
                    help="smooth: platen nodes slide freely, one bottom node pinned (default); "
                         "rough: no platen node moves sideways")
@@ -296,7 +295,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 #: options that are the command line's own, no fields of the run spec
-_CLI_ONLY = frozenset({"command", "func", "json", "resume", "preset", "material"})
+_CLI_ONLY = frozenset({"command", "func", "json", "resume", "preset", "material",
+                       "material_file"})
 
 
 def _given(args: argparse.Namespace) -> dict[str, Any]:
@@ -332,6 +332,9 @@ def spec_from_args(args: argparse.Namespace) -> RunSpec:
                                   with_discs=args.rve is None))
         flat["preset"] = args.preset
     _check_rve_options(material, given)
+    check_material_options(material, given)
+    if getattr(args, "material_file", None) is not None:
+        flat.update(material_file_values(args.material_file, material))
     flat.update(given)
     if args.resume is not None:
         flat["out"] = args.resume
