@@ -169,6 +169,14 @@ class LinearElastic(ScikitFemInterface):
         return LinearElastic(young=parameters.E, poisson=parameters.nu,
                              initial_stress=-context.confining)
 
+    @staticmethod
+    def for_problem(parameters: LinearElasticRunParameters, context: Any,
+                    initial_stress: np.ndarray) -> LinearElastic:
+        """The material of a boundary-value problem: its Gauss points at ``initial_stress``
+        [Pa] (n, 2, 2), tension positive; not yet allocated."""
+        return LinearElastic(young=parameters.E, poisson=parameters.nu,
+                             initial_stress=initial_stress)
+
     @property
     def n_points(self) -> int:
         """Number of Gauss points allocated."""

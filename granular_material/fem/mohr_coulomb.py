@@ -226,6 +226,19 @@ class MohrCoulomb(ScikitFemInterface):
                            softening_strain=parameters.softening_strain,
                            initial_stress=-context.confining)
 
+    @staticmethod
+    def for_problem(parameters: MohrCoulombRunParameters, context: Any,
+                    initial_stress: np.ndarray) -> MohrCoulomb:
+        """The material of a boundary-value problem: its Gauss points at ``initial_stress``
+        [Pa] (n, 2, 2), tension positive (σzz = σxx: both horizontal stresses alike, as in a
+        geostatic K0 state); not yet allocated."""
+        return MohrCoulomb(young=parameters.E, poisson=parameters.nu,
+                           friction_angle=parameters.phi, dilation_angle=parameters.psi,
+                           cohesion=parameters.cohesion,
+                           critical_friction_angle=parameters.phi_cs,
+                           softening_strain=parameters.softening_strain,
+                           initial_stress=initial_stress)
+
     # -- read-only state -------------------------------------------------------------
     @property
     def n_points(self) -> int:
