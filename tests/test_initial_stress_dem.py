@@ -228,3 +228,26 @@ def test_material_from_rve_file_brought_to_targets(tmp_path):
     material.allocate(2)
     assert material.preparation.packings == 0
     assert_meets(material.evaluate(np.zeros((2, 2, 2))).stress, target)
+
+
+def test_rve_file_per_point_and_replicated_packing_brought_to_targets(tmp_path):
+    from granular_material.dem import save_rve
+
+    target = k0_targets([12e3, 24e3])
+    data, _ = prepare_to_stress(k0_targets([20e3, 20e3], k0=1.0), DISCS, seed=6,
+                                device="cpu", shards=1)
+    path = tmp_path / "two.npz"
+    save_rve(path, data)
+    material = DEMMaterial(path, initial_stress=target, device="cpu", shards=1)
+    material.allocate(2)
+    rves = material.committed_rves()
+    np.testing.assert_array_equal(rves.radius, data.radius)  # point p from the file's RVE p
+    assert_meets(material.evaluate(np.zeros((2, 2, 2))).stress, target)
+    # replicate: one packing made, copied to every group and brought to its target
+    material = DEMMaterial(initial_stress=target, replicate=True, particles=DISCS, seed=6,
+                           device="cpu", shards=1)
+    material.allocate(2)
+    assert material.preparation.packings == 1
+    rves = material.committed_rves()
+    np.testing.assert_array_equal(rves.radius[0], rves.radius[1])
+    assert_meets(material.evaluate(np.zeros((2, 2, 2))).stress, target)
