@@ -1,18 +1,35 @@
 """FEM side of the FEM×DEM coupling: material protocol, Newton driver, problems.
 
 A material is anything that follows :class:`Material` (found by name through the
-``granular_material.materials`` entry points: ``linear-elastic``, ``dem``); the
-:class:`NewtonSolver` drives it on a scikit-fem basis, on the drained biaxial problems of
-:func:`build_biaxial` (one element or a specimen); :class:`Tracking` names the
+``granular_material.materials`` entry points: ``linear-elastic``, ``mohr-coulomb``, ``dem``);
+the :class:`NewtonSolver` drives it on a scikit-fem basis, on the drained biaxial problems of
+:func:`build_biaxial` (one element or a specimen) or on any boundary-value problem of
+:func:`build_problem` (a mesh from a file, :func:`read_mesh`, or :func:`rectangle_mesh`; named
+boundaries, :func:`select_boundaries`; the conditions :class:`Fixed`, :class:`Roller`,
+:class:`Displacement`, :class:`RigidBody`, :class:`Pressure`, :class:`Gravity`; an initial
+state, :func:`geostatic_stress`); :class:`Tracking` names the
 post-processors run on chosen Gauss points. :func:`default_settings` holds the Newton settings
 the commands use. The run loop that collects a run's tables and keeps its checkpoint is
 :func:`granular_material.runs.run_biaxial`.
 """
 
+from granular_material.fem.boundaries import select_boundaries, select_facets
+from granular_material.fem.conditions import (
+    Condition,
+    Displacement,
+    Fixed,
+    Gravity,
+    Pressure,
+    Problem,
+    RigidBody,
+    Roller,
+    build_problem,
+)
 from granular_material.fem.defaults import (
     default_settings,
     default_stress_tol,
 )
+from granular_material.fem.geostatic import geostatic_stress, uniform_stress
 from granular_material.fem.layout import Layout, grad_points, to_points, to_quadrature
 from granular_material.fem.linear_elastic import LinearElastic, LinearElasticParameters
 from granular_material.fem.loading import Loading
@@ -28,6 +45,8 @@ from granular_material.fem.material import (
     create_material,
     load_material,
 )
+from granular_material.fem.meshes import MeshData, make_basis, read_mesh, rectangle_mesh
+from granular_material.fem.mohr_coulomb import MohrCoulomb, MohrCoulombParameters
 from granular_material.fem.newton import (
     CommittedState,
     NewtonError,
@@ -36,6 +55,7 @@ from granular_material.fem.newton import (
     StepRecord,
 )
 from granular_material.fem.problems import BiaxialProblem, BiaxialSetup, build_biaxial
+from granular_material.fem.reactions import BoundaryDofs, boundary_dofs
 from granular_material.fem.tracking import (
     Tracking,
     available_postprocessors,
@@ -46,31 +66,52 @@ __all__ = [
     "MEASURES",
     "BiaxialProblem",
     "BiaxialSetup",
+    "BoundaryDofs",
     "CommittedState",
+    "Condition",
+    "Displacement",
     "FailureReason",
+    "Fixed",
+    "Gravity",
     "Layout",
     "LinearElastic",
     "LinearElasticParameters",
     "Loading",
     "Material",
     "MaterialResponse",
+    "MeshData",
+    "MohrCoulomb",
+    "MohrCoulombParameters",
     "NewtonError",
     "NewtonSettings",
     "NewtonSolver",
     "PointStatus",
+    "Pressure",
+    "Problem",
     "QuadratureResponse",
+    "RigidBody",
+    "Roller",
     "ScikitFemInterface",
     "StepRecord",
     "Tracking",
     "available_materials",
     "available_postprocessors",
+    "boundary_dofs",
     "build_biaxial",
+    "build_problem",
     "create_material",
     "default_settings",
     "default_stress_tol",
+    "geostatic_stress",
     "grad_points",
     "load_material",
     "load_postprocessor",
+    "make_basis",
+    "read_mesh",
+    "rectangle_mesh",
+    "select_boundaries",
+    "select_facets",
     "to_points",
     "to_quadrature",
+    "uniform_stress",
 ]
