@@ -448,3 +448,40 @@ def test_single_element_biaxial_with_newton_solver(phi_cs):
                 assert nxt <= 10.0 * prev ** 2, history
                 quadratic += 1
     assert quadratic >= (1 if phi_cs is None else 4)
+
+
+@pytest.mark.parametrize(("phi", "psi", "c", "phi_cs", "gs"), [
+    (30.0, 0.0, 0.0, 30.0, 0.0), (30.0, 30.0, 0.0, 30.0, 0.0),
+    (35.0, 10.0, 20e3, 25.0, 0.01)])
+def test_return_lands_on_the_surface_in_order(phi, psi, c, phi_cs, gs):
+    """Random trials: every returned state satisfies all six planes, keeps σ1 ≥ σ2 ≥ σ3,
+    γp never falls, and on the face the stress drop follows the potential's normal."""
+    lam, mu = MohrCoulombParameters().lame
+    strength = MohrCoulombParameters(friction_angle=phi, dilation_angle=psi, cohesion=c,
+                                     critical_friction_angle=phi_cs if gs else None,
+                                     softening_strain=gs).strength()
+    rng = np.random.default_rng(3)
+    trial = rng.normal(scale=300e3, size=(20000, 3)) - rng.uniform(0, 300e3, size=(20000, 1))
+    trial = -np.sort(-trial, axis=1)
+    gamma_n = rng.uniform(0, 0.02, 20000)
+    result = principal_return(trial, gamma_n, strength)
+    assert result.converged.all()
+    assert set(np.unique(result.region)) == {ELASTIC, FACE, EDGE_MAJOR, EDGE_MINOR, APEX}
+    s = result.stress
+    scale = np.abs(trial).max(axis=1) + c
+    assert np.all(np.diff(s, axis=1) <= 1e-12 * scale[:, None])
+    phi_now = strength.angles(result.gamma)[0]
+    f = (s[:, 0] - s[:, 2]) + (s[:, 0] + s[:, 2]) * np.sin(phi_now) - 2 * c * np.cos(phi_now)
+    assert np.all(f <= 1e-12 * scale)
+    plastic = result.region != ELASTIC
+    np.testing.assert_array_less(-1e-14, result.gamma - gamma_n)
+    assert np.all(np.abs(f[plastic]) <= 1e-12 * scale[plastic])
+    face = result.region == FACE
+    t = np.sin(strength.angles(result.gamma[face])[1])
+    normal = np.stack([1 + t, 0 * t, -(1 - t)], axis=1)
+    drop = (trial - s)[face]
+    expected = lam * normal.sum(axis=1)[:, None] + 2 * mu * normal
+    factor = drop[:, 0] / expected[:, 0]
+    np.testing.assert_allclose(drop, factor[:, None] * expected, rtol=1e-9,
+                               atol=1e-9 * scale[face].max())
+    np.testing.assert_allclose(result.gamma[face] - gamma_n[face], 2 * factor, rtol=1e-9)

@@ -25,9 +25,14 @@ Softening: φ falls linearly in γp from φ to φcs and ψ from ψ to 0 over
 ``softening_strain``, constant after.
 
 For a given γp each region's return is linear in the multipliers (closed form). With
-softening the one unknown left is γp itself: a scalar safeguarded Newton on
-r(γp) = γp − γp_n − Δγp(γp) = 0, differentiated analytically, so the algorithmic Jacobian
-∂σ/∂σtr (m, 3, 3) is exact (including dγp/dσtr).
+softening the one unknown left is γp itself: a scalar Newton on
+r(γp) = γp − γp_n − Δγp(γp) = 0, safeguarded by bisection in the bracket
+[γp_n, max(softening_strain, γp_n + Δγp of the fully softened angles)] and differentiated
+analytically, so the algorithmic Jacobian ∂σ/∂σtr (m, 3, 3) is exact (dγp/dσtr
+included). Where softening is so brittle that ∂Δγp/∂γp > 1 (a snap-back of the point
+itself: a tiny ``softening_strain`` at high pressure) the return may have several
+solutions or none in the region the trial points to; such a point is reported as not
+converged.
 """
 
 from __future__ import annotations
@@ -187,9 +192,12 @@ def _return_onto(trial: np.ndarray, gamma_n: np.ndarray, region: int, st: Streng
     if not st.softening:  # Δγp does not depend on γp: no iteration
         sol = _solve_planes(trial, gamma_n, region, st)
         return sol, gamma_n + sol.h, np.ones(len(gamma_n), dtype=bool), 0
-    m = len(gamma_n)
-    theta, lo, hi = gamma_n.copy(), gamma_n.copy(), np.full(m, np.inf)
-    done = np.zeros(m, dtype=bool)
+    # a bracket: r(γp_n) = −Δγp ≤ 0, and past the softening strain Δγp is constant, h_cs,
+    # so r ≥ 0 at max(softening_strain, γp_n + h_cs)
+    top = np.maximum(gamma_n, st.softening_strain)
+    theta, lo = gamma_n.copy(), gamma_n.copy()
+    hi = np.maximum(top, gamma_n + _solve_planes(trial, top, region, st).h)
+    done = np.zeros(len(gamma_n), dtype=bool)
     sol = _solve_planes(trial, theta, region, st)
     iterations = 0
     for it in range(max_iterations):
@@ -209,10 +217,8 @@ def _return_onto(trial: np.ndarray, gamma_n: np.ndarray, region: int, st: Streng
         slope = 1.0 - part.h_theta
         with np.errstate(divide="ignore", invalid="ignore"):
             step = th - r / slope
-        inside = (slope > 0) & (step > lo[todo]) & (step < hi[todo])
-        halves = np.where(np.isfinite(hi[todo]), 0.5 * (lo[todo] + hi[todo]),
-                          lo[todo] + 2 * np.abs(r) + 1e-12)
-        theta[todo] = np.where(ok, th, np.where(inside, step, halves))
+        inside = (slope > 0) & (step >= lo[todo]) & (step <= hi[todo])
+        theta[todo] = np.where(ok, th, np.where(inside, step, 0.5 * (lo[todo] + hi[todo])))
         iterations += int((~ok).sum())
     return sol, theta, done, iterations
 
@@ -234,7 +240,7 @@ def _apex(trial: np.ndarray, gamma_n: np.ndarray, st: Strength
 
 
 def principal_return(trial: np.ndarray, gamma_n: np.ndarray, st: Strength,
-                     max_iterations: int = 50) -> ReturnResult:
+                     max_iterations: int = 60) -> ReturnResult:
     """Return the sorted trial principal stresses ``trial`` (m, 3) [Pa] (σ1 ≥ σ2 ≥ σ3) with
     committed plastic shear strains ``gamma_n`` (m,) onto the Mohr–Coulomb surface.
 
