@@ -105,8 +105,8 @@ class StressPreparation:
 
     @property
     def error(self) -> np.ndarray:
-        """Each point's ``|σ − σ*|`` of xx, yy and xy over max(|σ*xx|, |σ*yy|) [-], (n, 3),
-        against its own target as given (sharing and clamping included)."""
+        """Each point's ``|σ − σ*|`` of xx, yy and xy over ``max(|σ*xx|, |σ*yy|)`` [-],
+        (n, 3), against its own target as given (sharing and clamping included)."""
         stress = self.servo.stress[self.labels]
         diff = stress - self.target
         error = np.abs(np.stack([diff[:, 0, 0], diff[:, 1, 1], diff[:, 0, 1]], axis=1))

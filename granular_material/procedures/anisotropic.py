@@ -110,7 +110,7 @@ class StressGroups:
 
 def group_targets(target: np.ndarray, tolerance: float) -> StressGroups:
     """Group the targets σ* [Pa] (n, 2, 2) whose components agree within ``tolerance`` [-]
-    of the group's scale s = max(|σ*xx|, |σ*yy|) (σv for K0 <= 1): every component of a
+    of the group's scale s = ``max(|σ*xx|, |σ*yy|)`` (σv for K0 <= 1): every component of a
     group spans at most ``tolerance``·s, and the group is prepared to the midrange, so each
     member's target is missed by at most ``tolerance``/2 · s (plus the servo's tolerance).
     Greedy, in order of increasing mean pressure. ``tolerance`` 0: equal targets only share.

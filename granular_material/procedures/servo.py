@@ -150,7 +150,7 @@ def check_stress_targets(target: np.ndarray, n_rve: int, name: str = "target") -
 
 
 def stress_scale(target: np.ndarray) -> np.ndarray:
-    """The scale of each target's errors: max(|σ*xx|, |σ*yy|) [Pa] (σv for K0 <= 1)."""
+    """The scale of each target's errors: ``max(|σ*xx|, |σ*yy|)`` [Pa] (σv for K0 <= 1)."""
     return np.maximum(np.abs(target[:, 0, 0]), np.abs(target[:, 1, 1]))
 
 
@@ -176,16 +176,17 @@ def servo_to_stress(
     ``max_strain`` per step); σxy by a symmetric shear of the cell, H ← (I + dγ (e₁⊗e₂ +
     e₂⊗e₁)) H, every ``check_every`` steps, with dγ = ``shear_gain``·(σ*xy − σxy)/G, G the
     shear stiffness D_xyxy + D_xyyx of the RVE's Kruyt–Rothenburg tangent (an upper bound:
-    the correction undershoots rather than overshoots), capped at ``max_strain``. An RVE is
-    done, and frozen, when ``|σxx − σ*xx|`` and ``|σyy − σ*yy|`` are within
-    ``tolerance``·s, ``|σxy − σ*xy|`` within ``shear_tolerance``·s (s = max(|σ*xx|,
-    |σ*yy|), σv for K0 <= 1) and its unbalanced-force ratio is at most ``max_unbalanced``
-    (the symmetrised Love stress is measured). The servo stops an RVE at ``aim`` times
-    those tolerances (default half), so that what the RVE does when released (it is not in
-    perfect equilibrium) stays within them: its error drifted by up to 0.3 % of σv in 2000
-    free steps (64 discs, 50 kPa, K0 = 0.5). RVEs not done in ``max_steps`` raise
-    RuntimeError naming them (``strict``), or are flagged in the result (``reached``; the
-    ``error`` of every RVE is measured at the end).
+    the correction undershoots rather than overshoots), capped at ``max_strain``.
+
+    An RVE is done, and frozen, when ``|σxx − σ*xx|`` and ``|σyy − σ*yy|`` are within
+    ``tolerance``·s, ``|σxy − σ*xy|`` within ``shear_tolerance``·s (s =
+    ``max(|σ*xx|, |σ*yy|)``, σv for K0 <= 1) and its unbalanced-force ratio is at most
+    ``max_unbalanced`` (the symmetrised Love stress is measured). The servo stops an RVE
+    at ``aim`` times those tolerances (default half), so that what the RVE does when
+    released (it is not in perfect equilibrium) stays within them: its error drifted by up
+    to 0.3 % of σv in 2000 free steps (64 discs, 50 kPa, K0 = 0.5). RVEs not done in
+    ``max_steps`` raise RuntimeError naming them (``strict``), or are flagged in the result
+    (``reached``; the ``error`` of every RVE is measured at the end).
     """
     if not 0 < aim <= 1:
         raise ParameterError("aim", f"must lie in (0, 1], got {aim!r}")
