@@ -19,12 +19,12 @@ import argparse
 import contextlib
 import re
 import shlex
-import sys
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from granular_material.cli.bvp import BOUNDARY_VALUE, run_bvp_scene
 from granular_material.cli.options import UsageError, check_output_dir, reports_to
 from granular_material.cli.scene_keys import (
     command_parsers,
@@ -37,11 +37,6 @@ from granular_material.cli.scene_keys import (
 from granular_material.cli.scene_toml import Where, flatten, line_of, read_toml, toml_repr
 from granular_material.results import write_json
 from granular_material.results.lock import FolderLock
-
-if sys.version_info >= (3, 11):
-    pass
-else:  # Python 3.10
-    pass
 
 __all__ = ["TESTS", "Scene", "check_scene", "command_parsers", "load_scene", "register",
            "run_scene", "scene_keys"]
@@ -375,6 +370,8 @@ def _run_command(parsers: Mapping[str, argparse.ArgumentParser], args: argparse.
     text, data = read_toml(Path(args.scene))
     if isinstance(data.get("problem"), dict):
         return _run_spec_file(Path(args.scene), text, data, args)
+    if data.get("test") == BOUNDARY_VALUE:
+        return run_bvp_scene(Path(args.scene), text, data, args)
     scene = load_scene(args.scene, parsers, out=args.out, resume=args.resume)
     if args.check:
         check_scene(scene)
@@ -410,7 +407,13 @@ A file with a [problem] table is a run specification instead (the nested form
 that granular_material.runs.save writes and a run's checkpoint keeps): its
 [problem], [material] (name, [material.parameters]), [newton] and [output]
 tables hold the spec's fields by their Python names; it is checked whole and run
-as it is (--out overrides its output.out).""",
+as it is (--out overrides its output.out).
+
+A scene with test = "boundary-value" is a boundary-value problem: a mesh (a
+file or a generated rectangle), named boundaries, conditions on them
+([[conditions]]: fixed, roller, displacement, rigid, pressure), gravity, an
+initial state (uniform or geostatic) and a material; see
+examples/scenes/footing-*.toml and docs/guide/boundary-value.md.""",
     )
     p.add_argument("scene", type=Path, help="the scene file (.toml)")
     p.add_argument("--out", type=Path, default=None, metavar="DIR",

@@ -56,7 +56,9 @@ from granular_material.multiscale.run_hooks import (
     DEMParameters,
     check_run,
     material_keywords,
+    problem_keywords,
     run_summary,
+    unit_weight,
 )
 
 if TYPE_CHECKING:
@@ -146,6 +148,7 @@ class DEMMaterial(ScikitFemInterface):
     noisy = True
     check_run = staticmethod(check_run)
     run_summary = staticmethod(run_summary)
+    unit_weight = staticmethod(unit_weight)
 
     def __init__(self, parameters: DEMMaterialParameters | str | Path | None = None, *,
                  progress: bool = False, pressure: float | None = None,
@@ -201,6 +204,15 @@ class DEMMaterial(ScikitFemInterface):
         """The material of a run specification (not yet allocated): the run hook of
         :mod:`granular_material.runs.context`."""
         keywords = material_keywords(parameters, context)
+        return cls(progress=keywords.pop("progress"), **keywords)
+
+    @classmethod
+    def for_problem(cls, parameters: DEMParameters, context: RunContext,
+                    initial_stress: np.ndarray) -> DEMMaterial:
+        """The material of a boundary-value problem whose points start at ``initial_stress``
+        [Pa] (n, 2, 2), tension positive (not yet allocated): see
+        :func:`~granular_material.multiscale.run_hooks.problem_keywords`."""
+        keywords = problem_keywords(parameters, context, initial_stress)
         return cls(progress=keywords.pop("progress"), **keywords)
 
     def reference_curve(self, axial_strain: float, confining: float, device: str | None,

@@ -1,0 +1,89 @@
+"""``granular-material run SCENE`` for a boundary-value problem (``test = "boundary-value"``):
+the scene is read whole into a :class:`~granular_material.runs.bvp_spec.BoundaryValueSpec`
+(a refusal names the key and its line, exit 2, nothing written), then run into its folder
+(:func:`~granular_material.runs.bvp_runner.run_boundary_value`), the scene copied in as
+``scene.toml``."""
+
+from __future__ import annotations
+
+import argparse
+import re
+import sys
+from pathlib import Path
+from typing import Any
+
+from granular_material.cli.options import UsageError, check_output_dir, emit
+from granular_material.results.lock import FolderLock
+
+__all__ = ["BOUNDARY_VALUE", "run_bvp_scene"]
+
+#: the ``test`` of a boundary-value scene
+BOUNDARY_VALUE = "boundary-value"
+
+
+def _line_of(text: str, key: str) -> int | None:
+    """The line of the scene's text where ``key`` (the last part of a dotted name) is set."""
+    name = key.rsplit(".", 1)[-1].replace("_", "[-_]")
+    pattern = re.compile(rf"^\s*{name}\s*=")
+    for number, line in enumerate(text.splitlines(), start=1):
+        if pattern.match(line):
+            return number
+    return None
+
+
+def _refusal(path: Path, text: str, exc: ValueError) -> UsageError:
+    key = getattr(exc, "field", None)
+    line = _line_of(text, key) if key else None
+    where = f"{path}, line {line}" if line else f"{path}"
+    named = f"{key}: " if key and key not in str(exc) else ""
+    return UsageError(f"{where}: {named}{exc}")
+
+
+def _run_folder(path: Path, data: dict[str, Any], out: Path | None) -> Path:
+    if out is not None:
+        folder = Path(out).expanduser()
+        check_output_dir(folder, "--out")
+        return folder
+    given = data.get("out") or (data.get("output") or {}).get("out")
+    if given is None:
+        folder = Path(path.stem)
+        check_output_dir(folder, "the run folder (the scene's name; set out or --out)")
+        return folder
+    folder = path.parent / Path(str(given)).expanduser()
+    check_output_dir(folder, "out")
+    return folder
+
+
+def run_bvp_scene(path: Path, text: str, data: dict[str, Any],
+                  args: argparse.Namespace) -> int:
+    """Check and run the boundary-value scene ``path`` (``data``: its TOML); the exit code
+    (0: it reached the end, 1: it stopped short). ``args``: the ``run`` command's (``out``,
+    ``check``, ``resume``)."""
+    from granular_material.runs.bvp_runner import build, run_boundary_value
+    from granular_material.runs.bvp_spec import bvp_from_dict
+
+    if getattr(args, "resume", False):
+        raise UsageError("--resume continues single-element and biaxial runs; a "
+                         "boundary-value scene runs from its start")
+    try:
+        spec = bvp_from_dict(data, path.parent)
+        if args.check:
+            build(spec)  # the mesh, boundaries, conditions and material, no step
+            print(f"{path}: a boundary-value problem of {spec.steps} steps, material "
+                  f"{spec.material.name}: checked")
+            return 0
+    except ValueError as exc:
+        raise _refusal(path, text, exc) from exc
+    folder = _run_folder(path, data, args.out)
+    folder.mkdir(parents=True, exist_ok=True)
+    with FolderLock(folder):
+        (folder / "scene.toml").write_text(text, encoding="utf-8")
+        try:
+            outcome = run_boundary_value(spec, out=folder)
+        except ValueError as exc:
+            raise _refusal(path, text, exc) from exc
+    emit(argparse.Namespace(json=False), outcome.summary)
+    if outcome.error:
+        print(f"error: {outcome.error}", file=sys.stderr)
+        return 1
+    return 0

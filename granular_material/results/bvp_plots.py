@@ -1,0 +1,74 @@
+"""Figures of a boundary-value problem: the load–displacement curve of each loaded boundary
+and the map of the failure mechanism (shear strain on the deformed mesh)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from granular_material.results.plots import deformed_triangles, pyplot, save_figure
+
+__all__ = ["plot_load_displacement", "plot_mechanism"]
+
+
+def plot_load_displacement(steps: pd.DataFrame, bodies: Sequence[tuple[str, str, float]],
+                           path: str | Path,
+                           references: Sequence[tuple[str, float]] = ()) -> Path:
+    """One panel per moved boundary: its mean pressure against its displacement.
+
+    ``bodies``: (name, axis "x" | "y", width [m]) of each moved boundary; the curve is
+    −F/width [kPa] (compression positive) against the displacement along its motion [mm],
+    read from the ``steps`` columns ``{name}_force_{axis}`` [N/m] and
+    ``{name}_displacement`` [m]. ``references``: horizontal lines (label, pressure [Pa]),
+    e.g. Prandtl's q·N_q.
+    """
+    plt = pyplot()
+    n = max(len(bodies), 1)
+    fig, axes = plt.subplots(1, n, figsize=(5.5 * n, 4.2), constrained_layout=True,
+                             squeeze=False)
+    for ax, (name, axis, width) in zip(axes[0], bodies, strict=False):
+        force = steps[f"{name}_force_{axis}"].to_numpy(dtype=float)
+        moved = steps[f"{name}_displacement"].to_numpy(dtype=float)
+        sign = -1.0 if np.nanmean(force[1:] if force.size > 1 else force) < 0 else 1.0
+        ax.plot(1e3 * moved, sign * force / width / 1e3, "o-", ms=3, label=name)
+        for label, value in references:
+            ax.axhline(value / 1e3, ls="--", lw=1, color="0.4")
+            ax.annotate(label, (0.02, value / 1e3), xycoords=("axes fraction", "data"),
+                        va="bottom", fontsize=8, color="0.3")
+        ax.set_xlabel(f"{name} displacement [mm]")
+        ax.set_ylabel(f"{name} mean pressure [kPa] (force / {1e3 * width:g} mm)")
+        ax.grid(alpha=0.3)
+        ax.set_title(name)
+    return save_figure(fig, path)
+
+
+def plot_mechanism(xy: np.ndarray, cells: np.ndarray, kind: str, ux: np.ndarray,
+                   uy: np.ndarray, shear_strain: np.ndarray, path: str | Path,
+                   title: str = "", scale: float = 1.0) -> Path:
+    """The mechanism: shear strain γ [%] of every element (``shear_strain``, (nelems,)) on
+    the mesh displaced by ``scale`` × (ux, uy) [m] (nodal, meshio order of ``cells``), with
+    the displacement vectors of the nodes."""
+    plt = pyplot()
+    from matplotlib.tri import Triangulation
+
+    x, y, dx, dy, triangles, element = deformed_triangles(xy, cells, kind, scale * ux,
+                                                          scale * uy)
+    tri = Triangulation(1e3 * x, 1e3 * y, triangles)
+    gamma = 100 * np.asarray(shear_strain, dtype=float)
+    width = np.ptp(x) / max(np.ptp(y), 1e-12)
+    fig, ax = plt.subplots(figsize=(4 + 4 * min(width, 2.5), 5), constrained_layout=True)
+    im = ax.tripcolor(tri, facecolors=gamma[element], cmap="inferno", vmin=0.0,
+                      vmax=max(float(np.nanpercentile(gamma, 99)), 1e-12))
+    fig.colorbar(im, ax=ax, label="shear strain γ [%]")
+    n = xy.shape[0]
+    every = max(n // 400, 1)
+    ax.quiver(1e3 * x[:n:every], 1e3 * y[:n:every], dx[:n:every], dy[:n:every],
+              color="cyan", alpha=0.6, width=0.002)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x [mm]")
+    ax.set_ylabel("y [mm]")
+    ax.set_title(title)
+    return save_figure(fig, path)

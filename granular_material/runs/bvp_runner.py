@@ -1,0 +1,366 @@
+"""Run a boundary-value problem (:class:`~granular_material.runs.bvp_spec.BoundaryValueSpec`):
+build the mesh, boundaries, conditions and initial state, the material at every Gauss point,
+and step the Newton solver through the loading, writing as it goes.
+
+The run folder gets:
+
+- ``steps.csv``: one row per committed step (step 0 is the initial state): the load factor,
+  Newton's iterations, cut-backs and residuals, the wall time, the failed and unconfined
+  points, and for every boundary that carries a condition its force ``{name}_force_x``,
+  ``{name}_force_y`` [N/m] (the reaction of the supports on the body, or the load a pressure
+  puts on it) and its mean displacement ``{name}_displacement_x``, ``_y`` [m]; a rigid body
+  also ``{name}_displacement`` [m] along its motion (a footing pushed down: its settlement,
+  also as ``{name}_settlement``);
+- ``points.csv``: every Gauss point at every step (coordinates, stress [Pa], strain, shear
+  strain, mean pressure, the material's own fields such as the void ratio);
+- ``fields.xdmf``: the same for ParaView at every committed step (XML, no HDF5 needed);
+- ``load_displacement.png``, ``mechanism.png`` and ``summary.json``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from granular_material.fem import NewtonError, NewtonSolver, StepRecord
+from granular_material.fem.boundaries import select_boundaries
+from granular_material.fem.conditions import (
+    Displacement,
+    Fixed,
+    Gravity,
+    Pressure,
+    RigidBody,
+    Roller,
+    build_problem,
+)
+from granular_material.fem.geostatic import geostatic_stress
+from granular_material.fem.meshes import MeshData, read_mesh, rectangle_mesh
+from granular_material.results.bvp_plots import plot_load_displacement, plot_mechanism
+from granular_material.results.writers import FieldWriter, write_csv, write_json
+from granular_material.runs.bvp_material import material_for_problem, unit_weight_of
+from granular_material.runs.bvp_spec import BoundaryValueSpec, ConditionSpec
+from granular_material.runs.spec import SpecError
+
+__all__ = [
+    "UNCONFINED_FRACTION",
+    "BVPOutcome",
+    "Built",
+    "boundary_length",
+    "build",
+    "run_boundary_value",
+]
+
+#: a point is unconfined where its mean pressure fell below this fraction of its initial one
+UNCONFINED_FRACTION = 0.01
+
+
+@dataclass
+class BVPOutcome:
+    """What a boundary-value run produced.
+
+    Attributes:
+        steps: the steps table (see the module docstring).
+        summary: what ``summary.json`` holds.
+        error: why the run stopped short (None: it reached the end).
+        points: the Gauss-point table of the last committed step.
+        u: the last committed nodal displacement [m].
+    """
+
+    steps: pd.DataFrame
+    summary: dict[str, Any]
+    error: str | None = None
+    points: pd.DataFrame = field(default_factory=pd.DataFrame)
+    u: np.ndarray = field(default_factory=lambda: np.zeros(0))
+
+
+def _mesh(spec: BoundaryValueSpec) -> MeshData:
+    m = spec.mesh
+    if m.file is not None:
+        data = read_mesh(m.file)
+    else:
+        data = rectangle_mesh(m.size[0], m.size[1], m.elements[0], m.elements[1], m.element,
+                              grading=m.grading)
+        _align(data, 0, m.align_x)
+        _align(data, 1, m.align_y)
+    aliases = {name: data.boundaries[value] for name, value in spec.boundaries.items()
+               if value in data.boundaries}
+    predicates = {name: value for name, value in spec.boundaries.items() if name not in aliases}
+    return select_boundaries(data.with_boundaries(aliases), predicates)
+
+
+def _align(data: MeshData, axis: int, values: tuple[float, ...]) -> None:
+    """Move the grid line of a generated mesh nearest each of ``values`` [m] onto it (along
+    ``axis``), in place; refused where that would fold an element."""
+    p = data.mesh.p
+    for value in values:
+        lines = np.unique(p[axis])
+        k = int(np.argmin(np.abs(lines - value)))
+        low = lines[k - 1] if k > 0 else -np.inf
+        high = lines[k + 1] if k + 1 < lines.size else np.inf
+        if not low < value < high:
+            raise SpecError("mesh.align-" + "xy"[axis], f"{value:g} m lies outside the mesh or "
+                                                        "would fold an element")
+        p[axis, p[axis] == lines[k]] = value
+
+
+def _condition(c: ConditionSpec) -> Any:
+    if c.type == "fixed":
+        return Fixed(c.boundary)
+    if c.type == "roller":
+        return Roller(c.boundary, c.component)
+    if c.type == "displacement":
+        return Displacement(c.boundary, c.component, c.value)
+    if c.type == "rigid":
+        return RigidBody(c.boundary, displacement=tuple(c.displacement), rough=c.rough)
+    return Pressure(c.boundary, c.value)
+
+
+def _initial_stress(spec: BoundaryValueSpec, xy: np.ndarray, unit_weight: float,
+                    top: float) -> np.ndarray:
+    """The initial Cauchy stress [Pa] (n, 2, 2), tension positive."""
+    s = spec.initial
+    if s.state == "uniform":
+        return np.broadcast_to(-s.pressure * np.eye(2), (xy.shape[0], 2, 2)).copy()
+    surface = top if s.surface is None else s.surface
+    return geostatic_stress(xy, surface, unit_weight, s.surcharge, s.k0)
+
+
+@dataclass
+class Built:
+    """The pieces of a boundary-value run before it steps (see :func:`build`)."""
+
+    spec: BoundaryValueSpec
+    mesh: MeshData
+    problem: Any
+    initial_stress: np.ndarray
+    unit_weight: float
+    material: Any
+    settings: Any
+    moved: dict[str, np.ndarray]  # rigid body / displacement name -> unit direction
+    preparation_s: float = 0.0  # seconds to build and allocate the material
+
+
+def build(spec: BoundaryValueSpec) -> Built:
+    """Mesh, problem, initial stress and material of ``spec`` (no step taken)."""
+    mesh = _mesh(spec)
+    conditions = [_condition(c) for c in spec.conditions]
+    unit_weight = unit_weight_of(spec)
+    if unit_weight > 0:
+        conditions.append(Gravity(unit_weight))
+    problem = build_problem(mesh, conditions, spec.mesh.quadrature)
+    xy = problem.points
+    top = mesh.bounding_box[3]
+    sigma0 = _initial_stress(spec, xy, unit_weight, top)
+    t0 = time.perf_counter()
+    material = material_for_problem(spec, xy.shape[0], sigma0)
+    preparation = time.perf_counter() - t0
+    noisy = bool(getattr(type(material), "noisy", False))
+    settings = spec.newton.settings(noisy)
+    stress_tol = spec.newton.stress_tolerance(noisy, spec.reference_pressure)
+    if stress_tol > 0:
+        settings = replace(settings, atol=problem.force_tolerance(stress_tol))
+    moved = {}
+    for c in spec.conditions:
+        if c.type == "rigid":
+            d = np.asarray(c.displacement, dtype=float)
+            moved[c.boundary] = d / max(float(np.linalg.norm(d)), 1e-300)
+        elif c.type == "displacement":
+            direction = np.zeros(2)
+            direction[c.component] = math.copysign(1.0, c.value) if c.value else 1.0
+            moved[c.boundary] = direction
+    return Built(spec, mesh, problem, sigma0, unit_weight, material, settings, moved,
+                 preparation)
+
+
+def _rows(b: Built, solver: NewtonSolver, record: StepRecord | None, p0: np.ndarray,
+          ) -> tuple[dict[str, Any], pd.DataFrame]:
+    problem = b.problem
+    kin = solver.kinematics
+    grad = solver.grad_u()
+    strain = kin.strain(grad)
+    stress = solver.response.stress
+    pressure = -0.5 * np.trace(stress, axis1=1, axis2=2)
+    failed = ~np.asarray(solver.response.ok_mask() if hasattr(solver.response, "ok_mask")
+                         else solver.response.status == 0)
+    unconfined = pressure < UNCONFINED_FRACTION * p0
+    reaction = solver.reaction
+    _, f_ext = solver.loading.at(solver.load_factor, solver.u if kin.finite else None)
+    step = record.step if record else 0
+    row: dict[str, Any] = {
+        "step": step, "load_factor": solver.load_factor,
+        "iterations": record.iterations if record else 0,
+        "cutbacks": record.cutbacks if record else 0,
+        "stalled": record.stalled if record else 0,
+        "wall_time": record.wall_time if record else 0.0,
+        "failed_points": int(failed.sum()), "unconfined_points": int(unconfined.sum()),
+        "residual_history": json.dumps(record.residual_history if record else []),
+        **({k: v for k, v in record.costs.items()} if record else {}),
+    }
+    for name in sorted({c.boundary for c in b.spec.conditions}):
+        loaded = any(c.boundary == name and c.type == "pressure" for c in b.spec.conditions)
+        fx, fy = problem.boundary_force(name, f_ext if loaded else reaction)
+        ux, uy = problem.boundary_displacement(name, solver.u)
+        row.update({f"{name}_force_x": fx, f"{name}_force_y": fy,
+                    f"{name}_displacement_x": ux, f"{name}_displacement_y": uy})
+        if name in b.moved:
+            along = float(b.moved[name] @ np.array([ux, uy]))
+            row[f"{name}_displacement"] = along
+            if b.moved[name][1] < -0.5:
+                row[f"{name}_settlement"] = along
+    xy = problem.points
+    nqp = problem.basis.X.shape[-1]
+    fields = {k: np.asarray(v, dtype=float) for k, v in solver.response.fields.items()}
+    w = strain
+    points = pd.DataFrame({
+        "step": step, "point": np.arange(len(stress)),
+        "element": np.arange(len(stress)) // nqp, "x": xy[:, 0], "y": xy[:, 1],
+        "sxx": stress[:, 0, 0], "syy": stress[:, 1, 1], "sxy": stress[:, 0, 1],
+        "exx": w[:, 0, 0], "eyy": w[:, 1, 1], "exy": w[:, 0, 1],
+        "volumetric_strain": np.trace(w, axis1=1, axis2=2),
+        "shear_strain": np.hypot(w[:, 0, 0] - w[:, 1, 1], 2 * w[:, 0, 1]),
+        "rotation": 0.5 * (grad[:, 1, 0] - grad[:, 0, 1]),
+        "mean_pressure": pressure, "unconfined": unconfined.astype(np.int8),
+        "failed": failed.astype(np.int8), **fields,
+    })
+    return row, points
+
+
+def _where(points: pd.DataFrame, column: str) -> str:
+    """Where the points flagged in ``column`` are: their count and bounding box."""
+    flagged = points[points[column] > 0]
+    if flagged.empty:
+        return ""
+    return (f"{len(flagged)} points in x {flagged.x.min():.3g}–{flagged.x.max():.3g} m, "
+            f"y {flagged.y.min():.3g}–{flagged.y.max():.3g} m")
+
+
+def run_boundary_value(spec: BoundaryValueSpec, out: Path | None = None) -> BVPOutcome:
+    """Run ``spec`` into ``out`` (default ``spec.out``; None: nothing written) and return
+    what it produced. A Newton failure or Ctrl-C stops the run with the committed steps kept
+    and written (``error`` says why)."""
+    t_start = time.perf_counter()
+    out = out if out is not None else spec.out
+    b = build(spec)
+    problem = b.problem
+    solver = NewtonSolver(problem.basis, b.material, problem.loading, b.settings)
+    p0 = np.maximum(-0.5 * np.trace(b.initial_stress, axis1=1, axis2=2), 1e-300)
+    rows: list[dict[str, Any]] = []
+    last: dict[str, Any] = {}
+    writer = None
+    if out is not None:
+        out = Path(out)
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "points.csv").unlink(missing_ok=True)
+        if spec.fields:
+            writer = FieldWriter(out / "fields.xdmf", problem).__enter__()
+
+    def collect(s: NewtonSolver, record: StepRecord | None) -> None:
+        row, points = _rows(b, s, record, p0)
+        rows.append(row)
+        last.update(points=points, u=s.u.copy())
+        if out is not None:
+            write_csv(pd.DataFrame(rows), out / "steps.csv")
+            write_csv(points, out / "points.csv", append=record is not None)
+            if writer is not None:
+                writer.write(float(s.load_factor), s.u, points)
+
+    t_initial = time.perf_counter()
+    collect(solver, None)
+    initial_residual = _initial_residual(solver)
+    t_initial = time.perf_counter() - t_initial
+    error = None
+    try:
+        solver.run(spec.steps, on_step=collect, progress=spec.progress,
+                   description=f"{spec.name} ({problem.basis.nelems} elements)")
+    except NewtonError as exc:
+        error = str(exc)
+    except KeyboardInterrupt:
+        error = f"interrupted after load step {len(rows) - 1} of {spec.steps}"
+    finally:
+        if writer is not None:
+            writer.__exit__(None, None, None)
+    steps = pd.DataFrame(rows)
+    summary = _summary(b, solver, steps, last.get("points", pd.DataFrame()), error,
+                       initial_residual, t_initial, time.perf_counter() - t_start)
+    if out is not None:
+        _figures(b, steps, last, out)
+        summary["out"] = str(out)
+        write_json(summary, out / "summary.json")
+    return BVPOutcome(steps, summary, error, last.get("points", pd.DataFrame()),
+                      last.get("u", np.zeros(0)))
+
+
+def _initial_residual(solver: NewtonSolver) -> dict[str, float]:
+    """‖R‖ [N/m] of the initial state at λ = 0 over the free dofs, against ‖f_ext‖: zero when
+    the initial stress is in equilibrium with the loads (a geostatic start)."""
+    _, f_ext = solver.loading.at(0.0, solver.u if solver.kinematics.finite else None)
+    residual = solver.f_int - f_ext
+    free = np.ones(residual.size, dtype=bool)
+    free[solver.loading.dirichlet_dofs] = False
+    norm = float(np.linalg.norm(residual[free]))
+    scale = float(np.linalg.norm(f_ext[free])) or float(np.linalg.norm(solver.f_int)) or 1.0
+    return {"norm": norm, "relative": norm / scale, "newton_atol": solver.settings.atol}
+
+
+def _summary(b: Built, solver: NewtonSolver, steps: pd.DataFrame, points: pd.DataFrame,
+             error: str | None, initial: dict[str, float], t_initial: float,
+             wall: float) -> dict[str, Any]:
+    spec = b.spec
+    timings: dict[str, float] = {"preparation": b.preparation_s, "initial_state": t_initial}
+    for record in solver.records:
+        for name, seconds in record.timings.items():
+            timings[name] = timings.get(name, 0.0) + seconds
+        timings["steps"] = timings.get("steps", 0.0) + record.wall_time
+    last = steps.iloc[-1].to_dict() if len(steps) else {}
+    bodies = {name: {"force_x": last.get(f"{name}_force_x"),
+                     "force_y": last.get(f"{name}_force_y"),
+                     "displacement": last.get(f"{name}_displacement")}
+              for name in b.moved}
+    return {
+        "name": spec.name, "mesh": b.mesh.source, "element": b.mesh.element,
+        "elements": int(problem_elements(b)), "gauss_points": int(b.initial_stress.shape[0]),
+        "material": spec.material.name, "unit_weight": b.unit_weight,
+        "initial_state": spec.initial.state, "initial_residual": initial,
+        "steps": int(len(steps) - 1), "steps_planned": spec.steps, "error": error,
+        "iterations": [int(i) for i in steps["iterations"].iloc[1:]],
+        "failed_points_last": int(last.get("failed_points", 0)),
+        "unconfined_points_last": int(last.get("unconfined_points", 0)),
+        "unconfined_where": _where(points, "unconfined") if len(points) else "",
+        "bodies": bodies, "timing_s": {k: round(v, 3) for k, v in timings.items()},
+        "wall_s": round(wall, 3),
+    }
+
+
+def problem_elements(b: Built) -> int:
+    """Elements of the run's mesh."""
+    return int(b.problem.basis.nelems)
+
+
+def _figures(b: Built, steps: pd.DataFrame, last: dict[str, Any], out: Path) -> None:
+    if len(steps) < 2 or "points" not in last:
+        return
+    bodies = []
+    for name, direction in b.moved.items():
+        axis = "y" if abs(direction[1]) >= abs(direction[0]) else "x"
+        bodies.append((name, axis, boundary_length(b.mesh, name)))
+    if bodies:
+        plot_load_displacement(steps, bodies, out / "load_displacement.png")
+    xy, cells, kind, dofs = b.problem.nodes()
+    u = last["u"]
+    gamma = last["points"].groupby("element")["shear_strain"].mean().to_numpy()
+    plot_mechanism(xy, cells, kind, u[dofs[0]], u[dofs[1]], gamma, out / "mechanism.png",
+                   title=f"{b.spec.name}: shear strain at step {int(steps['step'].iloc[-1])}")
+
+
+def boundary_length(mesh: MeshData, name: str) -> float:
+    """The reference length [m] of the boundary ``name`` (the sum of its facets')."""
+    m = mesh.mesh
+    ends = m.facets[:, mesh.boundaries[name]]
+    return float(np.linalg.norm(m.p[:, ends[0]] - m.p[:, ends[1]], axis=0).sum())

@@ -1,0 +1,191 @@
+"""Boundary-value scenes (test = "boundary-value"): read whole, run into a folder, checked
+against closed forms (a column under its own weight, Prandtl's bearing capacity)."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from granular_material.cli import main
+from granular_material.runs.bvp_runner import run_boundary_value
+from granular_material.runs.bvp_spec import bvp_from_dict
+
+FOOTING = """
+test = "boundary-value"
+name = "footing"
+steps = {steps}
+[mesh]
+size = [0.6, 0.4]
+elements = {elements}
+element = "tri6"
+grading = [4.0, 0.25]
+align-x = [0.05]
+[boundaries]
+footing = "y = top and x <= 0.05"
+surface = "y = top and x >= 0.05"
+[[conditions]]
+type = "roller"
+boundary = "left"
+component = "x"
+[[conditions]]
+type = "roller"
+boundary = "right"
+component = "x"
+[[conditions]]
+type = "fixed"
+boundary = "bottom"
+[[conditions]]
+type = "rigid"
+boundary = "footing"
+displacement = [0.0, {settlement}]
+[[conditions]]
+type = "pressure"
+boundary = "surface"
+value = 20e3
+[initial]
+state = "uniform"
+pressure = 20e3
+{material}
+"""
+ELASTIC = '[material]\nname = "linear-elastic"\n[material.parameters]\nE = 60e6\nnu = 0.3\n'
+
+
+def _scene(tmp_path: Path, text: str, name: str = "scene.toml") -> Path:
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+def test_linear_elastic_footing_runs_into_its_folder(tmp_path, capsys):
+    scene = _scene(tmp_path, FOOTING.format(steps=4, elements="[8, 6]", settlement=-0.001,
+                                            material=ELASTIC))
+    out = tmp_path / "run"
+    assert main(["run", str(scene), "--out", str(out)]) == 0
+    for name in ("steps.csv", "points.csv", "fields.xdmf", "load_displacement.png",
+                 "mechanism.png", "summary.json", "scene.toml"):
+        assert (out / name).is_file(), name
+    steps = pd.read_csv(out / "steps.csv")
+    assert list(steps["step"]) == [0, 1, 2, 3, 4]
+    assert steps["footing_settlement"].iloc[-1] == pytest.approx(0.001)
+    # uniform 20 kPa: the footing carries 20 kPa x B at step 0, elastic: linear after
+    assert steps["footing_force_y"].iloc[0] == pytest.approx(-20e3 * 0.05, rel=1e-9)
+    increments = np.diff(steps["footing_force_y"].to_numpy())
+    assert increments == pytest.approx(increments[0], rel=1e-2)  # finite strain: near-linear
+    assert steps["surface_force_y"].iloc[0] == pytest.approx(-20e3 * 0.55, rel=1e-9)
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["initial_residual"]["relative"] < 1e-10
+    assert summary["error"] is None and summary["iterations"] == [1, 1, 1, 1]
+    points = pd.read_csv(out / "points.csv")
+    assert set(points["step"]) == {0, 1, 2, 3, 4}
+    assert {"mean_pressure", "shear_strain", "rotation", "unconfined"} <= set(points)
+
+
+def test_mohr_coulomb_footing_levels_off_near_prandtl(tmp_path):
+    material = ('[material]\nname = "mohr-coulomb"\n[material.parameters]\nE = 60e6\n'
+                'nu = 0.3\nphi = 30.0\npsi = 30.0\n[newton]\nformulation = "small-strain"\n')
+    spec = bvp_from_dict(__import__("tomllib").loads(FOOTING.format(
+        steps=16, elements="[12, 8]", settlement=-0.004, material=material)))
+    outcome = run_boundary_value(spec)
+    assert outcome.error is None
+    q = -outcome.steps["footing_force_y"].to_numpy() / 0.05
+    phi = math.radians(30.0)
+    n_q = math.exp(math.pi * math.tan(phi)) * math.tan(math.pi / 4 + phi / 2) ** 2
+    # a coarse mesh overestimates the collapse load (measured: 1.13 on 12 x 8 tri6)
+    assert 1.0 < q[-1] / (20e3 * n_q) < 1.25
+    assert abs(q[-1] - q[-2]) < 0.01 * q[-1]  # a plateau
+
+
+def test_column_under_its_own_weight_starts_in_equilibrium(tmp_path):
+    text = """
+test = "boundary-value"
+steps = 2
+[mesh]
+size = [0.2, 1.0]
+elements = [1, 5]
+element = "quad8"
+[[conditions]]
+type = "roller"
+boundary = "left"
+component = "x"
+[[conditions]]
+type = "roller"
+boundary = "right"
+component = "x"
+[[conditions]]
+type = "fixed"
+boundary = "bottom"
+[[conditions]]
+type = "pressure"
+boundary = "top"
+value = 10e3
+[gravity]
+unit_weight = 18e3
+[initial]
+state = "geostatic"
+k0 = 0.42857142857142855
+surcharge = 10e3
+[material]
+name = "linear-elastic"
+[material.parameters]
+E = 50e6
+nu = 0.3
+"""
+    spec = bvp_from_dict(__import__("tomllib").loads(text))
+    outcome = run_boundary_value(spec)
+    assert outcome.summary["initial_residual"]["relative"] < 1e-12
+    # the loads are those of the initial state: nothing moves, the base carries them all
+    assert np.abs(outcome.u).max() < 1e-12
+    base = outcome.steps["bottom_force_y"].iloc[-1]
+    assert base == pytest.approx((10e3 + 18e3 * 1.0) * 0.2, rel=1e-9)
+    p = outcome.points
+    depth = 1.0 - p["y"]
+    assert p["syy"].to_numpy() == pytest.approx(-(10e3 + 18e3 * depth).to_numpy(), rel=1e-9)
+    assert p["sxx"].to_numpy() == pytest.approx(0.3 / 0.7 * p["syy"].to_numpy(), rel=1e-9)
+
+
+def test_dem_footing_smoke(tmp_path):
+    material = ('[material]\nname = "dem"\n[material.parameters]\nparticles = 64\n'
+                'seed = 1\n[output]\ndevice = "cpu"\n')
+    spec = bvp_from_dict(__import__("tomllib").loads(FOOTING.format(
+        steps=2, elements="[3, 2]", settlement=-0.0005, material=material)))
+    outcome = run_boundary_value(spec)
+    assert outcome.error is None
+    summary = outcome.summary
+    assert summary["initial_residual"]["norm"] <= summary["initial_residual"]["newton_atol"]
+    q = -outcome.steps["footing_force_y"].to_numpy() / 0.05
+    assert q[0] == pytest.approx(20e3, rel=0.05)
+    assert q[-1] > q[0]
+    assert summary["timing_s"]["preparation"] > 0
+
+
+@pytest.mark.parametrize("change, key, message", [
+    (('type = "fixed"', 'type = "glued"'), "conditions.type", "must be one of"),
+    (('footing = "y = top and x <= 0.05"', 'footing = "y = top and x <= -1"'), "footing",
+     "selects no boundary facet"),
+    (("steps = 4", "steps = 0"), "steps", "must be an integer >= 1"),
+    (("[initial]", "[initial]\nk0 = -1"), "initial.k0", "must be > 0"),
+    (("[mesh]", "[mesh]\ncolour = 3"), "mesh.colour", "is not a key of [mesh]"),
+])
+def test_a_scene_that_cannot_run_is_refused_naming_its_key(tmp_path, capsys, change, key,
+                                                            message):
+    text = FOOTING.format(steps=4, elements="[4, 3]", settlement=-0.001, material=ELASTIC)
+    assert change[0] in text
+    scene = _scene(tmp_path, text.replace(*change, 1))
+    out = tmp_path / "run"
+    assert main(["run", str(scene), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert message in err and key in err
+    assert not (out / "steps.csv").exists()
+
+
+def test_check_builds_the_problem_and_runs_nothing(tmp_path, capsys):
+    scene = _scene(tmp_path, FOOTING.format(steps=4, elements="[4, 3]", settlement=-0.001,
+                                            material=ELASTIC))
+    assert main(["run", str(scene), "--check", "--out", str(tmp_path / "run")]) == 0
+    assert "checked" in capsys.readouterr().out
+    assert not (tmp_path / "run").exists()
