@@ -68,7 +68,7 @@ def run_bvp_scene(path: Path, text: str, data: dict[str, Any],
     try:
         spec = bvp_from_dict(data, path.parent)
         if args.check:
-            build(spec)  # the mesh, boundaries, conditions and material, no step
+            build(spec, allocate=False)  # mesh, boundaries, conditions, material: no step
             print(f"{path}: a boundary-value problem of {spec.steps} steps, material "
                   f"{spec.material.name}: checked")
             return 0

@@ -15,8 +15,9 @@ job (:mod:`.mpi`), what an evaluation gives (:mod:`.evaluation`) and its run hoo
 """
 
 from granular_material.multiscale.backend import InProcessBackend
+from granular_material.multiscale.confinement import UnconfinedWarning
 from granular_material.multiscale.evaluation import DEMBackend, Evaluation
-from granular_material.multiscale.material import DEMMaterial, UnconfinedWarning
+from granular_material.multiscale.material import DEMMaterial
 from granular_material.multiscale.parameters import (
     BACKENDS,
     DEMDriving,

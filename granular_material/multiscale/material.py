@@ -44,6 +44,12 @@ from granular_material.fem.material import (
     ScikitFemInterface,
 )
 from granular_material.multiscale.backend import InProcessBackend
+from granular_material.multiscale.confinement import (
+    UNCONFINED_FRACTION,
+    UnconfinedWarning,
+    floored_tangent,
+    unconfined,
+)
 from granular_material.multiscale.evaluation import Evaluation
 from granular_material.multiscale.isotropic import relax_to_isotropic
 from granular_material.multiscale.parameters import BACKENDS, DEMMaterialParameters
@@ -69,21 +75,11 @@ if TYPE_CHECKING:
 
 __all__ = ["UNCONFINED_FRACTION", "DEMMaterial", "UnconfinedWarning"]
 
-#: a point whose mean pressure −tr σ / 2 falls below this fraction of the material's
-#: confining pressure has lost its confinement (:class:`UnconfinedWarning`)
-UNCONFINED_FRACTION = 0.01
 #: the checkpoint's array of the committed total ∇u (a ``backend_*`` array: the RVE states
 #: of a checkpoint are read without it)
 _GRAD_KEY = "backend_material_grad_u"
 #: the material's settings, by name (:class:`DEMMaterialParameters`' fields)
 _SETTINGS = frozenset(f.name for f in fields(DEMMaterialParameters))
-
-
-class UnconfinedWarning(UserWarning):
-    """A DEM RVE has (nearly) no confining stress: with none, a granular RVE relaxes into a
-    stress-free gas of discs (zero stress, zero stiffness) and a Newton loop "converges" to
-    nothing. Confine the specimen (a pressure on its boundary, as
-    ``examples/skfem_material_swap.py`` does) or load RVEs prepared at a pressure."""
 
 
 def _user_stacklevel() -> int:
@@ -160,6 +156,7 @@ class DEMMaterial(ScikitFemInterface):
         self._committed_response: MaterialResponse | None = None
         self._last_response: MaterialResponse | None = None
         self._warned_unconfined = False
+        self._initial_tangent: np.ndarray | None = None  # of the first evaluation
         #: how the RVEs were brought to ``initial_stress`` (None without it, or before
         #: :meth:`allocate`): the targets, clamped points, groups and errors
         self.preparation: StressPreparation | None = None
@@ -281,6 +278,7 @@ class DEMMaterial(ScikitFemInterface):
     def _reset_state(self, n_points: int) -> None:
         self._track_allocate(n_points)
         self._committed_response = self._last_response = None
+        self._initial_tangent = None
 
     def evaluate(self, grad_u: np.ndarray) -> MaterialResponse:
         """Symmetrised Love stress and the tangent for ∇u (n, 2, 2) since the commit.
@@ -315,9 +313,8 @@ class DEMMaterial(ScikitFemInterface):
                 "convert with granular_material.fem.to_points / to_quadrature)")
         self._track_evaluate(grad_u)
         ev = self.backend.evaluate(grad_u)
-        response = self._response_of(ev)
+        response = self._check_confinement(self._response_of(ev))
         self._last_response = response
-        self._check_confinement(response)
         return response
 
     def _response_of(self, ev: Evaluation) -> MaterialResponse:
@@ -376,26 +373,42 @@ class DEMMaterial(ScikitFemInterface):
                         "stress_skew": 0.5 * (love[:, 0, 1] - love[:, 1, 0])})
         return self._committed_response
 
-    def _check_confinement(self, response: MaterialResponse) -> None:
-        if self._warned_unconfined:
-            return
+    def _initial_pressure(self) -> float | np.ndarray:
+        """Each point's initial mean pressure [Pa] (its prepared stress), else the confining
+        pressure."""
+        if self.preparation is not None:
+            return -0.5 * np.trace(self.preparation.prepared, axis1=1, axis2=2)
+        return self.confining
+
+    def _check_confinement(self, response: MaterialResponse) -> MaterialResponse:
+        """``response`` with the tangent of unconfined points floored
+        (:func:`~granular_material.multiscale.confinement.floored_tangent`: by their initial
+        tangent), and a warning, once, that there are some."""
         ok = response.status == PointStatus.OK
+        if self._initial_tangent is None:  # the first evaluation's: the initial state's
+            self._initial_tangent = response.tangent.copy()
+        mask = unconfined(response.stress, ok, self._initial_pressure())
+        if mask.any():
+            response = replace(response, tangent=floored_tangent(
+                response.tangent, self._initial_tangent, mask))
+        if self._warned_unconfined:
+            return response
         pressure = -0.5 * np.trace(response.stress, axis1=1, axis2=2)
-        scale: float | np.ndarray = self.confining
-        named = f"{self.confining:g} Pa"
-        if self.preparation is not None:  # each point's own initial mean pressure
-            scale = -0.5 * np.trace(self.preparation.prepared, axis1=1, axis2=2)
-            named = "its initial mean pressure"
-        loose = np.flatnonzero(ok & (pressure < UNCONFINED_FRACTION * scale))
+        named = (f"{self.confining:g} Pa" if self.preparation is None
+                 else "its initial mean pressure")
+        loose = np.flatnonzero(mask)
         if loose.size:
             self._warned_unconfined = True
             warnings.warn(
                 f"{loose.size} of {len(pressure)} DEM points have lost their confinement "
                 f"(mean pressure below {UNCONFINED_FRACTION:.0%} of {named}, "
                 f"e.g. {pressure[loose[0]]:.3g} Pa at point {loose[0]}): an unconfined RVE "
-                "relaxes into a stress-free gas of discs. Apply a confining pressure on the "
-                "boundary of the specimen (see docs/guide/scikit-fem.md)",
+                "relaxes into a stress-free gas of discs (Newton iterates with a floor of "
+                "its initial tangent there). A specimen needs a confining pressure on its "
+                "boundary (see docs/guide/scikit-fem.md); in a boundary-value problem, soil "
+                "that unloads to nothing (beside a footing's edge) is physical",
                 UnconfinedWarning, stacklevel=_user_stacklevel())
+        return response
 
     def hold_tangent(self, hold: bool) -> None:
         """``hold``: the next evaluation's tangent is returned by the later ones too, up to

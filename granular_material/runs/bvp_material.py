@@ -34,9 +34,10 @@ def problem_context(spec: BoundaryValueSpec, n_points: int) -> RunContext:
 
 
 def material_for_problem(spec: BoundaryValueSpec, n_points: int,
-                         initial_stress: np.ndarray) -> Any:
+                         initial_stress: np.ndarray, allocate: bool = True) -> Any:
     """The material of ``spec`` at ``n_points`` Gauss points starting from
-    ``initial_stress`` [Pa] (n, 2, 2), allocated."""
+    ``initial_stress`` [Pa] (n, 2, 2), allocated (its RVEs prepared) unless ``allocate`` is
+    False."""
     cls = spec.material.cls
     hook = getattr(cls, "for_problem", None)
     if hook is None:
@@ -48,7 +49,7 @@ def material_for_problem(spec: BoundaryValueSpec, n_points: int,
     if check is not None:
         check(spec.material.parameters, context)
     material = hook(spec.material.parameters, context, np.asarray(initial_stress, float))
-    if material.n_points == 0:
+    if allocate and material.n_points == 0:
         material.allocate(n_points)
     return material
 

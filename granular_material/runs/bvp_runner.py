@@ -42,6 +42,7 @@ from granular_material.fem.conditions import (
 )
 from granular_material.fem.geostatic import geostatic_stress
 from granular_material.fem.meshes import MeshData, read_mesh, rectangle_mesh
+from granular_material.multiscale.confinement import UNCONFINED_FRACTION
 from granular_material.results.bvp_plots import plot_load_displacement, plot_mechanism
 from granular_material.results.writers import FieldWriter, write_csv, write_json
 from granular_material.runs.bvp_material import material_for_problem, unit_weight_of
@@ -49,7 +50,6 @@ from granular_material.runs.bvp_spec import BoundaryValueSpec, ConditionSpec
 from granular_material.runs.spec import SpecError
 
 __all__ = [
-    "UNCONFINED_FRACTION",
     "BVPOutcome",
     "Built",
     "boundary_length",
@@ -57,8 +57,6 @@ __all__ = [
     "run_boundary_value",
 ]
 
-#: a point is unconfined where its mean pressure fell below this fraction of its initial one
-UNCONFINED_FRACTION = 0.01
 
 
 @dataclass
@@ -147,8 +145,9 @@ class Built:
     preparation_s: float = 0.0  # seconds to build and allocate the material
 
 
-def build(spec: BoundaryValueSpec) -> Built:
-    """Mesh, problem, initial stress and material of ``spec`` (no step taken)."""
+def build(spec: BoundaryValueSpec, allocate: bool = True) -> Built:
+    """Mesh, problem, initial stress and material of ``spec`` (no step taken; the material
+    not allocated, its RVEs not prepared, unless ``allocate``)."""
     mesh = _mesh(spec)
     conditions = [_condition(c) for c in spec.conditions]
     unit_weight = unit_weight_of(spec)
@@ -159,7 +158,7 @@ def build(spec: BoundaryValueSpec) -> Built:
     top = mesh.bounding_box[3]
     sigma0 = _initial_stress(spec, xy, unit_weight, top)
     t0 = time.perf_counter()
-    material = material_for_problem(spec, xy.shape[0], sigma0)
+    material = material_for_problem(spec, xy.shape[0], sigma0, allocate)
     preparation = time.perf_counter() - t0
     noisy = bool(getattr(type(material), "noisy", False))
     settings = spec.newton.settings(noisy)
