@@ -189,3 +189,16 @@ def test_check_builds_the_problem_and_runs_nothing(tmp_path, capsys):
     assert main(["run", str(scene), "--check", "--out", str(tmp_path / "run")]) == 0
     assert "checked" in capsys.readouterr().out
     assert not (tmp_path / "run").exists()
+
+
+BVP_SCENES = sorted(p for p in (Path(__file__).parents[1] / "examples" / "scenes").glob("*.toml")
+                    if "boundary-value" in p.read_text())
+
+
+@pytest.mark.parametrize("path", BVP_SCENES, ids=[p.stem for p in BVP_SCENES])
+def test_example_boundary_value_scenes_check(path, capsys):
+    if "/usr/share/doc/yade" in path.read_text() and not Path(
+            "/usr/share/doc/yade/examples/FEMxDEM/footing.msh").is_file():
+        pytest.skip("Guo & Zhao's footing.msh ships with Debian's yade")
+    assert main(["run", str(path), "--check"]) == 0
+    assert "checked" in capsys.readouterr().out

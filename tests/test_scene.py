@@ -27,7 +27,9 @@ else:
     import tomli as tomllib
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples" / "scenes"
-SCENES = sorted(EXAMPLES.glob("*.toml"))
+#: the command scenes (a boundary-value scene is no command's: tests/test_bvp_run.py)
+SCENES = sorted(p for p in EXAMPLES.glob("*.toml")
+                if tomllib.loads(p.read_text())["test"] != "boundary-value")
 RVE64 = EXAMPLES / "rve64.npz"
 _PARSERS = command_parsers()
 
