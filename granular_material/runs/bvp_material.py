@@ -25,10 +25,13 @@ GRAVITY = 9.81
 
 
 def problem_context(spec: BoundaryValueSpec, n_points: int) -> RunContext:
-    """The run context a material of ``spec`` is built for."""
+    """The run context a material of ``spec`` is built for (the device resolved: None is
+    CUDA where present, else the CPU)."""
+    from granular_material.dem import resolve_device
+
     return RunContext(test="boundary-value", n_points=n_points,
                       confining=spec.reference_pressure, axial_strain=0.0, steps=spec.steps,
-                      scale_discs=None, device=spec.device or "cpu", shards=spec.shards,
+                      scale_discs=None, device=resolve_device(spec.device), shards=spec.shards,
                       backend="inprocess", progress=spec.progress,
                       convergence=spec.newton.convergence)
 

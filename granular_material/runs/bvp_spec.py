@@ -245,7 +245,8 @@ class BoundaryValueSpec:
         material: the material (as in a run specification).
         newton: the Newton solver.
         out: the run folder (None: nothing written).
-        device: the DEM device; shards: CPU shards; progress: progress bars.
+        device: the DEM device ("cpu", "cuda", "cuda:N"; None: CUDA where present); shards:
+            CPU shards; progress: progress bars.
         fields: write the ParaView fields (fields.xdmf) at every committed step.
         name: the problem's name (tables and figures).
     """
@@ -260,7 +261,7 @@ class BoundaryValueSpec:
     material: MaterialSpec = field(default_factory=lambda: MaterialSpec(name="linear-elastic"))
     newton: NewtonSpec = field(default_factory=NewtonSpec)
     out: Path | None = None
-    device: str | None = "cpu"
+    device: str | None = None
     shards: int | None = None
     progress: bool = False
     fields: bool = True
@@ -387,8 +388,8 @@ def bvp_from_dict(data: Mapping[str, Any], folder: Path | str = ".") -> Boundary
     if shards is not None and (isinstance(shards, bool) or not isinstance(shards, int)
                                or shards < 1):
         raise SpecError("output.shards", f"must be an integer >= 1, got {shards!r}")
-    device = output.get("device", "cpu")
-    if not isinstance(device, str):
+    device = output.get("device")
+    if device is not None and not isinstance(device, str):
         raise SpecError("output.device", f"must be a device name, got {device!r}")
     return BoundaryValueSpec(
         mesh=_mesh(_table("mesh", data.get("mesh")), folder),
