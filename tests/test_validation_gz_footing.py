@@ -14,6 +14,7 @@ from granular_material_validation import guo_zhao_runner, gz_footing
 from granular_material_validation.gz_footing import (
     FootingMesh,
     footing_mesh,
+    footing_nodal_reaction,
     footing_traction_force,
     lumped_nodal_stress,
     match_elements,
@@ -85,6 +86,11 @@ def test_uniform_stress_gives_the_surcharge_force_on_the_base_for_either_rule() 
         force, length = footing_traction_force(mesh, xy, sigma)
         assert length == pytest.approx(0.05)
         assert force == pytest.approx([0.0, -20e3 * 0.05])
+        # the internal force on the base's nodes holds the surcharge's share on the edge
+        # node (1/6 of the next top edge, 0.025 m): less that load, the surcharge × B
+        inner = footing_nodal_reaction(mesh, xy, sigma)
+        assert inner[1] == pytest.approx(-20e3 * (0.05 + 0.025 / 6))
+        assert footing_nodal_reaction(mesh, xy, sigma, 20e3)[1] == pytest.approx(-1000.0)
 
 
 def test_projection_lumps_by_area_and_integrates_the_base_by_hand() -> None:

@@ -28,11 +28,9 @@ import signal
 import subprocess
 import sys
 import time
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import pandas as pd
 from granular_material_validation.guo_zhao_runner import (
     MODULE_PATCHES,
@@ -40,21 +38,31 @@ from granular_material_validation.guo_zhao_runner import (
     find_femxdem,
     group_cpu_s,
 )
+from granular_material_validation.gz_footing_mesh import (
+    HALF_WIDTH,
+    X_LINES,
+    Y_LINES,
+    FootingMesh,
+    footing_mesh,
+    footing_nodal_reaction,
+    footing_traction_force,
+    lumped_nodal_stress,
+    match_elements,
+    read_gmsh22,
+    write_gmsh22,
+)
 from granular_material_validation.yade_io import export_rve
 from granular_material_validation.yade_runner import SCRIPTS, YadeError, find_yade, run_script
 
 __all__ = ["FOOTING_PATCHES", "HALF_WIDTH", "SETTLEMENT_PER_STEP", "SURCHARGE", "X_LINES",
-           "Y_LINES", "FootingMesh", "footing_mesh", "footing_traction_force",
+           "Y_LINES", "FootingMesh", "footing_mesh", "footing_nodal_reaction",
+           "footing_traction_force",
            "guo_zhao_footing", "lumped_nodal_stress", "match_elements", "ours_footing",
            "patch_footing", "read_gmsh22", "scene_text", "write_gmsh22"]
 
-#: their footing's half-width B [m], settlement a load step [m], surcharge [Pa]
-HALF_WIDTH = 0.05
+#: settlement a load step [m] and surcharge [Pa] of their script
 SETTLEMENT_PER_STEP = 0.25e-3
 SURCHARGE = 20e3
-#: grid lines of the coarse mesh [m]: 8 × 5 cells, a node at the footing's edge x = B
-X_LINES = (0.0, 0.025, 0.05, 0.075, 0.1, 0.15, 0.25, 0.4, 0.6)
-Y_LINES = (-0.4, -0.2, -0.1, -0.05, -0.025, 0.0)
 
 #: (what, original text, replacement) applied to their footing.py; {name}: the job's
 FOOTING_PATCHES: tuple[tuple[str, str, str], ...] = (
@@ -80,163 +88,6 @@ FOOTING_PATCHES: tuple[tuple[str, str, str], ...] = (
      "\tgz_probe.record(t, prob, vR)\n\trotation = prob.getLocalAvgRotation()"),
 )
 _CONVERGED = re.compile(r"Convergence reached after (\d+) iteration\(s\)! Relative error: (\S+)")
-
-
-@dataclass(frozen=True)
-class FootingMesh:
-    """A tri6 mesh of the half domain: ``points`` (n, 2) [m]; ``triangles`` (ne, 6) node
-    indices in gmsh order (corners counter-clockwise, then the midsides of 0-1, 1-2, 2-0);
-    ``lines`` (nb, 3) the boundary's line3 edges (ends, then midside)."""
-
-    points: np.ndarray
-    triangles: np.ndarray
-    lines: np.ndarray
-
-    @property
-    def corners(self) -> np.ndarray:
-        """The (ne, 3) corner nodes of every triangle."""
-        return self.triangles[:, :3]
-
-
-def footing_mesh(x_lines: tuple[float, ...] = X_LINES,
-                 y_lines: tuple[float, ...] = Y_LINES) -> FootingMesh:
-    """The rectangle spanned by the increasing grid lines ``x_lines`` × ``y_lines`` [m], each
-    cell cut into two tri6 along its diagonal from lower left to upper right."""
-    xs, ys = np.asarray(x_lines, float), np.asarray(y_lines, float)
-    if xs.size < 2 or ys.size < 2 or np.any(np.diff(xs) <= 0) or np.any(np.diff(ys) <= 0):
-        raise ValueError("grid lines must be increasing, at least two each way")
-    # a (2 nx + 1) × (2 ny + 1) grid of nodes holds the corners and every midside
-    gx = np.concatenate([np.ravel(np.column_stack([xs[:-1], 0.5 * (xs[:-1] + xs[1:])])),
-                         xs[-1:]])
-    gy = np.concatenate([np.ravel(np.column_stack([ys[:-1], 0.5 * (ys[:-1] + ys[1:])])),
-                         ys[-1:]])
-    nx, ny = gx.size, gy.size
-    index = np.full((nx, ny), -1)
-    used = np.zeros((nx, ny), dtype=bool)
-    used[::2, :] = True
-    used[:, ::2] = True
-    used[1::2, 1::2] = True  # the cell's diagonal midside
-    index[used] = np.arange(int(used.sum()))
-    ii, jj = np.nonzero(used)
-    order = np.argsort(index[used])
-    points = np.column_stack([gx[ii[order]], gy[jj[order]]])
-    tris = []
-    for i in range(0, nx - 1, 2):
-        for j in range(0, ny - 1, 2):
-            a, b, c, d = (i, j), (i + 2, j), (i + 2, j + 2), (i, j + 2)
-            for p, q, r in ((a, b, c), (a, c, d)):
-                mids = [((s[0] + t[0]) // 2, (s[1] + t[1]) // 2)
-                        for s, t in ((p, q), (q, r), (r, p))]
-                tris.append([index[n] for n in (p, q, r, *mids)])
-    lines = []
-    for side in ([(i, 0) for i in range(nx)], [(nx - 1, j) for j in range(ny)],
-                 [(i, ny - 1) for i in range(nx - 1, -1, -1)],
-                 [(0, j) for j in range(ny - 1, -1, -1)]):
-        for k in range(0, len(side) - 1, 2):
-            lines.append([index[side[k]], index[side[k + 2]], index[side[k + 1]]])
-    return FootingMesh(points, np.asarray(tris, dtype=np.int64), np.asarray(lines, np.int64))
-
-
-def write_gmsh22(mesh: FootingMesh, path: str | Path) -> Path:
-    """Write ``mesh`` as an ASCII gmsh 2.2 file (triangle6 in physical group 1, the boundary's
-    line3 in group 2), the format escript's ``ReadGmsh`` and ours read."""
-    import meshio
-
-    path = Path(path)
-    nl, nt = len(mesh.lines), len(mesh.triangles)
-    out = meshio.Mesh(
-        np.column_stack([mesh.points, np.zeros(len(mesh.points))]),
-        [("line3", mesh.lines), ("triangle6", mesh.triangles)],
-        cell_data={"gmsh:physical": [np.full(nl, 2), np.full(nt, 1)],
-                   "gmsh:geometrical": [np.full(nl, 2), np.full(nt, 1)]})
-    meshio.write(path, out, file_format="gmsh22", binary=False)
-    return path
-
-
-def read_gmsh22(path: str | Path) -> FootingMesh:
-    """The :class:`FootingMesh` of a file written by :func:`write_gmsh22`."""
-    import meshio
-
-    m = meshio.read(path)
-    return FootingMesh(np.asarray(m.points[:, :2], float),
-                       np.asarray(m.cells_dict["triangle6"], np.int64),
-                       np.asarray(m.cells_dict["line3"], np.int64))
-
-
-def lumped_nodal_stress(points: np.ndarray, corners: np.ndarray, gauss_xy: np.ndarray,
-                        stress: np.ndarray) -> np.ndarray:
-    """Gauss stresses [Pa] (ne·nq, 2, 2) projected onto the corner nodes as escript's default
-    ``Projector`` does (linear shape functions, lumped mass): σ_a = Σ λ_a(q) w_q σ_q /
-    Σ λ_a(q) w_q over the points q of the triangles at node a, w_q = area/nq (the equal
-    weights of both codes' 3-point rules), λ the barycentric coordinates of the point at
-    ``gauss_xy`` (ne·nq, 2) [m] in its triangle (point p lies in triangle p // nq)."""
-    stress = np.asarray(stress, float).reshape(-1, 2, 2)
-    ne = len(corners)
-    nq = len(stress) // ne
-    if nq * ne != len(stress) or len(gauss_xy) != len(stress):
-        raise ValueError(f"{len(stress)} stresses and {len(gauss_xy)} points for {ne} "
-                         "triangles")
-    xy = points[corners]  # (ne, 3, 2)
-    t = np.stack([xy[:, 1] - xy[:, 0], xy[:, 2] - xy[:, 0]], axis=2)  # (ne, 2, 2)
-    area = 0.5 * np.abs(np.linalg.det(t))
-    rel = np.asarray(gauss_xy, float) - np.repeat(xy[:, 0], nq, axis=0)
-    local = np.linalg.solve(np.repeat(t, nq, axis=0), rel[:, :, None])[:, :, 0]
-    lam = np.column_stack([1.0 - local.sum(axis=1), local])  # (ne·nq, 3)
-    if lam.min() < -1e-9:
-        bad = int(np.argmin(lam.min(axis=1)))
-        raise ValueError(f"Gauss point {bad} at {gauss_xy[bad]} lies outside triangle "
-                         f"{bad // nq} (points must be ordered element by element)")
-    w = lam * np.repeat(area / nq, nq)[:, None]
-    nodes = np.repeat(corners, nq, axis=0)
-    mass = np.zeros(len(points))
-    rhs = np.zeros((len(points), 2, 2))
-    np.add.at(mass, nodes.ravel(), w.ravel())
-    np.add.at(rhs, nodes.ravel(), (w[:, :, None, None] * stress[:, None]).reshape(-1, 2, 2))
-    out = np.full((len(points), 2, 2), np.nan)
-    has = mass > 0
-    out[has] = rhs[has] / mass[has, None, None]
-    return out
-
-
-def match_elements(mesh: FootingMesh, gauss_xy: np.ndarray, nq: int = 3) -> np.ndarray:
-    """The triangle of ``mesh`` of each element of a code's Gauss points ``gauss_xy``
-    (ne·nq, 2) [m], ordered element by element: the triangle whose centroid is nearest the
-    centroid of the element's points (both codes' rules are symmetric, so the two agree).
-    ValueError unless the match is one to one."""
-    centres = np.asarray(gauss_xy, float).reshape(-1, nq, 2).mean(axis=1)
-    ours = mesh.points[mesh.corners].mean(axis=1)
-    dist = np.linalg.norm(centres[:, None] - ours[None], axis=2)
-    match = dist.argmin(axis=1)
-    if len(match) != len(ours) or len(set(match.tolist())) != len(match) \
-            or dist.min(axis=1).max() > 1e-6:
-        raise ValueError("the Gauss points do not match the mesh's triangles one to one")
-    return match
-
-
-def footing_traction_force(mesh: FootingMesh, gauss_xy: np.ndarray, stress: np.ndarray,
-                           half_width: float = HALF_WIDTH, nq: int = 3,
-                           ) -> tuple[np.ndarray, float]:
-    """Their footing force [N/m] (2,): the traction σ·n (n = (0, 1), the top's outward
-    normal) of the lumped nodal stress (:func:`lumped_nodal_stress`), linear along each edge,
-    integrated over the top edges with x ≤ ``half_width`` [m]; and the base's length [m].
-    ``gauss_xy`` (ne·nq, 2) [m] and ``stress`` (ne·nq, 2, 2) [Pa] element by element in
-    any element order (:func:`match_elements`). Reference geometry (theirs integrates on
-    the updated mesh)."""
-    match = match_elements(mesh, gauss_xy, nq)
-    order = np.argsort(match)
-    xy = np.asarray(gauss_xy, float).reshape(-1, nq, 2)[order].reshape(-1, 2)
-    sig = np.asarray(stress, float).reshape(-1, nq, 2, 2)[order].reshape(-1, 2, 2)
-    nodal = lumped_nodal_stress(mesh.points, mesh.corners, xy, sig)
-    p = mesh.points
-    top = p[:, 1].max()
-    force, length = np.zeros(2), 0.0
-    for a, b, _ in mesh.lines:
-        ends = p[[a, b]]
-        if np.all(np.abs(ends[:, 1] - top) < 1e-9) and np.all(ends[:, 0] <= half_width + 1e-9):
-            span = float(abs(ends[1, 0] - ends[0, 0]))
-            force += span * 0.5 * (nodal[a] + nodal[b]) @ np.array([0.0, 1.0])
-            length += span
-    return force, length
 
 
 def patch_footing(text: str, **job: Any) -> str:

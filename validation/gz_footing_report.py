@@ -18,10 +18,11 @@ from typing import Any
 import numpy as np
 import pandas as pd
 from granular_material_validation.guo_zhao_runner import gauss_fields
-from granular_material_validation.gz_footing import (
+from granular_material_validation.gz_footing import SETTLEMENT_PER_STEP, SURCHARGE
+from granular_material_validation.gz_footing_mesh import (
     HALF_WIDTH,
-    SETTLEMENT_PER_STEP,
     FootingMesh,
+    footing_nodal_reaction,
     footing_traction_force,
     match_elements,
     read_gmsh22,
@@ -40,13 +41,17 @@ def _stress(frame: pd.DataFrame) -> np.ndarray:
 def projected_forces(mesh: FootingMesh, points: pd.DataFrame) -> pd.DataFrame:
     """Per step of a Gauss-point table (``step``, ``point``, ``x``, ``y``, ``sxx``, ``syy``,
     ``sxy``; points element by element): their footing force [N/m] computed from it
-    (:func:`~granular_material_validation.gz_footing.footing_traction_force`)."""
+    (:func:`~granular_material_validation.gz_footing_mesh.footing_traction_force`,
+    ``force_y``) and the nodal reaction (``reaction_y``,
+    :func:`~granular_material_validation.gz_footing_mesh.footing_nodal_reaction`)."""
     rows = []
     for step, g in points.groupby("step"):
         g = g.sort_values("point")
-        force, length = footing_traction_force(mesh, g[["x", "y"]].to_numpy(), _stress(g))
+        xy, sigma = g[["x", "y"]].to_numpy(), _stress(g)
+        force, length = footing_traction_force(mesh, xy, sigma)
+        reaction = footing_nodal_reaction(mesh, xy, sigma, SURCHARGE)
         rows.append({"step": int(step), "force_x": force[0], "force_y": force[1],
-                     "base_length": length})
+                     "base_length": length, "reaction_y": reaction[1]})
     return pd.DataFrame(rows)
 
 
@@ -83,7 +88,9 @@ def compare(folder: str | Path) -> dict[str, Any]:
     kpa = -1.0 / b / 1e3
     table["q_theirs_kpa"] = col(theirs, "force_y", kpa)
     table["q_theirs_reference_kpa"] = col(tproj, "force_y", kpa)
+    table["q_theirs_nodal_kpa"] = col(tproj, "reaction_y", kpa)
     table["q_ours_nodal_kpa"] = col(osteps, "footing_force_y", kpa)
+    table["q_ours_nodal_reference_kpa"] = col(oproj, "reaction_y", kpa)
     table["q_ours_projected_kpa"] = col(oproj, "force_y", kpa)
     table["iterations_theirs"] = col(theirs, "iterations")
     table["iterations_ours"] = col(osteps, "iterations")
@@ -139,6 +146,8 @@ def _figures(folder: Path, mesh: FootingMesh, table: pd.DataFrame, gt: np.ndarra
             label="Guo & Zhao (their projected traction)")
     ax.plot(s, table["q_theirs_reference_kpa"], "k:",
             label="theirs, our projection (reference mesh)")
+    ax.plot(s, table["q_theirs_nodal_kpa"], "k--", label="theirs: nodal reaction (from their "
+            "stresses)")
     ax.plot(s, table["q_ours_nodal_kpa"], "C3-s", ms=3, label="ours: nodal reaction")
     ax.plot(s, table["q_ours_projected_kpa"], "C0--^", ms=3, label="ours: projected traction")
     ax.set_xlabel("settlement [mm]")
@@ -177,14 +186,15 @@ def _figures(folder: Path, mesh: FootingMesh, table: pd.DataFrame, gt: np.ndarra
 def markdown(result: dict[str, Any]) -> str:
     """The report's tables (curves, mechanism, cost) of a :func:`compare` result."""
     t = pd.DataFrame(result["table"])
-    lines = ["| step | settlement [mm] | q theirs [kPa] | q theirs, our projection [kPa] | "
-             "q ours, nodal [kPa] | q ours, projected [kPa] | iterations theirs | "
-             "iterations ours |", "|" + "---|" * 8]
+    lines = ["| step | settlement [mm] | theirs: projected (their number) | theirs: "
+             "projected, ours from their stresses | theirs: nodal, from their stresses | "
+             "ours: projected | ours: nodal reaction | iterations theirs | iterations ours |",
+             "|" + "---|" * 9]
     for r in t.itertuples():
         lines.append(f"| {r.step} | {r.settlement_mm:.2f} | {r.q_theirs_kpa:.1f} | "
-                     f"{r.q_theirs_reference_kpa:.1f} | {r.q_ours_nodal_kpa:.1f} | "
-                     f"{r.q_ours_projected_kpa:.1f} | {r.iterations_theirs:.0f} | "
-                     f"{r.iterations_ours:.0f} |")
+                     f"{r.q_theirs_reference_kpa:.1f} | {r.q_theirs_nodal_kpa:.1f} | "
+                     f"{r.q_ours_projected_kpa:.1f} | {r.q_ours_nodal_kpa:.1f} | "
+                     f"{r.iterations_theirs:.0f} | {r.iterations_ours:.0f} |")
     m = result["mechanism"]
     lines += ["", f"Mechanism at step {m['step']} ({m['settlement_mm']:.2f} mm): "
               f"correlation of the element-mean γ fields {m['gamma_correlation']:.3f}.", "",
