@@ -67,6 +67,7 @@ K0 = 0.5  # σh / σv of the initial state [-]
 ELEMENTS = (6, 3)  # elements along x and y (the first column is the footing's)
 ROUGH = False  # a smooth footing: only its vertical displacement prescribed
 PHI, PSI = 30.0, 30.0  # Mohr–Coulomb friction and dilation angles [°] (ψ = φ: associated)
+UNCONFINED = 0.01  # a point below this fraction of its initial mean pressure is unconfined
 
 
 def parameters(name: str, sigma0: np.ndarray) -> dict:
@@ -77,7 +78,7 @@ def parameters(name: str, sigma0: np.ndarray) -> dict:
         "mohr-coulomb": {"E": 20e6, "nu": 0.3, "friction_angle": PHI, "dilation_angle": PSI,
                          "initial_stress": sigma0},
         "dem": {"particles": 64, "seed": 1, "initial_stress": sigma0, "share_tolerance": 0.02,
-                "confining": Q, "tangent": "condensed-sticking", "device": "cpu"},
+                "tangent": "condensed-sticking", "device": "cpu"},
     }[name]
 
 
@@ -105,15 +106,18 @@ def footing_problem(settlement: float, elements: tuple[int, int] = ELEMENTS,
 @dataclass
 class Footing:
     """What a run gave: settlement [m] and bearing pressure [Pa] of every step (step 0
-    first), Newton iterations, the initial residual and its tolerance [N/m], seconds."""
+    first), Newton iterations, cut-backs and unconfined points, the initial residual and
+    its tolerance [N/m], each point's initial mean pressure [Pa], seconds."""
 
     material: str
     settlement: list[float] = field(default_factory=list)
     pressure: list[float] = field(default_factory=list)
     iterations: list[int] = field(default_factory=list)
     cutbacks: list[int] = field(default_factory=list)
+    unconfined: list[int] = field(default_factory=list)
     initial_residual: float = math.nan
     tolerance: float = math.nan
+    initial_pressure: np.ndarray = field(default_factory=lambda: np.zeros(0))
     seconds: dict[str, float] = field(default_factory=dict)
 
 
@@ -188,19 +192,25 @@ def plain_newton(problem: Problem, material, steps: int, out: Footing,
         r = material.response(basis.interpolate(u))
         material.commit()
         reaction = internal_force.assemble(basis, sigma=r.stress) - f_ext
-        record(out, *bearing(problem, reaction, u), iterations, 0)
+        record(out, problem, reaction, u, r.points.stress, iterations, 0)
 
 
-def record(out: Footing, settlement: float, pressure: float, iterations: int,
-           cutbacks: int) -> None:
-    """Add a step to ``out`` and print it."""
+def record(out: Footing, problem: Problem, reaction: np.ndarray, u: np.ndarray,
+           stress: np.ndarray, iterations: int, cutbacks: int) -> None:
+    """Add a committed step to ``out`` and print it: the footing's settlement and bearing
+    pressure, and the points whose mean pressure fell below 1 % of their initial one."""
+    settlement, pressure = bearing(problem, reaction, u)
+    mean = -0.5 * np.trace(stress, axis1=1, axis2=2)
+    unconfined = int(np.sum(mean < UNCONFINED * out.initial_pressure))
     out.settlement.append(settlement)
     out.pressure.append(pressure)
     out.iterations.append(iterations)
     out.cutbacks.append(cutbacks)
+    out.unconfined.append(unconfined)
     tqdm.write(f"{out.material}: step {len(out.settlement) - 1:2d} settlement "
-          f"{settlement * 1e3:6.2f} mm  bearing pressure {pressure / 1e3:7.1f} kPa  "
-          f"({iterations} iterations{f', {cutbacks} cut-backs' if cutbacks else ''})")
+               f"{settlement * 1e3:6.2f} mm  bearing pressure {pressure / 1e3:7.1f} kPa  "
+               f"({iterations} iterations{f', {cutbacks} cut-backs' if cutbacks else ''}"
+               f"{f', unconfined points: {unconfined}' if unconfined else ''})")
 
 
 def main(name: str = MATERIAL, steps: int = 10, settlement: float = 0.02,
@@ -220,14 +230,15 @@ def main(name: str = MATERIAL, steps: int = 10, settlement: float = 0.02,
     settings = default_settings(noisy, atol=problem.force_tolerance(5e-3 * Q),
                                 formulation=FORMULATION)
     solver = NewtonSolver(problem.basis, material, problem.loading, settings)
-    result = Footing(name, tolerance=settings.atol, seconds={"preparation":
-                                                             time.perf_counter() - t0})
+    result = Footing(name, tolerance=settings.atol,
+                     initial_pressure=-0.5 * np.trace(sigma0, axis1=1, axis2=2),
+                     seconds={"preparation": time.perf_counter() - t0})
     # the geostatic start: the residual on the free dofs at load factor 0, no step taken
     free = np.setdiff1d(np.arange(problem.basis.N), problem.loading.dirichlet_dofs)
     result.initial_residual = float(np.linalg.norm(solver.reaction[free]))
     print(f"{name}: {len(problem.points)} Gauss points; initial residual "
           f"{result.initial_residual:.3g} N/m (tolerance {settings.atol:.3g} N/m)")
-    record(result, *bearing(problem, solver.reaction, solver.u), 0, 0)
+    record(result, problem, solver.reaction, solver.u, solver.response.stress, 0, 0)
 
     t1 = time.perf_counter()
     writer = None
@@ -239,7 +250,7 @@ def main(name: str = MATERIAL, steps: int = 10, settlement: float = 0.02,
             plain_newton(problem, material, steps, result)
         else:
             def on_step(s: NewtonSolver, rec) -> None:
-                record(result, *bearing(problem, s.reaction, s.u), rec.iterations,
+                record(result, problem, s.reaction, s.u, s.response.stress, rec.iterations,
                        rec.cutbacks)
                 if writer is not None:
                     writer.write(result.settlement[-1], s.u,

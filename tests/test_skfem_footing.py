@@ -25,6 +25,7 @@ def test_linear_elastic_footing_starts_in_equilibrium_and_is_linear():
     steps = _increments(result)
     assert steps.min() > 0
     assert np.ptp(steps) < 1e-6 * steps.mean()  # small strain: exactly linear
+    assert result.cutbacks == [0] * 5
 
 
 def test_mohr_coulomb_footing_levels_off_near_prandtl():
