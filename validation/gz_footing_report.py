@@ -5,7 +5,9 @@ and ``ours/``) and writes ``footing_curves.png``, ``footing_mechanism.png``,
 ``footing_iterations.png`` and ``comparison.json`` next to them; :func:`markdown` turns
 the comparison into the report's tables.
 
-Run: ``python -m granular_material_validation.gz_footing_report DIR``.
+Run: ``python -m granular_material_validation.gz_footing_report DIR`` (the tables), or
+``... gz_footing_report DEST LABEL=DIR [LABEL=DIR ...]`` (``report.md`` and the figures in
+DEST, :func:`write_report`).
 """
 
 from __future__ import annotations
@@ -28,7 +30,7 @@ from granular_material_validation.gz_footing_mesh import (
     read_gmsh22,
 )
 
-__all__ = ["compare", "element_gamma", "markdown", "projected_forces"]
+__all__ = ["compare", "element_gamma", "markdown", "projected_forces", "write_report"]
 
 
 def _stress(frame: pd.DataFrame) -> np.ndarray:
@@ -214,5 +216,40 @@ def markdown(result: dict[str, Any]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def write_report(runs: dict[str, Path], dest: str | Path) -> Path:
+    """``report.md`` in ``dest`` with one section per run folder (label → folder, each
+    compared by :func:`compare`) and its three figures copied as ``{label}_*.png``."""
+    import shutil
+
+    dest = Path(dest)
+    dest.mkdir(parents=True, exist_ok=True)
+    parts = ["# gz-footing: the tables\n",
+             "Written by `python -m granular_material_validation.gz_footing_report "
+             "DEST LABEL=DIR ...` from the run folders of `gz_footing`; bearing pressures "
+             "q = −F/B [kPa].\n"]
+    for label, folder in runs.items():
+        result = compare(folder)
+        for name in ("curves", "mechanism", "iterations"):
+            shutil.copy(Path(folder) / f"footing_{name}.png", dest / f"{label}_{name}.png")
+        c = result["cost"]
+        parts += [f"## {label}\n", f"{result['elements']} tri6, {result['gauss_points']} "
+                  f"Gauss points, RVE: {result['rve_state']['particles']} discs, e = "
+                  f"{result['rve_state']['void_ratio']:.4f}, stress (σxx, σyy, σxy) = "
+                  f"({', '.join(f'{v:.0f}' for v in result['rve_state']['stress'])}) Pa; "
+                  f"their run: {c['theirs']['steps_done']} load steps"
+                  f"{' (stopped at its time limit)' if c['theirs']['timed_out'] else ''}, "
+                  f"ours: {c['ours']['steps_done']}; compared over the first "
+                  f"{result['mechanism']['step']}.\n",
+                  markdown(result),
+                  f"![curves]({label}_curves.png)\n\n![mechanism]({label}_mechanism.png)"
+                  f"\n\n![iterations]({label}_iterations.png)\n"]
+    path = dest / "report.md"
+    path.write_text("\n".join(parts))
+    return path
+
+
 if __name__ == "__main__":
-    print(markdown(compare(sys.argv[1])))
+    if len(sys.argv) == 2:
+        print(markdown(compare(sys.argv[1])))
+    else:
+        print(write_report(dict(a.split("=", 1) for a in sys.argv[2:]), sys.argv[1]))
