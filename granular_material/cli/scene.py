@@ -19,6 +19,7 @@ import argparse
 import contextlib
 import re
 import shlex
+import sys
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -331,9 +332,11 @@ def _spec_error(path: Path, text: str, exc: ValueError) -> UsageError:
     """A run spec file's refusal, with the line of the field it names (where one is)."""
     name = getattr(exc, "field", None)
     pattern = re.compile(rf"^\s*{re.escape(name)}\s*=") if name else None
-    for number, line in enumerate(text.splitlines(), start=1):
-        if pattern is not None and pattern.match(line):
-            return UsageError(f"{path}, line {number}: {exc}")
+    table = re.compile(rf"^\s*\[\s*([\w.]*\.)?{re.escape(name)}\s*\]") if name else None
+    for want in (pattern, table):  # the field's line, else its table's header
+        for number, line in enumerate(text.splitlines(), start=1):
+            if want is not None and want.match(line):
+                return UsageError(f"{path}, line {number}: {exc}")
     return UsageError(f"{path}: {exc}")
 
 
@@ -349,14 +352,19 @@ def _run_spec_file(path: Path, text: str, data: dict[str, Any],
 
     try:
         spec = from_dict(data)
-        if args.out is not None:
-            spec = spec.replace(output=replace(spec.output, out=args.out))
+        # the run folder: --out, else the spec's output.out, else (as a scene's) the file's
+        # name in the current folder: a run from the command line never writes nothing
+        out = args.out if args.out is not None else spec.output.out or Path(path.stem)
+        spec = spec.replace(output=replace(spec.output, out=out))
         check(spec)
     except ValueError as exc:
         raise _spec_error(path, text, exc) from exc
     if args.check:
         print(command_line(spec))
         return 0
+    if args.out is None and "out" not in (data.get("output") or {}):
+        print(f"granular-material run: {path} names no output folder (output.out); the run "
+              f"writes into {out}", file=sys.stderr)
     outcome = run(spec, resume=args.resume, keep_stopped=True)
     again = shlex.join(["granular-material", "run", str(path),
                         *(["--out", str(args.out)] if args.out is not None else []),
@@ -368,7 +376,7 @@ def _run_spec_file(path: Path, text: str, data: dict[str, Any],
 def _run_command(parsers: Mapping[str, argparse.ArgumentParser], args: argparse.Namespace,
                  ) -> int:
     text, data = read_toml(Path(args.scene))
-    if isinstance(data.get("problem"), dict):
+    if "problem" in data:  # a run specification (a scene has no such key)
         return _run_spec_file(Path(args.scene), text, data, args)
     if data.get("test") == BOUNDARY_VALUE:
         return run_bvp_scene(Path(args.scene), text, data, args)

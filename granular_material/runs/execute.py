@@ -40,7 +40,13 @@ from granular_material.runs.checkpoint import RunCheckpoint
 from granular_material.runs.context import RunContext
 from granular_material.runs.resume import open_checkpoint, start_checkpoint
 from granular_material.runs.runner import RunObserver, run_biaxial
-from granular_material.runs.spec import FULL_SCALE, REDUCED_SCALE, RunSpec
+from granular_material.runs.spec import (
+    FULL_SCALE,
+    MAX_TRACKED_ROWS,
+    REDUCED_SCALE,
+    RunSpec,
+    SpecError,
+)
 from granular_material.timing import PhaseTimes, phase_table
 
 __all__ = ["RunOutcome", "RunPlan", "check", "run"]
@@ -98,6 +104,14 @@ def _tracking(spec: RunSpec, n_points: int) -> Tracking | None:
                          f"{spec.material.name}")
     tracking = Tracking.parse(spec.output.postprocessors(), track, spec.output.every)
     tracking.check_points(n_points)
+    rows = spec.output.tracked_rows(n_points, spec.problem.steps)
+    if rows > MAX_TRACKED_ROWS:
+        points = n_points if "all" in track else len(track)
+        raise SpecError("track", f"would post-process {rows} RVEs ({points} points × "
+                                 f"{len(spec.output.postprocessors())} post-processors × "
+                                 f"{spec.problem.steps // spec.output.every + 1} tracked "
+                                 f"steps), at most {MAX_TRACKED_ROWS}: track fewer points, "
+                                 "fewer post-processors or a larger every")
     return tracking
 
 
@@ -173,26 +187,47 @@ def _locked(out: Path | None) -> Iterator[None]:
 
 
 def run(spec: RunSpec, observer: RunObserver | None = None, *,
-        resume: bool = False, keep_stopped: bool = False) -> RunOutcome:
+        resume: bool = False, fresh: bool = False,
+        keep_stopped: bool | None = None) -> RunOutcome:
     """Run ``spec``: check it (:func:`check`), lock and write its output folder as it goes
     (tables, fields, figures, ``summary.json``; checkpoints of the committed state, see
     :class:`~granular_material.runs.checkpoint.RunCheckpoint`), and return the outcome.
+
     ``resume`` continues the run whose checkpoint is in ``output.out`` (its spec must be this
-    one, but for where and how it reports; with no saved step it starts afresh); a fresh run
-    replaces the folder's checkpoint, but with ``keep_stopped`` (the commands' choice) not
-    that of a run stopped before its last step (a UsageError, nothing changed). ``observer``
-    follows every committed
-    step as :class:`~granular_material.runs.runner.RunObserver`. A Newton failure or an
-    interrupt ends the run early with the steps so far (``outcome.result.error``,
-    ``outcome.interrupt``); bad input is a ``ValueError`` before any work."""
+    one, but for where and how it reports; with no saved step it starts afresh). A fresh run
+    into a folder that holds the checkpoint of a run stopped before its last load step is
+    refused (a UsageError, nothing in the folder changed), as the commands refuse it:
+    continue it with ``resume=True``, or pass ``fresh=True`` to throw that checkpoint away
+    and start from step 0. A finished run's checkpoint is replaced. (``keep_stopped=False``
+    is the older spelling of ``fresh=True``.)
+
+    ``observer`` follows every committed step as
+    :class:`~granular_material.runs.runner.RunObserver`. A Newton failure or an interrupt
+    ends the run early with the steps so far (``outcome.result.error``,
+    ``outcome.interrupt``), its committed steps kept in the folder's checkpoint; bad input
+    is a ``ValueError`` (a :class:`~granular_material.runs.spec.SpecError` naming the field
+    where it is one) before any work."""
     started = time.perf_counter()
+    if not isinstance(spec, RunSpec):
+        raise TypeError(f"run() takes a RunSpec, got {type(spec).__name__}")
+    if keep_stopped is not None:
+        fresh = fresh or not keep_stopped
+    if resume and fresh:
+        raise UsageError("resume and fresh exclude each other: resume continues the stopped "
+                         "run, fresh throws its checkpoint away")
     out = spec.output.out
     if resume and out is None:
         raise UsageError("a resumed run needs its output folder (output.out)")
     check_output_dir(out)
     times = PhaseTimes()
     with _locked(out):
-        checkpoint, saved = open_checkpoint(spec, resume, keep_stopped)
+        try:
+            checkpoint, saved = open_checkpoint(spec, resume, keep_stopped=not fresh)
+        except UsageError as exc:
+            if resume or "stopped after load step" not in str(exc):
+                raise
+            raise UsageError(f"{exc} (from Python: run(spec, resume=True) continues it, "
+                             "run(spec, fresh=True) starts afresh over it)") from None
         plan = check(spec)
         material = _built(spec, plan.context)
         with cleanup_on_rejection(out), start_checkpoint(spec, checkpoint, saved):

@@ -69,28 +69,55 @@ def to_dict(spec: RunSpec) -> dict[str, Any]:
     return data
 
 
-def _known(kind: type, values: Mapping[str, Any], where: str) -> dict[str, Any]:
+def _section(name: str, value: Any) -> Mapping[str, Any]:
+    """The section ``name`` of a nested form: a table of fields (absent: empty)."""
+    if value is None:
+        return {}
+    if not isinstance(value, Mapping):
+        raise SpecError(name, f"must be a table of fields ([{name}] in TOML, an object in "
+                              f"JSON), got {value!r} ({type(value).__name__})")
+    bad = [k for k in value if not isinstance(k, str)]
+    if bad:
+        raise SpecError(name, f"has a key that is no field name: {bad[0]!r}")
+    return value
+
+
+def _known(kind: type, values: Any, where: str) -> dict[str, Any]:
+    values = _section(where, values)
     names = {f.name for f in fields(kind)}
     unknown = sorted(set(values) - names)
     if unknown:
         raise SpecError(unknown[0], f"is no field of {where} (it has {', '.join(sorted(names))})")
+    required = [f.name for f in fields(kind)
+                if f.default is MISSING and f.default_factory is MISSING]
+    missing = [name for name in required if name not in values]
+    if missing:
+        raise SpecError(missing[0], f"must be given in {where} (it has no default)")
     return dict(values)
 
 
 def from_dict(data: Mapping[str, Any]) -> RunSpec:
-    """The spec of a nested form (:func:`to_dict`); SpecError naming an unknown field."""
-    unknown = sorted(set(data) - {*SECTIONS, "material", *_RUN_FIELDS})
+    """The spec of a nested form (:func:`to_dict`); SpecError naming an unknown, missing or
+    ill-typed field."""
+    if not isinstance(data, Mapping):
+        raise SpecError("spec", "must be a table of sections (problem, material, newton, "
+                                f"output), got {data!r} ({type(data).__name__})")
+    unknown = sorted(set(map(str, data)) - {*SECTIONS, "material", *_RUN_FIELDS})
     if unknown:
         raise SpecError(unknown[0], "is no section of a run spec")
-    material = dict(data.get("material") or {})
+    material = dict(_section("material", data.get("material")))
     if "name" not in material:
         raise SpecError("material", "must name the material (material.name)")
-    sections = {name: kind(**_known(kind, data.get(name) or {}, name))
+    extra = sorted(set(material) - {"name", "parameters"})
+    if extra:
+        raise SpecError(extra[0], "is no field of material (it has name, parameters: a "
+                                  "material's own parameters go in material.parameters)")
+    parameters = _section("parameters", material.get("parameters"))
+    sections = {name: kind(**_known(kind, data.get(name), name))
                 for name, kind in SECTIONS.items() if name != "problem"}
-    problem = ProblemSpec(**_known(ProblemSpec, data.get("problem") or {}, "problem"))
+    problem = ProblemSpec(**_known(ProblemSpec, data.get("problem"), "problem"))
     return RunSpec(problem=problem,
-                   material=MaterialSpec(name=material["name"],
-                                         parameters=material.get("parameters") or {}),
+                   material=MaterialSpec(name=material["name"], parameters=dict(parameters)),
                    **sections, **{k: data[k] for k in _RUN_FIELDS if k in data})
 
 
@@ -108,10 +135,12 @@ def from_flat(values: Mapping[str, Any], *, strict: bool = True) -> RunSpec:
     """The spec of a flat form (bare field names; ``material`` the material's name,
     ``test`` the problem's). ``strict``: a name that is no field is a SpecError naming it;
     else it is left out (a checkpoint of an older version)."""
-    values = dict(values)
+    values = dict(_section("spec", values))
     if "material" not in values:
         raise SpecError("material", "must name the material")
     name = values.pop("material")
+    if not isinstance(name, str):
+        raise SpecError("material", f"must name the material (a string), got {name!r}")
     data: dict[str, Any] = {key: {} for key in SECTIONS}
     parameters: dict[str, Any] = {}
     material_names = _material_names(name)
@@ -186,16 +215,27 @@ def to_toml(spec: RunSpec) -> str:
 
 
 def save(spec: RunSpec, path: str | Path) -> None:
-    """Write ``spec`` to ``path``: TOML for a ``.toml`` suffix, else JSON."""
+    """Write ``spec`` to ``path``: TOML for a ``.toml`` suffix, else JSON; whole or not at
+    all (:func:`~granular_material.filesafe.write_whole`: a failed write, a full disk
+    included, keeps the file that was there)."""
+    from granular_material.filesafe import write_whole
+
+    if not isinstance(spec, RunSpec):
+        raise TypeError(f"save() takes a RunSpec, got {type(spec).__name__}")
     path = Path(path)
     text = (to_toml(spec) if path.suffix == ".toml"
             else json.dumps(to_dict(spec), indent=2) + "\n")
-    path.write_text(text)
+    write_whole(path, lambda tmp: tmp.write_text(text, encoding="utf-8"))
 
 
 def load(path: str | Path) -> RunSpec:
-    """The spec saved in ``path`` (TOML for a ``.toml`` suffix, else JSON)."""
+    """The spec saved in ``path`` (TOML for a ``.toml`` suffix, else JSON); a file that is
+    no spec is a ValueError naming it, a bad field a SpecError naming the field."""
     path = Path(path)
-    text = path.read_text()
-    data = tomllib.loads(text) if path.suffix == ".toml" else json.loads(text)
+    text = path.read_text(encoding="utf-8")
+    try:
+        data = tomllib.loads(text) if path.suffix == ".toml" else json.loads(text)
+    except ValueError as exc:  # TOMLDecodeError, JSONDecodeError
+        kind = "TOML" if path.suffix == ".toml" else "JSON"
+        raise ValueError(f"{path} is no {kind} run spec: {exc}") from None
     return from_dict(data)

@@ -27,9 +27,18 @@ from granular_material.fem.newton import NewtonSettings
 from granular_material.fem.problems import BiaxialSetup
 from granular_material.procedures.element_tests import DEFAULT_AXIAL_STRAIN
 from granular_material.procedures.packing import DEFAULT_DISCS, DEFAULT_PRESSURE
+from granular_material.runs.spec_checks import (
+    SpecError,
+    check_device,
+    check_postprocess,
+    check_track,
+    conform_fields,
+    conform_mapping,
+)
 
-__all__ = ["BACKENDS", "FULL_SCALE", "REDUCED_SCALE", "SCALES", "TESTS", "MaterialSpec",
-           "NewtonSpec", "OutputSpec", "ProblemSpec", "RunSpec", "SpecError"]
+__all__ = ["BACKENDS", "FULL_SCALE", "MAX_MAP_STRAINS", "MAX_TRACKED_ROWS", "REDUCED_SCALE",
+           "SCALES", "TESTS", "MaterialSpec", "NewtonSpec", "OutputSpec", "ProblemSpec",
+           "RunSpec", "SpecError"]
 
 #: the tests a run specification describes: one element, or the biaxial specimen
 TESTS = ("single-element", "biaxial")
@@ -46,10 +55,19 @@ BACKENDS = ("inprocess", "mpi")
 _SIZES = {"single-element": (1.0, 1.0), "biaxial": (0.05, 0.10)}
 #: BiaxialSetup's field names that the spec calls otherwise
 _SETUP_NAMES = {"nx": "elements", "ny": "elements", "gauss": "quadrature"}
+#: the most map strains a run draws: each is a displacement and a shear-strain map and a
+#: band measure (about 0.5 s of figures each, measured on a 5 × 10 specimen)
+MAX_MAP_STRAINS = 20
+#: seconds of figures one map strain costs, about (the estimate of a refusal)
+_MAP_SECONDS = 0.5
+#: the most tracked rows (points × post-processors × tracked steps) a run computes; each is
+#: a post-processing of one RVE (up to seconds for the pore fractal of a 400-disc RVE)
+MAX_TRACKED_ROWS = 100_000
 
 
-class SpecError(ParameterError):
-    """A value of a run specification that cannot run; ``field`` is its flat name."""
+def _typed(obj: Any) -> None:
+    """Every field of the section ``obj`` of its annotated type (SpecError naming it)."""
+    conform_fields(obj, error=SpecError)
 
 
 def _at_least(name: str, value: Any, lowest: int) -> None:
@@ -98,12 +116,17 @@ class ProblemSpec:
     platens: str = "smooth"
 
     def __post_init__(self) -> None:
+        _typed(self)
         _one_of("test", self.test, TESTS)
         if not (math.isfinite(self.confining) and self.confining > 0):
             raise SpecError("confining", "must be a positive number of Pa (σxx is held at "
                                          "−confining, σ1/σ3 divides by it), got "
                                          f"{self.confining:g}")
         _at_least("steps", self.steps, 1)
+        for name in ("width", "height"):
+            value = getattr(self, name)
+            if value is not None and not value > 0:
+                raise SpecError(name, f"must be a length > 0 m, got {value!r}")
         width, height = _SIZES[self.test]
         object.__setattr__(self, "width", width if self.width is None else self.width)
         object.__setattr__(self, "height", height if self.height is None else self.height)
@@ -185,6 +208,7 @@ class NewtonSpec:
     secant_min_change: float = _newton_default("secant_min_change")
 
     def __post_init__(self) -> None:
+        _typed(self)
         if self.stress_tol is not None and not (math.isfinite(self.stress_tol)
                                                 and self.stress_tol >= 0):
             raise SpecError("stress_tol", f"must be a stress >= 0 Pa, got {self.stress_tol:g}")
@@ -227,6 +251,9 @@ class MaterialSpec:
     def __post_init__(self) -> None:
         from granular_material.fem.material import load_material
 
+        if not isinstance(self.name, str):
+            raise SpecError("material", f"must name the material (a string), got "
+                                        f"{self.name!r}")
         try:
             cls = load_material(self.name)
         except ValueError as exc:
@@ -234,6 +261,9 @@ class MaterialSpec:
         kind = getattr(cls, "Parameters", None)
         given = self.parameters
         if kind is None:
+            if given is not None and not isinstance(given, Mapping):
+                raise SpecError("material", f"parameters of {self.name} must be a mapping of "
+                                            f"keywords, got {type(given).__name__}")
             object.__setattr__(self, "parameters", dict(given or {}))
             return
         if isinstance(given, kind):
@@ -246,8 +276,9 @@ class MaterialSpec:
         if unknown:
             raise SpecError(unknown[0], f"is no parameter of the material {self.name} "
                                         f"(it has {', '.join(sorted(known))})")
+        values = conform_mapping(kind, dict(given or {}), error=SpecError)
         try:
-            object.__setattr__(self, "parameters", kind(**dict(given or {})))
+            object.__setattr__(self, "parameters", kind(**values))
         except SpecError:
             raise
         except ParameterError as exc:  # the material's own check, named as the spec's field
@@ -302,19 +333,37 @@ class OutputSpec:
     progress: bool = False
 
     def __post_init__(self) -> None:
-        if self.out is not None:
-            object.__setattr__(self, "out", Path(self.out))
-        object.__setattr__(self, "map_strain", tuple(float(s) for s in self.map_strain))
+        if isinstance(self.track, list | tuple):  # point ids as numbers are ids too
+            object.__setattr__(self, "track", tuple(
+                str(t) if isinstance(t, int) and not isinstance(t, bool) else t
+                for t in self.track))
+        _typed(self)
+        if not self.map_strain:
+            raise SpecError("map_strain", "must name at least one axial strain")
+        if len(self.map_strain) > MAX_MAP_STRAINS:
+            raise SpecError("map_strain", f"names {len(self.map_strain)} strains, at most "
+                                          f"{MAX_MAP_STRAINS}: each is two maps and a band "
+                                          f"measure, about {_MAP_SECONDS:g} s of figures "
+                                          f"(~{len(self.map_strain) * _MAP_SECONDS:.0f} s "
+                                          "in all)")
         if self.track is not None:
-            object.__setattr__(self, "track", tuple(str(t) for t in self.track))
+            check_track(self.track)
         if self.postprocess is not None:
-            object.__setattr__(self, "postprocess", tuple(self.postprocess))
+            check_postprocess(self.postprocess)
         _at_least("every", self.every, 1)
         if self.checkpoint_every is not None:
             _at_least("checkpoint_every", self.checkpoint_every, 1)
         if not (math.isfinite(self.checkpoint_minutes) and self.checkpoint_minutes > 0):
             raise SpecError("checkpoint_minutes",
                             f"must be a time > 0 min, got {self.checkpoint_minutes!r}")
+
+    def tracked_rows(self, n_points: int, steps: int) -> int:
+        """The rows tracking computes on ``n_points`` Gauss points over ``steps`` load
+        steps: points × post-processors × tracked steps (0 without tracking)."""
+        if self.track is None:
+            return 0
+        points = n_points if "all" in self.track else len(set(self.track))
+        return points * len(self.postprocessors()) * (steps // self.every + 1)
 
     def postprocessors(self) -> tuple[str, ...]:
         """The post-processors of tracked points: the given ones, else every installed one."""
@@ -349,6 +398,18 @@ class RunSpec:
     preset: str | None = None
 
     def __post_init__(self) -> None:
+        for name, kind in (("problem", ProblemSpec), ("material", MaterialSpec),
+                           ("newton", NewtonSpec), ("output", OutputSpec)):
+            if not isinstance(getattr(self, name), kind):
+                raise SpecError(name, f"must be a {kind.__name__}, got "
+                                      f"{type(getattr(self, name)).__name__}")
+        _typed(self)
+        if self.device is not None:
+            check_device(self.device)
+        if self.preset is not None:
+            from granular_material.runs.presets import PRESET_NAMES
+
+            _one_of("preset", self.preset, PRESET_NAMES)
         _one_of("backend", self.backend, BACKENDS)
         if self.shards is not None:
             _at_least("shards", self.shards, 1)
