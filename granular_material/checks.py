@@ -17,6 +17,12 @@ from pathlib import Path
 from typing import Any
 
 from granular_material.dem.rve_file import FRICTMAT_STIFFNESS, RVEMeta
+from granular_material.memory import (
+    MEMORY_LIMIT,
+    available_memory,
+    memory_refusal,
+    size_in_words,
+)
 from granular_material.procedures.packing import (
     DEFAULT_RADIUS_RANGE,
     PackingParameters,
@@ -69,45 +75,18 @@ def check_output_file(path: Path | None, option: str = "--out") -> None:
 DISC_BYTES = 2048
 
 
-#: a request for more memory than this is refused whatever the machine [bytes]: 1 TiB
-MEMORY_LIMIT = 2**40
-
-
 def _size(n_bytes: float) -> str:
     """``n_bytes`` in words: 12.3 GB, 4.1 TB, 2e+25 B."""
-    if n_bytes >= 1e21:
-        return f"{n_bytes:.3g} B"
-    for unit, scale in (("EB", 1e18), ("PB", 1e15), ("TB", 1e12), ("GB", 1e9), ("MB", 1e6),
-                        ("kB", 1e3)):
-        if n_bytes >= scale:
-            return f"{n_bytes / scale:.3g} {unit}"
-    return f"{n_bytes:.0f} B"
-
-
-def available_memory() -> int | None:
-    """Memory the system can give this process now [bytes] (MemAvailable of Linux, else the
-    free pages), or None where it cannot be told."""
-    with contextlib.suppress(OSError, ValueError):
-        with open("/proc/meminfo") as fh:
-            for line in fh:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    with contextlib.suppress(OSError, ValueError, AttributeError):
-        return int(os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
-    return None
+    return size_in_words(n_bytes)
 
 
 def check_memory(needed: float, what: str) -> None:
     """Before any allocation: ``what`` (the options, in words) needs about ``needed`` bytes;
     refused (UsageError with the estimate) beyond :data:`MEMORY_LIMIT`, which no machine
     this runs on has, or beyond the memory available now."""
-    if not needed <= MEMORY_LIMIT:  # NaN and inf too
-        raise UsageError(f"{what} needs about {_size(needed)} of memory, more than the "
-                         f"{_size(MEMORY_LIMIT)} any run may take; ask for less")
-    available = available_memory()
-    if available is not None and needed > available:
-        raise UsageError(f"{what} needs about {_size(needed)} of memory; this machine has "
-                         f"{_size(available)} available now; ask for less")
+    refusal = memory_refusal(needed, what, available_memory())
+    if refusal is not None:
+        raise UsageError(refusal)
 
 
 def check_output_dir(path: Path | None, option: str = "--out") -> None:

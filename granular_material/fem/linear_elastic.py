@@ -16,12 +16,23 @@ from granular_material.fem.material import (
     PointStatus,
     ScikitFemInterface,
 )
+from granular_material.fem.material_checks import (
+    CHECKPOINT_NAME_KEY,
+    check_grad,
+    check_points,
+    checkpoint_archive,
+)
 from granular_material.filesafe import write_whole
 
 __all__ = ["LinearElastic", "LinearElasticParameters", "LinearElasticRunParameters",
            "isotropic_tangent"]
 
 _I2 = np.eye(2)
+#: the material's name (its entry point), kept in its checkpoints
+_NAME = "linear-elastic"
+#: memory of one point: its strain, ∇u and their trial copies, and an evaluation's stress,
+#: tangent and work arrays, with a margin [bytes]
+_POINT_BYTES = 1024
 
 
 @dataclass(frozen=True, eq=False)
@@ -199,9 +210,10 @@ class LinearElastic(ScikitFemInterface):
                                                    f"material has {n_points} Gauss points")
 
     def allocate(self, n_points: int) -> None:
-        """Start ``n_points`` points at zero strain (at the initial stress)."""
-        if n_points < 1:
-            raise ValueError(f"n_points must be >= 1, got {n_points}")
+        """Start ``n_points`` points at zero strain (at the initial stress); ParameterError
+        naming ``n_points`` (with the memory estimate) for a count that is not an integer
+        >= 1 or would not fit in memory, before anything is allocated."""
+        n_points = check_points(n_points, _POINT_BYTES, _NAME)
         self._check_points(n_points)
         self._strain = np.zeros((n_points, 2, 2))
         self._trial = None
@@ -210,7 +222,7 @@ class LinearElastic(ScikitFemInterface):
     def evaluate(self, grad_u: np.ndarray) -> MaterialResponse:
         """σ [Pa] (n, 2, 2) and C [Pa] (n, 2, 2, 2, 2) for ∇u [-] (n, 2, 2) since the
         commit (the increment; ``response`` takes totals)."""
-        grad_u = _check_grad(grad_u, self.n_points)
+        grad_u = check_grad(grad_u, self.n_points)
         n = self.n_points
         finite = np.isfinite(grad_u).all(axis=(1, 2))
         status = np.full(n, PointStatus.OK, dtype=np.int8)
@@ -252,7 +264,8 @@ class LinearElastic(ScikitFemInterface):
         given: a number or its array) to ``path`` (.npz), whole or not at all (a temporary
         file renamed into place: a failed write keeps the previous file)."""
         p = self.parameters
-        arrays = {"strain": self._strain, "young": p.young, "poisson": p.poisson,
+        arrays = {CHECKPOINT_NAME_KEY: np.array(_NAME),
+                  "strain": self._strain, "young": p.young, "poisson": p.poisson,
                   "initial_stress": np.asarray(p.initial_stress),
                   "grad_u": self.committed_grad_u}
 
@@ -263,8 +276,10 @@ class LinearElastic(ScikitFemInterface):
         write_whole(path, write)
 
     def restore(self, path: str | Path) -> None:
-        """Read a checkpoint; its parameters must match this material's."""
-        with np.load(path) as data:
+        """Read a checkpoint; its parameters must match this material's. ValueError naming
+        the material for another material's checkpoint, or a file that is none."""
+        with checkpoint_archive(path, _NAME, ("strain", "young", "poisson",
+                                              "initial_stress")) as data:
             sigma0 = data["initial_stress"]
             saved = LinearElasticParameters(
                 float(data["young"]), float(data["poisson"]),
@@ -274,6 +289,9 @@ class LinearElastic(ScikitFemInterface):
                 raise ValueError(f"{path}: checkpoint parameters {saved} differ from "
                                  f"{self.parameters}")
             strain = np.array(data["strain"], dtype=np.float64)
+            if strain.ndim != 3 or strain.shape[1:] != (2, 2) or not np.isfinite(strain).all():
+                raise ValueError(f"{path}: the committed strain must be finite, shape "
+                                 f"(n, 2, 2), got shape {strain.shape}")
             self._check_points(strain.shape[0])
             self._strain = strain
             self._track_allocate(self._strain.shape[0])
@@ -281,15 +299,3 @@ class LinearElastic(ScikitFemInterface):
                 self._committed_grad = np.array(data["grad_u"], dtype=np.float64)
         self._trial = None
 
-
-def _check_grad(grad_u: np.ndarray, n: int) -> np.ndarray:
-    grad_u = np.asarray(grad_u, dtype=np.float64)
-    if n == 0:
-        raise RuntimeError("allocate() the material before evaluate()")
-    if grad_u.shape != (n, 2, 2):
-        raise ValueError(
-            f"evaluate() takes grad_u batch-first, shape ({n}, 2, 2) (the increment since the "
-            f"commit), got {grad_u.shape}; response() also takes scikit-fem's quadrature-last "
-            "(2, 2, nelems, nqp) or a DiscreteField (or convert with "
-            "granular_material.fem.to_points / to_quadrature)")
-    return grad_u

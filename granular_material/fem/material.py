@@ -37,8 +37,17 @@ keep the full (2, 2, 2, 2) tangent (recommended: scikit-fem's forms contract it 
 strain, ½ (D_ijkl + D_ijlk), which is exact for the linear-elastic material and loses the
 stress's rotation for the DEM one.
 
-A failed point carries a reason (:class:`FailureReason`, the response's ``reasons``) and its
-committed stress, never NaN, for the DEM material.
+A failed point carries a reason (:class:`FailureReason`, the response's ``reasons``) and the
+stress of its committed state, never NaN, in every shipped material: a ∇u that is NaN or
+infinite at a point is that point's failure (``non_finite_input``); ∇u that is None, text,
+complex or of another shape is a ``ValueError`` before any work. What ``commit()`` does after
+an evaluation in which points failed is each material's (said in its class): the
+linear-elastic and DEM materials commit the failed points' committed state unchanged (their
+``committed_grad_u`` too), the Mohr–Coulomb material refuses the commit (RuntimeError);
+none commits a non-finite state. ``allocate(n)`` refuses (ParameterError naming
+``n_points``, with the estimate) a count that is not an integer >= 1 or whose state would
+not fit in the memory available, before it takes any; ``restore(path)`` refuses another
+material's checkpoint by that material's name (ValueError).
 
 Semantics every implementation keeps:
 
@@ -71,6 +80,7 @@ import numpy as np
 
 from granular_material.entry_points import entry_point_names, load_entry_point
 from granular_material.fem.layout import Layout, grad_points, to_quadrature
+from granular_material.fem.material_checks import check_grad
 
 __all__ = [
     "ENTRY_POINT_GROUP",
@@ -373,6 +383,12 @@ class ScikitFemInterface:
         n = self.n_points  # type: ignore[attr-defined]
         if n == 0:
             raise RuntimeError("allocate() the material before response()")
+        if grad_u is None:
+            raise ValueError(f"grad_u must be ∇u of {n} points (batch-first (n, 2, 2), "
+                             "quadrature-last or a DiscreteField), got None")
+        given = np.asarray(getattr(grad_u, "grad", grad_u))  # a DiscreteField's ∇u
+        if given.dtype.kind not in "biuf":
+            check_grad(given, n)  # names complex values, text or objects
         grad, layout = grad_points(grad_u, n)
         if measure == "total":
             grad = grad - self.committed_grad_u
@@ -384,10 +400,19 @@ class ScikitFemInterface:
         self._trial_grad = None
 
     def _track_evaluate(self, increment: np.ndarray) -> None:
-        self._trial_grad = self.committed_grad_u + np.asarray(increment, dtype=np.float64)
+        committed = self.committed_grad_u
+        trial = committed + np.asarray(increment, dtype=np.float64)
+        finite = np.isfinite(trial).all(axis=(1, 2))
+        # a point whose ∇u is not finite fails and stays at its committed state
+        self._trial_grad = np.where(finite[:, None, None], trial, committed)
 
-    def _track_commit(self) -> None:
+    def _track_commit(self, failed: np.ndarray | None = None) -> None:
+        """The last evaluation's total ∇u becomes the committed one, but at the ``failed``
+        points (bool, (n,)), whose state stays the committed one."""
         if self._trial_grad is not None:
+            if failed is not None and np.any(failed):
+                keep = np.asarray(failed, dtype=bool)[:, None, None]
+                self._trial_grad = np.where(keep, self.committed_grad_u, self._trial_grad)
             self._committed_grad, self._trial_grad = self._trial_grad, None
 
     def _track_revert(self) -> None:

@@ -23,6 +23,7 @@ from granular_material.fem.material import (
     PointStatus,
     ScikitFemInterface,
 )
+from granular_material.fem.material_checks import check_grad, check_points, checkpoint_archive
 from granular_material.fem.mohr_coulomb_return import (
     ELASTIC,
     SYM4,
@@ -38,6 +39,9 @@ __all__ = ["MohrCoulomb", "MohrCoulombParameters", "MohrCoulombRunParameters"]
 
 _I2 = np.eye(2)
 _NAME = "mohr-coulomb"
+#: memory of one point: its state and trial copies, and an evaluation's principal
+#: return, spectral derivative, spin and tangent work arrays, with a margin [bytes]
+_POINT_BYTES = 8192
 
 
 def _number(field: str, value: Any) -> float:
@@ -274,8 +278,7 @@ class MohrCoulomb(ScikitFemInterface):
     def allocate(self, n_points: int) -> None:
         """Start ``n_points`` points at the initial stress, γp = 0; ParameterError when an
         initial stress has the wrong shape or lies outside the yield surface."""
-        if n_points < 1:
-            raise ValueError(f"n_points must be >= 1, got {n_points}")
+        n_points = check_points(n_points, _POINT_BYTES, _NAME)
         stress = _per_point("initial_stress", self._initial, n_points, (2, 2))
         zz = (stress[:, 0, 0].copy() if self._initial_zz is None
               else _per_point("initial_stress_zz", self._initial_zz, n_points, ()))
@@ -300,12 +303,7 @@ class MohrCoulomb(ScikitFemInterface):
         """σ [Pa] (n, 2, 2) and D = ∂σ/∂∇u [Pa] (n, 2, 2, 2, 2) for ∇u [-] (n, 2, 2), the
         increment since the last commit on the committed configuration."""
         n = self.n_points
-        if n == 0:
-            raise RuntimeError("allocate() the material before evaluate()")
-        grad = np.asarray(grad_u, dtype=np.float64)
-        if grad.shape != (n, 2, 2):
-            raise ValueError(f"evaluate() takes grad_u batch-first, shape ({n}, 2, 2) (the "
-                             f"increment since the commit), got {grad.shape}")
+        grad = check_grad(grad_u, n)
         self._track_evaluate(grad)
         finite = np.isfinite(grad).all(axis=(1, 2))
         grad = np.where(finite[:, None, None], grad, 0.0)
@@ -404,9 +402,8 @@ class MohrCoulomb(ScikitFemInterface):
     def restore(self, path: str | Path) -> None:
         """Read a :meth:`checkpoint`; ValueError for another material's checkpoint or other
         parameters (the initial stress is not compared: the state holds the stress)."""
-        with np.load(path, allow_pickle=False) as data:
-            if "material" not in data.files or str(data["material"]) != _NAME:
-                raise ValueError(f"{path} is not a checkpoint of the {_NAME} material")
+        with checkpoint_archive(path, _NAME, ("material", "stress", "stress_zz", "gamma",
+                                              "yielding", "grad_u")) as data:
             kw = {k[2:]: float(data[k]) for k in data.files if k.startswith("p_")}
             if math.isnan(kw.get("critical_friction_angle", math.nan)):
                 kw["critical_friction_angle"] = None

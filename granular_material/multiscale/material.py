@@ -43,6 +43,7 @@ from granular_material.fem.material import (
     PointStatus,
     ScikitFemInterface,
 )
+from granular_material.fem.material_checks import check_grad, check_points, checkpoint_archive
 from granular_material.multiscale.backend import InProcessBackend
 from granular_material.multiscale.confinement import (
     UNCONFINED_FRACTION,
@@ -245,7 +246,10 @@ class DEMMaterial(ScikitFemInterface):
         the isotropic stress where ``isotropic``), or, with ``initial_stress``, each at its
         point's stress (:attr:`preparation` says how; a :class:`UserWarning` names the points
         whose target was clamped to the lowest prepared pressure). ParameterError naming
-        ``initial_stress`` unless it holds ``n_points`` tensors."""
+        ``initial_stress`` unless it holds ``n_points`` tensors, and naming ``n_points``
+        (with the estimate) for a count that is not an integer >= 1 or whose RVEs would not
+        fit in memory, before any is prepared."""
+        n_points = self._check_points(n_points)
         if self.parameters.initial_stress is not None:
             self.preparation = rves_at_stress(self.parameters, n_points, self.progress)
             data = self.preparation.data
@@ -265,6 +269,15 @@ class DEMMaterial(ScikitFemInterface):
         self._reset_state(n_points)
         if self.parameters.isotropic:
             self.make_isotropic()
+
+    def _check_points(self, n_points: Any) -> int:
+        """``n_points`` as a count whose RVEs (their discs, about DISC_BYTES each, and the
+        point's tables) fit in the memory available now (:func:`check_points`)."""
+        from granular_material.checks import DISC_BYTES, rve_file_shape
+
+        p = self.parameters
+        discs = rve_file_shape(p.rve, "rve")[1] if p.rve is not None else p.discs
+        return check_points(n_points, discs * DISC_BYTES + 8192, "dem")
 
     def make_isotropic(self, tol: float = 0.01, max_iterations: int = 30) -> int:
         """Relax every committed RVE to the isotropic stress −``confining`` I and commit it as
@@ -304,13 +317,7 @@ class DEMMaterial(ScikitFemInterface):
         """
         if self.backend is None:
             raise RuntimeError("allocate() the DEM material before evaluate()")
-        grad_u = np.asarray(grad_u, dtype=np.float64)
-        if grad_u.shape != (self.n_points, 2, 2):
-            raise ValueError(
-                f"evaluate() takes grad_u batch-first, shape ({self.n_points}, 2, 2) (the "
-                f"increment since the commit), got {grad_u.shape}; response() also takes "
-                "scikit-fem's quadrature-last (2, 2, nelems, nqp) or a DiscreteField (or "
-                "convert with granular_material.fem.to_points / to_quadrature)")
+        grad_u = check_grad(grad_u, self.n_points)
         self._track_evaluate(grad_u)
         ev = self.backend.evaluate(grad_u)
         response = self._check_confinement(self._response_of(ev))
@@ -420,8 +427,17 @@ class DEMMaterial(ScikitFemInterface):
 
     def commit(self) -> None:
         """The RVE states of the last evaluation become the committed states (and its total
-        ∇u :attr:`committed_grad_u`)."""
-        self._allocated().commit()
+        ∇u :attr:`committed_grad_u`). RuntimeError, and the committed state kept, when a
+        point failed in that evaluation (its RVE need not be in its committed state, nor any
+        other of the batch: ``revert()`` it, and evaluate a smaller increment)."""
+        backend = self._allocated()
+        last = self._last_response
+        if last is not None and not last.ok:
+            bad = last.failed_points()
+            raise RuntimeError(f"commit() refuses an evaluation that failed at {bad.size} "
+                               f"points (first {bad[:8].tolist()}: "
+                               f"{last.failure_counts()}); revert() it")
+        backend.commit()
         self._track_commit()
         self._committed_response = self._last_response
 
@@ -442,7 +458,10 @@ class DEMMaterial(ScikitFemInterface):
 
     def restore(self, path: str | Path) -> None:
         """Load the committed state written by :meth:`checkpoint` (RVE states with contact
-        history, what reuse and ``continue`` carry between steps, the committed total ∇u)."""
+        history, what reuse and ``continue`` carry between steps, the committed total ∇u);
+        ValueError naming the material for another material's checkpoint."""
+        with checkpoint_archive(path, "dem", ()):
+            pass  # another material's checkpoint is refused by its name
         data = load_rve(path)
         self.backend = self._backend(data, resume=True)
         self._reset_state(self.backend.n_rve)

@@ -129,6 +129,25 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 #: the most moment orders q of one spectrum (41 by default)
 _MAX_ORDERS = 10_000
+#: the most box sides per doubling of the physical rule (4 by default): sides closer than a
+#: pixel are the same box, and a 4096-pixel image has fewer than 4096 distinct sides, so more
+#: only makes the list of candidate sides long (1e8 took 33 s to fail for memory)
+_MAX_PER_OCTAVE = 1024
+
+
+def _check_per_octave(args: argparse.Namespace) -> None:
+    """The physical rule's sides per doubling: an integer in 1..:data:`_MAX_PER_OCTAVE`,
+    refused with the count of sides it would make before any work."""
+    n = args.per_octave
+    if n < 1:
+        raise UsageError(f"--per-octave must be an integer >= 1, got {n}")
+    if n > _MAX_PER_OCTAVE:
+        octaves = (math.log2(args.box_max / args.box_min)
+                   if 0 < args.box_min < args.box_max and math.isfinite(args.box_max) else 1.0)
+        raise UsageError(f"--per-octave {n} asks for about {n * octaves:.3g} box sides over "
+                         f"{octaves:.3g} doublings (--box-min {args.box_min:g} to --box-max "
+                         f"{args.box_max:g} m); sides closer than a pixel are the same box, so "
+                         f"at most {_MAX_PER_OCTAVE} per doubling are taken")
 #: memory per pixel of the image while it is analysed, about [bytes]: the pore mask and the
 #: box masses of its finest level (float64), with room for their temporaries
 _PIXEL_BYTES = 24
@@ -180,6 +199,7 @@ def run(args: argparse.Namespace) -> int:
     if not 0.0 <= args.min_r2 <= 1.0:
         raise ValueError(f"--min-r2 must lie in [0, 1], got {args.min_r2}")
     check_figure_file(args.plot, "--plot")
+    _check_per_octave(args)
     q = _orders(args.q_min, args.q_max, args.q_step)
     levels = list(range(1, args.k_max + 1))
     data = load_rve(args.rve)
