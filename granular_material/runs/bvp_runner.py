@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from granular_material.fem import NewtonError, NewtonSolver, StepRecord
+from granular_material.fem import NewtonError, NewtonSolver, PointStatus, StepRecord
 from granular_material.fem.boundaries import select_boundaries
 from granular_material.fem.conditions import (
     Displacement,
@@ -186,8 +186,7 @@ def _rows(b: Built, solver: NewtonSolver, record: StepRecord | None, p0: np.ndar
     strain = kin.strain(grad)
     stress = solver.response.stress
     pressure = -0.5 * np.trace(stress, axis1=1, axis2=2)
-    failed = ~np.asarray(solver.response.ok_mask() if hasattr(solver.response, "ok_mask")
-                         else solver.response.status == 0)
+    failed = np.asarray(solver.response.status) != PointStatus.OK
     unconfined = pressure < UNCONFINED_FRACTION * p0
     reaction = solver.reaction
     _, f_ext = solver.loading.at(solver.load_factor, solver.u if kin.finite else None)
