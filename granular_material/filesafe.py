@@ -67,7 +67,8 @@ def write_whole(path: str | Path, write: Callable[[Path], object]) -> Path:
             write(tmp)
             os.replace(tmp, path)
         except OSError as exc:
-            if str(path) in str(exc):
+            if exc.filename == str(path) or (exc.filename is None and str(path) in str(exc)
+                                             and str(tmp) not in str(exc)):
                 raise
             if exc.errno is None:
                 raise OSError(f"cannot write {path}: {exc}") from exc

@@ -246,3 +246,25 @@ def test_fractal_per_octave_is_bounded_before_any_work(small_rve_path, capsys):
     assert main(argv) == 2
     err = capsys.readouterr().err
     assert "--per-octave 100000000 asks for about 4e+08 box sides" in err
+
+
+def test_the_dem_material_never_commits_a_failed_point(small_rve_path):
+    from granular_material.multiscale import DEMMaterial
+
+    material = DEMMaterial(rve=small_rve_path, device="cpu")
+    material.allocate(2)
+    grad = np.zeros((2, 2, 2))
+    grad[0, 0, 0] = np.nan
+    response = material.evaluate(grad)
+    assert np.isfinite(response.stress).all()
+    assert response.reasons[0] == "non_finite_input"
+    with pytest.raises(RuntimeError, match="refuses"):
+        material.commit()
+    assert np.isfinite(material.committed_grad_u).all()
+    for bad in (None, np.zeros((2, 2, 2), dtype=complex)):
+        with pytest.raises(ValueError, match="grad_u"):
+            material.evaluate(bad)
+    material.revert()
+    material.evaluate(np.zeros((2, 2, 2)))
+    material.commit()
+    assert np.array_equal(material.committed_grad_u, np.zeros((2, 2, 2)))

@@ -36,6 +36,7 @@ from granular_material.cli.scene_keys import (
     suggest,
 )
 from granular_material.cli.scene_toml import Where, flatten, line_of, read_toml, toml_repr
+from granular_material.filesafe import write_whole
 from granular_material.results import write_json
 from granular_material.results.lock import FolderLock
 
@@ -257,7 +258,8 @@ def _scene_copied(scene: Scene) -> Iterator[None]:
     held = _listing(scene.run_dir)
     held.pop(_SCENE_COPY, None)
     scene.run_dir.mkdir(parents=True, exist_ok=True)
-    copy.write_bytes(scene.path.read_bytes())
+    text = scene.path.read_bytes()
+    write_whole(copy, lambda tmp: tmp.write_bytes(text))
     try:
         yield
     except ValueError:
@@ -265,7 +267,7 @@ def _scene_copied(scene: Scene) -> Iterator[None]:
         now.pop(_SCENE_COPY, None)
         if now == held:  # rejected before it wrote anything
             if before is not None:
-                copy.write_bytes(before)
+                write_whole(copy, lambda tmp: tmp.write_bytes(before))
             else:
                 copy.unlink()
             for path in made:  # deepest first

@@ -108,6 +108,13 @@ class LinearElasticRunParameters:
     E: float = LinearElasticParameters.young
     nu: float = LinearElasticParameters.poisson
 
+    def __post_init__(self) -> None:
+        try:  # the material's own checks, named as the spec's fields
+            LinearElasticParameters(self.E, self.nu)
+        except ParameterError as exc:
+            raise ParameterError({"young": "E", "poisson": "nu"}.get(exc.field, exc.field),
+                                 exc.message) from None
+
 
 def isotropic_tangent(lam: float, mu: float) -> np.ndarray:
     """C_ijkl = λ δ_ij δ_kl + μ (δ_ik δ_jl + δ_il δ_jk) [Pa], shape (2, 2, 2, 2).

@@ -139,6 +139,17 @@ class MohrCoulombRunParameters:
     phi_cs: float | None = None
     softening_strain: float = 0.0
 
+    def __post_init__(self) -> None:
+        names = {"young": "E", "poisson": "nu", "friction_angle": "phi",
+                 "dilation_angle": "psi", "critical_friction_angle": "phi_cs"}
+        try:  # the material's own checks, named as the spec's fields
+            MohrCoulombParameters(young=self.E, poisson=self.nu, friction_angle=self.phi,
+                                  dilation_angle=self.psi, cohesion=self.cohesion,
+                                  critical_friction_angle=self.phi_cs,
+                                  softening_strain=self.softening_strain)
+        except ParameterError as exc:
+            raise ParameterError(names.get(exc.field, exc.field), exc.message) from None
+
 
 class MohrCoulomb(ScikitFemInterface):
     """Plane-strain Mohr–Coulomb material: linear isotropic elasticity, the full hexagon on

@@ -232,7 +232,10 @@ def load(path: str | Path) -> RunSpec:
     """The spec saved in ``path`` (TOML for a ``.toml`` suffix, else JSON); a file that is
     no spec is a ValueError naming it, a bad field a SpecError naming the field."""
     path = Path(path)
-    text = path.read_text(encoding="utf-8")
+    try:
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError:
+        raise ValueError(f"{path} is no run spec: not UTF-8 text (TOML or JSON)") from None
     try:
         data = tomllib.loads(text) if path.suffix == ".toml" else json.loads(text)
     except ValueError as exc:  # TOMLDecodeError, JSONDecodeError

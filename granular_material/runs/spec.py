@@ -3,10 +3,13 @@
 A :class:`RunSpec` gathers the problem (:class:`ProblemSpec`), the Newton settings
 (:class:`NewtonSpec`), the material (:class:`MaterialSpec`: an entry-point name and that
 material's own typed parameters), the outputs (:class:`OutputSpec`) and where it runs
-(device, CPU shards, backend). Every field has its default and its check here, once; a value
-that cannot run is a :class:`SpecError` naming the field. The command line, the scenes, the
-presets and the checkpoints all build one (:mod:`granular_material.runs.serial`), and
-:func:`granular_material.runs.run` runs it.
+(device, CPU shards, backend). Every field has its default and its check here, once: first
+by its annotated type (:mod:`~granular_material.runs.spec_checks`: a number finite, a count
+whole, a pair of two, a name a string; a material's parameters by its ``Parameters``' own
+annotations), then by its range; a value that cannot run is a :class:`SpecError` naming the
+field, whether the spec is built in Python or read from TOML, JSON or the flat form. The
+command line, the scenes, the presets and the checkpoints all build one
+(:mod:`granular_material.runs.serial`), and :func:`granular_material.runs.run` runs it.
 
 Field names are unique across the sections, so a field is also known by its bare name (its
 *flat* name: ``axial_strain``), which is the command-line option (``--axial-strain``) and the
@@ -256,8 +259,11 @@ class MaterialSpec:
                                         f"{self.name!r}")
         try:
             cls = load_material(self.name)
-        except ValueError as exc:
-            raise SpecError("material", str(exc)) from None
+        except ValueError:
+            from granular_material.fem.material import available_materials
+
+            raise SpecError("material", f"{self.name!r} is no installed material (they are "
+                                        f"{', '.join(available_materials())})") from None
         kind = getattr(cls, "Parameters", None)
         given = self.parameters
         if kind is None:
@@ -310,9 +316,11 @@ class OutputSpec:
 
     Attributes:
         out: the output folder (tables, fields, figures, summary, checkpoint); None: none.
-        map_strain: axial strains of the displacement/shear-strain maps and band measures.
-        track: Gauss point ids (as text) or ("all",) whose RVEs are post-processed; None:
-            none.
+        map_strain: axial strains of the displacement/shear-strain maps and band measures
+            (1 to :data:`MAX_MAP_STRAINS`, finite).
+        track: Gauss point ids (as text, whole numbers >= 0, none twice; numbers are taken
+            as ids) or ("all",) whose RVEs are post-processed; None: none. The run refuses
+            more than :data:`MAX_TRACKED_ROWS` post-processings (:meth:`tracked_rows`).
         every: with ``track``: every this many load steps.
         postprocess: with ``track``: the post-processors; None: every installed one.
         checkpoint_every: save the committed state every this many load steps (with out);
