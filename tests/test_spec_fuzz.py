@@ -184,3 +184,12 @@ def test_a_toml_spec_takes_what_from_dict_takes():
 
     tomllib = __import__("tomllib" if sys.version_info >= (3, 11) else "tomli")
     assert from_dict(tomllib.loads(to_toml(spec))) == spec
+
+
+def test_a_spec_file_names_its_fields_not_the_command_s_options(tmp_path, capsys):
+    path = tmp_path / "spec.toml"
+    path.write_text('[problem]\ntest = "single-element"\n\n[material]\nname = "dem"\n\n'
+                    '[material.parameters]\nrve = "missing.npz"\n')
+    assert main(["run", str(path), "--check"]) == 2
+    err = capsys.readouterr().err
+    assert "spec.toml, line 8: rve missing.npz does not exist" in err and "--rve" not in err

@@ -331,8 +331,17 @@ def check_scene(scene: Scene) -> None:
 
 
 def _spec_error(path: Path, text: str, exc: ValueError) -> UsageError:
-    """A run spec file's refusal, with the line of the field it names (where one is)."""
+    """A run spec file's refusal, with the line of the field it names (where one is); the
+    command-line options a library check names (``--rve``) are named as the file's fields
+    (``rve``)."""
     name = getattr(exc, "field", None)
+    message = str(exc)
+    if name is None:
+        options = re.findall(r"--([a-z][a-z0-9-]*)", message)
+        name = options[0].replace("-", "_") if options else None
+        message = re.sub(r"--([a-z][a-z0-9-]*)", lambda m: m.group(1).replace("-", "_"),
+                         message)
+        exc = ValueError(message)
     pattern = re.compile(rf"^\s*{re.escape(name)}\s*=") if name else None
     table = re.compile(rf"^\s*\[\s*([\w.]*\.)?{re.escape(name)}\s*\]") if name else None
     for want in (pattern, table):  # the field's line, else its table's header
@@ -359,7 +368,7 @@ def _run_spec_file(path: Path, text: str, data: dict[str, Any],
         out = args.out if args.out is not None else spec.output.out or Path(path.stem)
         spec = spec.replace(output=replace(spec.output, out=out))
         check(spec)
-    except ValueError as exc:
+    except (ValueError, FileNotFoundError) as exc:
         raise _spec_error(path, text, exc) from exc
     if args.check:
         print(command_line(spec))
