@@ -50,7 +50,7 @@ def plot_mechanism(xy: np.ndarray, cells: np.ndarray, kind: str, ux: np.ndarray,
                    title: str = "", scale: float = 1.0) -> Path:
     """The mechanism: shear strain γ [%] of every element (``shear_strain``, (nelems,)) on
     the mesh displaced by ``scale`` × (ux, uy) [m] (nodal, meshio order of ``cells``), with
-    the displacement vectors of the nodes."""
+    the nodes' displacement as arrows (the longest a twentieth of the mesh's width)."""
     plt = pyplot()
     from matplotlib.tri import Triangulation
 
@@ -65,8 +65,11 @@ def plot_mechanism(xy: np.ndarray, cells: np.ndarray, kind: str, ux: np.ndarray,
     fig.colorbar(im, ax=ax, label="shear strain γ [%]")
     n = xy.shape[0]
     every = max(n // 400, 1)
-    ax.quiver(1e3 * x[:n:every], 1e3 * y[:n:every], dx[:n:every], dy[:n:every],
-              color="cyan", alpha=0.6, width=0.002)
+    longest = float(np.hypot(dx[:n], dy[:n]).max())
+    if longest > 0:  # the longest arrow a twentieth of the mesh's width
+        ax.quiver(1e3 * x[:n:every], 1e3 * y[:n:every], 1e3 * dx[:n:every],
+                  1e3 * dy[:n:every], color="cyan", alpha=0.6, width=0.002, angles="xy",
+                  scale_units="xy", scale=1e3 * longest / (0.05 * 1e3 * np.ptp(x)))
     ax.set_aspect("equal")
     ax.set_xlabel("x [mm]")
     ax.set_ylabel("y [mm]")
