@@ -63,6 +63,7 @@ def check_output_file(path: Path | None, option: str = "--out") -> None:
     if path is None:
         return
     path = Path(path)
+    _not_dangling(path, option)
     if path.is_dir():
         raise UsageError(f"{option} {path} is a folder; give a file name")
     if path.exists() and not os.access(path, os.W_OK):
@@ -95,9 +96,17 @@ def check_output_dir(path: Path | None, option: str = "--out") -> None:
     if path is None:
         return
     path = Path(path)
+    _not_dangling(path, option)
     if path.exists() and not path.is_dir():
         raise UsageError(f"{option} {path} exists and is not a folder")
     _writable_folder(path, option, path)
+
+
+def _not_dangling(path: Path, option: str) -> None:
+    """``path`` is no symbolic link to nothing (which neither exists nor can be made)."""
+    if path.is_symlink() and not path.exists():
+        raise UsageError(f"{option} {path} is a symbolic link to {os.readlink(path)}, which "
+                         "does not exist: make its target, or give another path")
 
 
 @contextlib.contextmanager

@@ -231,7 +231,7 @@ def test_a_bad_grad_u_is_a_failure_or_an_error_never_a_nan_stress(make):
 
 # -- lists a user can make long --------------------------------------------------------------
 def test_long_lists_are_bounded_before_any_work(tmp_path):
-    with pytest.raises(SpecError, match=r"500 strains, at most 20.*~250 s"):
+    with pytest.raises(SpecError, match=r"500 strains, at most 20.*~750 s"):
         OutputSpec(map_strain=[0.01] * 500)
     spec = RunSpec(problem=ProblemSpec(test="biaxial", elements=(10, 10), steps=5000),
                    material=MaterialSpec(name="dem", parameters={"particles": 64}),
@@ -268,3 +268,21 @@ def test_the_dem_material_never_commits_a_failed_point(small_rve_path):
     material.evaluate(np.zeros((2, 2, 2)))
     material.commit()
     assert np.array_equal(material.committed_grad_u, np.zeros((2, 2, 2)))
+
+
+def test_a_dangling_link_or_a_pipe_is_named_for_what_it_is(tmp_path, capsys):
+    (tmp_path / "link").symlink_to(tmp_path / "nowhere" / "run")
+    argv = ["single-element", "--material", "linear-elastic", "--steps", "1",
+            "--device", "cpu", "--no-progress", "--out", str(tmp_path / "link")]
+    assert main(argv) == 2
+    assert "is a symbolic link to" in capsys.readouterr().err
+    save(_elastic(None, steps=1), tmp_path / "spec.toml")
+    read, write = os.pipe()
+    os.write(write, (tmp_path / "spec.toml").read_bytes())
+    os.close(write)
+    try:
+        assert main(["run", f"/dev/fd/{read}"]) == 2
+    finally:
+        os.close(read)
+    assert "names no output folder" in capsys.readouterr().err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["link", "spec.toml"]

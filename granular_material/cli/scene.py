@@ -363,9 +363,15 @@ def _run_spec_file(path: Path, text: str, data: dict[str, Any],
 
     try:
         spec = from_dict(data)
-        # the run folder: --out, else the spec's output.out, else (as a scene's) the file's
-        # name in the current folder: a run from the command line never writes nothing
-        out = args.out if args.out is not None else spec.output.out or Path(path.stem)
+    except ValueError as exc:
+        raise _spec_error(path, text, exc) from exc
+    # the run folder: --out, else the spec's output.out, else (as a scene's) the file's name
+    # in the current folder: a run from the command line never writes nothing
+    if args.out is None and spec.output.out is None and not path.is_file():
+        raise UsageError(f"{path} names no output folder (output.out) and is no file to "
+                         "name one after (a pipe?): give --out DIR")
+    out = args.out if args.out is not None else spec.output.out or Path(path.stem)
+    try:
         spec = spec.replace(output=replace(spec.output, out=out))
         check(spec)
     except (ValueError, FileNotFoundError) as exc:

@@ -59,10 +59,11 @@ _SIZES = {"single-element": (1.0, 1.0), "biaxial": (0.05, 0.10)}
 #: BiaxialSetup's field names that the spec calls otherwise
 _SETUP_NAMES = {"nx": "elements", "ny": "elements", "gauss": "quadrature"}
 #: the most map strains a run draws: each is a displacement and a shear-strain map and a
-#: band measure (about 0.5 s of figures each, measured on a 5 × 10 specimen)
+#: band measure (20 strains added 30 s to the outputs of a 5 × 10 linear-elastic specimen,
+#: and 29 s to a single element's, on a shared 2-core machine)
 MAX_MAP_STRAINS = 20
 #: seconds of figures one map strain costs, about (the estimate of a refusal)
-_MAP_SECONDS = 0.5
+_MAP_SECONDS = 1.5
 #: the most tracked rows (points × post-processors × tracked steps) a run computes; each is
 #: a post-processing of one RVE (up to seconds for the pore fractal of a 400-disc RVE)
 MAX_TRACKED_ROWS = 100_000
