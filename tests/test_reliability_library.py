@@ -246,6 +246,19 @@ def test_fractal_per_octave_is_bounded_before_any_work(small_rve_path, capsys):
     assert main(argv) == 2
     err = capsys.readouterr().err
     assert "--per-octave 100000000 asks for about 4e+08 box sides" in err
+    assert main(["fractal", str(small_rve_path), "--box-min", "0.003"]) == 2
+    assert "--box-rule cell would ignore it" in capsys.readouterr().err
+
+
+def test_a_newton_bound_is_a_field_error_not_an_overflow(capsys):
+    from granular_material.runs import NewtonSpec
+
+    with pytest.raises(SpecError, match="max_cutbacks must be at most 50"):
+        NewtonSpec(max_cutbacks=100_000)
+    argv = ["single-element", "--material", "linear-elastic", "--steps", "1", "--device",
+            "cpu", "--no-progress", "--max-cutbacks", "100000"]
+    assert main(argv) == 2
+    assert "--max-cutbacks must be at most 50" in capsys.readouterr().err
 
 
 def test_the_dem_material_never_commits_a_failed_point(small_rve_path):

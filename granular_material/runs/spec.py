@@ -39,7 +39,8 @@ from granular_material.runs.spec_checks import (
     conform_mapping,
 )
 
-__all__ = ["BACKENDS", "FULL_SCALE", "MAX_MAP_STRAINS", "MAX_TRACKED_ROWS", "REDUCED_SCALE",
+__all__ = ["BACKENDS", "FULL_SCALE", "MAX_CUTBACKS", "MAX_ITERATIONS", "MAX_MAP_STRAINS",
+           "MAX_TRACKED_ROWS", "REDUCED_SCALE",
            "SCALES", "TESTS", "MaterialSpec", "NewtonSpec", "OutputSpec", "ProblemSpec",
            "RunSpec", "SpecError"]
 
@@ -58,6 +59,11 @@ BACKENDS = ("inprocess", "mpi")
 _SIZES = {"single-element": (1.0, 1.0), "biaxial": (0.05, 0.10)}
 #: BiaxialSetup's field names that the spec calls otherwise
 _SETUP_NAMES = {"nx": "elements", "ny": "elements", "gauss": "quadrature"}
+#: the most cut-backs of an increment: 2^-50 of a load step is at the resolution of a float
+#: load factor (2^-52), and 2^-1024 overflows
+MAX_CUTBACKS = 50
+#: the most Newton iterations of an increment (the commands' default is 25)
+MAX_ITERATIONS = 10_000
 #: the most map strains a run draws: each is a displacement and a shear-strain map and a
 #: band measure (20 strains added 30 s to the outputs of a 5 × 10 linear-elastic specimen,
 #: and 29 s to a single element's, on a shared 2-core machine)
@@ -213,6 +219,15 @@ class NewtonSpec:
 
     def __post_init__(self) -> None:
         _typed(self)
+        if self.max_cutbacks > MAX_CUTBACKS:
+            raise SpecError("max_cutbacks", f"must be at most {MAX_CUTBACKS}: the smallest "
+                                            f"increment, 2^-{self.max_cutbacks} of a step, is "
+                                            "below what a float load factor can tell apart, got "
+                                            f"{self.max_cutbacks}")
+        if self.max_iterations > MAX_ITERATIONS:
+            raise SpecError("max_iterations", f"must be at most {MAX_ITERATIONS} material "
+                                              "evaluations an increment (each a DEM run of "
+                                              "every point), got {self.max_iterations}")
         if self.stress_tol is not None and not (math.isfinite(self.stress_tol)
                                                 and self.stress_tol >= 0):
             raise SpecError("stress_tol", f"must be a stress >= 0 Pa, got {self.stress_tol:g}")

@@ -89,20 +89,20 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="cell rule: finest box level, eps = 2^-k L for k = 1..K (default 8)",
     )
     parser.add_argument(
-        "--box-min", type=float, default=DEFAULT_BOX_MIN, metavar="M",
+        "--box-min", type=float, default=None, metavar="M",
         help=f"physical rule: smallest box in m, at least 2 pixels (default {DEFAULT_BOX_MIN})",
     )
     parser.add_argument(
-        "--box-max", type=float, default=DEFAULT_BOX_MAX, metavar="M",
+        "--box-max", type=float, default=None, metavar="M",
         help=f"physical rule: largest box in m, capped at half the window "
              f"(default {DEFAULT_BOX_MAX})",
     )
     parser.add_argument(
-        "--per-octave", type=int, default=DEFAULT_PER_OCTAVE, metavar="N",
+        "--per-octave", type=int, default=None, metavar="N",
         help=f"physical rule: box sides per doubling (default {DEFAULT_PER_OCTAVE})",
     )
     parser.add_argument(
-        "--min-fill", type=float, default=DEFAULT_MIN_FILL, metavar="F",
+        "--min-fill", type=float, default=None, metavar="F",
         help=f"physical rule: a box less than this fraction pore counts as empty "
              f"(default {DEFAULT_MIN_FILL})",
     )
@@ -133,6 +133,25 @@ _MAX_ORDERS = 10_000
 #: pixel are the same box, and a 4096-pixel image has fewer than 4096 distinct sides, so more
 #: only makes the list of candidate sides long (1e8 took 33 s to fail for memory)
 _MAX_PER_OCTAVE = 1024
+
+
+#: the physical rule's options and their defaults (None on the parser: given or not)
+_PHYSICAL = {"box_min": DEFAULT_BOX_MIN, "box_max": DEFAULT_BOX_MAX,
+             "per_octave": DEFAULT_PER_OCTAVE, "min_fill": DEFAULT_MIN_FILL}
+
+
+def _physical_options(args: argparse.Namespace) -> None:
+    """The physical rule's options at their defaults where not given; refused (naming them)
+    under ``--box-rule cell``, which would silently ignore them."""
+    given = [name for name in _PHYSICAL if getattr(args, name, None) is not None]
+    if args.box_rule != "physical" and given:
+        flags = ", ".join("--" + name.replace("_", "-") for name in given)
+        raise UsageError(f"{flags} set{'s' if len(given) == 1 else ''} the boxes of "
+                         f"--box-rule physical; --box-rule {args.box_rule} would ignore "
+                         f"{'it' if len(given) == 1 else 'them'} (add --box-rule physical)")
+    for name, default in _PHYSICAL.items():
+        if getattr(args, name, None) is None:
+            setattr(args, name, default)
 
 
 def _check_per_octave(args: argparse.Namespace) -> None:
@@ -199,6 +218,7 @@ def run(args: argparse.Namespace) -> int:
     if not 0.0 <= args.min_r2 <= 1.0:
         raise ValueError(f"--min-r2 must lie in [0, 1], got {args.min_r2}")
     check_figure_file(args.plot, "--plot")
+    _physical_options(args)
     _check_per_octave(args)
     q = _orders(args.q_min, args.q_max, args.q_step)
     levels = list(range(1, args.k_max + 1))
