@@ -55,10 +55,10 @@ from granular_material_validation.yade_io import export_rve
 from granular_material_validation.yade_runner import SCRIPTS, YadeError, find_yade, run_script
 
 __all__ = ["FOOTING_PATCHES", "HALF_WIDTH", "SETTLEMENT_PER_STEP", "SURCHARGE", "X_LINES",
-           "Y_LINES", "FootingMesh", "footing_mesh", "footing_nodal_reaction",
-           "footing_traction_force",
-           "guo_zhao_footing", "lumped_nodal_stress", "match_elements", "ours_footing",
-           "patch_footing", "read_gmsh22", "scene_text", "write_gmsh22"]
+           "Y_LINES", "FootingMesh", "finish_footing", "footing_mesh",
+           "footing_nodal_reaction", "footing_traction_force", "guo_zhao_footing",
+           "lumped_nodal_stress", "match_elements", "ours_footing", "patch_footing",
+           "read_gmsh22", "scene_text", "write_gmsh22"]
 
 #: settlement a load step [m] and surcharge [Pa] of their script
 SETTLEMENT_PER_STEP = 0.25e-3
@@ -160,9 +160,20 @@ def guo_zhao_footing(rve: str | Path, workdir: str | Path, mesh: FootingMesh, st
     if not timed_out and (proc.returncode != 0 or "Traceback (most recent call last)" in text):
         tail = "\n".join(text.splitlines()[-25:])
         raise YadeError(f"their footing.py failed (exit {proc.returncode}):\n{tail}")
+    return finish_footing(work, job, wall, seen, timed_out)
+
+
+def finish_footing(work: str | Path, job: dict[str, Any], wall_s: float, cpu_s: float,
+                   timed_out: bool = False) -> dict[str, Any]:
+    """Read back a run of their ``footing.py`` in ``work`` (finished, or stopped with the
+    load steps it had done), write ``gz_curve.csv`` and ``gz_summary.json`` there and return
+    them as :func:`guo_zhao_footing` does (``wall_s``, ``cpu_s`` [s] as measured by the
+    caller)."""
+    work = Path(work)
+    text = (work / "footing.log").read_text(errors="replace")
     curve = _their_curve(work, text)
-    summary = {"job": job, "wall_s": wall, "cpu_s": seen, "processes": int(processes),
-               "timed_out": timed_out, "steps_done": int(len(curve) - 1),
+    summary = {"job": job, "wall_s": wall_s, "cpu_s": cpu_s, "processes": job["processes"],
+               "timed_out": bool(timed_out), "steps_done": int(len(curve) - 1),
                "rve_state": json.loads((work / "rve_state.json").read_text()),
                "patches": [p[0] for p in FOOTING_PATCHES]}
     (work / "gz_summary.json").write_text(json.dumps(summary, indent=1))
