@@ -299,3 +299,22 @@ def test_a_dangling_link_or_a_pipe_is_named_for_what_it_is(tmp_path, capsys):
         os.close(read)
     assert "names no output folder" in capsys.readouterr().err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["link", "spec.toml"]
+
+
+@pytest.mark.parametrize(("make", "field"), [
+    (lambda: LinearElastic(young="60e6"), "young"),
+    (lambda: LinearElastic(poisson=None), "poisson"),
+    (lambda: LinearElastic(initial_stress="-1e5"), "initial_stress"),
+    (lambda: LinearElastic(initial_stress=[[1.0, 2.0], [3.0]]), "initial_stress"),
+    (lambda: MohrCoulomb(friction_angle=None), "friction_angle"),
+    (lambda: __import__("granular_material.multiscale", fromlist=["DEMMaterial"])
+     .DEMMaterial(device=3), "device"),
+    (lambda: __import__("granular_material.multiscale", fromlist=["DEMMaterial"])
+     .DEMMaterial(rve=5), "rve"),
+    (lambda: __import__("granular_material.multiscale", fromlist=["DEMMaterial"])
+     .DEMMaterial(particles="64"), "particles"),
+])
+def test_a_material_built_in_python_names_a_parameter_of_the_wrong_type(make, field):
+    with pytest.raises(ParameterError) as info:
+        make()
+    assert info.value.field == field

@@ -23,6 +23,7 @@ from granular_material.fem.material_checks import (
     checkpoint_archive,
 )
 from granular_material.filesafe import write_whole
+from granular_material.typed_fields import conform_fields
 
 __all__ = ["LinearElastic", "LinearElasticParameters", "LinearElasticRunParameters",
            "isotropic_tangent"]
@@ -55,6 +56,8 @@ class LinearElasticParameters:
     initial_stress: float | np.ndarray = 0.0
 
     def __post_init__(self) -> None:
+        conform_fields(self, skip=("initial_stress",))  # numbers, not text or None
+        _check_stress_value(self.initial_stress)
         if not (math.isfinite(self.young) and self.young > 0):
             raise ParameterError("young", f"must be a positive number of Pa, got {self.young!r}")
         if not (math.isfinite(self.poisson) and -1.0 < self.poisson < 0.5):
@@ -98,6 +101,21 @@ class LinearElasticParameters:
         """Lamé constants (λ, μ) [Pa]: λ = Eν/((1+ν)(1−2ν)), μ = E/(2(1+ν))."""
         e, nu = self.young, self.poisson
         return e * nu / ((1 + nu) * (1 - 2 * nu)), e / (2 * (1 + nu))
+
+
+def _check_stress_value(value: Any) -> None:
+    """An initial stress is a real number or an array of them (ParameterError otherwise)."""
+    if isinstance(value, str | bytes | bool) or value is None:
+        raise ParameterError("initial_stress", "must be a number, a (2, 2) tensor or an "
+                                               f"(n, 2, 2) array [Pa], got {value!r}")
+    try:
+        array = np.asarray(value)
+    except ValueError:
+        array = None
+    if array is None or array.dtype.kind not in "biuf":
+        raise ParameterError("initial_stress", "must be a number, a (2, 2) tensor or an "
+                                               f"(n, 2, 2) array of real numbers [Pa], got "
+                                               f"{value!r}"[:200])
 
 
 @dataclass(frozen=True, kw_only=True)

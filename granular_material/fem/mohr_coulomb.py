@@ -148,6 +148,10 @@ class MohrCoulombRunParameters:
                                   critical_friction_angle=self.phi_cs,
                                   softening_strain=self.softening_strain)
         except ParameterError as exc:
+            if exc.field == "softening_strain" and self.softening_strain == 0.0:
+                raise ParameterError("phi_cs", "needs softening_strain > 0 (the plastic shear "
+                                               "strain over which phi softens to phi_cs), "
+                                               "which is 0") from None
             raise ParameterError(names.get(exc.field, exc.field), exc.message) from None
 
 

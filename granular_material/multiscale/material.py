@@ -67,6 +67,7 @@ from granular_material.multiscale.run_hooks import (
     run_summary,
     unit_weight,
 )
+from granular_material.typed_fields import conform_mapping
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -114,10 +115,13 @@ def _parameters(given: DEMMaterialParameters | str | Path | None, pressure: floa
                       "run specification's and the command line's name)",
                       DeprecationWarning, stacklevel=_user_stacklevel())
         settings = {**settings, "confining": pressure}
+    # types, named (the initial stress array has its own check, which says more)
+    settings = {**settings, **conform_mapping(DEMMaterialParameters, {
+        k: v for k, v in settings.items() if k != "initial_stress"})}
     if isinstance(given, DEMMaterialParameters):
         return replace(given, **settings) if settings else given
     if given is not None:  # the RVE file, the first positional argument of old
-        settings = {**settings, "rve": given}
+        settings = {**settings, **conform_mapping(DEMMaterialParameters, {"rve": given})}
     if settings.get("packing") is None:
         settings.pop("packing", None)
     return DEMMaterialParameters(**settings)
