@@ -100,6 +100,14 @@ def check_output_dir(path: Path | None, option: str = "--out") -> None:
     if path.exists() and not path.is_dir():
         raise UsageError(f"{option} {path} exists and is not a folder")
     _writable_folder(path, option, path)
+    if path.is_dir():  # a folder where a file is written under its temporary name
+        with contextlib.suppress(OSError):
+            stray = sorted(p.name for p in path.iterdir()
+                           if p.name.endswith(".part") and p.is_dir() and not p.is_symlink())
+            if stray:
+                raise UsageError(f"{option} {path} holds the folder {stray[0]}, where a file "
+                                 "of the run is written before it is renamed into place: "
+                                 "remove it")
 
 
 def _not_dangling(path: Path, option: str) -> None:

@@ -11,6 +11,7 @@ leaves a half-written or empty file, nor a ``.part``.
 from __future__ import annotations
 
 import contextlib
+import errno
 import os
 import signal
 import threading
@@ -62,6 +63,9 @@ def write_whole(path: str | Path, write: Callable[[Path], object]) -> Path:
     leaves ``path`` as it was and no ``.part``; an ``OSError`` names ``path``."""
     path = Path(path)
     tmp = path.with_name(path.name + ".part")
+    if tmp.is_dir() and not tmp.is_symlink():
+        raise IsADirectoryError(errno.EISDIR, f"cannot write {path}: {tmp} is a folder in "
+                                              "the way (remove it)")
     with deferred_signals():
         try:
             write(tmp)

@@ -318,3 +318,14 @@ def test_a_material_built_in_python_names_a_parameter_of_the_wrong_type(make, fi
     with pytest.raises(ParameterError) as info:
         make()
     assert info.value.field == field
+
+
+def test_a_stray_part_folder_is_refused_before_any_work(tmp_path):
+    from granular_material.filesafe import write_whole
+
+    (tmp_path / "run" / "steps.csv.part").mkdir(parents=True)
+    with pytest.raises(UsageError, match=r"holds the folder steps.csv.part"):
+        run(_elastic(tmp_path / "run", steps=2))
+    assert sorted(p.name for p in (tmp_path / "run").iterdir()) == ["steps.csv.part"]
+    with pytest.raises(IsADirectoryError, match="is a folder in the way"):
+        write_whole(tmp_path / "run" / "steps.csv", lambda tmp: tmp.write_text("x"))
