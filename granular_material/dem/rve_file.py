@@ -112,7 +112,9 @@ def load_rve(path: str | Path) -> RVEData:
     except RVEFileError as exc:
         raise RVEFileError(f"{path}: {exc}") from exc
     except (OSError, ValueError, RecursionError, zipfile.BadZipFile, EOFError) as exc:
-        raise RVEFileError(f"{path}: not a readable RVE file ({exc})") from exc
+        # numpy reads a file that is no archive as pickled data and advises allow_pickle
+        why = "not an .npz archive" if "allow_pickle" in str(exc) else str(exc)
+        raise RVEFileError(f"{path}: not a readable RVE file ({why})") from exc
     n_rve = core["radius"].shape[0] if core["radius"].ndim >= 1 else 0
     unbatched = [k for k, v in extra.items() if k not in CONTACT_HISTORY_KEYS
                  and (v.ndim == 0 or v.shape[0] != n_rve)]
