@@ -184,9 +184,11 @@ RVE_MATERIAL_DEFAULTS: dict[str, Any] = _rve_material_defaults()
 
 def rve_material_given(values: Any) -> list[str]:
     """The RVE material options (:data:`RVE_MATERIAL_DEFAULTS`) that ``values`` (parsed
-    options, or a material's parameters) sets to other than their defaults, as ``--names``."""
-    return [f"--{dest.replace('_', '-')}" for dest, default in RVE_MATERIAL_DEFAULTS.items()
-            if getattr(values, dest) != default]
+    options, or a material's parameters) sets to other than their defaults, as ``--names``;
+    ``--particles`` too where it is set (the discs of the RVEs a run prepares)."""
+    given = [f"--{dest.replace('_', '-')}" for dest, default in RVE_MATERIAL_DEFAULTS.items()
+             if getattr(values, dest) != default]
+    return (["--particles"] if getattr(values, "particles", None) is not None else []) + given
 
 
 def _option_named(message: str) -> str:

@@ -329,3 +329,12 @@ def test_a_stray_part_folder_is_refused_before_any_work(tmp_path):
     assert sorted(p.name for p in (tmp_path / "run").iterdir()) == ["steps.csv.part"]
     with pytest.raises(IsADirectoryError, match="is a folder in the way"):
         write_whole(tmp_path / "run" / "steps.csv", lambda tmp: tmp.write_text("x"))
+
+
+def test_particles_beside_an_rve_file_is_refused(small_rve_path):
+    spec = RunSpec(problem=ProblemSpec(test="single-element", steps=1),
+                   material=MaterialSpec(name="dem", parameters={"rve": small_rve_path,
+                                                                 "particles": 64}),
+                   device="cpu")
+    with pytest.raises(UsageError, match="--particles sets the material"):
+        check(spec)
