@@ -155,7 +155,7 @@ def test_a_json_null_spec_file_is_named(tmp_path):
     with pytest.raises(SpecError, match="spec must be a table"):
         load(tmp_path / "spec.json")
     (tmp_path / "broken.json").write_text("{")
-    with pytest.raises(ValueError, match="broken.json is no JSON run spec"):
+    with pytest.raises(ValueError, match=r"broken\.json is no JSON run spec"):
         load(tmp_path / "broken.json")
 
 

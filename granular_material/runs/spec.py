@@ -31,8 +31,14 @@ from granular_material.fem.problems import BiaxialSetup
 from granular_material.procedures.element_tests import DEFAULT_AXIAL_STRAIN
 from granular_material.procedures.packing import DEFAULT_DISCS, DEFAULT_PRESSURE
 from granular_material.runs.spec_checks import (
+    MAX_CUTBACKS,
+    MAX_ITERATIONS,
+    MAX_MAP_STRAINS,
+    MAX_TRACKED_ROWS,
     SpecError,
     check_device,
+    check_map_strains,
+    check_newton_bounds,
     check_postprocess,
     check_track,
     conform_fields,
@@ -59,20 +65,6 @@ BACKENDS = ("inprocess", "mpi")
 _SIZES = {"single-element": (1.0, 1.0), "biaxial": (0.05, 0.10)}
 #: BiaxialSetup's field names that the spec calls otherwise
 _SETUP_NAMES = {"nx": "elements", "ny": "elements", "gauss": "quadrature"}
-#: the most cut-backs of an increment: 2^-50 of a load step is at the resolution of a float
-#: load factor (2^-52), and 2^-1024 overflows
-MAX_CUTBACKS = 50
-#: the most Newton iterations of an increment (the commands' default is 25)
-MAX_ITERATIONS = 10_000
-#: the most map strains a run draws: each is a displacement and a shear-strain map and a
-#: band measure (20 strains added 30 s to the outputs of a 5 × 10 linear-elastic specimen,
-#: and 29 s to a single element's, on a shared 2-core machine)
-MAX_MAP_STRAINS = 20
-#: seconds of figures one map strain costs, about (the estimate of a refusal)
-_MAP_SECONDS = 1.5
-#: the most tracked rows (points × post-processors × tracked steps) a run computes; each is
-#: a post-processing of one RVE (up to seconds for the pore fractal of a 400-disc RVE)
-MAX_TRACKED_ROWS = 100_000
 
 
 def _typed(obj: Any) -> None:
@@ -219,15 +211,7 @@ class NewtonSpec:
 
     def __post_init__(self) -> None:
         _typed(self)
-        if self.max_cutbacks > MAX_CUTBACKS:
-            raise SpecError("max_cutbacks", f"must be at most {MAX_CUTBACKS}: the smallest "
-                                            f"increment, 2^-{self.max_cutbacks} of a step, is "
-                                            "below what a float load factor can tell apart, got "
-                                            f"{self.max_cutbacks}")
-        if self.max_iterations > MAX_ITERATIONS:
-            raise SpecError("max_iterations", f"must be at most {MAX_ITERATIONS} material "
-                                              "evaluations an increment (each a DEM run of "
-                                              "every point), got {self.max_iterations}")
+        check_newton_bounds(self.max_cutbacks, self.max_iterations)
         if self.stress_tol is not None and not (math.isfinite(self.stress_tol)
                                                 and self.stress_tol >= 0):
             raise SpecError("stress_tol", f"must be a stress >= 0 Pa, got {self.stress_tol:g}")
@@ -362,14 +346,7 @@ class OutputSpec:
                 str(t) if isinstance(t, int) and not isinstance(t, bool) else t
                 for t in self.track))
         _typed(self)
-        if not self.map_strain:
-            raise SpecError("map_strain", "must name at least one axial strain")
-        if len(self.map_strain) > MAX_MAP_STRAINS:
-            raise SpecError("map_strain", f"names {len(self.map_strain)} strains, at most "
-                                          f"{MAX_MAP_STRAINS}: each is two maps and a band "
-                                          f"measure, about {_MAP_SECONDS:g} s of figures "
-                                          f"(~{len(self.map_strain) * _MAP_SECONDS:.0f} s "
-                                          "in all)")
+        check_map_strains(self.map_strain)
         if self.track is not None:
             check_track(self.track)
         if self.postprocess is not None:

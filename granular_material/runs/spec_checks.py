@@ -1,4 +1,5 @@
-"""The checks of a run specification's fields beyond their types: tracked points,
+"""The checks of a run specification's fields beyond their types: the bounds of what a user
+can make long (map strains, Newton cut-backs and iterations, tracked rows), tracked points,
 post-processors, the device; and :class:`SpecError`, the error of a field that cannot run.
 Every field is first conformed to its annotated type
 (:mod:`granular_material.typed_fields`, re-exported here)."""
@@ -14,12 +15,55 @@ from granular_material.typed_fields import (
     field_types,
 )
 
-__all__ = ["SpecError", "check_device", "check_postprocess", "check_track", "conform",
-           "conform_fields", "conform_mapping", "describe", "field_types"]
+__all__ = ["MAX_CUTBACKS", "MAX_ITERATIONS", "MAX_MAP_STRAINS", "MAX_TRACKED_ROWS",
+           "SpecError", "check_device", "check_map_strains", "check_newton_bounds",
+           "check_postprocess", "check_track", "conform", "conform_fields", "conform_mapping",
+           "describe", "field_types"]
+
+
+#: seconds of figures one map strain costs, about (the estimate of a refusal)
+_MAP_SECONDS = 1.5
+#: the most cut-backs of an increment: 2^-50 of a load step is at the resolution of a float
+#: load factor (2^-52), and 2^-1024 overflows
+MAX_CUTBACKS = 50
+#: the most Newton iterations of an increment (the commands' default is 25)
+MAX_ITERATIONS = 10_000
+#: the most map strains a run draws: each is a displacement and a shear-strain map and a
+#: band measure (20 strains added 30 s to the outputs of a 5 × 10 linear-elastic specimen,
+#: and 29 s to a single element's, on a shared 2-core machine)
+MAX_MAP_STRAINS = 20
+#: the most tracked rows (points × post-processors × tracked steps) a run computes; each is
+#: a post-processing of one RVE (up to seconds for the pore fractal of a 400-disc RVE)
+MAX_TRACKED_ROWS = 100_000
 
 
 class SpecError(ParameterError):
     """A value of a run specification that cannot run; ``field`` is its flat name."""
+
+
+def check_newton_bounds(max_cutbacks: int, max_iterations: int) -> None:
+    """Cut-backs and iterations of an increment within :data:`MAX_CUTBACKS` and
+    :data:`MAX_ITERATIONS`."""
+    if max_cutbacks > MAX_CUTBACKS:
+        raise SpecError("max_cutbacks", f"must be at most {MAX_CUTBACKS}: the smallest "
+                                        f"increment, 2^-{max_cutbacks} of a step, is below "
+                                        "what a float load factor can tell apart, got "
+                                        f"{max_cutbacks}")
+    if max_iterations > MAX_ITERATIONS:
+        raise SpecError("max_iterations", f"must be at most {MAX_ITERATIONS} material "
+                                          "evaluations an increment (each a DEM run of every "
+                                          f"point), got {max_iterations}")
+
+
+def check_map_strains(map_strain: tuple[float, ...]) -> None:
+    """Map strains: 1 to :data:`MAX_MAP_STRAINS` of them (refused with the estimate)."""
+    if not map_strain:
+        raise SpecError("map_strain", "must name at least one axial strain")
+    if len(map_strain) > MAX_MAP_STRAINS:
+        raise SpecError("map_strain", f"names {len(map_strain)} strains, at most "
+                                      f"{MAX_MAP_STRAINS}: each is two maps and a band "
+                                      f"measure, about {_MAP_SECONDS:g} s of figures "
+                                      f"(~{len(map_strain) * _MAP_SECONDS:.0f} s in all)")
 
 
 def check_track(track: tuple[str, ...]) -> None:
