@@ -9,8 +9,10 @@ Every run is a ``granular-material`` command on the same RVE material, in this o
    against ``--material mohr-coulomb --material-file`` (100 kPa);
 3. ``specimen``: ``biaxial --scale reduced`` (5 × 10 Q4, one RVE per Gauss point) with the
    DEM and with the calibrated material, same mesh and platens;
-4. ``footing``: the footing scene with its DEM material, and with the calibrated
-   Mohr–Coulomb (as calibrated, and perfectly plastic at φ and at φcs) on the same mesh;
+4. ``footing``: the footing scene with its DEM material (the scene's updated-Lagrangian
+   kinematics), and with the calibrated Mohr–Coulomb (as calibrated, and perfectly plastic
+   at φ and at φcs) on the same mesh with small-strain kinematics, the classical reference;
+   the perfectly plastic one also with the DEM run's kinematics (``mc-peak-ul``);
 5. ``report``: figures, ``results.json`` and ``report.md`` in ``--out``.
 
 The cheap (Mohr–Coulomb) runs are repeated ``--repeats`` times and their median time is
@@ -109,6 +111,24 @@ def onset_strain(series: pd.DataFrame, threshold: float = LOCALISED) -> float | 
     """Axial strain [-] at which ``ratio`` first reaches ``threshold`` (None: never)."""
     hit = series[series["ratio"] >= threshold]
     return float(hit["axial_strain"].iloc[0]) if len(hit) else None
+
+
+def quadrant_angles(points: pd.DataFrame, step: int, fraction: float = 0.3) -> list[float]:
+    """|Inclination| [deg] of the band in each quadrant about the specimen's centre at
+    ``step`` (the top ``fraction`` of each quadrant's γ; see
+    :func:`~granular_material.results.localization.shear_band`): each arm of an X of
+    conjugate bands, where one axis for the whole specimen is none of them."""
+    from granular_material.results.localization import shear_band
+
+    at = points[points["step"] == step]
+    cx, cy = (at["x"].min() + at["x"].max()) / 2, (at["y"].min() + at["y"].max()) / 2
+    out = []
+    for right in (False, True):
+        for top in (False, True):
+            q = at[((at["x"] > cx) == right) & ((at["y"] > cy) == top)]
+            if len(q) >= 4:
+                out.append(abs(shear_band(q, step, fraction).inclination_deg))
+    return out
 
 
 def bearing_curve(steps: pd.DataFrame, half_width: float) -> pd.DataFrame:
@@ -273,9 +293,14 @@ def stage_footing(out: Path, scale: Scale, repeats: int, force: bool, costs: dic
     dem_scene.write_text(scene_with(text, "dem", dem_parameters, over), encoding="utf-8")
     timed(out / "footing-dem", ["run", dem_scene], 1, force, costs, "footing-dem")
     parameters = material_file(out / "calibration-gz20k" / "mohr-coulomb.toml")
-    for name, params in footing_variants(parameters).items():
+    variants = footing_variants(parameters)
+    variants["mc-peak-ul"] = variants["mc-peak"]
+    for name, params in variants.items():
         scene = out / f"footing-{name}.toml"
-        scene.write_text(scene_with(text, "mohr-coulomb", params, over), encoding="utf-8")
+        body = scene_with(text, "mohr-coulomb", params, over)
+        if not name.endswith("-ul"):  # the classical reference: small-strain kinematics
+            body += '\n[newton]\nformulation = "small-strain"\n'
+        scene.write_text(body, encoding="utf-8")
         timed(out / f"footing-{name}", ["run", scene], repeats, force, costs, f"footing-{name}")
 
 

@@ -20,11 +20,11 @@ from material_comparison import (
     LOCALISED,
     band_angles,
     bearing_curve,
-    footing_variants,
     localisation_series,
     material_file,
     onset_strain,
     prandtl_nq,
+    quadrant_angles,
 )
 
 #: the footing scene's half-width B [m] and surcharge q [Pa]
@@ -88,12 +88,25 @@ def element_results(out: Path, rves: int) -> dict[str, Any]:
 
 def _map(ax: Any, points: pd.DataFrame, step: int, title: str) -> None:
     at = points[points["step"] == step]
-    tc = ax.tricontourf(at["x"], at["y"], at["shear_strain"], levels=14, cmap="viridis")
+    top = max(float(at["shear_strain"].max()), 1e-12)
+    tc = ax.tricontourf(at["x"], at["y"], at["shear_strain"], cmap="viridis",
+                        levels=np.linspace(0.0, top * 1.0001, 15))  # from 0: a uniform
+    # field is one colour
     ax.set_aspect("equal")
     ax.set_title(title, fontsize=9)
     ax.set_xticks([])
     ax.set_yticks([])
     plt.colorbar(tc, ax=ax, shrink=0.8, label="γ [-]")
+
+
+#: axial strains [-] at which the band is measured
+BAND_STRAINS = (0.02, 0.05, 0.1)
+
+
+def _step_at(points: pd.DataFrame, strain: float) -> int:
+    """The step of ``points`` whose axial strain is nearest ``strain``."""
+    g = points.groupby("step")["axial_strain"].first()
+    return int((g - strain).abs().idxmin())
 
 
 #: the specimens: folder suffix, line style, label
@@ -127,6 +140,11 @@ def specimen_results(out: Path, phi: float, psi: float) -> dict[str, Any]:
                      "onset_strain": onset_strain(loc),
                      "ratio_final": float(loc["ratio"].iloc[-1]),
                      "band_final": band.as_dict(),
+                     "bands": {f"{e:g}": shear_band(points, _step_at(points, e)).as_dict()
+                               for e in BAND_STRAINS if e <= loc["axial_strain"].max() + 1e-9},
+                     "quadrant_angles": {f"{e:g}": quadrant_angles(points, _step_at(points, e))
+                                         for e in BAND_STRAINS
+                                         if e <= loc["axial_strain"].max() + 1e-9},
                      "iterations": float(s["iterations"][1:].mean()),
                      "cutbacks": int(s["cutbacks"].sum()),
                      "error": _summary(out / f"specimen-{name}").get("error")}
@@ -167,10 +185,11 @@ def footing_results(out: Path, parameters: dict[str, float]) -> dict[str, Any]:
         "phi_cs": SURCHARGE * prandtl_nq(parameters.get("phi_cs", parameters["phi"])) / 1e3}}
     fig, ax = plt.subplots(figsize=(7, 4.5))
     runs = {"dem": ("DEM (64-disc RVEs)", "C0-")}
-    labels = {"mc": ("MC as calibrated (softening)", "k--"),
-              "mc-peak": ("MC perfectly plastic at φ", "C1-."),
-              "mc-cs": ("MC perfectly plastic at φcs", "C2:")}
-    runs |= {k: labels[k] for k in footing_variants(parameters)}
+    runs |= {"mc": ("MC as calibrated (softening)", "k--"),
+             "mc-peak": ("MC perfectly plastic at φ", "C1-."),
+             "mc-cs": ("MC perfectly plastic at φcs", "C2:"),
+             "mc-peak-ul": ("MC at φ, updated-Lagrangian", "C4-")}
+    top = 0.0
     for name, (label, style) in runs.items():
         s = _steps(out / f"footing-{name}")
         if s is None:
@@ -182,10 +201,13 @@ def footing_results(out: Path, parameters: dict[str, float]) -> dict[str, Any]:
                      float(c["settlement"].iloc[-1] * 1e3),
                      "iterations": float(s["iterations"][1:].mean()),
                      "error": _summary(out / f"footing-{name}").get("error")}
-        ax.plot(c["settlement"] * 1e3, c["pressure"] / 1e3, style, label=label)
+        if name in PLOTTED:
+            ax.plot(c["settlement"] * 1e3, c["pressure"] / 1e3, style, label=label, lw=1.2)
+            top = max(top, float(c["pressure"].max() / 1e3))
     for key, ls, label in (("phi", "--", "φ"), ("phi_cs", ":", "φcs")):
         ax.axhline(res["prandtl_kpa"][key], color="grey", ls=ls, lw=1,
                    label=f"Prandtl q·N_q, {label}")
+    ax.set_ylim(0, 1.15 * max(top, res["prandtl_kpa"]["phi"]))
     ax.set_xlabel("settlement [mm]")
     ax.set_ylabel("bearing pressure [kPa]")
     ax.grid(alpha=0.3)
@@ -199,24 +221,31 @@ def footing_results(out: Path, parameters: dict[str, float]) -> dict[str, Any]:
     return res
 
 
+#: the footing runs in the figures (the softening and updated-Lagrangian Mohr–Coulomb runs
+#: are in the table only: on this mesh they are no solution, see the report)
+PLOTTED = ("dem", "mc-peak", "mc-cs")
+
+
 def _footing_maps(out: Path, res: dict[str, Any]) -> None:
-    """γ of the DEM footing at its last step and of the calibrated MC at that settlement."""
+    """γ of the DEM footing at its last step beside the Mohr–Coulomb runs' at the nearest
+    settlement they reached: ``footing_maps.png``."""
+    names = {"dem": "DEM", "mc-peak": "MC perfectly plastic at φ",
+             "mc-cs": "MC perfectly plastic at φcs"}
     tables = {}
-    for name in ("dem", "mc"):
+    for name in names:
         pts, st = out / f"footing-{name}" / "points.csv", _steps(out / f"footing-{name}")
         if pts.is_file() and st is not None:
             tables[name] = (pd.read_csv(pts), st)
-    if len(tables) < 2:
+    if "dem" not in tables or len(tables) < 2:
         return
     dem_points, dem_steps = tables["dem"]
     settle = float(dem_steps["footing_settlement"].iloc[int(dem_points["step"].max())])
-    fig, ax = plt.subplots(1, 2, figsize=(12, 4.2))
+    fig, ax = plt.subplots(len(tables), 1, figsize=(7, 3.2 * len(tables)))
     for a, (name, (points, steps)) in zip(ax, tables.items(), strict=True):
         have = sorted(points["step"].unique())
         step = min(have, key=lambda k: abs(steps["footing_settlement"].iloc[k] - settle))
-        _map(a, points, step, f"{'DEM' if name == 'dem' else 'Mohr–Coulomb'}: γ at "
+        _map(a, points, step, f"{names[name]}: γ at "
              f"{steps['footing_settlement'].iloc[step] * 1e3:.2f} mm settlement")
-        a.set_aspect("equal")
     res["maps_settlement_mm"] = settle * 1e3
     fig.tight_layout()
     fig.savefig(out / "footing_maps.png", dpi=110)
@@ -301,23 +330,34 @@ def _markdown(r: dict[str, Any]) -> str:
               "minor principal direction). Localised: γmax/γmean ≥ "
               f"{LOCALISED:g}.", "",
               "| run | peak σyy/σxx | at | end σyy/σxx | localised from | γmax/γmean at the "
-              "end | band angle | γ in/out | elongation | iterations | cut-backs |",
-              "|---|---|---|---|---|---|---|---|---|---|---|"]
+              "end | band angle at 2 / 5 / 10 % | γ in/out at the end | elongation | "
+              "iterations | cut-backs |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+    quadrants = ["", "The band's angle in each quadrant about the centre (the arms of an X "
+                 "of conjugate bands; elongation well below 1 says the specimen has no "
+                 "single band), median [min, max]:", "",
+                 "| run | " + " | ".join(f"{e:g}" for e in BAND_STRAINS) + " |",
+                 "|---|" + "---|" * len(BAND_STRAINS)]
     for name, _, label in SPECIMENS:
         if name in s:
             d, b = s[name], s[name]["band_final"]
             lines.append(f"| {label} | {d['peak_ratio']:.3f} | {d['strain_at_peak']:.2%} | "
                          f"{d['final_ratio']:.3f} | {_fmt(d['onset_strain'], '.2%')} | "
-                         f"{d['ratio_final']:.2f} | {abs(b['inclination_deg']):.1f}° | "
+                         f"{d['ratio_final']:.2f} | "
+                         + " / ".join(f"{abs(x['inclination_deg']):.1f}°"
+                                      for x in d["bands"].values()) + " | "
                          f"{b['localization']:.2f} | {b['elongation']:.2f} | "
                          f"{d['iterations']:.2f} | {d['cutbacks']} |")
+            quadrants.append(f"| {label} | " + " | ".join(
+                f"{statistics.median(a):.0f}° [{min(a):.0f}, {max(a):.0f}]" if a else "–"
+                for a in d["quadrant_angles"].values()) + " |")
+    lines += quadrants
     f = r["footing"]
     lines += ["", "## Footing (Guo & Zhao's material, q = 20 kPa)", "",
               f"Prandtl q·N_q: {f['prandtl_kpa']['phi']:.0f} kPa at φ, "
               f"{f['prandtl_kpa']['phi_cs']:.0f} kPa at φcs.", "",
               "| run | steps | largest pressure [kPa] | final pressure [kPa] | settlement [mm] "
               "| iterations | stopped by |", "|---|---|---|---|---|---|---|"]
-    for name in ("dem", "mc", "mc-peak", "mc-cs"):
+    for name in ("dem", "mc", "mc-peak", "mc-cs", "mc-peak-ul"):
         if name in f:
             d = f[name]
             lines.append(f"| {name} | {d['steps']} | {d['max_pressure_kpa']:.0f} | "
@@ -328,13 +368,14 @@ def _markdown(r: dict[str, Any]) -> str:
     for name, c in r["costs"].items():
         lines.append(f"| {name} | {_fmt(c.get('run_median_s'))} | "
                      f"{_fmt(c.get('process_median_s'))} | {len(c.get('process_s', []))} |")
-    pairs = [("element", "element-dem", "element-mc"), ("specimen", "specimen-dem",
-                                                         "specimen-mc"),
-             ("footing", "footing-dem", "footing-mc")]
+    pairs = [("single element (the 4 RVEs' median)", "element-dem-", "element-mc"),
+             ("specimen, smooth", "specimen-dem", "specimen-mc"),
+             ("specimen, rough", "specimen-dem-rough", "specimen-mc-rough"),
+             ("footing (Mohr–Coulomb at φ, small strain)", "footing-dem", "footing-mc-peak")]
     lines += ["", "| problem | DEM / Mohr–Coulomb time |", "|---|---|"]
     for label, a, b in pairs:
         da = [c["run_median_s"] for k, c in r["costs"].items()
-              if k.startswith(a) and c.get("run_median_s")]
+              if (k.startswith(a) if a.endswith("-") else k == a) and c.get("run_median_s")]
         mb = _median(r["costs"], b)
         if da and mb:
             lines.append(f"| {label} | {statistics.median(da) / mb:.0f} |")

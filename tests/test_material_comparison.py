@@ -68,6 +68,20 @@ def test_localisation_series_and_onset() -> None:
     assert mc.onset_strain(growing, threshold=1.3) == pytest.approx(0.01)
 
 
+def test_quadrant_angles_of_an_x() -> None:
+    """An X of two bands at ±60° through the centre of a grid: every quadrant reads its
+    arm at 60° (to 2°), where one axis for the whole grid would read neither."""
+    x, y = np.meshgrid(np.linspace(-1, 1, 41), np.linspace(-2, 2, 81))
+    x, y = x.ravel(), y.ravel()
+    t = math.tan(math.radians(60))
+    d = np.minimum(np.abs(y - t * x), np.abs(y + t * x)) / math.hypot(1, t)
+    points = pd.DataFrame({"step": 3, "axial_strain": 0.05, "x": x, "y": y,
+                           "shear_strain": np.exp(-(d / 0.05) ** 2)})
+    angles = mc.quadrant_angles(points, 3, fraction=0.1)
+    assert len(angles) == 4
+    np.testing.assert_allclose(angles, 60.0, atol=2.0)
+
+
 def test_bearing_curve() -> None:
     """Bearing pressure −F_y/B [Pa] of the half footing; the settlement as written."""
     steps = pd.DataFrame({"footing_settlement": [0.0, 1e-3],
