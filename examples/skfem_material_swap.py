@@ -8,7 +8,7 @@ asked for them with the *total* displacement gradient in scikit-fem's layout
 and answers in the same layout, and the script runs its own Newton loop. Swap the material
 by changing the one line marked below:
 
-    MATERIAL = "linear-elastic"   ->   MATERIAL = "dem"
+    MATERIAL = "linear-elastic"   ->   MATERIAL = "mohr-coulomb"   or   "dem"
 
 and the element (``ELEMENT = "quad1"``: MeshQuad with Q1, 2 × 2 Gauss points; ``"tri2"``:
 MeshTri with P2, 3 points a triangle). From the command line (installed with the package)::
@@ -46,12 +46,13 @@ from skfem import (
 
 from granular_material.fem import create_material
 
-MATERIAL = "linear-elastic"  # <- the one line: "linear-elastic" or "dem"
+MATERIAL = "linear-elastic"  # <- the one line: "linear-elastic", "mohr-coulomb" or "dem"
 ELEMENT = "quad1"  # "quad1" (MeshQuad, Q1) or "tri2" (MeshTri, P2)
 
 P = 100e3  # lateral confinement [Pa], compression
 PARAMETERS = {
     "linear-elastic": {"E": 60e6, "nu": 0.3, "initial_stress": -P},
+    "mohr-coulomb": {"E": 60e6, "nu": 0.3, "friction_angle": 30.0, "initial_stress": -P},
     "dem": {"particles": 64, "seed": 1, "confining": P, "device": "cpu"},
 }
 ELEMENTS = {  # mesh, element, quadrature order

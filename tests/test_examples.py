@@ -14,6 +14,13 @@ def test_swap_example_linear_elastic_matches_the_closed_form(element):
 
 
 @pytest.mark.parametrize("element", ["quad1", "tri2"])
+def test_swap_example_mohr_coulomb_peaks_at_the_closed_form(element):
+    stress = example.main("mohr-coulomb", element, axial_strain=0.01, steps=5)
+    # c = 0, φ = 30°: σ1/σ3 = (1 + sin φ)/(1 − sin φ) = 3 once yielding
+    assert stress[-1] == pytest.approx(3 * 100e3, rel=1e-6)
+
+
+@pytest.mark.parametrize("element", ["quad1", "tri2"])
 def test_swap_example_dem_converges_with_totals_and_increments_alike(element, monkeypatch):
     monkeypatch.setitem(example.PARAMETERS, "dem", {**example.PARAMETERS["dem"],
                                                     "particles": 24})
