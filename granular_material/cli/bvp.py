@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from granular_material.cli.options import UsageError, check_output_dir, emit
+from granular_material.filesafe import write_whole
 from granular_material.results.lock import FolderLock
 
 __all__ = ["BOUNDARY_VALUE", "run_bvp_scene"]
@@ -77,7 +78,7 @@ def run_bvp_scene(path: Path, text: str, data: dict[str, Any],
     folder = _run_folder(path, data, args.out)
     folder.mkdir(parents=True, exist_ok=True)
     with FolderLock(folder):
-        (folder / "scene.toml").write_text(text, encoding="utf-8")
+        write_whole(folder / "scene.toml", lambda tmp: tmp.write_text(text, encoding="utf-8"))
         try:
             outcome = run_boundary_value(spec, out=folder)
         except ValueError as exc:
