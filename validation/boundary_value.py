@@ -280,9 +280,11 @@ def _report(out: Path, lines: list[str], footing: pd.DataFrame, walls: pd.DataFr
         "foot, times the wall's height (0.17 m).", "", markdown_table(walls, 3), "",
         "## Cost (seconds by phase)", "",
         "On this 2-core machine, shared with other work while these ran (a load average of "
-        "about 13): the times are several times those of an idle machine.", "",
+        "7 to 13; the condensed-sticking runs met the heavier load): the times are several "
+        "times an idle machine's, and their ratios indicative only.", "",
         markdown_table(timing, 4), "",
-        f"The study took {wall / 60:.1f} min.", ""]
+        f"This report took {wall / 60:.1f} min to write (runs already in `runs/` are "
+        "reused; each run's own time is in the table).", ""]
     (out / "report.md").write_text("\n".join(text), encoding="utf-8")
 
 
