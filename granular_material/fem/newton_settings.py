@@ -12,6 +12,7 @@ from granular_material.fem.kinematics import FORMULATIONS
 
 __all__ = [
     "CONVERGENCE_TESTS",
+    "MAX_CUTBACKS",
     "PREDICTORS",
     "RELAXATIONS",
     "TANGENT_UPDATES",
@@ -26,6 +27,9 @@ PREDICTORS = ("tangent", "extrapolate")
 RELAXATIONS = ("none", "aitken")
 #: the updates of the points' tangents between evaluations (NewtonSettings.tangent_update)
 TANGENT_UPDATES = ("none", "secant", "hold")
+#: the most cut-backs of an increment: 2^-50 of a load step is at the resolution of a float
+#: load factor (2^-52), and 2^-1024 overflows
+MAX_CUTBACKS = 50
 
 
 @dataclass(frozen=True)
@@ -139,8 +143,10 @@ class NewtonSettings:
             raise ParameterError("atol", f"must be a finite number >= 0, got {self.atol!r}")
         if self.max_iterations < 1:
             raise ParameterError("max_iterations", f"must be >= 1, got {self.max_iterations!r}")
-        if self.max_cutbacks < 0:
-            raise ParameterError("max_cutbacks", f"must be >= 0, got {self.max_cutbacks!r}")
+        if not 0 <= self.max_cutbacks <= MAX_CUTBACKS:
+            raise ParameterError("max_cutbacks", f"must lie in [0, {MAX_CUTBACKS}] (the "
+                                                 "smallest increment is 2^-max_cutbacks of a "
+                                                 f"step), got {self.max_cutbacks!r}")
         if not self.divergence > 1:
             raise ParameterError("divergence", f"must be > 1, got {self.divergence!r}")
         if not self.max_growth > 1:

@@ -7,6 +7,7 @@ Every field is first conformed to its annotated type
 from __future__ import annotations
 
 from granular_material.errors import ParameterError
+from granular_material.fem.newton_settings import MAX_CUTBACKS
 from granular_material.typed_fields import (
     conform,
     conform_fields,
@@ -23,9 +24,6 @@ __all__ = ["MAX_CUTBACKS", "MAX_ITERATIONS", "MAX_MAP_STRAINS", "MAX_TRACKED_ROW
 
 #: seconds of figures one map strain costs, about (the estimate of a refusal)
 _MAP_SECONDS = 1.5
-#: the most cut-backs of an increment: 2^-50 of a load step is at the resolution of a float
-#: load factor (2^-52), and 2^-1024 overflows
-MAX_CUTBACKS = 50
 #: the most Newton iterations of an increment (the commands' default is 25)
 MAX_ITERATIONS = 10_000
 #: the most map strains a run draws: each is a displacement and a shear-strain map and a
