@@ -126,7 +126,9 @@ class _Runner:
         # the knobs are those of the force test (rtol of ‖R‖/‖R₀‖, the stress floor, reuse)
         spec = from_flat({
             **problem, "material": "dem", "confining": self.scale.confining,
-            "axial_strain": self.scale.axial_strain, "rve": rve, "particles": s["discs"],
+            "axial_strain": self.scale.axial_strain, "rve": rve,
+            # the file carries its discs; only prepared packings are told how many
+            "particles": None if rve is not None else s["discs"],
             "seed": self.scale.seeds[0], **tangent_settings(s["tangent"]),
             "reuse_tol": s["reuse_tol"], "convergence": "force", "max_iterations": 25,
             "rtol": s["rtol"], "predictor": predictor, "relaxation": relaxation,
