@@ -176,7 +176,7 @@ class DEMMaterialParameters(DEMRVEs):
             points :meth:`~granular_material.multiscale.DEMMaterial.allocate` is given
             (checked there). Kept as nested tuples (the parameters compare and hash);
             :attr:`initial_stress_array` is the array. Each point's RVE (prepared, or the
-            file's) is brought to its σ* (every component within 2 % of its σv, the shear
+            file's) is brought to its σ* (every component within 1 % of its σv, the shear
             included: :func:`~granular_material.procedures.servo.servo_to_stress`); targets
             below :func:`~granular_material.procedures.anisotropic.lowest_target_pressure`
             are clamped to it (see :mod:`granular_material.procedures.anisotropic`). Does
