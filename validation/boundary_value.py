@@ -6,9 +6,10 @@ with Mohr–Coulomb on the same meshes.
 
 runs (or reuses, where a run folder already holds its ``summary.json``) the reduced scenes of
 ``examples/scenes`` and writes ``report.md`` with its figures. The friction angle of the
-bounds is measured on the footing's own RVE: its drained biaxial DEM test at the surcharge
-(20 kPa), φ at the peak and at 10 % axial strain. These bound a softening, non-associated
-material; they are sanity bounds, not a pass mark.
+bounds is measured on the footing's RVE material: drained biaxial DEM tests at the
+surcharge (20 kPa) of the RVE as the footing prepares it (seed 1) and of three more seeds, φ
+at the peak and at 10 % axial strain, their mean taken. These bound a softening,
+non-associated material; they are sanity bounds, not a pass mark.
 """
 
 from __future__ import annotations
@@ -156,10 +157,13 @@ def main(argv: list[str] | None = None) -> int:
         phi_peak, phi_end, curve = rve_friction_angles(scene)
         curve.to_csv(out / f"rve_biaxial_seed{seed}.csv", index=False)
         angles.append((seed, phi_peak, phi_end))
-    phi_peak, phi_end = angles[0][1], angles[0][2]
     spread = np.array([a[1:] for a in angles])
+    # the bounds take the material's φ, the mean over the seeds: one 64-disc RVE's peak moves
+    # by degrees with its preparation (seed 1: 34.1° at a 2 % servo tolerance, 31.4° at 1 %)
+    phi_peak, phi_end = float(spread[:, 0].mean()), float(spread[:, 1].mean())
     lines = [f"φ of the footing's RVE (seed {SEEDS[0]}; drained biaxial DEM at "
-             f"{SURCHARGE / 1e3:g} kPa): {phi_peak:.1f}° at the peak, {phi_end:.1f}° at 10 %",
+             f"{SURCHARGE / 1e3:g} kPa): {angles[0][1]:.1f}° at the peak, {angles[0][2]:.1f}° "
+             "at 10 %",
              f"φ over seeds {', '.join(map(str, SEEDS))} (the scatter between RVEs of the "
              f"same material): peak {spread[:, 0].mean():.1f} ± {spread[:, 0].std():.1f}° "
              f"[{spread[:, 0].min():.1f}, {spread[:, 0].max():.1f}], at 10 % "
@@ -279,6 +283,9 @@ def _report(out: Path, lines: list[str], footing: pd.DataFrame, walls: pd.DataFr
         "wall: the mean −σxx of the Gauss points of the element column at the wall, above its "
         "foot, times the wall's height (0.17 m).", "", markdown_table(walls, 3), "",
         "## Cost (seconds by phase)", "",
+        "The `-condensed` runs of the committed report were made before 5d4173d, whose servo "
+        "brings each RVE within 1 % of its initial stress instead of 2 %; the others after.",
+        "",
         "On this 2-core machine, shared with other work while these ran (a load average of "
         "7 to 13; the condensed-sticking runs met the heavier load): the times are several "
         "times an idle machine's, and their ratios indicative only.", "",
