@@ -323,7 +323,8 @@ def _summary(b: Built, solver: NewtonSolver, steps: pd.DataFrame, points: pd.Dat
               for name in b.moved}
     return {
         "name": spec.name, "mesh": b.mesh.source, "element": b.mesh.element,
-        "elements": int(problem_elements(b)), "gauss_points": int(b.initial_stress.shape[0]),
+        "elements": int(b.problem.basis.nelems),
+        "gauss_points": int(b.initial_stress.shape[0]),
         "material": spec.material.name, "unit_weight": b.unit_weight,
         "initial_state": spec.initial.state, "initial_residual": initial,
         "steps": int(len(steps) - 1), "steps_planned": spec.steps, "error": error,
@@ -334,11 +335,6 @@ def _summary(b: Built, solver: NewtonSolver, steps: pd.DataFrame, points: pd.Dat
         "bodies": bodies, "timing_s": {k: round(v, 3) for k, v in timings.items()},
         "wall_s": round(wall, 3),
     }
-
-
-def problem_elements(b: Built) -> int:
-    """Elements of the run's mesh."""
-    return int(b.problem.basis.nelems)
 
 
 def _figures(b: Built, steps: pd.DataFrame, last: dict[str, Any], out: Path) -> None:
