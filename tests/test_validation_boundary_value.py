@@ -4,7 +4,6 @@ DESIGN.md §5 quotes."""
 from __future__ import annotations
 
 import pytest
-
 from granular_material_validation.boundary_value import bearing_factor, rankine
 
 

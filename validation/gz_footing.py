@@ -40,6 +40,8 @@ from granular_material_validation.guo_zhao_runner import (
 )
 from granular_material_validation.gz_footing_mesh import (
     HALF_WIDTH,
+    SETTLEMENT_PER_STEP,
+    SURCHARGE,
     X_LINES,
     Y_LINES,
     FootingMesh,
@@ -59,10 +61,6 @@ __all__ = ["FOOTING_PATCHES", "HALF_WIDTH", "SETTLEMENT_PER_STEP", "SURCHARGE", 
            "footing_nodal_reaction", "footing_traction_force", "guo_zhao_footing",
            "lumped_nodal_stress", "match_elements", "ours_footing", "patch_footing",
            "read_gmsh22", "scene_text", "write_gmsh22"]
-
-#: settlement a load step [m] and surcharge [Pa] of their script
-SETTLEMENT_PER_STEP = 0.25e-3
-SURCHARGE = 20e3
 
 #: (what, original text, replacement) applied to their footing.py; {name}: the job's
 FOOTING_PATCHES: tuple[tuple[str, str, str], ...] = (

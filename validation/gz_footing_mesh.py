@@ -16,12 +16,15 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["HALF_WIDTH", "X_LINES", "Y_LINES", "FootingMesh", "footing_mesh",
-           "footing_nodal_reaction", "footing_traction_force", "lumped_nodal_stress",
-           "match_elements", "read_gmsh22", "write_gmsh22"]
+__all__ = ["HALF_WIDTH", "SETTLEMENT_PER_STEP", "SURCHARGE", "X_LINES", "Y_LINES",
+           "FootingMesh", "footing_mesh", "footing_nodal_reaction", "footing_traction_force",
+           "lumped_nodal_stress", "match_elements", "read_gmsh22", "write_gmsh22"]
 
 #: their footing's half-width B [m]
 HALF_WIDTH = 0.05
+#: settlement a load step [m] and surcharge [Pa] of their script
+SETTLEMENT_PER_STEP = 0.25e-3
+SURCHARGE = 20e3
 #: grid lines of the coarse mesh [m]: 8 × 5 cells, a node at the footing's edge x = B
 X_LINES = (0.0, 0.025, 0.05, 0.075, 0.1, 0.15, 0.25, 0.4, 0.6)
 Y_LINES = (-0.4, -0.2, -0.1, -0.05, -0.025, 0.0)

@@ -20,9 +20,10 @@ from typing import Any
 import numpy as np
 import pandas as pd
 from granular_material_validation.guo_zhao_runner import gauss_fields
-from granular_material_validation.gz_footing import SETTLEMENT_PER_STEP, SURCHARGE
 from granular_material_validation.gz_footing_mesh import (
     HALF_WIDTH,
+    SETTLEMENT_PER_STEP,
+    SURCHARGE,
     FootingMesh,
     footing_nodal_reaction,
     footing_traction_force,
