@@ -41,9 +41,21 @@ from granular_material_validation.yade_runner import (
 
 from granular_material.procedures.packing import DEFAULT_PRESSURE
 
-__all__ = ["EXAMPLE_PATCHES", "MODULE_PATCHES", "EscriptNotFoundError", "find_escript",
-           "find_femxdem", "finish_run", "gauss_fields", "group_cpu_s", "guo_zhao_available",
-           "guo_zhao_biaxial", "patch_example"]
+__all__ = [
+    "EXAMPLE_PATCHES",
+    "MODULE_PATCHES",
+    "EscriptNotFoundError",
+    "apply_patches",
+    "copy_modules",
+    "find_escript",
+    "find_femxdem",
+    "finish_run",
+    "gauss_fields",
+    "group_cpu_s",
+    "guo_zhao_available",
+    "guo_zhao_biaxial",
+    "patch_example",
+]
 
 #: (what, original text, replacement) applied to the example; {name} fields are the job's
 EXAMPLE_PATCHES: tuple[tuple[str, str, str], ...] = (
@@ -116,19 +128,27 @@ def guo_zhao_available() -> bool:
     return True
 
 
-def patch_example(text: str, **job: Any) -> str:
-    """``biaxialSmooth.py`` with :data:`EXAMPLE_PATCHES` applied; every original must occur
+def apply_patches(text: str, patches: Any, source: str, **job: Any) -> str:
+    """``text`` (their script ``source``) with ``patches`` ((what, original, replacement)
+    each, the replacement formatted with ``job``) applied; every original must occur
     exactly once (raises otherwise, naming it)."""
-    for what, old, new in EXAMPLE_PATCHES:
+    for what, old, new in patches:
         if text.count(old) != 1:
             raise ValueError(f"patch '{what}': {old!r} occurs {text.count(old)} times in "
-                             "the example, expected once (another yade version?)")
+                             f"{source}, expected once (another yade version?)")
         text = text.replace(old, new.format(**job))
     return text
 
 
-def _prepare_folder(work: Path, job: dict[str, Any]) -> None:
-    """Copies of their module and example, patched, with the probe and a yadeimport link."""
+def patch_example(text: str, **job: Any) -> str:
+    """``biaxialSmooth.py`` with :data:`EXAMPLE_PATCHES` applied (:func:`apply_patches`)."""
+    return apply_patches(text, EXAMPLE_PATCHES, "the example", **job)
+
+
+def copy_modules(work: Path) -> Path:
+    """``work/FEMxDEM``: a fresh copy of their module with :data:`MODULE_PATCHES`, the
+    counting probe and a ``yadeimport`` link to yade; returns the example folder's
+    ``biaxialSmooth.py`` (it may be ``.gz``)."""
     module_dir, example = find_femxdem()
     modules = work / "FEMxDEM"
     if modules.exists():
@@ -142,8 +162,13 @@ def _prepare_folder(work: Path, job: dict[str, Any]) -> None:
                              f"{count}")
         path.write_text(text.replace(old, new))
     shutil.copy(SCRIPTS / "gz_probe.py", modules / "gz_probe.py")
-    link = modules / "yadeimport.py"
-    link.symlink_to(find_yade())
+    (modules / "yadeimport.py").symlink_to(find_yade())
+    return example
+
+
+def _prepare_folder(work: Path, job: dict[str, Any]) -> None:
+    """Copies of their module and example, patched, with the probe and a yadeimport link."""
+    example = copy_modules(work)
     raw = gzip.open(example, "rt").read() if example.suffix == ".gz" else example.read_text()
     (work / "biaxialSmooth.py").write_text(patch_example(raw, **job))
 

@@ -33,9 +33,9 @@ from typing import Any
 
 import pandas as pd
 from granular_material_validation.guo_zhao_runner import (
-    MODULE_PATCHES,
+    apply_patches,
+    copy_modules,
     find_escript,
-    find_femxdem,
     group_cpu_s,
 )
 from granular_material_validation.gz_footing_mesh import (
@@ -54,7 +54,7 @@ from granular_material_validation.gz_footing_mesh import (
     write_gmsh22,
 )
 from granular_material_validation.yade_io import export_rve
-from granular_material_validation.yade_runner import SCRIPTS, YadeError, find_yade, run_script
+from granular_material_validation.yade_runner import YadeError, find_yade, run_script
 
 __all__ = ["FOOTING_PATCHES", "HALF_WIDTH", "SETTLEMENT_PER_STEP", "SURCHARGE", "X_LINES",
            "Y_LINES", "FootingMesh", "finish_footing", "footing_mesh",
@@ -90,26 +90,11 @@ _CONVERGED = re.compile(r"Convergence reached after (\d+) iteration\(s\)! Relati
 
 def patch_footing(text: str, **job: Any) -> str:
     """``footing.py`` with :data:`FOOTING_PATCHES` applied; each original must occur once."""
-    for what, old, new in FOOTING_PATCHES:
-        if text.count(old) != 1:
-            raise ValueError(f"patch '{what}': {old!r} occurs {text.count(old)} times in "
-                             "footing.py, expected once (another yade version?)")
-        text = text.replace(old, new.format(**job))
-    return text
+    return apply_patches(text, FOOTING_PATCHES, "footing.py", **job)
 
 
 def _their_folder(work: Path, job: dict[str, Any]) -> None:
-    module_dir, example = find_femxdem()
-    modules = work / "FEMxDEM"
-    shutil.copytree(module_dir, modules)
-    for name, old, new, count in MODULE_PATCHES:
-        path = modules / name
-        text = path.read_text()
-        if text.count(old) != count:
-            raise ValueError(f"{name}: {old!r} occurs {text.count(old)} times, not {count}")
-        path.write_text(text.replace(old, new))
-    shutil.copy(SCRIPTS / "gz_probe.py", modules / "gz_probe.py")
-    (modules / "yadeimport.py").symlink_to(find_yade())
+    example = copy_modules(work)
     source = example.parent / "footing.py"
     raw = (gzip.open(str(source) + ".gz", "rt").read() if not source.is_file()
            else source.read_text())
