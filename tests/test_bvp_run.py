@@ -221,3 +221,24 @@ def test_geostatic_dem_start_is_within_newtons_tolerance():
     assert residual["norm"] < residual["newton_atol"]
     sigma = built.initial_stress
     assert sigma[:, 0, 0] == pytest.approx(0.5 * sigma[:, 1, 1])  # K0 = 0.5
+
+
+@pytest.mark.parametrize("section, key, value, field", [
+    ("mesh", "size", "0.6", "mesh.size"),
+    ("mesh", "elements", [0, 3], "mesh.elements"),
+    ("initial", "pressure", "20e3", "initial.pressure"),
+    ("output", "shards", 0, "output.shards"),
+    ("output", "progress", "yes", "output.progress"),
+    (None, "steps", "58", "steps"),
+])
+def test_a_value_of_the_wrong_type_or_range_is_refused_naming_its_key(section, key, value,
+                                                                        field):
+    import tomllib
+
+    from granular_material.runs.spec import SpecError
+
+    scene = tomllib.loads((EXAMPLES / "footing-gz2016-cpu.toml").read_text())
+    (scene.setdefault(section, {}) if section else scene)[key] = value
+    with pytest.raises(SpecError) as refused:
+        bvp_from_dict(scene, EXAMPLES)
+    assert refused.value.field == field

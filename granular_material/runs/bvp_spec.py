@@ -47,13 +47,13 @@ into a :class:`BoundaryValueSpec` by :func:`bvp_from_dict` (every key checked, a
 
 from __future__ import annotations
 
-import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from granular_material.runs.spec import MaterialSpec, NewtonSpec, SpecError
+from granular_material.typed_fields import conform, conform_fields
 
 __all__ = ["CONDITION_TYPES", "INITIAL_STATES", "BoundaryValueSpec", "ConditionSpec",
            "InitialStateSpec", "MeshSpec", "bvp_from_dict"]
@@ -67,28 +67,14 @@ _COMPONENTS = {"x": 0, "y": 1, 0: 0, 1: 1}
 _ELEMENTS = ("tri3", "tri6", "quad4", "quad8", "quad9")
 
 
-def _number(name: str, value: Any, *, positive: bool = False, at_least: float | None = None,
-            ) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise SpecError(name, f"must be a number, got {value!r}")
-    value = float(value)
-    if not math.isfinite(value):
-        raise SpecError(name, f"must be finite, got {value!r}")
-    if positive and value <= 0:
-        raise SpecError(name, f"must be > 0, got {value:g}")
-    if at_least is not None and value < at_least:
-        raise SpecError(name, f"must be >= {at_least:g}, got {value:g}")
-    return value
-
-
-def _pair(name: str, value: Any, kind: type = float) -> tuple:
-    if not isinstance(value, (list, tuple)) or len(value) != 2:
-        raise SpecError(name, f"must be a pair [a, b], got {value!r}")
-    if kind is int:
-        if any(isinstance(v, bool) or not isinstance(v, int) or v < 1 for v in value):
-            raise SpecError(name, f"must be two integers >= 1, got {value!r}")
-        return tuple(int(v) for v in value)
-    return tuple(_number(name, v) for v in value)
+def _within(section: str, build: Callable[[], Any]) -> Any:
+    """``build()``, a SpecError it raises named within ``section`` (``mesh.size``)."""
+    try:
+        return build()
+    except SpecError as exc:
+        if exc.field.startswith(section + "."):
+            raise
+        raise SpecError(f"{section}.{exc.field}", exc.message) from None
 
 
 def _table(name: str, value: Any) -> dict[str, Any]:
@@ -125,6 +111,9 @@ class MeshSpec:
     align_y: tuple[float, ...] = ()
 
     def __post_init__(self) -> None:
+        conform_fields(self, error=SpecError)
+        if self.elements is not None and min(self.elements) < 1:
+            raise SpecError("mesh.elements", f"must be two counts >= 1, got {self.elements}")
         if (self.file is not None) and (self.align_x or self.align_y):
             raise SpecError("mesh.align-x", "aligns a generated mesh's grid lines; a mesh "
                                             "file has its own nodes")
@@ -174,6 +163,7 @@ class ConditionSpec:
     rough: bool = True
 
     def __post_init__(self) -> None:
+        conform_fields(self, error=SpecError)
         if self.type not in CONDITION_TYPES:
             raise SpecError("conditions.type", f"must be one of {', '.join(CONDITION_TYPES)}, "
                                                f"got {self.type!r}")
@@ -209,6 +199,7 @@ class InitialStateSpec:
     surface: float | None = None
 
     def __post_init__(self) -> None:
+        conform_fields(self, error=SpecError)
         if self.state not in INITIAL_STATES:
             raise SpecError("initial.state", f"must be one of {', '.join(INITIAL_STATES)}, "
                                              f"got {self.state!r}")
@@ -268,7 +259,10 @@ class BoundaryValueSpec:
     name: str = "problem"
 
     def __post_init__(self) -> None:
-        if isinstance(self.steps, bool) or not isinstance(self.steps, int) or self.steps < 1:
+        conform_fields(self, error=SpecError, skip=_SECTIONS)
+        if self.shards is not None and self.shards < 1:
+            raise SpecError("shards", f"must be an integer >= 1, got {self.shards!r}")
+        if self.steps < 1:
             raise SpecError("steps", f"must be an integer >= 1, got {self.steps!r}")
         if not self.conditions:
             raise SpecError("conditions", "a problem needs at least one condition")
@@ -279,7 +273,10 @@ class BoundaryValueSpec:
             raise SpecError("conditions.boundary", f"{missing[0]!r} is no boundary of "
                                                    "[boundaries] nor a side of the mesh")
         if self.unit_weight != "rve":
-            _number("gravity.unit_weight", self.unit_weight, at_least=0.0)
+            weight = conform("gravity.unit_weight", self.unit_weight, float, SpecError)
+            if weight < 0:
+                raise SpecError("gravity.unit_weight", f"must be >= 0 N/m³, got {weight:g}")
+            object.__setattr__(self, "unit_weight", weight)
 
     @property
     def reference_pressure(self) -> float:
@@ -287,6 +284,10 @@ class BoundaryValueSpec:
         return self.initial.reference_pressure
 
 
+#: the fields of BoundaryValueSpec that are sections, each checked by its own class (or,
+#: ``unit_weight``, a number or "rve")
+_SECTIONS = ("mesh", "boundaries", "conditions", "unit_weight", "initial", "material",
+             "newton")
 #: the sides every generated rectangle names
 _GENERATED_SIDES = frozenset({"left", "right", "bottom", "top"})
 
@@ -300,55 +301,28 @@ def _condition(entry: Any, index: int) -> ConditionSpec:
         if component not in _COMPONENTS:
             raise SpecError("conditions.component", f"must be x or y, got {component!r}")
         component = _COMPONENTS[component]
-    value = entry.get("value")
-    if value is not None:
-        value = _number("conditions.value", value)
-    displacement = entry.get("displacement")
-    if displacement is not None:
-        displacement = _pair("conditions.displacement", displacement)
-    rough = entry.get("rough", True)
-    if not isinstance(rough, bool):
-        raise SpecError("conditions.rough", f"must be true or false, got {rough!r}")
-    if not isinstance(entry.get("boundary"), str):
-        raise SpecError("conditions.boundary", f"must name a boundary, got "
-                                               f"{entry.get('boundary')!r}")
-    return ConditionSpec(type=str(entry.get("type")), boundary=entry["boundary"],
-                         component=component, value=value, displacement=displacement,
-                         rough=rough)
+    return _within("conditions", lambda: ConditionSpec(
+        type=entry.get("type"), boundary=entry.get("boundary"), component=component,
+        value=entry.get("value"), displacement=entry.get("displacement"),
+        rough=entry.get("rough", True)))
 
 
 def _mesh(table: dict[str, Any], folder: Path) -> MeshSpec:
     _unknown("mesh", table, {"file", "size", "elements", "element", "grading", "quadrature",
                              "align-x", "align-y"})
-    align = {}
-    for key in ("align-x", "align-y"):
-        values = table.get(key, [])
-        if not isinstance(values, list):
-            raise SpecError(f"mesh.{key}", f"must be a list of coordinates [m], got {values!r}")
-        align[key.replace("-", "_")] = tuple(_number(f"mesh.{key}", v) for v in values)
-    file = table.get("file")
-    if file is not None:
-        if not isinstance(file, str):
-            raise SpecError("mesh.file", f"must be a path, got {file!r}")
-        file = (folder / file) if not Path(file).is_absolute() else Path(file)
-        if not file.is_file():
-            raise SpecError("mesh.file", f"{file} does not exist")
-    size = table.get("size")
-    elements = table.get("elements")
-    return MeshSpec(
-        file=file, size=None if size is None else _pair("mesh.size", size),
-        elements=None if elements is None else _pair("mesh.elements", elements, int),
-        element=str(table.get("element", "quad4")),
-        grading=(None if table.get("grading") is None
-                 else _pair("mesh.grading", table["grading"])),
-        quadrature=table.get("quadrature"), **align)
+    values = {key.replace("-", "_"): value for key, value in table.items()}
+    file = values.get("file")
+    if isinstance(file, str) and file:
+        path = Path(file) if Path(file).is_absolute() else folder / file
+        if not path.is_file():
+            raise SpecError("mesh.file", f"{path} does not exist")
+        values["file"] = path
+    return _within("mesh", lambda: MeshSpec(**values))
 
 
 def _initial(table: dict[str, Any]) -> InitialStateSpec:
     _unknown("initial", table, {"state", "pressure", "k0", "surcharge", "surface"})
-    numbers = {k: _number(f"initial.{k}", table[k])
-               for k in ("pressure", "k0", "surcharge", "surface") if k in table}
-    return InitialStateSpec(state=str(table.get("state", "uniform")), **numbers)
+    return _within("initial", lambda: InitialStateSpec(**table))
 
 
 _SCENE_KEYS = {"test", "steps", "name", "out", "mesh", "boundaries", "conditions", "gravity",
@@ -383,27 +357,23 @@ def bvp_from_dict(data: Mapping[str, Any], folder: Path | str = ".") -> Boundary
         newton_spec = NewtonSpec(**newton)
     except TypeError as exc:
         raise SpecError("newton", str(exc)) from None
-    out = output.get("out", data.get("out"))
-    shards = output.get("shards")
-    if shards is not None and (isinstance(shards, bool) or not isinstance(shards, int)
-                               or shards < 1):
-        raise SpecError("output.shards", f"must be an integer >= 1, got {shards!r}")
-    device = output.get("device")
-    if device is not None and not isinstance(device, str):
-        raise SpecError("output.device", f"must be a device name, got {device!r}")
-    return BoundaryValueSpec(
-        mesh=_mesh(_table("mesh", data.get("mesh")), folder),
-        boundaries={str(k): v for k, v in boundaries.items()},
-        conditions=tuple(_condition(c, i) for i, c in enumerate(conditions)),
-        unit_weight=gravity.get("unit_weight", 0.0),
-        initial=_initial(_table("initial", data.get("initial"))),
-        steps=data.get("steps", 10),
-        material=MaterialSpec(name=str(material.get("name", "linear-elastic")),
-                              parameters=_table("material.parameters",
-                                                material.get("parameters"))),
-        newton=newton_spec,
-        out=None if out is None else Path(out),
-        device=device, shards=shards, progress=bool(output.get("progress", False)),
-        fields=bool(output.get("fields", True)),
-        name=str(data.get("name", "problem")),
-    )
+    sections = {
+        "mesh": _mesh(_table("mesh", data.get("mesh")), folder),
+        "conditions": tuple(_condition(c, i) for i, c in enumerate(conditions)),
+        "initial": _initial(_table("initial", data.get("initial"))),
+        "material": MaterialSpec(name=material.get("name", "linear-elastic"),
+                                 parameters=_table("material.parameters",
+                                                   material.get("parameters"))),
+    }
+    try:
+        return BoundaryValueSpec(
+            **sections, boundaries={str(k): v for k, v in boundaries.items()},
+            unit_weight=gravity.get("unit_weight", 0.0), steps=data.get("steps", 10),
+            newton=newton_spec, out=output.get("out", data.get("out")),
+            device=output.get("device"), shards=output.get("shards"),
+            progress=output.get("progress", False), fields=output.get("fields", True),
+            name=data.get("name", "problem"))
+    except SpecError as exc:
+        if exc.field in _OUTPUT_KEYS:  # the [output] table's, named within it
+            raise SpecError(f"output.{exc.field}", exc.message) from None
+        raise
