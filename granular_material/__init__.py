@@ -10,9 +10,11 @@ Floors, bottom up, each importing only from those below it:
 warp is silent in the library: its start-up banner ("Warp 1.x initialized ...") and its
 module-load lines ("Module ... load on device 'cpu' took ...") go to stdout, so importing
 this package keeps warp at log level WARNING, whenever warp is imported (before or after this
-package). Opt in with :func:`verbose` (``granular_material.verbose(True)``) or the
-environment variable ``GRANULAR_MATERIAL_VERBOSE=1``; warp's warnings and errors are always
-shown.
+package). Its native library also writes "Warp CUDA warning: Could not find or load the
+NVIDIA CUDA driver" to stderr as the runtime starts on a machine without a GPU; that line is
+dropped too (a run that asks for CUDA there is refused by the library with its own message).
+Opt in with :func:`verbose` (``granular_material.verbose(True)``) or the environment variable
+``GRANULAR_MATERIAL_VERBOSE=1``; warp's other warnings and errors are always shown.
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ import importlib.abc
 import importlib.machinery
 import os
 import sys
+import tempfile
 from types import ModuleType
 from typing import Any
 
@@ -44,11 +47,49 @@ def verbose(on: bool = True) -> bool:
     return previous
 
 
+#: the native library's line on a machine without a CUDA driver, dropped unless verbose
+_NO_DRIVER_LINE = "Could not find or load the NVIDIA CUDA driver"
+
+
+def _without_driver_warning(start: Any) -> Any:
+    """warp's ``Runtime.__init__`` with the file descriptor 2 captured while it runs: the
+    no-driver line (:data:`_NO_DRIVER_LINE`) is dropped unless verbose, every other line is
+    written back to stderr."""
+
+    def start_quietly(runtime: Any, *args: Any, **kwargs: Any) -> None:
+        if _verbose:
+            start(runtime, *args, **kwargs)
+            return
+        sys.stderr.flush()
+        with tempfile.TemporaryFile() as captured:
+            saved = os.dup(2)
+            os.dup2(captured.fileno(), 2)
+            try:
+                start(runtime, *args, **kwargs)
+            finally:
+                os.dup2(saved, 2)
+                os.close(saved)
+                captured.seek(0)
+                lines = captured.read().decode(errors="replace").splitlines(keepends=True)
+                kept = "".join(line for line in lines if _NO_DRIVER_LINE not in line)
+                if kept:
+                    sys.stderr.write(kept)
+                    sys.stderr.flush()
+
+    start_quietly.__wrapped__ = start  # type: ignore[attr-defined]
+    return start_quietly
+
+
 def _configure_warp(wp: ModuleType) -> None:
-    """warp's log level as :func:`verbose` says (INFO when verbose, else WARNING)."""
+    """warp's log level as :func:`verbose` says (INFO when verbose, else WARNING), and its
+    runtime's start without the no-driver line (:func:`_without_driver_warning`)."""
     config = getattr(wp, "config", None)
     if config is None:
         return
+    context = sys.modules.get("warp._src.context") or sys.modules.get("warp.context")
+    runtime = getattr(context, "Runtime", None)
+    if runtime is not None and not hasattr(runtime.__init__, "__wrapped__"):
+        runtime.__init__ = _without_driver_warning(runtime.__init__)
     if hasattr(wp, "LOG_WARNING"):  # warp >= 1.10
         config.log_level = getattr(wp, "LOG_INFO", 20) if _verbose else wp.LOG_WARNING
     else:  # older warp
