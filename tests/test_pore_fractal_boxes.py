@@ -168,6 +168,22 @@ def test_cli_physical_rule_reports_the_fit_range_and_explains_poor_fits(
     assert "at least 2 pixels" in capsys.readouterr().err
 
 
+def test_cli_physical_rule_says_curved_orders_are_the_packings_own(
+        dense_packing, tmp_path, capsys):
+    """Under --box-rule physical the advice to take it is not repeated; the flagged orders
+    are printed as runs (q = -10 to -1, ...), not one by one."""
+    path = tmp_path / "rve.npz"
+    save_rve(path, dense_packing)
+    _, spec = analyse_rve(dense_packing, 0, 0.3e-3, box_rule="physical")
+    min_r2 = float(spec.r2[spec.q == 0][0]) - 1e-9  # q = 0 passes, orders that bend more fail
+    assert main(["fractal", str(path), "--box-rule", "physical", "--min-r2", f"{min_r2!r}"]) == 0
+    text = capsys.readouterr().out
+    poor = spec.q[spec.r2 < min_r2]
+    assert poor.size > 2 and "poor fits" in text
+    assert "expected for a disc packing" in text and "add --box-rule" not in text
+    assert f"q = {poor[0]:g} to " in text
+
+
 # -- cross-check against PoreSpy (PMEAL), an optional extra: pip install '.[crosscheck]' --
 
 

@@ -21,7 +21,7 @@ from .boxes import (
 from .image import DEFAULT_PIXEL
 from .postprocess import analyse_rve, summary
 
-__all__ = ["POOR_FIT_HINT", "register", "run"]
+__all__ = ["CURVED_AT_PHYSICAL_HINT", "POOR_FIT_HINT", "register", "run"]
 
 #: one line on what a flagged fit means for a pore image and what to do about it
 POOR_FIT_HINT = (
@@ -29,6 +29,14 @@ POOR_FIT_HINT = (
     "self-similar across them (the grains set a scale; at one-pixel boxes the pixels do) "
     "and those D_q depend on the range: compare RVEs only at one --box-rule physical range "
     "and pixel, or narrow --box-min/--box-max"
+)
+
+#: the same under ``--box-rule physical`` when the fits at q = 0 (D0, alpha0) pass: the
+#: advice of :data:`POOR_FIT_HINT` is followed already, what is left is the packing's own
+CURVED_AT_PHYSICAL_HINT = (
+    "expected for a disc packing: its pores look alike over about a decade of box sizes only, "
+    "so D_q away from q = 0 bend; D0 and alpha0 (q = 0) fit, and every D_q compares between "
+    "RVEs analysed at these boxes and pixel"
 )
 
 _DESCRIPTION = """\
@@ -258,9 +266,25 @@ def _print_text(args: argparse.Namespace, result: dict[str, object]) -> None:
           "  (± standard error of the fits)")
     poor = result["poor_fit_q"]
     if poor:
-        print(f"  poor fits    R² < {args.min_r2:g} at q = {', '.join(f'{v:g}' for v in poor)}")
-        print(f"  meaning      {POOR_FIT_HINT.format(min_r2=args.min_r2)}")
+        print(f"  poor fits    R² < {args.min_r2:g} at q = {_ranges(poor, args.q_step)}")
+        q0_fits = result["r2_q0"] >= args.min_r2
+        hint = (CURVED_AT_PHYSICAL_HINT if args.box_rule == "physical" and q0_fits
+                else POOR_FIT_HINT.format(min_r2=args.min_r2))
+        print(f"  meaning      {hint}")
     else:
         print(f"  fits         all R² >= {args.min_r2:g} (smallest {result['min_r2']:.5f})")
     if args.plot is not None:
         print(f"  figure       {args.plot}")
+
+
+def _ranges(values: list[float], step: float) -> str:
+    """Orders q as runs of consecutive ones (``-10 to -1, 1 to 10``), single ones alone."""
+    runs: list[list[float]] = []
+    for v in values:
+        if runs and abs(v - runs[-1][-1] - step) <= 1e-9 * max(1.0, abs(step)):
+            runs[-1].append(v)
+        else:
+            runs.append([v])
+    return ", ".join(f"{r[0]:g}" if len(r) == 1 else
+                     f"{r[0]:g}, {r[1]:g}" if len(r) == 2 else f"{r[0]:g} to {r[-1]:g}"
+                     for r in runs)
