@@ -6,9 +6,14 @@ Built by ``tox -e docs`` (``sphinx-build -W --keep-going -b html docs docs/_buil
 
 from __future__ import annotations
 
+import functools
 import os
+import sys
+from pathlib import Path
 
 os.environ.setdefault("MPLBACKEND", "Agg")
+# docs/_ext: the site's own extensions (mathml: equations rendered when the site is built)
+sys.path.insert(0, str(Path(__file__).resolve().parent / "_ext"))
 
 project = "granular-material"
 author = "granular-material contributors"
@@ -18,13 +23,16 @@ extensions = [
     "myst_parser",
     "sphinx.ext.autodoc",
     "sphinx.ext.napoleon",
-    "sphinx.ext.mathjax",
+    "mathml",
 ]
+# equations as MathML in the HTML, converted at build time: no script, no network
+html_math_renderer = "mathml"
 
 source_suffix = {".md": "markdown", ".rst": "restructuredtext"}
 root_doc = "index"
 exclude_patterns = [
     "_build",
+    "_ext",
     "**/.ipynb_checkpoints",
     # the validation reports' READMEs are linked from their report pages, not pages of their own
 ]
@@ -64,7 +72,6 @@ ESCAPED_BARS = {
     "granular_material.dem.condensed.SLIDING_TOLERANCE": ["|fs|"],
     "granular_material.dem.condensed.contact_network": ["|fs|"],
     "granular_material.dem.homogenization.Homogenized": ["|net disc force|", "|contact force|"],
-    "granular_material.procedures.element_tests.lateral_stress_error": ["|σxx/(−confining) − 1|"],
     "granular_material.procedures.strain_path.drive_grad_u": ["|H01/H11|"],
 }
 
@@ -97,36 +104,88 @@ def _check_escapes(app, env):
             stale)
 
 
-# -- Every module of the public packages is in the API reference ---------------------------------
+# -- The API reference: the public API by package, the rest for contributors -------------------
 #
-# docs/api/<package>.md lists its modules one by one; a module added to a package but not to its
-# page fails the build.
+# The public API is what the packages export (their __all__). docs/api/<package>.md documents
+# the modules those names live in, each showing only its exported names; every other module of
+# the packages is on docs/api/internals.md (for contributors). A module on the wrong page, or on
+# none, fails the build.
 API_PACKAGES = ["granular_material.runs", "granular_material.fem", "granular_material.dem",
                 "granular_material.procedures", "granular_material.results",
                 "granular_material.multiscale", "granular_material_pore_fractal"]
+INTERNALS_PAGE = "api/internals"
 
 
-def _check_api_complete(app, env):
+@functools.lru_cache(maxsize=1)
+def _exported() -> dict[str, set[str]]:
+    """Module -> the names of it that some package of :data:`API_PACKAGES` exports."""
+    import importlib
+
+    homes: dict[str, set[str]] = {}
+    for name in API_PACKAGES:
+        package = importlib.import_module(name)
+        for export in getattr(package, "__all__", ()):
+            home = getattr(getattr(package, export), "__module__", None)
+            if home is not None:
+                homes.setdefault(home, set()).add(export)
+    return homes
+
+
+def _skip_unexported(app, what, name, obj, skip, options):
+    # a public module's page shows its exported names only; internal modules show everything
+    if what != "module" or skip:
+        return None
+    module = getattr(app.env, "gm_documenting", None)
+    exported = _exported().get(module)
+    if exported is not None and name not in exported:
+        return True
+    return None
+
+
+def _note_module(app, what, name, obj, options, lines):
+    if what == "module":
+        app.env.gm_documenting = name
+
+
+def _check_api_pages(app, env):
     import importlib
     import pkgutil
 
     from sphinx.util import logging
 
-    documented = set(env.get_domain("py").modules)
-    missing = []
+    documented = {name: entry.docname for name, entry in env.get_domain("py").modules.items()}
+    exported = _exported()
+    wrong, missing = [], []
     for name in API_PACKAGES:
         package = importlib.import_module(name)
-        for info in pkgutil.iter_modules(package.__path__):
-            if not info.name.startswith("_") and f"{name}.{info.name}" not in documented:
-                missing.append(f"{name}.{info.name}")
+        modules = [f"{name}.{info.name}" for info in pkgutil.iter_modules(package.__path__)
+                   if not info.name.startswith("_")]
+        for module in modules:
+            if module not in documented:
+                missing.append(module)
+                continue
+            internal_page = documented[module] == INTERNALS_PAGE
+            if internal_page == (module in exported):
+                wrong.append(f"{module} ({'public' if module in exported else 'internal'}, "
+                             f"on {documented[module]})")
+    for module in exported:
+        if module in documented and documented[module] == INTERNALS_PAGE:
+            wrong.append(f"{module} (public, on {INTERNALS_PAGE})")
+    log = logging.getLogger(__name__)
     if missing:
-        logging.getLogger(__name__).warning(
-            "modules missing from the API reference (add an automodule block to their "
-            "package's page under docs/api/): %s", ", ".join(missing))
+        log.warning("modules missing from the API reference (add an automodule block to their "
+                    "package's page under docs/api/, or to %s.md if no package exports from "
+                    "them): %s", INTERNALS_PAGE, ", ".join(missing))
+    if wrong:
+        log.warning("modules on the wrong API page (a module some package's __all__ exports "
+                    "from goes on its package's page, any other on %s.md): %s",
+                    INTERNALS_PAGE, ", ".join(sorted(set(wrong))))
 
 
 def setup(app):
     app.connect("autodoc-process-docstring", _escape_bars)
     app.connect("env-purge-doc", _purge_escapes)
     app.connect("env-updated", _check_escapes)
-    app.connect("env-updated", _check_api_complete)
+    app.connect("autodoc-process-docstring", _note_module)
+    app.connect("autodoc-skip-member", _skip_unexported)
+    app.connect("env-updated", _check_api_pages)
