@@ -15,7 +15,11 @@ job (:mod:`.mpi`), what an evaluation gives (:mod:`.evaluation`) and its run hoo
 """
 
 from granular_material.multiscale.backend import InProcessBackend
-from granular_material.multiscale.confinement import UnconfinedWarning
+from granular_material.multiscale.confinement import (
+    UNCONFINED_FRACTION,
+    UnconfinedWarning,
+    unconfined,
+)
 from granular_material.multiscale.evaluation import DEMBackend, Evaluation
 from granular_material.multiscale.material import DEMMaterial
 from granular_material.multiscale.parameters import (
@@ -26,5 +30,6 @@ from granular_material.multiscale.parameters import (
 )
 from granular_material.multiscale.run_hooks import DEMParameters
 
-__all__ = ["BACKENDS", "DEMBackend", "DEMDriving", "DEMMaterial", "DEMMaterialParameters",
-           "DEMParameters", "DEMRVEs", "Evaluation", "InProcessBackend", "UnconfinedWarning"]
+__all__ = ["BACKENDS", "UNCONFINED_FRACTION", "DEMBackend", "DEMDriving", "DEMMaterial",
+           "DEMMaterialParameters", "DEMParameters", "DEMRVEs", "Evaluation",
+           "InProcessBackend", "UnconfinedWarning", "unconfined"]
