@@ -12,7 +12,9 @@ The run folder gets:
   also ``{name}_displacement`` [m] along its motion (a footing pushed down: its settlement,
   also as ``{name}_settlement``);
 - ``points.csv``: every Gauss point at every step (coordinates, stress [Pa], strain, shear
-  strain, mean pressure, the material's own fields such as the void ratio);
+  strain, mean pressure, the material's own fields such as the void ratio), appended a step
+  at a time before that step's ``steps.csv`` row (a killed run: read both with
+  :func:`~granular_material.results.writers.read_run_tables`);
 - ``fields.xdmf``: the same for ParaView at every committed step (XML, no HDF5 needed);
 - ``load_displacement.png``, ``mechanism.png`` and ``summary.json``.
 """
@@ -264,8 +266,9 @@ def run_boundary_value(spec: BoundaryValueSpec, out: Path | None = None) -> BVPO
         rows.append(row)
         last.update(points=points, u=s.u.copy())
         if out is not None:
-            write_csv(pd.DataFrame(rows), out / "steps.csv")
             write_csv(points, out / "points.csv", append=record is not None)
+            write_csv(pd.DataFrame([row]), out / "steps.csv",  # last: the step's commit
+                      append=record is not None)
             if writer is not None:
                 writer.write(float(s.load_factor), s.u, points)
 

@@ -12,7 +12,7 @@ from typing import Any
 import pandas as pd
 
 from granular_material.procedures import progress_bar
-from granular_material.results import write_csv
+from granular_material.results import write_csv, write_json
 from granular_material.studies.plan import PlannedRow, run_key
 from granular_material.studies.running import RunResult, _Runner
 from granular_material.studies.scoring import _row
@@ -53,7 +53,7 @@ def _measure(rows: list[PlannedRow], runner: _Runner, out: Path, device: str, co
                         "iterations": result.iterations, "error": result.error,
                         **result.extra}
                 curve_path(key).parent.mkdir(parents=True, exist_ok=True)
-                curve_path(key).with_suffix(".json").write_text(json.dumps(meta))
+                write_json(meta, curve_path(key).with_suffix(".json"), indent=None)
                 write_csv(result.curve, curve_path(key))  # whole or not at all: the commit point
                 log(f"{key}: {result.wall_s:.1f} s"
                     + (f" ({result.error})" if result.error else ""))

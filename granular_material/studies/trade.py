@@ -36,6 +36,7 @@ from pathlib import Path
 
 import pandas as pd
 
+from granular_material.filesafe import write_whole
 from granular_material.provenance import code_commit
 from granular_material.studies.measure import _drop_rows, _measure, read_trade_table
 from granular_material.studies.plan import (
@@ -90,9 +91,14 @@ def run_trade_study(scale: str | StudyScale, out: str | Path, device: str = "cpu
         {run_key(r.settings) for r in preset_rows}))
     _measure(preset_rows, runner, out, device, commit, progress, log)
     table = read_trade_table(out / "trade.csv")
-    (out / "presets.json").write_text(presets_file(presets))
+    _write_text(out / "presets.json", presets_file(presets))
     plot_pareto(table, accuracy(table), out / "pareto.png")
     for name in dict.fromkeys(k.name for k in knobs(study)):
         plot_knob(table[table["knob"] == name], name, out / f"knob_{name}.png")
-    (out / "report.md").write_text(report(table, presets, study, device, commit))
+    _write_text(out / "report.md", report(table, presets, study, device, commit))
     return table
+
+
+def _write_text(path: Path, text: str) -> None:
+    """``text`` to ``path`` whole or not at all (UTF-8)."""
+    write_whole(path, lambda tmp: tmp.write_text(text, encoding="utf-8"))
