@@ -17,6 +17,7 @@ from granular_material.errors import ParameterError
 from granular_material.fem.linear_elastic import LinearElastic, isotropic_tangent
 from granular_material.fem.material import FailureReason, Material, PointStatus
 from granular_material.fem.mohr_coulomb import (
+    APEX_TANGENT,
     MohrCoulomb,
     MohrCoulombParameters,
     MohrCoulombRunParameters,
@@ -199,7 +200,7 @@ def test_tangent_matches_finite_differences_in_every_region(softening, rotation)
     init, zz, grad, regions = _cases(rotation)
     material = MohrCoulomb(friction_angle=30.0, dilation_angle=10.0, cohesion=20e3,
                            critical_friction_angle=softening, softening_strain=0.05,
-                           initial_stress=init, initial_stress_zz=zz)
+                           initial_stress=init, initial_stress_zz=zz, apex_tangent=0.0)
     material.allocate(len(init))
     response = material.evaluate(grad)
     assert response.ok
@@ -212,12 +213,30 @@ def test_tangent_matches_finite_differences_in_every_region(softening, rotation)
         assert np.abs(response.tangent[-1]).max() == 0
 
 
+def test_apex_iterates_with_a_floor_of_the_elastic_tangent_and_the_same_stress():
+    """With c = 0 an apex point is stress-free with a zero exact tangent; by default it
+    answers APEX_TANGENT × C instead (Newton's matrix stays regular), the stress unchanged."""
+    init, zz, grad, _ = _cases(False)
+    kwargs = dict(friction_angle=30.0, dilation_angle=10.0, cohesion=0.0,
+                  initial_stress=init[-1:], initial_stress_zz=zz[-1:])
+    exact, floored = MohrCoulomb(apex_tangent=0.0, **kwargs), MohrCoulomb(**kwargs)
+    for material in (exact, floored):
+        material.allocate(1)
+    a, b = exact.evaluate(grad[-1:]), floored.evaluate(grad[-1:])
+    assert b.fields["return_region"][0] == APEX
+    np.testing.assert_array_equal(a.stress, b.stress)
+    assert np.abs(a.tangent).max() == 0
+    np.testing.assert_allclose(b.tangent[0], APEX_TANGENT * floored._c, rtol=1e-14)
+    with pytest.raises(ParameterError, match="apex_tangent"):
+        MohrCoulomb(apex_tangent=-1.0)
+
+
 @pytest.mark.parametrize("rotation", [False, True])
 def test_tangent_in_every_region_without_cohesion(rotation):
     init, zz, grad, _ = _cases(rotation)
     material = MohrCoulomb(friction_angle=30.0, dilation_angle=30.0,
                            critical_friction_angle=28.0, softening_strain=0.05,
-                           initial_stress=init, initial_stress_zz=zz)
+                           initial_stress=init, initial_stress_zz=zz, apex_tangent=0.0)
     material.allocate(len(init))
     response = material.evaluate(grad)
     assert response.ok and response.fields["return_region"][-1] == APEX

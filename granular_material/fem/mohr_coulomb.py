@@ -25,6 +25,7 @@ from granular_material.fem.material import (
 )
 from granular_material.fem.material_checks import check_grad, check_points, checkpoint_archive
 from granular_material.fem.mohr_coulomb_return import (
+    APEX,
     ELASTIC,
     SYM4,
     Strength,
@@ -35,9 +36,15 @@ from granular_material.fem.mohr_coulomb_return import (
 )
 from granular_material.filesafe import write_whole
 
-__all__ = ["MohrCoulomb", "MohrCoulombParameters", "MohrCoulombRunParameters"]
+__all__ = ["APEX_TANGENT", "MohrCoulomb", "MohrCoulombParameters", "MohrCoulombRunParameters"]
 
 _I2 = np.eye(2)
+#: the fraction of the elastic tangent that a point at the apex iterates with (a matrix for
+#: Newton, never its stress): with c = 0 the apex is stress-free and its exact tangent is 0,
+#: so an element whose points all reach it leaves Newton a singular matrix (the softening
+#: footing's corner: "matrix is exactly singular" at 9 mm). The DEM material floors an
+#: unconfined RVE's tangent by the same fraction of its initial one.
+APEX_TANGENT = 0.05
 _NAME = "mohr-coulomb"
 #: memory of one point: its state and trial copies, and an evaluation's principal
 #: return, spectral derivative, spin and tangent work arrays, with a margin [bytes]
@@ -182,7 +189,10 @@ class MohrCoulomb(ScikitFemInterface):
     2 edge σ1 = σ2, 3 edge σ2 = σ3, 4 apex).
 
     With c = 0 the apex is the origin: a point returned there (e.g. pulled into tension) is
-    stress-free with status OK and a zero tangent; it has no strength there.
+    stress-free with status OK; it has no strength there and its exact tangent is zero. The
+    tangent it answers is ``apex_tangent`` × C (default :data:`APEX_TANGENT`), so that a
+    Newton matrix stays regular where a region of points reaches the apex; the stress, and so
+    the converged answer, is the same. ``apex_tangent=0`` gives the exact tangent everywhere.
 
     Failures: a non-finite ∇u fails its point (``non_finite_input``), a local Newton that
     does not converge fails it (``failed``); a failed point answers its committed stress and
@@ -200,6 +210,8 @@ class MohrCoulomb(ScikitFemInterface):
             point, checked at :meth:`allocate`).
         initial_stress_zz: σzz at allocation [Pa]: a number or an (n,) array; default the
             initial σxx (a geostatic K0 state has both horizontal stresses K0·σv).
+        apex_tangent: the fraction [-] (≥ 0) of the elastic tangent C a point at the apex
+            answers as its tangent; 0: the exact (zero) tangent.
     """
 
     #: the parameters of the material in a run specification
@@ -212,11 +224,16 @@ class MohrCoulomb(ScikitFemInterface):
         initial_stress: float | np.ndarray = 0.0,
         initial_stress_zz: float | np.ndarray | None = None,
         *, E: float | None = None, nu: float | None = None,
+        apex_tangent: float = APEX_TANGENT,
     ) -> None:
         self.parameters = MohrCoulombParameters(
             young if E is None else E, poisson if nu is None else nu, friction_angle,
             dilation_angle, cohesion, critical_friction_angle, softening_strain)
         self._strength = self.parameters.strength()
+        self.apex_tangent = _number("apex_tangent", apex_tangent)
+        if not self.apex_tangent >= 0:
+            raise ParameterError("apex_tangent", "must be a fraction >= 0 of the elastic "
+                                                 f"tangent, got {apex_tangent!r}")
         lam, mu = self.parameters.lame
         self._lam = lam
         self._c = isotropic_tangent(lam, mu)
@@ -340,6 +357,8 @@ class MohrCoulomb(ScikitFemInterface):
         jac = np.swapaxes(perm, 1, 2) @ ret.jacobian @ perm
         stress = out[:, 0, None, None] * m_a + out[:, 1, None, None] * m_b
         tangent = self._tangent(*spectral_derivative(jac, principal, out, m_a, m_b), s_n)
+        if self.apex_tangent > 0:
+            tangent[ret.region == APEX] += self.apex_tangent * self._c
         ok = finite & ret.converged
         ok &= np.isfinite(stress).all(axis=(1, 2)) & np.isfinite(out[:, 2])
         ok &= np.isfinite(tangent).all(axis=(1, 2, 3, 4))
