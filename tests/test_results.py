@@ -37,11 +37,15 @@ def test_summarize_biaxial_takes_the_first_largest_ratio():
 
 def test_default_settings_are_the_commands_and_depend_on_the_material_by_name():
     dem, elastic = default_settings("dem"), default_settings("linear-elastic")
-    for s in (dem, elastic):  # Guo & Zhao's loop in finite strain, our predictor, their
-        assert s.predictor == "extrapolate"  # test judged one iterate earlier
-        assert (s.convergence, s.rtol, s.max_iterations) == ("residual-displacement", 0.01,
-                                                              100)
+    for s in (dem, elastic):  # Guo & Zhao's loop in finite strain, our predictor
+        assert s.predictor == "extrapolate"
+        assert (s.rtol, s.max_iterations) == (0.01, 100)
         assert s.formulation == "updated-lagrangian"
+    # DEM: their test judged one iterate earlier; a smooth material: the force residual
+    assert dem.convergence == "residual-displacement"
+    assert elastic.convergence == default_settings("mohr-coulomb").convergence == "force"
+    assert default_settings("linear-elastic", convergence="displacement").convergence == (
+        "displacement")
     # a noisy material's increments hold their first tangent and are Aitken-relaxed; a
     # smooth one keeps full Newton; either can be asked for the other's
     assert (dem.relaxation, dem.tangent_update) == ("aitken", "hold")

@@ -121,12 +121,15 @@ def add_element(parser: argparse.ArgumentParser) -> None:
                         "two hourglass modes per element)")
 
 
-def add_convergence(group: Any, default: str = "force", rtol: float = 0.005) -> None:
-    """``--convergence`` of the FEM commands' Newton solver, in ``group``."""
+def add_convergence(group: Any, default: str | None = "force", rtol: float = 0.005) -> None:
+    """``--convergence`` of the FEM commands' Newton solver, in ``group`` (``default`` None:
+    residual-displacement for a noisy (DEM) material, force for any other)."""
     from granular_material.fem.newton import CONVERGENCE_TESTS
 
+    said = (default if default is not None
+            else "residual-displacement for dem, force for linear-elastic and mohr-coulomb")
     group.add_argument("--convergence", choices=CONVERGENCE_TESTS, default=default,
-                       help=f"Newton convergence test (default {default}). force: "
+                       help=f"Newton convergence test (default {said}). force: "
                             "||R||/||R0|| <= --rtol, or ||R|| below the --stress-tol floor; "
                             "displacement (Guo & Zhao): ||du||/||Du|| <= --rtol, du the Newton "
                             "correction of the iteration, Du the increment of the load step so "

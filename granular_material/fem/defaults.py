@@ -14,8 +14,8 @@ from typing import Any
 from granular_material.fem.material import load_material
 from granular_material.fem.newton import NewtonSettings
 
-__all__ = ["COMMAND_DEFAULTS", "NOISY_DEFAULTS", "default_settings", "default_stress_tol",
-           "is_noisy"]
+__all__ = ["COMMAND_DEFAULTS", "NOISY_DEFAULTS", "SMOOTH_DEFAULTS", "default_settings",
+           "default_stress_tol", "is_noisy"]
 
 #: what the commands change from NewtonSettings' own defaults, for every material: Guo &
 #: Zhao's FEM×DEM solve() — finite strain in the updated-Lagrangian form, plain Newton steps
@@ -43,6 +43,15 @@ COMMAND_DEFAULTS: dict[str, Any] = {"formulation": "updated-lagrangian",
 #: tangent". A smooth material keeps full Newton: plain steps, the tangent of every iterate.
 NOISY_DEFAULTS: dict[str, Any] = {"relaxation": "aitken", "tangent_update": "hold"}
 
+#: what a material whose stress carries no noise (linear-elastic, Mohr–Coulomb) changes: its
+#: equilibrium is judged by the force residual itself. The displacement tests never look at
+#: the residual; they stand in for it where DEM noise keeps ‖R‖ from falling. For a smooth
+#: material they accept out-of-balance states: on Guo & Zhao's reduced footing with a
+#: softening Mohr–Coulomb material, residual-displacement took 20 steps after one iteration
+#: each with ‖R‖/‖R₀‖ = 1.2–1.4 and the bearing pressure climbed in a straight line
+#: (docs/guide/choosing-a-material.md, "Newton with a smooth material")
+SMOOTH_DEFAULTS: dict[str, Any] = {"convergence": "force"}
+
 #: a noisy material's increment whose force residual stalls is accepted once the Newton
 #: correction is this small (Guo & Zhao's ‖δu‖/‖Δu‖ test and tolerance)
 NOISY_ACCEPT_CORRECTION = 1e-2
@@ -64,7 +73,8 @@ def default_settings(material: str | bool, **overrides: Any) -> NewtonSettings:
 
     ``overrides`` are NewtonSettings fields; one given as None takes its default. A noisy
     (DEM) material gets :data:`NOISY_DEFAULTS` (Aitken relaxation, the tangent held over an
-    increment; no relaxation with secant updates unless one is asked for); the stall
+    increment; no relaxation with secant updates unless one is asked for), any other
+    :data:`SMOOTH_DEFAULTS` (the force test); the stall
     tolerance defaults to 2 × rtol for it and to 0 (off) otherwise; so does the acceptance
     of a stalled residual on a small correction (:data:`NOISY_ACCEPT_CORRECTION`).
     """
@@ -74,6 +84,8 @@ def default_settings(material: str | bool, **overrides: Any) -> NewtonSettings:
         values.update(NOISY_DEFAULTS)
         if overrides.get("tangent_update") == "secant" and overrides.get("relaxation") is None:
             values["relaxation"] = "none"  # Broyden updates and Aitken fight (docs/physics.md)
+    else:
+        values.update(SMOOTH_DEFAULTS)
     values.update({k: v for k, v in overrides.items() if v is not None})
     if "stall_rtol" not in values:
         rtol = values.get("rtol", NewtonSettings.rtol)

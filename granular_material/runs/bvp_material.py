@@ -33,7 +33,7 @@ def problem_context(spec: BoundaryValueSpec, n_points: int) -> RunContext:
                       confining=spec.reference_pressure, axial_strain=0.0, steps=spec.steps,
                       scale_discs=None, device=resolve_device(spec.device), shards=spec.shards,
                       backend="inprocess", progress=spec.progress,
-                      convergence=spec.newton.convergence)
+                      convergence=spec.newton.convergence_test(spec.material.noisy))
 
 
 def material_for_problem(spec: BoundaryValueSpec, n_points: int,

@@ -143,7 +143,7 @@ def check(spec: RunSpec) -> RunPlan:
                          axial_strain=spec.problem.axial_strain, steps=spec.problem.steps,
                          scale_discs=scale_discs, device=device, shards=spec.shards,
                          backend=spec.backend, progress=spec.output.progress,
-                         convergence=spec.newton.convergence)
+                         convergence=spec.newton.convergence_test(spec.material.noisy))
     cls = spec.material.cls
     hook = getattr(cls, "check_run", None)
     discs = hook(spec.material.parameters, context) if hook is not None else 0
@@ -287,7 +287,7 @@ def _execute(plan: RunPlan, material: Material, observer: RunObserver | None,
     summary["preset"] = spec.preset
     summary.update(element=plan.setup.element,
                    points_per_element=plan.setup.points_per_element,
-                   convergence=spec.newton.convergence)
+                   convergence=spec.newton.convergence_test(noisy))
     if plan.tracking is not None:
         summary["tracked_rows"] = len(result.tracked)
         summary["tracking_time_s"] = (float(result.tracked["seconds"].sum())

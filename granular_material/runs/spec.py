@@ -191,7 +191,10 @@ class NewtonSpec:
             secant updates), else none.
         tangent_update: "none", "secant" or "hold"; None: hold for a noisy material, else
             none.
-        stall_window, max_iterations, max_cutbacks, convergence, predictor, formulation,
+        convergence: "force", "displacement" or "residual-displacement"; None:
+            residual-displacement for a noisy material, force otherwise
+            (:func:`~granular_material.fem.defaults.default_settings`).
+        stall_window, max_iterations, max_cutbacks, predictor, formulation,
         secant_min_change: as :class:`~granular_material.fem.NewtonSettings`.
     """
 
@@ -202,7 +205,7 @@ class NewtonSpec:
     stall_window: int = _newton_default("stall_window")
     max_iterations: int = _newton_default("max_iterations")
     max_cutbacks: int = _newton_default("max_cutbacks")
-    convergence: str = _newton_default("convergence")
+    convergence: str | None = None
     predictor: str = _newton_default("predictor")
     formulation: str = _newton_default("formulation")
     relaxation: str | None = None
@@ -229,6 +232,10 @@ class NewtonSpec:
             if exc.field in values:
                 raise SpecError(exc.field, exc.message) from None
             raise
+
+    def convergence_test(self, noisy: bool) -> str:
+        """The convergence test of the run for a material whose stress is ``noisy``."""
+        return self.settings(noisy).convergence
 
     def stress_tolerance(self, noisy: bool, confining: float) -> float:
         """The absolute tolerance [Pa] of the run."""
