@@ -134,8 +134,11 @@ def _conform(value: Any, hint: Any) -> Any:
             return int(value)
         raise _MismatchError
     if hint is float:
-        if isinstance(value, numbers.Real) and math.isfinite(float(value)):
-            return float(value)
+        try:
+            if isinstance(value, numbers.Real) and math.isfinite(float(value)):
+                return float(value)
+        except OverflowError:  # an integer beyond any float
+            pass
         raise _MismatchError
     if hint is str:
         if isinstance(value, str):

@@ -28,13 +28,22 @@ import numpy as np
 from granular_material.dem import resolve_device
 from granular_material.dem.tangents import TangentMethod, tangent_method
 from granular_material.errors import ParameterError
-from granular_material.procedures.packing import PackingParameters, min_discs
+from granular_material.procedures.packing import (
+    MAX_OVERLAP,
+    PACKING_NAMES,
+    PackingParameters,
+    check_packing,
+    max_pressure,
+    min_discs,
+    smallest_normal_stiffness,
+)
 from granular_material.procedures.servo import check_stress_targets
 from granular_material.procedures.strain_path import DEFAULT_MAX_DEM_STEPS, DEFAULT_STRAIN_PER_STEP
 from granular_material.reference_values import DEFAULT_DISCS, DEFAULT_PRESSURE
+from granular_material.typed_fields import conform_fields
 
-__all__ = ["BACKENDS", "DRIVES", "MIN_PERTURBATION", "REUSE_CORRECTIONS", "DEMDriving",
-           "DEMMaterialParameters", "DEMRVEs"]
+__all__ = ["BACKENDS", "DRIVES", "MAX_SHARDS", "MIN_PERTURBATION", "REUSE_CORRECTIONS",
+           "DEMDriving", "DEMMaterialParameters", "DEMRVEs"]
 
 #: how an RVE that must move is driven to a new trial ∇u: from the committed state along the
 #: whole path of the step (``restart``, Guo & Zhao), or from its last trial state by the change
@@ -47,11 +56,27 @@ REUSE_CORRECTIONS = ("none", "tangent")
 BACKENDS = ("inprocess", "mpi")
 #: the smallest perturbation of ∇u the perturbation tangent takes [-]
 MIN_PERTURBATION = 1.0e-4
+#: most CPU shards (threads) of a batch: a batch runs min(shards, RVEs) threads, each with its
+#: own build of the DEM kernels (a CPU kernel module cannot serve two threads at once,
+#: :func:`~granular_material.dem.kernels.kernels_for`), and no machine this runs on has more
+#: cores than this, so more threads only add builds and never step faster
+MAX_SHARDS = 1024
 
 
 def _one_of(name: str, value: object, choices: tuple[str, ...]) -> None:
     if value not in choices:
         raise ParameterError(name, f"must be one of {', '.join(choices)}, got {value!r}")
+
+
+def _finite(value: object) -> bool:
+    """``value`` is a real number (no bool) that a float holds finite: an integer beyond any
+    float is not (``math.isfinite`` overflows on it)."""
+    if isinstance(value, bool) or not isinstance(value, Real):
+        return False
+    try:
+        return math.isfinite(value)
+    except OverflowError:
+        return False
 
 
 def _count(name: str, value: object, lowest: int, what: str = "") -> None:
@@ -99,12 +124,15 @@ class DEMDriving:
     max_dem_steps: int | None = DEFAULT_MAX_DEM_STEPS
 
     def __post_init__(self) -> None:
+        # every field by its annotated type first (a string for a count, a number for the
+        # device, 1.5 for a seed: a ParameterError naming it), then the ranges below
+        conform_fields(self, skip=("packing", "initial_stress"))
         tangent_method(self.tangent)  # a ParameterError naming the tangent
         for name in ("perturbation", "max_strain_per_step"):
             value = getattr(self, name)
-            if not (isinstance(value, Real) and math.isfinite(value) and value > 0):
+            if not (_finite(value) and value > 0):
                 raise ParameterError(name, f"must be a finite number > 0, got {value!r}")
-        if not (isinstance(self.reuse_tol, Real) and math.isfinite(self.reuse_tol)
+        if not (_finite(self.reuse_tol)
                 and self.reuse_tol >= 0):
             raise ParameterError("reuse_tol", f"must be a finite strain >= 0 (0: off), got "
                                               f"{self.reuse_tol!r}")
@@ -148,6 +176,7 @@ class DEMRVEs(DEMDriving):
         super().__post_init__()
         if self.rve is not None:
             object.__setattr__(self, "rve", Path(self.rve))
+        _count("seed", self.seed, 0)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -157,14 +186,17 @@ class DEMMaterialParameters(DEMRVEs):
 
     Attributes:
         confining: isotropic pressure [Pa], > 0, compression positive, at which prepared
-            RVEs are consolidated; also the scale of the
-            :class:`~granular_material.multiscale.UnconfinedWarning`. Default 100 kPa.
+            RVEs are consolidated (then within what their contact law holds:
+            :func:`~granular_material.procedures.packing.max_pressure` and
+            :func:`~granular_material.procedures.packing.min_pressure`); also the scale of
+            the :class:`~granular_material.multiscale.UnconfinedWarning`. Default 100 kPa.
         replicate: one RVE (the file's first, or one prepared with ``seed``) copied to every
             Gauss point; False: one independent RVE per point.
         device: "cpu", "cuda", "cuda:N" or None (CUDA when present).
-        shards: CPU shards (threads) of the batch, per rank with the ``mpi`` backend; None:
-            one per core (with ``mpi`` the cores of a node shared by its ranks). With 1,
-            independent RVEs are also prepared one at a time.
+        shards: CPU shards (threads) of the batch, per rank with the ``mpi`` backend, at
+            most :data:`MAX_SHARDS` (a batch runs no more threads than RVEs); None: one per
+            core (with ``mpi`` the cores of a node shared by its ranks). With 1, independent
+            RVEs are also prepared one at a time.
         backend: "inprocess" (every RVE in this process) or "mpi" (contiguous shards on the
             ranks of an MPI job; the same results bit for bit).
         packing: the material of prepared RVEs (contact law, friction, damping, density,
@@ -203,6 +235,11 @@ class DEMMaterialParameters(DEMRVEs):
         self._check_initial_stress()
         if self.shards is not None:
             _count("shards", self.shards, 1, " or None")
+            if self.shards > MAX_SHARDS:
+                raise ParameterError("shards", f"must be at most {MAX_SHARDS} (a CPU thread "
+                                               "each, each building its own DEM kernels; more "
+                                               "than the cores never step faster), got "
+                                               f"{self.shards!r}")
         if not isinstance(self.packing, PackingParameters):
             raise ParameterError("packing", f"must be PackingParameters, got {self.packing!r}")
         fewest = min_discs(self.packing.radius_range)
@@ -211,18 +248,47 @@ class DEMMaterialParameters(DEMRVEs):
             raise ParameterError("particles", f"must be an integer >= {fewest} (the periodic "
                                               "cell must stay wider than twice the contact "
                                               f"cut-off), got {particles!r}")
-        if not (isinstance(self.confining, Real) and math.isfinite(self.confining)
-                and self.confining > 0):
+        if not (_finite(self.confining) and self.confining > 0):
             raise ParameterError("confining", f"must be a positive number of Pa, got "
                                               f"{self.confining!r}")
+        if self.rve is None and self.initial_stress is None:
+            self._check_consolidation()
         if self.device is not None:
-            resolve_device(self.device)  # the engine's one device check
+            try:
+                resolve_device(self.device)  # the engine's one device check
+            except ValueError as exc:
+                raise ParameterError("device", f"cannot be used: {exc}") from None
+
+    def _check_consolidation(self) -> None:
+        """Prepared packings are consolidated to ``confining``: within what their linear
+        contact law holds. A disc of radius r carries about F = 2·p·r·t, so its contacts
+        overlap δ/r ≈ 2·p·t/kn (:func:`~granular_material.procedures.packing.max_pressure`:
+        at most :data:`~granular_material.procedures.packing.MAX_OVERLAP`, the void space
+        gone near twice that), and the servo settles a packing only above
+        :func:`~granular_material.procedures.packing.min_pressure`; ParameterErrors naming
+        ``confining``."""
+        meta, radii = self.packing.meta, self.packing.radius_range
+        highest = max_pressure(meta, radii)
+        if self.confining > highest:
+            overlap = 2.0 * self.confining * meta.thickness / smallest_normal_stiffness(meta,
+                                                                                         radii)
+            raise ParameterError("confining", f"{self.confining:g} Pa would press the discs "
+                                              f"{overlap:.3g} of their radius into each other "
+                                              f"(2·p·thickness/kn); the linear contact law "
+                                              f"holds to {MAX_OVERLAP:g}: at most "
+                                              f"{highest:.4g} Pa with these stiffnesses")
+        try:
+            check_packing(self.discs, float(self.confining), meta, radii,
+                          names={**PACKING_NAMES, "pressure": "confining",
+                                 "n_disc": "particles"})
+        except ValueError as exc:
+            raise ParameterError("confining", f"(prepared packings): {exc}") from None
 
     def _check_initial_stress(self) -> None:
         """``initial_stress`` as nested tuples of compressive symmetric tensors, and
         ``share_tolerance``; ParameterErrors naming them."""
         share = self.share_tolerance
-        if share is not None and not (isinstance(share, Real) and math.isfinite(share)
+        if share is not None and not (_finite(share)
                                       and share >= 0):
             raise ParameterError("share_tolerance", f"must be None or a finite fraction >= 0, "
                                                     f"got {share!r}")
@@ -233,7 +299,7 @@ class DEMMaterialParameters(DEMRVEs):
                                                    "relaxes every RVE to -confining I)")
         try:
             given = np.asarray(self.initial_stress, dtype=np.float64)
-        except (TypeError, ValueError) as exc:
+        except (TypeError, ValueError, OverflowError) as exc:
             raise ParameterError("initial_stress", f"must be an array of shape (n, 2, 2) "
                                                    f"[Pa]: {exc}") from None
         if given.ndim != 3 or given.shape[1:] != (2, 2) or given.shape[0] < 1:
