@@ -60,9 +60,14 @@ def _without_driver_warning(start: Any) -> Any:
         if _verbose:
             start(runtime, *args, **kwargs)
             return
-        sys.stderr.flush()
-        with tempfile.TemporaryFile() as captured:
+        try:
+            if sys.stderr is not None:
+                sys.stderr.flush()
             saved = os.dup(2)
+        except (OSError, ValueError):  # no stderr to capture (closed): nothing to drop either
+            start(runtime, *args, **kwargs)
+            return
+        with tempfile.TemporaryFile() as captured:
             os.dup2(captured.fileno(), 2)
             try:
                 start(runtime, *args, **kwargs)
@@ -72,7 +77,7 @@ def _without_driver_warning(start: Any) -> Any:
                 captured.seek(0)
                 lines = captured.read().decode(errors="replace").splitlines(keepends=True)
                 kept = "".join(line for line in lines if _NO_DRIVER_LINE not in line)
-                if kept:
+                if kept and sys.stderr is not None:
                     sys.stderr.write(kept)
                     sys.stderr.flush()
 

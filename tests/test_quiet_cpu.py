@@ -53,3 +53,11 @@ def test_the_material_on_the_cpu_is_silent():
                          timeout=300, env={**os.environ, "GRANULAR_MATERIAL_VERBOSE": "0"})
     assert run.returncode == 0, run.stderr
     assert run.stdout == "" and run.stderr == "", run.stdout + run.stderr
+
+
+def test_warp_starts_with_stderr_closed():
+    """A process without a stderr (a daemon, ``2>&-``) still starts warp: nothing to capture."""
+    run = subprocess.run([sys.executable, "-c", START_WARP.format(extra="")],
+                         stdout=subprocess.PIPE, text=True, timeout=300,
+                         preexec_fn=lambda: os.close(2))
+    assert run.returncode == 0 and run.stdout == "ok\n"
