@@ -25,6 +25,7 @@ from skfem.mesh import Mesh
 
 from granular_material.errors import ParameterError
 from granular_material.fem.meshes import MeshData
+from granular_material.typed_fields import conform
 
 __all__ = ["parse_predicate", "select_boundaries", "select_facets"]
 
@@ -116,7 +117,7 @@ def select_facets(mesh: Mesh | MeshData, expr: str, name: str = "boundary") -> n
     ParameterError naming the boundary ``name`` and the expression when none does."""
     if isinstance(mesh, MeshData):
         mesh = mesh.mesh
-    groups = parse_predicate(expr, name)
+    groups = parse_predicate(conform(name, expr, str), name)
     p = mesh.p
     bounds = np.stack([p.min(axis=1), p.max(axis=1)], axis=1)
     facets = mesh.boundary_facets()
@@ -135,5 +136,12 @@ def select_facets(mesh: Mesh | MeshData, expr: str, name: str = "boundary") -> n
 def select_boundaries(mesh_data: MeshData, expressions: Mapping[str, str]) -> MeshData:
     """``mesh_data`` with a boundary per ``name: expression`` (:func:`select_facets`) added
     (a name it already has is replaced)."""
+    if not isinstance(expressions, Mapping):
+        raise ParameterError("boundaries", f"must map names to expressions, got "
+                                           f"{type(expressions).__name__}")
+    for name in expressions:
+        if not (isinstance(name, str) and name.strip()):
+            raise ParameterError("boundaries", f"names must be non-empty strings, got "
+                                               f"{name!r}")
     return mesh_data.with_boundaries({name: select_facets(mesh_data.mesh, expr, name)
                                       for name, expr in expressions.items()})

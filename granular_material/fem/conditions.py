@@ -28,7 +28,7 @@ rotation) is refused, a :class:`~granular_material.errors.ParameterError` naming
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -40,6 +40,7 @@ from granular_material.fem.loading import Loading
 from granular_material.fem.meshes import MeshData, make_basis
 from granular_material.fem.problems import ELEMENTS, confining_traction, follower_traction
 from granular_material.fem.reactions import BoundaryDofs, boundary_dofs
+from granular_material.typed_fields import conform_fields
 
 __all__ = ["Condition", "Displacement", "Fixed", "Gravity", "Pressure", "Problem",
            "RigidBody", "Roller", "build_problem"]
@@ -63,6 +64,9 @@ class Fixed:
 
     boundary: str
 
+    def __post_init__(self) -> None:
+        conform_fields(self)
+
 
 @dataclass(frozen=True)
 class Roller:
@@ -72,6 +76,7 @@ class Roller:
     component: int
 
     def __post_init__(self) -> None:
+        conform_fields(self)
         _component(self.component)
 
 
@@ -84,6 +89,7 @@ class Displacement:
     end: float
 
     def __post_init__(self) -> None:
+        conform_fields(self)
         _component(self.component)
         _length("end", self.end)
 
@@ -101,6 +107,7 @@ class RigidBody:
     rough: bool = True
 
     def __post_init__(self) -> None:
+        conform_fields(self)  # a pair of finite numbers, rough true or false
         d = tuple(_length("displacement", float(v)) for v in self.displacement)
         if len(d) != 2:
             raise ParameterError("displacement", f"must be (dx, dy) [m], got "
@@ -127,6 +134,7 @@ class Pressure:
     value: float
 
     def __post_init__(self) -> None:
+        conform_fields(self)
         if not math.isfinite(self.value):
             raise ParameterError("value", f"of a pressure must be finite Pa, got {self.value!r}")
 
@@ -138,6 +146,7 @@ class Gravity:
     unit_weight: float
 
     def __post_init__(self) -> None:
+        conform_fields(self)
         if not (math.isfinite(self.unit_weight) and self.unit_weight >= 0):
             raise ParameterError("unit_weight", f"must be >= 0 N/m³, got {self.unit_weight!r}")
 
@@ -273,6 +282,12 @@ def build_problem(mesh_data: MeshData, conditions: Sequence[Condition],
     ``conditions`` (see the module docstring); ``gauss`` as
     :func:`~granular_material.fem.meshes.make_basis` takes it (None: the element's default,
     tri6 3 points, quad8 2 × 2)."""
+    if not isinstance(mesh_data, MeshData):
+        raise ParameterError("mesh_data", f"must be a MeshData (read_mesh, rectangle_mesh), "
+                                          f"got {type(mesh_data).__name__}")
+    if isinstance(conditions, str | bytes) or not isinstance(conditions, Iterable):
+        raise ParameterError("conditions", f"must be a list of conditions, got "
+                                           f"{type(conditions).__name__}")
     conditions = tuple(conditions)
     for c in conditions:
         if not isinstance(c, Fixed | Roller | Displacement | RigidBody | Pressure | Gravity):

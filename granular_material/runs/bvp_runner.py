@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import json
 import math
+import shutil
 import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -44,12 +45,23 @@ from granular_material.fem.conditions import (
 )
 from granular_material.fem.geostatic import geostatic_stress
 from granular_material.fem.meshes import MeshData, read_mesh, rectangle_mesh
+from granular_material.fem.problems import DEFAULT_GAUSS, TRIANGLES
+from granular_material.memory import available_memory, memory_refusal, size_in_words
 from granular_material.multiscale.confinement import UNCONFINED_FRACTION
 from granular_material.results.bvp_plots import plot_load_displacement, plot_mechanism
 from granular_material.results.writers import FieldWriter, write_csv, write_json
 from granular_material.runs.bvp_material import material_for_problem, unit_weight_of
 from granular_material.runs.bvp_spec import BoundaryValueSpec, ConditionSpec
 from granular_material.runs.spec import SpecError
+
+#: memory of a boundary-value run per Gauss point [bytes] (basis, assembly, the solver's
+#: factorisation, the tables of a step): the peak RSS over the build and one linear-elastic
+#: step of 150 x 150 meshes, measured at 4.8 kB (quad4), 10.1 kB (tri6) and 8.3 kB (quad9)
+#: (3.7 kB for quad4 at 300 x 300; /work/check47/bvp_memory.py); the largest, rounded
+_POINT_BYTES = 10_000
+#: the least a Gauss point's row of points.csv takes on disk [bytes]: its 17 columns at a few
+#: characters each (a committed step's floats take 18-24; step 0's zeros take 3)
+_POINT_ROW_BYTES = 17 * 6
 
 __all__ = [
     "BVPOutcome",
@@ -95,12 +107,47 @@ def _mesh(spec: BoundaryValueSpec) -> MeshData:
     return select_boundaries(data.with_boundaries(aliases), predicates)
 
 
+def _points_of(spec: BoundaryValueSpec, mesh: MeshData) -> int:
+    """Gauss points of ``mesh`` under ``spec``'s quadrature (per triangle, or per direction
+    of a quadrilateral)."""
+    n = spec.mesh.quadrature or DEFAULT_GAUSS[mesh.element]
+    return mesh.n_elements * (n if mesh.element in TRIANGLES else n * n)
+
+
+def _check_memory(spec: BoundaryValueSpec, mesh: MeshData) -> None:
+    """Before the basis is built: the run's memory (:data:`_POINT_BYTES` a Gauss point), a
+    SpecError naming the mesh with the estimate where it cannot be had."""
+    points = _points_of(spec, mesh)
+    refusal = memory_refusal(float(points) * _POINT_BYTES,
+                             f"{mesh.n_elements} {mesh.element} elements ({points} Gauss "
+                             "points)", available_memory())
+    if refusal:
+        raise SpecError("mesh", refusal)
+
+
+def _check_disk(spec: BoundaryValueSpec, out: Path) -> None:
+    """Before the run: ``points.csv`` (every Gauss point at every step, at least
+    :data:`_POINT_ROW_BYTES` a row) must fit the free space of ``out``'s disk; a SpecError
+    naming ``steps`` with the estimate otherwise."""
+    points = _points_of(spec, _mesh(spec))
+    needed = float(points) * (spec.steps + 1) * _POINT_ROW_BYTES
+    free = shutil.disk_usage(out).free
+    if needed > free:
+        raise SpecError("steps", f"{spec.steps} load steps of {points} Gauss points write "
+                                 f"at least {size_in_words(needed)} of points.csv; {out} has "
+                                 f"{size_in_words(free)} free; take fewer steps or a coarser "
+                                 "mesh")
+
+
 def _align(data: MeshData, axis: int, values: tuple[float, ...]) -> None:
     """Move the grid line of a generated mesh nearest each of ``values`` [m] onto it (along
     ``axis``), in place; refused where that would fold an element."""
     p = data.mesh.p
     for value in values:
         lines = np.unique(p[axis])
+        if not lines[0] < value < lines[-1]:  # the mesh's own edges stay where they are
+            raise SpecError("mesh.align-" + "xy"[axis], f"{value:g} m lies outside the mesh "
+                                                        f"({lines[0]:g} to {lines[-1]:g} m)")
         k = int(np.argmin(np.abs(lines - value)))
         low = lines[k - 1] if k > 0 else -np.inf
         high = lines[k + 1] if k + 1 < lines.size else np.inf
@@ -151,6 +198,7 @@ def build(spec: BoundaryValueSpec, allocate: bool = True) -> Built:
     """Mesh, problem, initial stress and material of ``spec`` (no step taken; the material
     not allocated, its RVEs not prepared, unless ``allocate``)."""
     mesh = _mesh(spec)
+    _check_memory(spec, mesh)
     conditions = [_condition(c) for c in spec.conditions]
     unit_weight = unit_weight_of(spec)
     if unit_weight > 0:
@@ -247,6 +295,11 @@ def run_boundary_value(spec: BoundaryValueSpec, out: Path | None = None) -> BVPO
     and written (``error`` says why)."""
     t_start = time.perf_counter()
     out = out if out is not None else spec.out
+    if out is not None:
+        out = Path(out)
+        if out.exists() and not out.is_dir():
+            raise SpecError("out", f"{out} is a file, not a folder")
+        _check_disk(spec, next(p for p in (out, *out.absolute().parents) if p.exists()))
     b = build(spec)
     problem = b.problem
     solver = NewtonSolver(problem.basis, b.material, problem.loading, b.settings)
@@ -255,7 +308,6 @@ def run_boundary_value(spec: BoundaryValueSpec, out: Path | None = None) -> BVPO
     last: dict[str, Any] = {}
     writer = None
     if out is not None:
-        out = Path(out)
         out.mkdir(parents=True, exist_ok=True)
         (out / "points.csv").unlink(missing_ok=True)
         if spec.fields:

@@ -52,6 +52,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from granular_material.multiscale.parameters import MAX_SHARDS
 from granular_material.runs.spec import MaterialSpec, NewtonSpec, SpecError
 from granular_material.typed_fields import conform, conform_fields
 
@@ -114,6 +115,13 @@ class MeshSpec:
         conform_fields(self, error=SpecError)
         if self.elements is not None and min(self.elements) < 1:
             raise SpecError("mesh.elements", f"must be two counts >= 1, got {self.elements}")
+        for axis, values in enumerate((self.align_x, self.align_y)):
+            lines = None if self.elements is None else self.elements[axis] - 1
+            if lines is not None and len(values) > lines:
+                raise SpecError(f"mesh.align-{'xy'[axis]}", f"moves {len(values)} grid lines; "
+                                                          f"{self.elements[axis]} elements "
+                                                          f"along {'xy'[axis]} have {lines} "
+                                                          "inside the mesh")
         if (self.file is not None) and (self.align_x or self.align_y):
             raise SpecError("mesh.align-x", "aligns a generated mesh's grid lines; a mesh "
                                             "file has its own nodes")
@@ -260,8 +268,9 @@ class BoundaryValueSpec:
 
     def __post_init__(self) -> None:
         conform_fields(self, error=SpecError, skip=_SECTIONS)
-        if self.shards is not None and self.shards < 1:
-            raise SpecError("shards", f"must be an integer >= 1, got {self.shards!r}")
+        if self.shards is not None and not 1 <= self.shards <= MAX_SHARDS:
+            raise SpecError("shards", f"must be an integer from 1 to {MAX_SHARDS} (a CPU "
+                                      f"thread each), got {self.shards!r}")
         if self.steps < 1:
             raise SpecError("steps", f"must be an integer >= 1, got {self.steps!r}")
         if not self.conditions:
@@ -298,7 +307,8 @@ def _condition(entry: Any, index: int) -> ConditionSpec:
                                    "rough"})
     component = entry.get("component")
     if component is not None:
-        if component not in _COMPONENTS:
+        if isinstance(component, bool) or not isinstance(component, str | int) \
+                or component not in _COMPONENTS:
             raise SpecError("conditions.component", f"must be x or y, got {component!r}")
         component = _COMPONENTS[component]
     return _within("conditions", lambda: ConditionSpec(

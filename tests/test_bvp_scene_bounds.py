@@ -1,0 +1,83 @@
+"""A boundary-value scene meets a hostile user (issue 47): what it cannot hold is refused
+naming its key before any work (the run's memory, the tables' disk, grid lines to align,
+shards), and nothing it is given is silently moved or ignored."""
+
+from __future__ import annotations
+
+import copy
+import time
+from collections import namedtuple
+
+import pytest
+
+from granular_material.runs import bvp_runner
+from granular_material.runs.bvp_runner import run_boundary_value
+from granular_material.runs.bvp_spec import bvp_from_dict
+from granular_material.runs.spec import SpecError
+
+SCENE = {"test": "boundary-value", "steps": 2,
+         "mesh": {"size": [1.0, 1.0], "elements": [2, 2]},
+         "conditions": [{"type": "fixed", "boundary": "bottom"},
+                        {"type": "displacement", "boundary": "top", "component": "y",
+                         "value": -0.001}],
+         "initial": {"state": "uniform", "pressure": 1e5},
+         "material": {"name": "linear-elastic"}, "output": {"fields": False}}
+
+
+def scene(tmp_path, **sections):
+    data = copy.deepcopy(SCENE)
+    data.update(sections)
+    return bvp_from_dict(data, tmp_path)
+
+
+@pytest.mark.parametrize("component", [[0], {"x": 1}, True, 2.5])
+def test_a_component_of_another_type_is_named(tmp_path, component):
+    with pytest.raises(SpecError, match=r"conditions.component must be x or y"):
+        scene(tmp_path, conditions=[{"type": "roller", "boundary": "left",
+                                     "component": component}])
+
+
+def test_an_alignment_outside_the_mesh_is_refused_not_a_moved_edge(tmp_path):
+    spec = scene(tmp_path, mesh={"size": [1.0, 1.0], "elements": [2, 2], "align-x": [5.0]})
+    with pytest.raises(SpecError, match=r"mesh.align-x 5 m lies outside the mesh \(0 to 1 m\)"):
+        run_boundary_value(spec, None)  # it moved the right edge to x = 5 m before
+
+
+def test_more_alignments_than_grid_lines_are_refused(tmp_path):
+    start = time.perf_counter()
+    with pytest.raises(SpecError, match=r"mesh.align-x moves 100000 grid lines; 2 elements"):
+        scene(tmp_path, mesh={"size": [1.0, 1.0], "elements": [2, 2],
+                              "align-x": [0.5] * 10**5})
+    assert time.perf_counter() - start < 5.0  # 10**6 took 35 s of work before
+
+
+def test_shards_beyond_the_cap_are_refused(tmp_path):
+    with pytest.raises(SpecError, match="shards must be an integer from 1 to 1024"):
+        scene(tmp_path, output={"shards": 10**9})
+
+
+def test_a_mesh_beyond_the_memory_is_refused_before_its_basis(tmp_path, monkeypatch):
+    monkeypatch.setattr(bvp_runner, "available_memory", lambda: 10**9)
+    spec = scene(tmp_path, mesh={"size": [1.0, 1.0], "elements": [300, 300]})
+    start = time.perf_counter()
+    with pytest.raises(SpecError, match=r"mesh 90000 quad4 elements \(360000 Gauss points\) "
+                                        r"needs about 3.6 GB of memory"):
+        run_boundary_value(spec, None)
+    assert time.perf_counter() - start < 5.0
+
+
+def test_tables_beyond_the_free_disk_are_refused_before_any_work(tmp_path, monkeypatch):
+    usage = namedtuple("usage", "total used free")
+    monkeypatch.setattr(bvp_runner.shutil, "disk_usage", lambda path: usage(10**6, 0, 10**4))
+    spec = scene(tmp_path, steps=1000)
+    with pytest.raises(SpecError, match=r"steps 1000 load steps of 16 Gauss points write at "
+                                        r"least 1.63 MB of points.csv; .* has 10 kB free"):
+        run_boundary_value(spec, tmp_path / "run")
+    assert not (tmp_path / "run").exists()
+
+
+def test_a_file_where_the_run_folder_goes_is_named(tmp_path):
+    (tmp_path / "run").write_text("mine")
+    with pytest.raises(SpecError, match=r"out .*run is a file, not a folder"):
+        run_boundary_value(scene(tmp_path), tmp_path / "run")
+    assert (tmp_path / "run").read_text() == "mine"
