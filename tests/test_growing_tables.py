@@ -162,3 +162,12 @@ def test_a_writer_killed_outright_leaves_tables_that_read_whole(tmp_path, after)
     points = tables["points"]
     assert len(points) == 500 * len(done)
     assert (points["sxx"] == -1.0 - points["step"]).all()  # no row cut inside a number
+
+
+def test_a_rewrite_for_new_columns_keeps_every_float_bit_for_bit(tmp_path):
+    path = tmp_path / "steps.csv"
+    values = np.random.default_rng(3).random(50) * 10.0 ** np.arange(-25, 25)
+    write_csv(pd.DataFrame({"step": range(50), "value": values}), path)
+    append_csv(pd.DataFrame([{"step": 50, "value": 1 / 3, "dem_steps": 7}]), path)
+    table = read_table(path)
+    assert table["value"].tolist() == [*values.tolist(), 1 / 3]

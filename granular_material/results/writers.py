@@ -107,7 +107,8 @@ def append_csv(frame: pd.DataFrame, path: str | Path) -> Path:
         end = _whole_end(fh, os.fstat(fh.fileno()).st_size)
     names = [str(c) for c in frame.columns]
     if sorted(names) != sorted(header) or len(set(header)) != len(header):
-        whole = pd.concat([read_table(path), frame.set_axis(names, axis=1)],
+        whole = pd.concat([read_table(path),  # pandas reads floats back bit for bit
+                           frame.set_axis(names, axis=1)],
                           ignore_index=True)
         return write_csv(whole, path)
     data = frame.set_axis(names, axis=1)[header].to_csv(index=False, header=False)
