@@ -10,7 +10,7 @@ from collections import namedtuple
 
 import pytest
 
-from granular_material.runs import bvp_runner
+from granular_material.runs import bvp_checks
 from granular_material.runs.bvp_runner import run_boundary_value
 from granular_material.runs.bvp_spec import bvp_from_dict
 from granular_material.runs.spec import SpecError
@@ -57,7 +57,7 @@ def test_shards_beyond_the_cap_are_refused(tmp_path):
 
 
 def test_a_mesh_beyond_the_memory_is_refused_before_its_basis(tmp_path, monkeypatch):
-    monkeypatch.setattr(bvp_runner, "available_memory", lambda: 10**9)
+    monkeypatch.setattr(bvp_checks, "available_memory", lambda: 10**9)
     spec = scene(tmp_path, mesh={"size": [1.0, 1.0], "elements": [300, 300]})
     start = time.perf_counter()
     with pytest.raises(SpecError, match=r"mesh 90000 quad4 elements \(360000 Gauss points\) "
@@ -68,7 +68,7 @@ def test_a_mesh_beyond_the_memory_is_refused_before_its_basis(tmp_path, monkeypa
 
 def test_tables_beyond_the_free_disk_are_refused_before_any_work(tmp_path, monkeypatch):
     usage = namedtuple("usage", "total used free")
-    monkeypatch.setattr(bvp_runner.shutil, "disk_usage", lambda path: usage(10**6, 0, 10**4))
+    monkeypatch.setattr(bvp_checks.shutil, "disk_usage", lambda path: usage(10**6, 0, 10**4))
     spec = scene(tmp_path, steps=1000)
     with pytest.raises(SpecError, match=r"steps 1000 load steps of 16 Gauss points write at "
                                         r"least 1.63 MB of points.csv; .* has 10 kB free"):
@@ -81,3 +81,13 @@ def test_a_file_where_the_run_folder_goes_is_named(tmp_path):
     with pytest.raises(SpecError, match=r"out .*run is a file, not a folder"):
         run_boundary_value(scene(tmp_path), tmp_path / "run")
     assert (tmp_path / "run").read_text() == "mine"
+
+
+@pytest.mark.parametrize("out", [None, "run"])
+def test_a_generated_mesh_beyond_the_memory_is_refused_before_it_is_made(tmp_path, out):
+    spec = scene(tmp_path, mesh={"size": [1.0, 1.0], "elements": [3000, 3000]})
+    start = time.perf_counter()
+    with pytest.raises(SpecError, match=r"mesh 9000000 quad4 elements \(36000000 Gauss "
+                                        r"points\) needs about 360 GB of memory"):
+        run_boundary_value(spec, None if out is None else tmp_path / out)
+    assert time.perf_counter() - start < 5.0  # making the mesh took more than 60 s before

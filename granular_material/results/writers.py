@@ -12,7 +12,7 @@ table whole (the union). A step writes ``tracked.csv`` and ``points.csv`` first 
 leaves a cut last row out, and :func:`read_run_tables` also the rows of steps ``steps.csv``
 does not hold. A resumed run writes its tables anew from its checkpoint.
 
-Measured (``/work/check47/table_cost.py``, 1000 steps, median of 3, a 2-core machine shared
+Measured by writing the tables of 1000 steps (median of 3, a 2-core machine shared
 with other work, so seconds vary; ratios are of one run): ``steps.csv`` rewritten whole
 every step took 27–102 s over the run, appended 5.4 s (102 s in that run); a 4-point
 ``points.csv`` appended 3.8 s (0.6 s without the ``fsync``), rewritten whole 87 s; a

@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import json
 import math
-import shutil
 import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -45,23 +44,13 @@ from granular_material.fem.conditions import (
 )
 from granular_material.fem.geostatic import geostatic_stress
 from granular_material.fem.meshes import MeshData, read_mesh, rectangle_mesh
-from granular_material.fem.problems import DEFAULT_GAUSS, TRIANGLES
-from granular_material.memory import available_memory, memory_refusal, size_in_words
 from granular_material.multiscale.confinement import UNCONFINED_FRACTION
 from granular_material.results.bvp_plots import plot_load_displacement, plot_mechanism
 from granular_material.results.writers import FieldWriter, write_csv, write_json
+from granular_material.runs.bvp_checks import check_disk, check_memory, generated_size
 from granular_material.runs.bvp_material import material_for_problem, unit_weight_of
 from granular_material.runs.bvp_spec import BoundaryValueSpec, ConditionSpec
 from granular_material.runs.spec import SpecError
-
-#: memory of a boundary-value run per Gauss point [bytes] (basis, assembly, the solver's
-#: factorisation, the tables of a step): the peak RSS over the build and one linear-elastic
-#: step of 150 x 150 meshes, measured at 4.8 kB (quad4), 10.1 kB (tri6) and 8.3 kB (quad9)
-#: (3.7 kB for quad4 at 300 x 300; /work/check47/bvp_memory.py); the largest, rounded
-_POINT_BYTES = 10_000
-#: the least a Gauss point's row of points.csv takes on disk [bytes]: its 17 columns at a few
-#: characters each (a committed step's floats take 18-24; step 0's zeros take 3)
-_POINT_ROW_BYTES = 17 * 6
 
 __all__ = [
     "BVPOutcome",
@@ -70,7 +59,6 @@ __all__ = [
     "build",
     "run_boundary_value",
 ]
-
 
 
 @dataclass
@@ -105,38 +93,6 @@ def _mesh(spec: BoundaryValueSpec) -> MeshData:
                if value in data.boundaries}
     predicates = {name: value for name, value in spec.boundaries.items() if name not in aliases}
     return select_boundaries(data.with_boundaries(aliases), predicates)
-
-
-def _points_of(spec: BoundaryValueSpec, mesh: MeshData) -> int:
-    """Gauss points of ``mesh`` under ``spec``'s quadrature (per triangle, or per direction
-    of a quadrilateral)."""
-    n = spec.mesh.quadrature or DEFAULT_GAUSS[mesh.element]
-    return mesh.n_elements * (n if mesh.element in TRIANGLES else n * n)
-
-
-def _check_memory(spec: BoundaryValueSpec, mesh: MeshData) -> None:
-    """Before the basis is built: the run's memory (:data:`_POINT_BYTES` a Gauss point), a
-    SpecError naming the mesh with the estimate where it cannot be had."""
-    points = _points_of(spec, mesh)
-    refusal = memory_refusal(float(points) * _POINT_BYTES,
-                             f"{mesh.n_elements} {mesh.element} elements ({points} Gauss "
-                             "points)", available_memory())
-    if refusal:
-        raise SpecError("mesh", refusal)
-
-
-def _check_disk(spec: BoundaryValueSpec, out: Path) -> None:
-    """Before the run: ``points.csv`` (every Gauss point at every step, at least
-    :data:`_POINT_ROW_BYTES` a row) must fit the free space of ``out``'s disk; a SpecError
-    naming ``steps`` with the estimate otherwise."""
-    points = _points_of(spec, _mesh(spec))
-    needed = float(points) * (spec.steps + 1) * _POINT_ROW_BYTES
-    free = shutil.disk_usage(out).free
-    if needed > free:
-        raise SpecError("steps", f"{spec.steps} load steps of {points} Gauss points write "
-                                 f"at least {size_in_words(needed)} of points.csv; {out} has "
-                                 f"{size_in_words(free)} free; take fewer steps or a coarser "
-                                 "mesh")
 
 
 def _align(data: MeshData, axis: int, values: tuple[float, ...]) -> None:
@@ -197,8 +153,10 @@ class Built:
 def build(spec: BoundaryValueSpec, allocate: bool = True) -> Built:
     """Mesh, problem, initial stress and material of ``spec`` (no step taken; the material
     not allocated, its RVEs not prepared, unless ``allocate``)."""
+    if spec.mesh.file is None:  # a generated mesh: checked before it is made
+        check_memory(spec, *generated_size(spec))
     mesh = _mesh(spec)
-    _check_memory(spec, mesh)
+    check_memory(spec, mesh.n_elements, mesh.element)
     conditions = [_condition(c) for c in spec.conditions]
     unit_weight = unit_weight_of(spec)
     if unit_weight > 0:
@@ -299,7 +257,8 @@ def run_boundary_value(spec: BoundaryValueSpec, out: Path | None = None) -> BVPO
         out = Path(out)
         if out.exists() and not out.is_dir():
             raise SpecError("out", f"{out} is a file, not a folder")
-        _check_disk(spec, next(p for p in (out, *out.absolute().parents) if p.exists()))
+        check_disk(spec, next(p for p in (out, *out.absolute().parents) if p.exists()),
+                   _mesh)
     b = build(spec)
     problem = b.problem
     solver = NewtonSolver(problem.basis, b.material, problem.loading, b.settings)
