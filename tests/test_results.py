@@ -39,11 +39,12 @@ def test_default_settings_are_the_commands_and_depend_on_the_material_by_name():
     dem, elastic = default_settings("dem"), default_settings("linear-elastic")
     for s in (dem, elastic):  # Guo & Zhao's loop in finite strain, our predictor
         assert s.predictor == "extrapolate"
-        assert (s.rtol, s.max_iterations) == (0.01, 100)
+        assert s.max_iterations == 100
         assert s.formulation == "updated-lagrangian"
     # DEM: their test judged one iterate earlier; a smooth material: the force residual
-    assert dem.convergence == "residual-displacement"
-    assert elastic.convergence == default_settings("mohr-coulomb").convergence == "force"
+    assert (dem.convergence, dem.rtol) == ("residual-displacement", 0.01)
+    assert (elastic.convergence, elastic.rtol) == ("force", 1e-4)
+    assert default_settings("mohr-coulomb").convergence == "force"
     assert default_settings("linear-elastic", convergence="displacement").convergence == (
         "displacement")
     # a noisy material's increments hold their first tangent and are Aitken-relaxed; a

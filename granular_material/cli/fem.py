@@ -62,10 +62,10 @@ _PARSERS: dict[str, CommandParser] = {}
 
 def _newton_arguments(parser: argparse.ArgumentParser) -> None:
     g = parser.add_argument_group("Newton solver")
-    g.add_argument("--rtol", type=float, default=_NEWTON.rtol,
+    g.add_argument("--rtol", type=float, default=None,
                    help="relative tolerance of the --convergence test: ||du||/||Du|| "
-                        f"(default {_NEWTON.rtol:g}, Guo & Zhao) or ||R||/||R0|| (Wu et al. "
-                        "use 0.005)")
+                        "or ||R||/||R0|| (default 0.01 for dem, Guo & Zhao; 1e-4 for "
+                        "linear-elastic and mohr-coulomb; Wu et al. use 0.005)")
     g.add_argument("--stress-tol", type=float, default=None,
                    help="absolute tolerance as a stress error [Pa] at the Gauss points, for "
                         "DEM noise (default 0.005 x confining for dem, 0 for linear-elastic)")
@@ -82,7 +82,7 @@ def _newton_arguments(parser: argparse.ArgumentParser) -> None:
                         f"(default {_NEWTON.max_iterations})")
     g.add_argument("--max-cutbacks", type=int, default=_NEWTON.max_cutbacks,
                    help=f"how often an increment may be halved (default {_NEWTON.max_cutbacks})")
-    add_convergence(g, _NEWTON.convergence, _NEWTON.rtol)
+    add_convergence(g, _NEWTON.convergence, None)
     g.add_argument("--predictor", choices=PREDICTORS, default=_NEWTON.predictor,
                    help="first guess of a step: committed-tangent solve or the last increment "
                         f"scaled (default {_NEWTON.predictor})")

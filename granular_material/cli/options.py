@@ -121,7 +121,8 @@ def add_element(parser: argparse.ArgumentParser) -> None:
                         "two hourglass modes per element)")
 
 
-def add_convergence(group: Any, default: str | None = "force", rtol: float = 0.005) -> None:
+def add_convergence(group: Any, default: str | None = "force", rtol: float | None = 0.005,
+                    ) -> None:
     """``--convergence`` of the FEM commands' Newton solver, in ``group`` (``default`` None:
     residual-displacement for a noisy (DEM) material, force for any other)."""
     from granular_material.fem.newton import CONVERGENCE_TESTS
@@ -139,7 +140,9 @@ def add_convergence(group: Any, default: str | None = "force", rtol: float = 0.0
                             "0.01); residual-displacement: the same ratio of the correction "
                             "the current iterate asks for, which is then not applied: that "
                             "iterate, already evaluated, is accepted (one material evaluation "
-                            f"an increment fewer; default --rtol {rtol:g} in every test). "
+                            "an increment fewer"
+                            + ("" if rtol is None else f"; default --rtol {rtol:g} in every "
+                               "test") + "). "
                             "steps.csv records which test accepted each step (converged_by)")
 
 

@@ -180,7 +180,8 @@ class NewtonSpec:
     commands' defaults: :data:`~granular_material.fem.defaults.COMMAND_DEFAULTS`).
 
     Attributes:
-        rtol: relative tolerance of the convergence test [-].
+        rtol: relative tolerance of the convergence test [-]; None: 1e-2 for a noisy
+            material, 1e-4 otherwise.
         stress_tol: absolute tolerance as a stress error [Pa]; None: 0.005 × confining for
             a noisy (DEM) material, else 0.
         stall_rtol: accept a stalled residual below this [-]; None: 2 × rtol for a noisy
@@ -198,7 +199,7 @@ class NewtonSpec:
         secant_min_change: as :class:`~granular_material.fem.NewtonSettings`.
     """
 
-    rtol: float = _newton_default("rtol")
+    rtol: float | None = None
     stress_tol: float | None = None
     stall_rtol: float | None = None
     accept_correction: float | None = None
