@@ -59,13 +59,12 @@ def run_bvp_scene(path: Path, text: str, data: dict[str, Any],
                   args: argparse.Namespace) -> int:
     """Check and run the boundary-value scene ``path`` (``data``: its TOML); the exit code
     (0: it reached the end, 1: it stopped short). ``args``: the ``run`` command's (``out``,
-    ``check``, ``resume``)."""
+    ``check``, ``resume``: continue a stopped run in the same folder)."""
+    from granular_material.runs.bvp_resume import check_not_stopped
     from granular_material.runs.bvp_runner import build, run_boundary_value
     from granular_material.runs.bvp_spec import bvp_from_dict
 
-    if getattr(args, "resume", False):
-        raise UsageError("--resume continues single-element and biaxial runs; a "
-                         "boundary-value scene runs from its start")
+    resume = bool(getattr(args, "resume", False))
     try:
         spec = bvp_from_dict(data, path.parent)
         if args.check:
@@ -78,9 +77,12 @@ def run_bvp_scene(path: Path, text: str, data: dict[str, Any],
     folder = _run_folder(path, data, args.out)
     folder.mkdir(parents=True, exist_ok=True)
     with FolderLock(folder):
-        write_whole(folder / "scene.toml", lambda tmp: tmp.write_text(text, encoding="utf-8"))
         try:
-            outcome = run_boundary_value(spec, out=folder)
+            if not resume:
+                check_not_stopped(spec, folder)
+            write_whole(folder / "scene.toml",
+                        lambda tmp: tmp.write_text(text, encoding="utf-8"))
+            outcome = run_boundary_value(spec, out=folder, resume=resume)
         except ValueError as exc:
             raise _refusal(path, text, exc) from exc
     emit(argparse.Namespace(json=False), outcome.summary)

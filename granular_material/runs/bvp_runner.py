@@ -49,6 +49,7 @@ from granular_material.results.bvp_plots import plot_load_displacement, plot_mec
 from granular_material.results.writers import FieldWriter, write_csv, write_json
 from granular_material.runs.bvp_checks import check_disk, check_memory, generated_size
 from granular_material.runs.bvp_material import material_for_problem, unit_weight_of
+from granular_material.runs.bvp_resume import open_bvp_checkpoint, remember
 from granular_material.runs.bvp_spec import BoundaryValueSpec, ConditionSpec
 from granular_material.runs.spec import SpecError
 
@@ -207,7 +208,8 @@ def _rows(b: Built, solver: NewtonSolver, record: StepRecord | None, p0: np.ndar
         "wall_time": record.wall_time if record else 0.0,
         "failed_points": int(failed.sum()), "unconfined_points": int(unconfined.sum()),
         "residual_history": json.dumps(record.residual_history if record else []),
-        **({k: v for k, v in record.costs.items()} if record else {}),
+        # the material's costs (step 0: none spent, under the names its evaluations use)
+        **(dict(record.costs) if record else dict.fromkeys(solver.response.costs, 0)),
     }
     for name in sorted({c.boundary for c in b.spec.conditions}):
         loaded = any(c.boundary == name and c.type == "pressure" for c in b.spec.conditions)
@@ -247,10 +249,12 @@ def _where(points: pd.DataFrame, column: str) -> str:
             f"y {flagged.y.min():.3g}–{flagged.y.max():.3g} m")
 
 
-def run_boundary_value(spec: BoundaryValueSpec, out: Path | None = None) -> BVPOutcome:
+def run_boundary_value(spec: BoundaryValueSpec, out: Path | None = None,
+                       resume: bool = False) -> BVPOutcome:
     """Run ``spec`` into ``out`` (default ``spec.out``; None: nothing written) and return
     what it produced. A Newton failure or Ctrl-C stops the run with the committed steps kept
-    and written (``error`` says why)."""
+    and written (``error`` says why), and its checkpoint in ``out/checkpoint``; ``resume``
+    continues such a run (:mod:`~granular_material.runs.bvp_resume`)."""
     t_start = time.perf_counter()
     out = out if out is not None else spec.out
     if out is not None:
@@ -259,9 +263,14 @@ def run_boundary_value(spec: BoundaryValueSpec, out: Path | None = None) -> BVPO
             raise SpecError("out", f"{out} is a file, not a folder")
         check_disk(spec, next(p for p in (out, *out.absolute().parents) if p.exists()),
                    _mesh)
-    b = build(spec)
+    checkpoint, saved = open_bvp_checkpoint(spec, out, resume)
+    b = build(spec, allocate=saved is None)
+    if saved is not None:
+        b.material.restore(saved.material_path)
     problem = b.problem
     solver = NewtonSolver(problem.basis, b.material, problem.loading, b.settings)
+    if saved is not None:
+        solver.resume(saved.state)
     p0 = np.maximum(-0.5 * np.trace(b.initial_stress, axis1=1, axis2=2), 1e-300)
     rows: list[dict[str, Any]] = []
     last: dict[str, Any] = {}
@@ -272,25 +281,39 @@ def run_boundary_value(spec: BoundaryValueSpec, out: Path | None = None) -> BVPO
         if spec.fields:
             writer = FieldWriter(out / "fields.xdmf", problem).__enter__()
 
+    def keep(row: dict[str, Any], points: pd.DataFrame, u: np.ndarray) -> None:
+        rows.append(row)
+        last.update(points=points, u=u.copy())
+        if out is not None:
+            first = row["step"] == 0
+            write_csv(points, out / "points.csv", append=not first)
+            write_csv(pd.DataFrame([row]), out / "steps.csv",  # last: the step's commit
+                      append=not first)
+            if writer is not None:
+                writer.write(float(row["load_factor"]), u, points)
+
     def collect(s: NewtonSolver, record: StepRecord | None) -> None:
         row, points = _rows(b, s, record, p0)
-        rows.append(row)
-        last.update(points=points, u=s.u.copy())
-        if out is not None:
-            write_csv(points, out / "points.csv", append=record is not None)
-            write_csv(pd.DataFrame([row]), out / "steps.csv",  # last: the step's commit
-                      append=record is not None)
-            if writer is not None:
-                writer.write(float(s.load_factor), s.u, points)
+        keep(row, points, s.u)
+        if checkpoint is not None:
+            checkpoint.save_step(row, points, s.u, None)
+            if checkpoint.due(int(row["step"]), spec.steps):
+                checkpoint.save_state(int(row["step"]), solver, b.material)
 
     t_initial = time.perf_counter()
-    collect(solver, None)
-    initial_residual = _initial_residual(solver)
+    if saved is None:
+        collect(solver, None)
+        initial_residual = remember(checkpoint, "initial_residual", _initial_residual(solver))
+    else:
+        for step in saved.steps:
+            keep(step.row, step.points, step.u)
+        initial_residual = remember(checkpoint, "initial_residual")
     t_initial = time.perf_counter() - t_initial
     error = None
     try:
         solver.run(spec.steps, on_step=collect, progress=spec.progress,
-                   description=f"{spec.name} ({problem.basis.nelems} elements)")
+                   description=f"{spec.name} ({problem.basis.nelems} elements)",
+                   done=0 if saved is None else saved.step)
     except NewtonError as exc:
         error = str(exc)
     except KeyboardInterrupt:
@@ -301,6 +324,9 @@ def run_boundary_value(spec: BoundaryValueSpec, out: Path | None = None) -> BVPO
     steps = pd.DataFrame(rows)
     summary = _summary(b, solver, steps, last.get("points", pd.DataFrame()), error,
                        initial_residual, t_initial, time.perf_counter() - t_start)
+    summary["resumed_from_step"] = None if saved is None else saved.step
+    if checkpoint is not None and error is None:
+        checkpoint.remove()  # finished: nothing to resume
     if out is not None:
         _figures(b, steps, last, out)
         summary["out"] = str(out)

@@ -1,0 +1,106 @@
+"""A boundary-value run stopped part-way resumes to the run that never stopped
+(granular_material.runs.bvp_resume), and a fresh run into its folder is refused."""
+
+from __future__ import annotations
+
+import sys
+
+import numpy as np
+import pandas as pd
+import pytest
+from test_bvp_run import FOOTING
+
+from granular_material.cli import main
+from granular_material.fem.newton import NewtonSolver
+from granular_material.runs.bvp_runner import run_boundary_value
+from granular_material.runs.bvp_spec import bvp_from_dict
+from granular_material.runs.spec import SpecError
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # Python 3.10
+    import tomli as tomllib
+
+MOHR_COULOMB = ('[material]\nname = "mohr-coulomb"\n[material.parameters]\nE = 19e6\n'
+                'nu = 0.25\nphi = 35.0\npsi = 15.0\nphi_cs = 25.0\nsoftening_strain = 0.05\n'
+                '[newton]\nformulation = "small-strain"\n')
+DEM = ('[material]\nname = "dem"\n[material.parameters]\nparticles = 16\nseed = 1\n'
+       'tangent = "kruyt-rothenburg"\n[output]\ndevice = "cpu"\n')
+#: columns that are times, not results
+TIMES = ("wall_time",)
+
+
+def _spec(material: str, steps: int, elements: str, settlement: float | None = None):
+    settlement = -0.0005 * steps if settlement is None else settlement
+    text = FOOTING.format(steps=steps, elements=elements, settlement=settlement,
+                          material=material)
+    return bvp_from_dict(tomllib.loads(text))
+
+
+def _stop_at(monkeypatch, step: int) -> None:
+    """Ctrl-C as load step ``step`` begins."""
+    original = NewtonSolver.step
+
+    def step_or_stop(self, target, k):
+        if k == step:
+            raise KeyboardInterrupt
+        return original(self, target, k)
+
+    monkeypatch.setattr(NewtonSolver, "step", step_or_stop)
+
+
+def _tables(folder):
+    steps = pd.read_csv(folder / "steps.csv").drop(columns=list(TIMES))
+    return steps, pd.read_csv(folder / "points.csv")
+
+
+@pytest.mark.parametrize(("material", "elements"), [(MOHR_COULOMB, "[6, 4]"),
+                                                    (DEM, "[3, 2]")])
+def test_a_stopped_run_resumes_to_the_run_that_never_stopped(tmp_path, monkeypatch,
+                                                             material, elements):
+    steps = 4
+    whole = run_boundary_value(_spec(material, steps, elements), out=tmp_path / "whole")
+    assert whole.error is None
+    assert not (tmp_path / "whole" / "checkpoint").exists()  # finished: nothing to resume
+    with monkeypatch.context() as m:
+        _stop_at(m, 3)
+        stopped = run_boundary_value(_spec(material, steps, elements), out=tmp_path / "run")
+    assert "interrupted after load step 2" in stopped.error
+    with pytest.raises(SpecError, match="--resume"):  # a fresh run would throw it away
+        run_boundary_value(_spec(material, steps, elements), out=tmp_path / "run")
+    resumed = run_boundary_value(_spec(material, steps, elements), out=tmp_path / "run",
+                                 resume=True)
+    # the state is saved by elapsed time: after step 2, or earlier where saving it is slow
+    assert resumed.error is None and 0 <= resumed.summary["resumed_from_step"] <= 2
+    for a, b in zip(_tables(tmp_path / "whole"), _tables(tmp_path / "run"), strict=True):
+        pd.testing.assert_frame_equal(a, b, check_exact=True)
+    np.testing.assert_array_equal(whole.u, resumed.u)
+    assert (tmp_path / "run" / "fields.xdmf").read_text().count("<Grid ") == (
+        (tmp_path / "whole" / "fields.xdmf").read_text().count("<Grid "))
+
+
+def test_a_resume_with_another_scene_is_refused_naming_the_field(tmp_path, monkeypatch):
+    with monkeypatch.context() as m:
+        _stop_at(m, 2)
+        run_boundary_value(_spec(MOHR_COULOMB, 3, "[4, 3]", -0.0015), out=tmp_path / "run")
+    with pytest.raises(SpecError, match="steps") as refused:
+        run_boundary_value(_spec(MOHR_COULOMB, 4, "[4, 3]", -0.0015), out=tmp_path / "run",
+                           resume=True)
+    assert refused.value.field == "steps"
+    with pytest.raises(SpecError, match="no boundary-value run to resume"):
+        run_boundary_value(_spec(MOHR_COULOMB, 3, "[4, 3]"), out=tmp_path / "other",
+                           resume=True)
+
+
+def test_the_command_line_resumes_a_scene(tmp_path, monkeypatch, capsys):
+    scene = tmp_path / "footing.toml"
+    scene.write_text(FOOTING.format(steps=3, elements="[4, 3]", settlement=-0.0015,
+                                    material=MOHR_COULOMB))
+    out = tmp_path / "run"
+    with monkeypatch.context() as m:
+        _stop_at(m, 2)
+        assert main(["run", str(scene), "--out", str(out)]) == 1
+    assert main(["run", str(scene), "--out", str(out)]) == 2
+    assert "--resume" in capsys.readouterr().err
+    assert main(["run", str(scene), "--out", str(out), "--resume"]) == 0
+    assert list(pd.read_csv(out / "steps.csv")["step"]) == [0, 1, 2, 3]
