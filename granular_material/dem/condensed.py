@@ -32,7 +32,7 @@ Why an upper bound matters: modified Newton with a held symmetric tangent K cont
 where 0 < J ≤ K (J the response's own stiffness, the error shrinks by I − K⁻¹J), and
 overshoots, cycles or diverges where J > 2K. With ``"free"`` a contact at its cap has
 kt = 0 however the next increment moves it; where it moves back, it sticks and answers
-with kt, so K underestimates J in those directions. Measured in docs/physics.md ("Sliding
+with kt, so K underestimates J in those directions. Measured in docs/physics-tangents.md ("Sliding
 contacts in the condensed tangent").
 
 Properties, by construction: with ``sliding="free"`` (or ``"stick"``) C has major symmetry

@@ -24,7 +24,8 @@ __all__ = ["COMMAND_DEFAULTS", "NOISY_DEFAULTS", "SMOOTH_DEFAULTS", "default_set
 #: solves with the committed tangent: the same band, half the iterations). On their 2 × 4
 #: case this is a loop in which the shear band of their code forms; with Aitken relaxation
 #: and the objective tangent it stays nearly uniform, whatever the test (see
-#: docs/physics.md, "Finite strain"), so Aitken comes only with the noisy defaults below.
+#: docs/physics-tangents.md, "Finite strain and the band"), so Aitken comes only with the
+#: noisy defaults below.
 #: The test is theirs judged one iterate earlier ("residual-displacement"): the iterate
 #: whose correction is within 1e-2 is accepted, where their loop applies that correction
 #: and evaluates the RVEs once more (issue 26: a DEM run less per increment, a fifth fewer
@@ -39,8 +40,8 @@ COMMAND_DEFAULTS: dict[str, Any] = {"formulation": "updated-lagrangian",
 #: corrections (it cannot cycle between sliding sets, and the RVEs condense once an
 #: increment) and Aitken relaxation (it damps the DEM noise a soft tangent turns into
 #: displacement). On Guo & Zhao's 2 × 4 case their band still forms, no later than with the
-#: objective tangent, at about a quarter fewer particle-steps; see docs/physics.md, "A held
-#: tangent". A smooth material keeps full Newton: plain steps, the tangent of every iterate.
+#: objective tangent, at about a quarter fewer particle-steps; see docs/physics-tangents.md,
+#: "A held tangent". A smooth material keeps full Newton: plain steps, the tangent of every iterate.
 NOISY_DEFAULTS: dict[str, Any] = {"relaxation": "aitken", "tangent_update": "hold"}
 
 #: what a material whose stress carries no noise (linear-elastic, Mohr–Coulomb) changes: its
@@ -84,7 +85,8 @@ def default_settings(material: str | bool, **overrides: Any) -> NewtonSettings:
     if noisy:
         values.update(NOISY_DEFAULTS)
         if overrides.get("tangent_update") == "secant" and overrides.get("relaxation") is None:
-            values["relaxation"] = "none"  # Broyden updates and Aitken fight (docs/physics.md)
+            # Broyden updates and Aitken fight (docs/physics-tangents.md)
+            values["relaxation"] = "none"
     else:
         values.update(SMOOTH_DEFAULTS)
     values.update({k: v for k, v in overrides.items() if v is not None})
