@@ -72,8 +72,8 @@ from granular_material.typed_fields import conform_mapping
 if TYPE_CHECKING:
     import pandas as pd
 
+    from granular_material.fem.run_context import RunContext
     from granular_material.multiscale.mpi import MPIBackend
-    from granular_material.runs.context import RunContext
 
 __all__ = ["UNCONFINED_FRACTION", "DEMMaterial", "UnconfinedWarning"]
 
@@ -140,7 +140,7 @@ class DEMMaterial(ScikitFemInterface):
 
     In a run specification its parameters are :class:`DEMParameters` (``Parameters``), and
     ``check_run``, ``for_run`` and ``run_summary`` are its run hooks (see
-    :mod:`granular_material.runs.context`); its stress carries noise (``noisy``).
+    :mod:`granular_material.fem.run_context`); its stress carries noise (``noisy``).
     """
 
     #: the parameters of the material in a run specification
@@ -204,7 +204,7 @@ class DEMMaterial(ScikitFemInterface):
     @classmethod
     def for_run(cls, parameters: DEMParameters, context: RunContext) -> DEMMaterial:
         """The material of a run specification (not yet allocated): the run hook of
-        :mod:`granular_material.runs.context`."""
+        :mod:`granular_material.fem.run_context`."""
         keywords = material_keywords(parameters, context)
         return cls(progress=keywords.pop("progress"), **keywords)
 
