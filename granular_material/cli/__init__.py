@@ -133,16 +133,11 @@ _STOPPED_CODES = frozenset({128 + 1, 128 + 2, 128 + 15})
 
 
 def _named(exc: BaseException) -> str:
-    """The message of ``exc``; a library's ParameterError with its field named as the option
-    (:func:`~granular_material.cli.options.flag_of`; a run specification's SpecError is
-    named by the scene or command that read it)."""
-    from granular_material.errors import ParameterError
+    """The message of ``exc``; a library's ParameterError with its fields named as options
+    (:func:`~granular_material.cli.options.message_of`)."""
+    from granular_material.cli.options import message_of
 
-    if type(exc) is ParameterError:
-        from granular_material.cli.options import flag_of
-
-        return f"{flag_of(exc.field)} {exc.message}"
-    return str(exc)
+    return message_of(exc)
 
 
 def _usage_error() -> type[Exception]:

@@ -32,6 +32,7 @@ from granular_material.cli.options import (
     positive,
     positive_int,
     progress_enabled,
+    shown,
 )
 from granular_material.cli.parsers import CommandParser
 from granular_material.cli.signals import interrupt_exit_code
@@ -342,7 +343,7 @@ def spec_from_args(args: argparse.Namespace) -> RunSpec:
     try:  # another material's options, given or not, are no fields of this run
         return from_flat(flat, strict=False)
     except SpecError as exc:
-        raise UsageError(f"{flag_of(exc.field)} {exc.message}") from None
+        raise UsageError(shown(exc)) from None
 
 
 def report(args: argparse.Namespace, summary: dict[str, Any],

@@ -7,6 +7,7 @@ import argparse
 import contextlib
 import json
 import math
+import re
 import sys
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -14,19 +15,15 @@ from typing import Any
 
 import numpy as np
 
+from granular_material import checks
 from granular_material.checks import (
     DISC_BYTES,
     RVE_MATERIAL_DEFAULTS,
-    UsageError,
-    check_memory,
-    check_output_dir,
-    check_output_file,
     cleanup_on_rejection,
     make_parents,
-    packing_parameters,
-    rve_file_shape,
     rve_material_given,
 )
+from granular_material.errors import ParameterError
 from granular_material.procedures.strain_path import DEFAULT_MAX_DEM_STEPS
 
 __all__ = [
@@ -51,6 +48,7 @@ __all__ = [
     "emit",
     "flag_of",
     "make_parents",
+    "message_of",
     "packing_parameters",
     "positive",
     "positive_int",
@@ -59,8 +57,14 @@ __all__ = [
     "rve_file_shape",
     "rve_material_given",
     "scalar_or_list",
+    "shown",
     "warn",
 ]
+
+
+class UsageError(ValueError):
+    """Bad input from the user: reported on stderr with exit code 2."""
+
 
 def flag_of(field: str) -> str:
     """The command-line option of a field of the library (a
@@ -68,6 +72,92 @@ def flag_of(field: str) -> str:
     name): ``max_strain_per_step`` → ``--max-strain-per-step``. The one place where the
     library's names become the command line's."""
     return f"--{field.replace('_', '-')}"
+
+
+#: how a library message names a field beside its own: in backquotes, ```convergence```, or
+#: with its value as a keyword, ```radius_min`` = 0.008` (on the command line
+#: ``--radius-min 0.008``)
+_FIELD_IN_MESSAGE = re.compile(r"`([A-Za-z][A-Za-z0-9_]*)`( = )?")
+
+
+def _flags(text: str) -> str:
+    """``text`` with every field in backquotes named as its option."""
+    return _FIELD_IN_MESSAGE.sub(lambda m: flag_of(m.group(1)) + (" " if m.group(2) else ""),
+                                 text)
+
+
+def shown(exc: ParameterError) -> str:
+    """A library ParameterError as the command line shows it: its field as the option, and
+    every other field its message names in backquotes too (``reuse_tol 0.01 needs
+    `convergence` force`` → ``--reuse-tol 0.01 needs --convergence force``); a
+    :class:`~granular_material.checks.WordedError` is the sentence alone."""
+    text = exc.message if isinstance(exc, checks.WordedError) else f"`{exc.field}` {exc.message}"
+    return _flags(text)
+
+
+def message_of(exc: BaseException) -> str:
+    """What the command line says of ``exc``: a library ParameterError as :func:`shown`
+    (a run specification's SpecError is named by the scene or command that read it), any
+    other error as its message."""
+    if isinstance(exc, ParameterError) and type(exc).__name__ != "SpecError":
+        return shown(exc)
+    return str(exc)
+
+
+@contextlib.contextmanager
+def _as_option(option: str | None) -> Iterator[None]:
+    """ParameterErrors of the block as UsageErrors naming the option: ``option`` (a flag, or
+    words saying what set the value) in place of the field's own; None: the field's."""
+    try:
+        yield
+    except checks.WordedError as exc:
+        raise UsageError(shown(exc)) from None
+    except ParameterError as exc:
+        if option is None:
+            raise UsageError(shown(exc)) from None
+        raise UsageError(f"{option} {_flags(exc.message)}") from None
+
+
+def check_output_file(path: Path | None, option: str = "--out") -> None:
+    """Before any work: the output file ``path`` (None: none) can be written
+    (:func:`granular_material.checks.check_output_file`); a UsageError naming ``option``."""
+    with _as_option(option):
+        checks.check_output_file(path)
+
+
+def check_output_dir(path: Path | None, option: str = "--out") -> None:
+    """Before any work: the output folder ``path`` (None: none) is one or can be made, and
+    written in (:func:`granular_material.checks.check_output_dir`); a UsageError naming
+    ``option``."""
+    with _as_option(option):
+        checks.check_output_dir(path)
+
+
+def rve_file_shape(path: Path, option: str = "--rve") -> tuple[int, int]:
+    """(B, N) of the RVE file ``path`` (:func:`granular_material.checks.rve_file_shape`); a
+    UsageError naming ``option`` where it does not exist."""
+    with _as_option(option):
+        return checks.rve_file_shape(path)
+
+
+def check_memory(needed: float, what: str) -> None:
+    """:func:`granular_material.checks.check_memory` (``what``: the options, in words), its
+    refusal a UsageError."""
+    try:
+        checks.check_memory(needed, what)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+
+
+def packing_parameters(args: argparse.Namespace, particles: int, pressure: float,
+                       pressure_option: str = "--pressure") -> Any:
+    """The RVE material options of ``args`` as
+    :class:`~granular_material.procedures.packing.PackingParameters`
+    (:func:`granular_material.checks.packing_parameters`); a UsageError naming the options
+    (the pressure as ``pressure_option``)."""
+    field = pressure_option.removeprefix("--").replace("-", "_")
+    with _as_option(None):
+        return checks.packing_parameters(args, particles, pressure, field)
 
 
 def positive(text: str) -> float:

@@ -26,7 +26,12 @@ from pathlib import Path
 from typing import Any
 
 from granular_material.cli.bvp import BOUNDARY_VALUE, run_bvp_scene
-from granular_material.cli.options import UsageError, check_output_dir, reports_to
+from granular_material.cli.options import (
+    UsageError,
+    check_output_dir,
+    message_of,
+    reports_to,
+)
 from granular_material.cli.scene_keys import (
     command_parsers,
     convert,
@@ -302,7 +307,7 @@ def run_scene(scene: Scene) -> int:
             with _scene_copied(scene), reports_to(reports.append):
                 code = int(namespace.func(namespace) or 0)
         except ValueError as exc:  # the command's own checks: say where the scene set it
-            raise UsageError(_located(scene, str(exc))) from exc
+            raise UsageError(_located(scene, message_of(exc))) from exc
         # the FEM commands write summary.json into their folder themselves; the DEM
         # commands, whose --out is a file, report on stdout only: their report is kept here
         if TESTS[scene.test] is not None and reports:
@@ -327,7 +332,7 @@ def check_scene(scene: Scene) -> None:
     try:
         check(spec_from_args(scene.namespace))
     except ValueError as exc:
-        raise UsageError(_located(scene, str(exc))) from exc
+        raise UsageError(_located(scene, message_of(exc))) from exc
 
 
 def _spec_error(path: Path, text: str, exc: ValueError) -> UsageError:
