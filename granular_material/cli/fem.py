@@ -178,7 +178,7 @@ def _rve_material_arguments(parser: argparse.ArgumentParser) -> None:
         "RVE material", "dem: the material of the RVEs the run prepares, each consolidated to "
         "--confining: the options of `granular-material prepare` (not with --rve, whose file "
         "carries its own; refused there)")
-    add_rve_material_options(g)
+    add_rve_material_options(g, defaults=False)
 
 
 def _common_arguments(parser: argparse.ArgumentParser) -> None:
@@ -308,14 +308,21 @@ def _given(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def _check_rve_options(material: str, given: dict[str, Any]) -> None:
-    """An RVE material option given with a material that prepares no RVEs is refused (the
-    other options of another material are left unused)."""
+    """An RVE material option given (at its default value too: they default to None) with a
+    material that prepares no RVEs, or beside an RVE file, which carries its own, is refused
+    (the other options of another material are left unused)."""
     own = set(load_material(material).Parameters.__dataclass_fields__)
     rve_options = [flag_of(k) for k in given if k in RVE_MATERIAL_DEFAULTS and k not in own]
+    sets = f"set{'s' if len(rve_options) == 1 else ''}"
     if rve_options:
-        raise UsageError(f"{', '.join(rve_options)} set{'s' if len(rve_options) == 1 else ''} "
-                         "the material of the RVEs a run prepares, but --material "
-                         f"{material} has no RVEs")
+        raise UsageError(f"{', '.join(rve_options)} {sets} the material of the RVEs a run "
+                         f"prepares, but --material {material} has no RVEs")
+    rve_options = [flag_of(k) for k in given if k in RVE_MATERIAL_DEFAULTS]
+    sets = f"set{'s' if len(rve_options) == 1 else ''}"
+    if rve_options and given.get("rve") is not None:
+        raise UsageError(f"{', '.join(rve_options)} {sets} the material of the RVEs a run "
+                         f"prepares, but --rve {given['rve']} carries its own (give them to "
+                         "`granular-material prepare` instead)")
 
 
 def spec_from_args(args: argparse.Namespace) -> RunSpec:

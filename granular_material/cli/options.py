@@ -265,36 +265,44 @@ def add_max_dem_steps(parser: argparse.ArgumentParser | argparse._ArgumentGroup,
 
 
 def add_rve_material_options(parser: argparse.ArgumentParser | argparse._ArgumentGroup,
-                             ) -> None:
+                             defaults: bool = True) -> None:
     """The material of prepared RVEs and how they are packed (e0, radii, contact law,
     friction, damping, density, thickness): ``prepare`` and the FEM commands take the same;
-    :func:`packing_parameters` turns them into :class:`PackingParameters`."""
+    :func:`packing_parameters` turns them into :class:`PackingParameters`. With ``defaults``
+    False each defaults to None (its default is the material's, applied where the DEM
+    settings are built, and shown in the help), so an option given at its default value
+    still counts as given: refused beside a material that prepares no RVEs."""
     d = RVE_MATERIAL_DEFAULTS
-    parser.add_argument("--target-void-ratio", type=positive, default=d["target_void_ratio"],
+
+    def default(name: str) -> Any:
+        return d[name] if defaults else None
+
+    parser.add_argument("--target-void-ratio", type=positive, default=default("target_void_ratio"),
                         help="first compress the gas to this 2D void ratio (Wu et al.: 0.18)")
-    parser.add_argument("--radius-min", type=positive, default=d["radius_min"],
+    parser.add_argument("--radius-min", type=positive, default=default("radius_min"),
                         help=f"[m] ({d['radius_min']:g})")
-    parser.add_argument("--radius-max", type=positive, default=d["radius_max"],
+    parser.add_argument("--radius-max", type=positive, default=default("radius_max"),
                         help=f"[m] ({d['radius_max']:g})")
-    parser.add_argument("--law", choices=["constant", "frictmat"], default=d["law"],
-                        help="contact stiffness law (constant: Wu et al. Table 1)")
-    parser.add_argument("--kn", type=positive, default=d["kn"],
+    parser.add_argument("--law", choices=["constant", "frictmat"], default=default("law"),
+                        help=f"contact stiffness law (constant: Wu et al. Table 1; default "
+                             f"{d['law']})")
+    parser.add_argument("--kn", type=positive, default=default("kn"),
                         help=f"normal stiffness [N/m] ({d['kn']:g})")
-    parser.add_argument("--kt", type=positive, default=d["kt"],
+    parser.add_argument("--kt", type=positive, default=default("kt"),
                         help=f"tangential stiffness [N/m] ({d['kt']:g})")
-    parser.add_argument("--young", type=positive, default=d["young"],
+    parser.add_argument("--young", type=positive, default=default("young"),
                         help="--law frictmat: the discs' Young's modulus [Pa], which sets the "
                              f"contact stiffness kn = 2E r1 r2/(r1 + r2) ({d['young']:g}; not "
                              "the --E of a linear-elastic material)")
-    parser.add_argument("--kt-over-kn", type=positive, default=d["kt_over_kn"],
+    parser.add_argument("--kt-over-kn", type=positive, default=default("kt_over_kn"),
                         help=f"FrictMat kt/kn ({d['kt_over_kn']:g})")
-    parser.add_argument("--friction-angle", type=float, default=d["friction_angle"],
-                        help=f"[rad] ({d['friction_angle']:g})")
-    parser.add_argument("--damping", type=float, default=d["damping"],
+    parser.add_argument("--friction-angle", type=float, default=default("friction_angle"),
+                        help=f"contact friction angle [rad] ({d['friction_angle']:g})")
+    parser.add_argument("--damping", type=float, default=default("damping"),
                         help=f"local damping ({d['damping']:g})")
-    parser.add_argument("--density", type=positive, default=d["density"],
+    parser.add_argument("--density", type=positive, default=default("density"),
                         help=f"[kg/m³] ({d['density']:g})")
-    parser.add_argument("--thickness", type=positive, default=d["thickness"],
+    parser.add_argument("--thickness", type=positive, default=default("thickness"),
                         help=f"disc thickness [m] ({d['thickness']:g})")
 
 
