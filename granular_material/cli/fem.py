@@ -62,7 +62,7 @@ _PARSERS: dict[str, CommandParser] = {}
 
 
 def _newton_arguments(parser: argparse.ArgumentParser) -> None:
-    g = parser.add_argument_group("Newton solver")
+    g = parser.add_argument_group("Newton solver", advanced=True)
     g.add_argument("--rtol", type=float, default=_NEWTON.rtol,
                    help="relative tolerance of the --convergence test: ||du||/||Du|| "
                         f"(default {_NEWTON.rtol:g}, Guo & Zhao) or ||R||/||R0|| (Wu et al. "
@@ -133,7 +133,8 @@ def _newton_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _dem_arguments(parser: argparse.ArgumentParser) -> None:
-    g = parser.add_argument_group("DEM material: what is stepped, and what is post-processed")
+    g = parser.add_argument_group("DEM material: what is stepped, and what is post-processed",
+                                  advanced=True)
     g.add_argument("--reuse-tol", type=float, default=_DEM.reuse_tol,
                    help="a Gauss point whose grad u moved by at most this strain (every "
                         "component) since its RVE was last driven keeps that response instead "
@@ -175,14 +176,16 @@ def _dem_arguments(parser: argparse.ArgumentParser) -> None:
 
 def _rve_material_arguments(parser: argparse.ArgumentParser) -> None:
     g = parser.add_argument_group(
-        "RVE material", "dem: the material of the RVEs the run prepares, each consolidated to "
-        "--confining: the options of `granular-material prepare` (not with --rve, whose file "
-        "carries its own; refused there)")
+        "RVE material", advanced=True,
+        description="dem: the material of the RVEs the run prepares, each consolidated to "
+                    "--confining: the options of `granular-material prepare` (not with "
+                    "--rve, whose file carries its own; refused there)")
     add_rve_material_options(g, defaults=False)
 
 
 def _common_arguments(parser: argparse.ArgumentParser) -> None:
-    add_element(parser)
+    """The options of both commands: the load, the outputs and the device (what ``--help``
+    shows), then the elements, where the RVEs run and the checkpoints (``--help-all``)."""
     parser.add_argument("--axial-strain", type=float, default=_PROBLEM["axial_strain"],
                         help="final axial strain, compression positive (default "
                              f"{_PROBLEM['axial_strain']:g})")
@@ -195,23 +198,28 @@ def _common_arguments(parser: argparse.ArgumentParser) -> None:
     add_out(parser, "output folder: steps.csv, points.csv, fields.xdmf, summary.json, figures")
     add_json(parser, "a summary")
     add_device(parser, "DEM device")
-    parser.add_argument("--shards", type=int, default=None,
-                        help="CPU threads (shards) of the DEM batch, per rank with --backend "
-                             "mpi (default: one per core, shared by a node's ranks)")
-    parser.add_argument("--backend", choices=BACKENDS, default=BACKENDS[0],
-                        help="dem: where the RVEs live: this process (default) or shards on "
-                             "the ranks of an MPI job (launch with mpiexec -n K; rank 0 runs "
-                             "the FEM and alone writes and prints; the same results)")
-    parser.add_argument("--map-strain", type=float, nargs="+",
-                        default=list(_OUTPUT.map_strain),
-                        help="axial strain(s) of the displacement/shear-strain maps and of the "
-                             "shear-band measures (default 0.02)")
     parser.add_argument("--preset", choices=PRESET_NAMES, default=None,
                         help="settings the trade study recommends (docs/trade-study): discs "
                              "per RVE, strain per DEM step, Newton stress floor, tangent, "
                              "predictor and relaxation, reuse; an option given beside it (not "
                              "at its default) wins")
-    g = parser.add_argument_group("checkpoints (with --out)")
+    parser.add_argument("--resume", type=Path, default=None, metavar="DIR",
+                        help="continue the stopped or killed run whose --out was DIR, in DIR, "
+                             "from its last checkpoint (give the other options as then); the "
+                             "result is the one of a run that never stopped")
+    add_progress(parser)
+    add_element(parser, advanced=True)
+    g = parser.add_argument_group("where the RVEs run, maps and checkpoints", advanced=True)
+    g.add_argument("--shards", type=int, default=None,
+                   help="CPU threads (shards) of the DEM batch, per rank with --backend "
+                        "mpi (default: one per core, shared by a node's ranks)")
+    g.add_argument("--backend", choices=BACKENDS, default=BACKENDS[0],
+                   help="dem: where the RVEs live: this process (default) or shards on "
+                        "the ranks of an MPI job (launch with mpiexec -n K; rank 0 runs "
+                        "the FEM and alone writes and prints; the same results)")
+    g.add_argument("--map-strain", type=float, nargs="+", default=list(_OUTPUT.map_strain),
+                   help="axial strain(s) of the displacement/shear-strain maps and of the "
+                        "shear-band measures (default 0.02)")
     g.add_argument("--checkpoint-every", type=positive_int, default=_OUTPUT.checkpoint_every,
                    metavar="N",
                    help="save the committed state (RVEs with contact history, displacement, "
@@ -223,11 +231,6 @@ def _common_arguments(parser: argparse.ArgumentParser) -> None:
                    default=_OUTPUT.checkpoint_minutes, metavar="M",
                    help="without --checkpoint-every: the longest time between two saves of "
                         f"the committed state (default {_OUTPUT.checkpoint_minutes:g} min)")
-    g.add_argument("--resume", type=Path, default=None, metavar="DIR",
-                   help="continue the stopped or killed run whose --out was DIR, in DIR, "
-                        "from its last checkpoint (give the other options as then); the "
-                        "result is the one of a run that never stopped")
-    add_progress(parser)
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:

@@ -188,11 +188,13 @@ def add_device(parser: argparse.ArgumentParser, what: str = "warp device") -> No
                         help=f"{what} (default: CUDA when present, else CPU)")
 
 
-def add_element(parser: argparse.ArgumentParser) -> None:
-    """``--element`` and ``--quadrature`` of the FEM commands (a group of their own)."""
+def add_element(parser: argparse.ArgumentParser, advanced: bool = False) -> None:
+    """``--element`` and ``--quadrature`` of the FEM commands (a group of their own; one
+    that only ``--help-all`` shows where ``advanced``)."""
     from granular_material.fem.problems import ELEMENTS
 
-    g = parser.add_argument_group("finite elements")
+    g = (parser.add_argument_group("finite elements", advanced=True) if advanced
+         else parser.add_argument_group("finite elements"))
     g.add_argument("--element", choices=tuple(ELEMENTS), default="quad4",
                    help="quad4: bilinear, 4 nodes, 2x2 Gauss points (full; default); quad8: "
                         "serendipity, 8 nodes (midside nodes), 2x2 Gauss points: REDUCED "
