@@ -40,6 +40,7 @@ __all__ = [
     "add_out",
     "add_progress",
     "add_rve_material_options",
+    "as_flags",
     "check_figure_file",
     "check_memory",
     "check_output_dir",
@@ -80,7 +81,7 @@ def flag_of(field: str) -> str:
 _FIELD_IN_MESSAGE = re.compile(r"`([A-Za-z][A-Za-z0-9_]*)`( = )?")
 
 
-def _flags(text: str) -> str:
+def as_flags(text: str) -> str:
     """``text`` with every field in backquotes named as its option."""
     return _FIELD_IN_MESSAGE.sub(lambda m: flag_of(m.group(1)) + (" " if m.group(2) else ""),
                                  text)
@@ -92,7 +93,7 @@ def shown(exc: ParameterError) -> str:
     `convergence` force`` → ``--reuse-tol 0.01 needs --convergence force``); a
     :class:`~granular_material.checks.WordedError` is the sentence alone."""
     text = exc.message if isinstance(exc, checks.WordedError) else f"`{exc.field}` {exc.message}"
-    return _flags(text)
+    return as_flags(text)
 
 
 def message_of(exc: BaseException) -> str:
@@ -115,7 +116,7 @@ def _as_option(option: str | None) -> Iterator[None]:
     except ParameterError as exc:
         if option is None:
             raise UsageError(shown(exc)) from None
-        raise UsageError(f"{option} {_flags(exc.message)}") from None
+        raise UsageError(f"{option} {as_flags(exc.message)}") from None
 
 
 def check_output_file(path: Path | None, option: str = "--out") -> None:
