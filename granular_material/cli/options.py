@@ -100,8 +100,11 @@ def message_of(exc: BaseException) -> str:
     """What the command line says of ``exc``: a library ParameterError as :func:`shown`
     (a run specification's SpecError is named by the scene or command that read it), any
     other error as its message."""
-    if isinstance(exc, ParameterError) and type(exc).__name__ != "SpecError":
-        return shown(exc)
+    if isinstance(exc, ParameterError):
+        from granular_material.runs.spec_checks import SpecError
+
+        if not isinstance(exc, SpecError):
+            return shown(exc)
     return str(exc)
 
 
