@@ -2,14 +2,18 @@
 specification, a library caller): output folders and files that can be written, memory
 that a run will need, RVE files that exist, the material and packing of RVEs to prepare.
 
-Each refusal is a :class:`UsageError` (a ``ValueError``) whose message names what set the
-value, as the caller names it (``option``: a command-line flag by default).
+Each refusal of a value is a :class:`~granular_material.errors.ParameterError` naming the
+field that set it (``field``: ``out``, ``rve``, ``friction_angle``; another field the message
+names is written in backquotes, ```particles```), which the command line shows as its option
+(:func:`granular_material.cli.options.flag_of`); a refusal that no one value makes (the
+memory a run needs) is a plain ``ValueError``. No message here names a command-line flag.
 """
 
 from __future__ import annotations
 
 import contextlib
 import functools
+import math
 import os
 import re
 from collections.abc import Iterator
@@ -17,6 +21,7 @@ from pathlib import Path
 from typing import Any
 
 from granular_material.dem.rve_file import FRICTMAT_STIFFNESS, RVEMeta
+from granular_material.errors import ParameterError
 from granular_material.memory import (
     MEMORY_LIMIT,
     available_memory,
@@ -28,47 +33,44 @@ from granular_material.procedures.packing import (
     PackingParameters,
     check_packing,
     check_radius_range,
+    min_discs,
 )
 
-__all__ = ["DISC_BYTES", "MEMORY_LIMIT", "RVE_MATERIAL_DEFAULTS", "UsageError",
+__all__ = ["DISC_BYTES", "MEMORY_LIMIT", "RVE_MATERIAL_DEFAULTS", "WordedError",
            "available_memory", "check_memory", "check_output_dir", "check_output_file",
            "cleanup_on_rejection", "make_parents", "packing_parameters", "rve_file_shape",
            "rve_material_given"]
 
 
-class UsageError(ValueError):
-    """Bad input from the user: reported on stderr with exit code 2."""
-
-
-def _writable_folder(path: Path, option: str, given: Path) -> None:
+def _writable_folder(path: Path, field: str, given: Path) -> None:
     """The folder ``path`` or, where it does not exist yet, its nearest existing ancestor must
     be a folder this process may create files in (nothing is created here); messages name
-    the option's value ``given``."""
+    the value ``given`` of ``field``."""
     folder = path
     while not folder.exists():
         if folder.parent == folder:
             break
         folder = folder.parent
     if not folder.is_dir():
-        raise UsageError(f"{option} {given}: {folder} is not a folder")
+        raise ParameterError(field, f"{given}: {folder} is not a folder")
     if not os.access(folder, os.W_OK | os.X_OK):
-        raise UsageError(f"{option} {given}: cannot write in {folder} (permission denied or a "
-                         "read-only file system)")
+        raise ParameterError(field, f"{given}: cannot write in {folder} (permission denied or "
+                                    "a read-only file system)")
 
 
-def check_output_file(path: Path | None, option: str = "--out") -> None:
+def check_output_file(path: Path | None, field: str = "out") -> None:
     """Before any work: ``path`` (an output file; None: none) can be written — it is not a
     folder and its folder exists or can be made. Creates nothing (:func:`make_parents` does,
     when the file is written), so a rejected run leaves nothing behind."""
     if path is None:
         return
     path = Path(path)
-    _not_dangling(path, option)
+    _not_dangling(path, field)
     if path.is_dir():
-        raise UsageError(f"{option} {path} is a folder; give a file name")
+        raise ParameterError(field, f"{path} is a folder; give a file name")
     if path.exists() and not os.access(path, os.W_OK):
-        raise UsageError(f"{option} {path} exists and cannot be overwritten")
-    _writable_folder(path.parent, option, path)
+        raise ParameterError(field, f"{path} exists and cannot be overwritten")
+    _writable_folder(path.parent, field, path)
 
 
 #: memory one disc of an RVE takes while it is run, about [bytes]: its state, the committed
@@ -83,38 +85,38 @@ def _size(n_bytes: float) -> str:
 
 def check_memory(needed: float, what: str) -> None:
     """Before any allocation: ``what`` (the options, in words) needs about ``needed`` bytes;
-    refused (UsageError with the estimate) beyond :data:`MEMORY_LIMIT`, which no machine
+    refused (ValueError with the estimate) beyond :data:`MEMORY_LIMIT`, which no machine
     this runs on has, or beyond the memory available now."""
     refusal = memory_refusal(needed, what, available_memory())
     if refusal is not None:
-        raise UsageError(refusal)
+        raise ValueError(refusal)
 
 
-def check_output_dir(path: Path | None, option: str = "--out") -> None:
+def check_output_dir(path: Path | None, field: str = "out") -> None:
     """Before any work: ``path`` (an output folder; None: none) is a folder, or can be made,
     and can be written in. Creates nothing."""
     if path is None:
         return
     path = Path(path)
-    _not_dangling(path, option)
+    _not_dangling(path, field)
     if path.exists() and not path.is_dir():
-        raise UsageError(f"{option} {path} exists and is not a folder")
-    _writable_folder(path, option, path)
+        raise ParameterError(field, f"{path} exists and is not a folder")
+    _writable_folder(path, field, path)
     if path.is_dir():  # a folder where a file is written under its temporary name
         with contextlib.suppress(OSError):
             stray = sorted(p.name for p in path.iterdir()
                            if p.name.endswith(".part") and p.is_dir() and not p.is_symlink())
             if stray:
-                raise UsageError(f"{option} {path} holds the folder {stray[0]}, where a file "
-                                 "of the run is written before it is renamed into place: "
-                                 "remove it")
+                raise ParameterError(field, f"{path} holds the folder {stray[0]}, where a file "
+                                            "of the run is written before it is renamed into "
+                                            "place: remove it")
 
 
-def _not_dangling(path: Path, option: str) -> None:
+def _not_dangling(path: Path, field: str) -> None:
     """``path`` is no symbolic link to nothing (which neither exists nor can be made)."""
     if path.is_symlink() and not path.exists():
-        raise UsageError(f"{option} {path} is a symbolic link to {os.readlink(path)}, which "
-                         "does not exist: make its target, or give another path")
+        raise ParameterError(field, f"{path} is a symbolic link to {os.readlink(path)}, which "
+                                    "does not exist: make its target, or give another path")
 
 
 @contextlib.contextmanager
@@ -145,13 +147,13 @@ def make_parents(path: Path | None) -> None:
         Path(path).parent.mkdir(parents=True, exist_ok=True)
 
 
-def rve_file_shape(path: Path, option: str = "--rve") -> tuple[int, int]:
+def rve_file_shape(path: Path, field: str = "rve") -> tuple[int, int]:
     """(B, N): the RVEs and discs per RVE of the RVE file ``path``, read (and so checked)
     before any work; a file asked about again unchanged (same size and modification time)
     is not read again."""
     path = Path(path)
     if not path.exists():
-        raise UsageError(f"{option} {path} does not exist")
+        raise ParameterError(field, f"{path} does not exist")
     stat = path.stat()
     return _rve_file_shape(str(path.resolve()), stat.st_mtime_ns, stat.st_size)
 
@@ -167,7 +169,8 @@ def _rve_file_shape(path: str, mtime_ns: int, size: int) -> tuple[int, int]:
 
 
 def _rve_material_defaults() -> dict[str, Any]:
-    """The options of :func:`add_rve_material_options`, by ``dest``, with their defaults:
+    """The RVE material fields (the options of
+    :func:`~granular_material.cli.options.add_rve_material_options`) with their defaults:
     those of :class:`~granular_material.dem.RVEMeta`, its contact laws and the packing
     (Wu et al. 2025, Table 1)."""
     meta = RVEMeta()
@@ -178,43 +181,78 @@ def _rve_material_defaults() -> dict[str, Any]:
             "damping": meta.damping, "density": meta.density, "thickness": meta.thickness}
 
 
-#: the options of :func:`add_rve_material_options`, by ``dest``, with their defaults
+#: the fields of the material and packing of prepared RVEs, with their defaults
 RVE_MATERIAL_DEFAULTS: dict[str, Any] = _rve_material_defaults()
 
 
 def rve_material_given(values: Any) -> list[str]:
-    """The RVE material options (:data:`RVE_MATERIAL_DEFAULTS`) that ``values`` (parsed
-    options, or a material's parameters) sets to other than their defaults, as ``--names``;
-    ``--particles`` too where it is set (the discs of the RVEs a run prepares)."""
-    given = [f"--{dest.replace('_', '-')}" for dest, default in RVE_MATERIAL_DEFAULTS.items()
-             if getattr(values, dest) != default]
-    return (["--particles"] if getattr(values, "particles", None) is not None else []) + given
+    """The RVE material fields (:data:`RVE_MATERIAL_DEFAULTS`) that ``values`` (parsed
+    options, or a material's parameters) sets to other than their defaults, by name;
+    ``particles`` too where it is set (the discs of the RVEs a run prepares)."""
+    given = [name for name, default in RVE_MATERIAL_DEFAULTS.items()
+             if getattr(values, name) != default]
+    return (["particles"] if getattr(values, "particles", None) is not None else []) + given
 
 
-def _option_named(message: str) -> str:
-    """A message of ``RVEMeta.validate`` with its field named as the option that sets it
-    (``meta.friction_angle`` → ``--friction-angle``, ``meta.stiffness.kn`` → ``--kn``)."""
-    return re.sub(r"meta\.(?:stiffness\.)?([a-z_]+)",
-                  lambda m: "--" + m.group(1).replace("_", "-"), message)
+class WordedError(ParameterError):
+    """A refusal worded whole: ``message`` is the sentence, naming ``field`` and any other
+    field it speaks of in backquotes (```radius_min`` = 0.007 exceeds ``radius_max`` ...``);
+    ``str()`` shows it with the backquotes dropped, the command line with each name as its
+    option. Where a check's sentence does not begin with the field (several take part)."""
+
+    def __init__(self, field: str, message: str) -> None:
+        super().__init__(field, message)
+        self.args = (message.replace("`", ""),)
+
+    def __str__(self) -> str:
+        return str(self.args[0])
 
 
-#: how :func:`packing_parameters` names the values of a packing: by their options
-_PACKING_OPTIONS = {"radius_range": ("--radius-min", "--radius-max"), "n_disc": "--particles",
-                    "stiffness": "--kn / --young"}
+def _named(field: str) -> str:
+    """How a worded refusal names ``field``: in backquotes."""
+    return f"`{field}`"
+
+
+#: how :func:`packing_parameters` names the values of a packing: by their fields
+_PACKING_FIELDS = {"radius_range": ("radius_min", "radius_max"), "n_disc": "particles",
+                   "stiffness": "kn"}
+
+#: a message of :meth:`~granular_material.dem.RVEMeta.validate` names its key
+#: (``meta.friction_angle``, ``meta.stiffness.kn``): the field of the same name sets it
+_META_KEY = re.compile(r"meta\.(?:stiffness\.)?([a-z_]+)")
+
+
+def _packing_refusal(exc: ValueError, pressure_field: str, particles: int, pressure: float,
+                     radius_range: tuple[float, float]) -> WordedError:
+    """A refusal of :func:`~granular_material.procedures.packing.check_packing` (which names
+    the values as it is told: the fields, in backquotes) with the field it is about: the
+    radii's, the discs', else the pressure's."""
+    r_min, r_max = radius_range
+    if not (0 < r_min <= r_max and math.isfinite(r_max)):
+        field = "radius_min"
+    elif math.isfinite(pressure) and pressure > 0 and particles < min_discs(radius_range):
+        field = "particles"
+    else:
+        field = pressure_field
+    return WordedError(field, str(exc))
 
 
 def packing_parameters(args: Any, particles: int, pressure: float,
-                       pressure_option: str = "--pressure") -> PackingParameters:
-    """The options of :func:`add_rve_material_options` in ``args`` as the parameters of a
-    packing of ``particles`` discs consolidated to ``pressure`` [Pa] (set by
-    ``pressure_option``), checked before any work (the checks of
-    :func:`~granular_material.procedures.packing.check_packing`): ``UsageError`` naming the
-    option when the radii, the contact law, the discs or the pressure cannot make a packing."""
+                       pressure_field: str = "pressure") -> PackingParameters:
+    """The RVE material fields (:data:`RVE_MATERIAL_DEFAULTS`) of ``args`` as the parameters
+    of a packing of ``particles`` discs consolidated to ``pressure`` [Pa] (set by
+    ``pressure_field``), checked before any work (the checks of
+    :func:`~granular_material.procedures.packing.check_packing`): a ParameterError naming
+    the field when the radii, the contact law, the discs or the pressure cannot make a
+    packing."""
     radius_range = (args.radius_min, args.radius_max)
+    names = {"radius_range": tuple(_named(f) for f in _PACKING_FIELDS["radius_range"]),
+             "n_disc": _named("particles"), "stiffness": f"{_named('kn')} / {_named('young')}",
+             "pressure": _named(pressure_field)}
     try:
-        check_radius_range(radius_range, _PACKING_OPTIONS["radius_range"])
+        check_radius_range(radius_range, names["radius_range"])
     except ValueError as exc:
-        raise UsageError(str(exc)) from None
+        raise WordedError("radius_min", str(exc)) from None
     if args.law == "constant":
         stiffness = {"law": "constant", "kn": args.kn, "kt": args.kt}
     else:
@@ -225,11 +263,12 @@ def packing_parameters(args: Any, particles: int, pressure: float,
     try:
         meta.validate()
     except ValueError as exc:
-        raise UsageError(_option_named(str(exc))) from None
+        key = _META_KEY.search(str(exc))
+        raise WordedError(key.group(1) if key else "law",
+                            _META_KEY.sub(lambda m: _named(m.group(1)), str(exc))) from None
     try:
-        check_packing(particles, pressure, meta, radius_range,
-                      names={**_PACKING_OPTIONS, "pressure": pressure_option})
+        check_packing(particles, pressure, meta, radius_range, names=names)
     except ValueError as exc:
-        raise UsageError(str(exc)) from None
+        raise _packing_refusal(exc, pressure_field, particles, pressure, radius_range) from None
     return PackingParameters(meta=meta, radius_range=radius_range,
                              target_void_ratio=args.target_void_ratio)

@@ -66,7 +66,7 @@ def test_a_stopped_run_resumes_to_the_run_that_never_stopped(tmp_path, monkeypat
         _stop_at(m, 3)
         stopped = run_boundary_value(_spec(material, steps, elements), out=tmp_path / "run")
     assert "interrupted after load step 2" in stopped.error
-    with pytest.raises(SpecError, match="--resume"):  # a fresh run would throw it away
+    with pytest.raises(SpecError, match="`resume`"):  # a fresh run would throw it away
         run_boundary_value(_spec(material, steps, elements), out=tmp_path / "run")
     resumed = run_boundary_value(_spec(material, steps, elements), out=tmp_path / "run",
                                  resume=True)

@@ -65,3 +65,33 @@ def test_run_gets_every_command_for_its_scenes():
     action = next(a for a in build_parser("run")._actions if a.dest == "command")
     assert set(action.choices) == set(next(
         a for a in build_parser()._actions if a.dest == "command").choices)
+
+
+def test_the_stored_help_is_the_parsers_own():
+    """Each command's --help and --help-all are printed from text stored in the package;
+    it must be what the parsers print (regenerate: python -m
+    granular_material.cli.stored_help)."""
+    from granular_material.cli.help_texts import HELP_TEXTS
+    from granular_material.cli.stored_help import generate
+
+    assert generate() == HELP_TEXTS, "run python -m granular_material.cli.stored_help"
+
+
+def test_a_commands_help_imports_nothing_it_runs_with():
+    heavy = ("numpy", "warp", "skfem", "pandas", "scipy", "matplotlib",
+             "granular_material.dem", "granular_material.cli.fem")
+    loaded, printed = _modules_loaded_by_help(
+        [["biaxial", "--help"], ["run", "-h"], ["prepare", "--steps", "3", "--help"],
+         ["single-element", "--help-all"]], heavy)
+    assert loaded == [] and "--help-all" in printed and "--tangent" in printed
+
+
+def test_help_shows_the_first_options_and_names_the_others():
+    short = build_parser("biaxial").commands["biaxial"].format_help()
+    full = build_parser("biaxial").commands["biaxial"].format_help_all()
+    assert len(short.splitlines()) < 100 < len(full.splitlines())
+    for shown in ("--steps", "--out", "--material", "--rve", "--resume", "Newton solver (",
+                  "RVE material ("):
+        assert shown in short, shown
+    for hidden in ("--tangent", "--rtol", "--kt-over-kn", "--shards"):
+        assert hidden not in short and hidden in full, hidden

@@ -11,8 +11,9 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from granular_material.checks import RVE_MATERIAL_DEFAULTS, UsageError, packing_parameters
+from granular_material.checks import RVE_MATERIAL_DEFAULTS
 from granular_material.cli import build_parser
+from granular_material.cli.options import UsageError, packing_parameters
 from granular_material.dem import RVEMeta
 from granular_material.dem.rve_file import FRICTMAT_STIFFNESS
 from granular_material.procedures.driven_path import plan_path

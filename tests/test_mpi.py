@@ -28,11 +28,10 @@ from granular_material.multiscale.mpi import (
     FAULT_VARIABLE,
     HEADER,
     ROW,
-    _pack,
-    _unpack,
     message_bytes,
     shard_bounds,
 )
+from granular_material.multiscale.mpi_wire import _pack, _unpack
 from granular_material.procedures import drive_grad_u, prepare_packing
 
 

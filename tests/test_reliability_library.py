@@ -15,7 +15,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from granular_material.checks import UsageError
 from granular_material.cli import main
 from granular_material.errors import ParameterError
 from granular_material.fem import LinearElastic
@@ -66,10 +65,10 @@ def test_a_run_into_a_stopped_runs_folder_is_refused_unless_resumed_or_fresh(tmp
     stopped = run(spec, _StopAfter(3))
     assert stopped.interrupt is not None and len(stopped.result.steps) == 4
     before = _files(tmp_path / "run")
-    with pytest.raises(UsageError, match=r"stopped after load step [23] of 6.*resume=True"):
+    with pytest.raises(ParameterError, match=r"stopped after load step [23] of 6.*resume=True"):
         run(spec)
     assert _files(tmp_path / "run") == before  # nothing in the folder changed
-    with pytest.raises(UsageError, match="exclude each other"):
+    with pytest.raises(ParameterError, match="exclude each other"):
         run(spec, resume=True, fresh=True)
     resumed = run(spec, resume=True)
     assert resumed.summary["resumed_from_step"] in (2, 3) and len(resumed.result.steps) == 7
@@ -324,7 +323,7 @@ def test_a_stray_part_folder_is_refused_before_any_work(tmp_path):
     from granular_material.filesafe import write_whole
 
     (tmp_path / "run" / "steps.csv.part").mkdir(parents=True)
-    with pytest.raises(UsageError, match=r"holds the folder steps.csv.part"):
+    with pytest.raises(ParameterError, match=r"holds the folder steps.csv.part"):
         run(_elastic(tmp_path / "run", steps=2))
     assert sorted(p.name for p in (tmp_path / "run").iterdir()) == ["steps.csv.part"]
     with pytest.raises(IsADirectoryError, match="is a folder in the way"):
@@ -336,5 +335,6 @@ def test_particles_beside_an_rve_file_is_refused(small_rve_path):
                    material=MaterialSpec(name="dem", parameters={"rve": small_rve_path,
                                                                  "particles": 64}),
                    device="cpu")
-    with pytest.raises(UsageError, match="--particles sets the material"):
+    with pytest.raises(ParameterError, match="particles sets the material") as info:
         check(spec)
+    assert info.value.field == "particles" and "--" not in str(info.value)

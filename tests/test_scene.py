@@ -17,7 +17,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from granular_material.cli import main
-from granular_material.cli.scene import _NOT_KEYS, TESTS, command_parsers, load_scene, scene_keys
+from granular_material.cli.parsers import HelpAll
+from granular_material.cli.scene import TESTS, command_parsers, load_scene, scene_keys
+from granular_material.cli.scene_load import _NOT_KEYS
 from granular_material.dem import load_rve
 from granular_material.procedures.packing import VOID_RATIO_TOLERANCE
 
@@ -104,7 +106,7 @@ def test_every_option_is_a_scene_key(test, parsers, tmp_path):
     parser = parsers[test]
     keys = scene_keys(parser)
     for action in parser._actions:
-        if isinstance(action, argparse._HelpAction):
+        if isinstance(action, (argparse._HelpAction, HelpAll)):  # the help is no key
             continue
         longs = [o[2:] for o in action.option_strings if o.startswith("--")]
         assert (longs[0] if longs else action.dest) in keys

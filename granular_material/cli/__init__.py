@@ -133,16 +133,11 @@ _STOPPED_CODES = frozenset({128 + 1, 128 + 2, 128 + 15})
 
 
 def _named(exc: BaseException) -> str:
-    """The message of ``exc``; a library's ParameterError with its field named as the option
-    (:func:`~granular_material.cli.options.flag_of`; a run specification's SpecError is
-    named by the scene or command that read it)."""
-    from granular_material.errors import ParameterError
+    """The message of ``exc``; a library's ParameterError with its fields named as options
+    (:func:`~granular_material.cli.options.message_of`)."""
+    from granular_material.cli.options import message_of
 
-    if type(exc) is ParameterError:
-        from granular_material.cli.options import flag_of
-
-        return f"{flag_of(exc.field)} {exc.message}"
-    return str(exc)
+    return message_of(exc)
 
 
 def _usage_error() -> type[Exception]:
@@ -170,7 +165,14 @@ def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     if not _names_a_command(argv):  # --help, --version or nothing: no command to import
         command_parser().parse_args(argv)
+    from granular_material.cli.stored_help import asks_for_help, print_stored
+
+    option = asks_for_help(argv)  # a command's help: stored, the command not imported
+    if option is not None and print_stored(argv[0], option):
+        raise SystemExit(0)
     parser = build_parser(argv[0])
+    if option == "--help-all" and not getattr(parser.commands.get(argv[0]), "_advanced", 1):
+        argv = ["--help" if a == option else a for a in argv]  # all its options are shown
     args = parser.parse_args(argv)
     with stop_signals_as_interrupt():  # the reports below too: a later signal is ignored
         try:

@@ -12,9 +12,10 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from granular_material.cli.options import UsageError, check_output_dir, emit
+from granular_material.cli.options import UsageError, as_flags, check_output_dir, emit
 from granular_material.filesafe import write_whole
 from granular_material.results.lock import FolderLock
+from granular_material.runs.spec_checks import SpecError
 
 __all__ = ["BOUNDARY_VALUE", "run_bvp_scene"]
 
@@ -79,7 +80,10 @@ def run_bvp_scene(path: Path, text: str, data: dict[str, Any],
     with FolderLock(folder):
         try:
             if not resume:
-                check_not_stopped(spec, folder)
+                try:
+                    check_not_stopped(spec, folder)
+                except SpecError as exc:  # `resume` is the run command's --resume
+                    raise UsageError(as_flags(f"{path}: {exc}")) from None
             write_whole(folder / "scene.toml",
                         lambda tmp: tmp.write_text(text, encoding="utf-8"))
             outcome = run_boundary_value(spec, out=folder, resume=resume)

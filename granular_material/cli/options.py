@@ -7,6 +7,7 @@ import argparse
 import contextlib
 import json
 import math
+import re
 import sys
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -14,19 +15,15 @@ from typing import Any
 
 import numpy as np
 
+from granular_material import checks
 from granular_material.checks import (
     DISC_BYTES,
     RVE_MATERIAL_DEFAULTS,
-    UsageError,
-    check_memory,
-    check_output_dir,
-    check_output_file,
     cleanup_on_rejection,
     make_parents,
-    packing_parameters,
-    rve_file_shape,
     rve_material_given,
 )
+from granular_material.errors import ParameterError
 from granular_material.procedures.strain_path import DEFAULT_MAX_DEM_STEPS
 
 __all__ = [
@@ -43,6 +40,7 @@ __all__ = [
     "add_out",
     "add_progress",
     "add_rve_material_options",
+    "as_flags",
     "check_figure_file",
     "check_memory",
     "check_output_dir",
@@ -51,6 +49,7 @@ __all__ = [
     "emit",
     "flag_of",
     "make_parents",
+    "message_of",
     "packing_parameters",
     "positive",
     "positive_int",
@@ -59,8 +58,14 @@ __all__ = [
     "rve_file_shape",
     "rve_material_given",
     "scalar_or_list",
+    "shown",
     "warn",
 ]
+
+
+class UsageError(ValueError):
+    """Bad input from the user: reported on stderr with exit code 2."""
+
 
 def flag_of(field: str) -> str:
     """The command-line option of a field of the library (a
@@ -68,6 +73,95 @@ def flag_of(field: str) -> str:
     name): ``max_strain_per_step`` → ``--max-strain-per-step``. The one place where the
     library's names become the command line's."""
     return f"--{field.replace('_', '-')}"
+
+
+#: how a library message names a field beside its own: in backquotes, ```convergence```, or
+#: with its value as a keyword, ```radius_min`` = 0.008` (on the command line
+#: ``--radius-min 0.008``)
+_FIELD_IN_MESSAGE = re.compile(r"`([A-Za-z][A-Za-z0-9_]*)`( = )?")
+
+
+def as_flags(text: str) -> str:
+    """``text`` with every field in backquotes named as its option."""
+    return _FIELD_IN_MESSAGE.sub(lambda m: flag_of(m.group(1)) + (" " if m.group(2) else ""),
+                                 text)
+
+
+def shown(exc: ParameterError) -> str:
+    """A library ParameterError as the command line shows it: its field as the option, and
+    every other field its message names in backquotes too (``reuse_tol 0.01 needs
+    `convergence` force`` → ``--reuse-tol 0.01 needs --convergence force``); a
+    :class:`~granular_material.checks.WordedError` is the sentence alone."""
+    text = exc.message if isinstance(exc, checks.WordedError) else f"`{exc.field}` {exc.message}"
+    return as_flags(text)
+
+
+def message_of(exc: BaseException) -> str:
+    """What the command line says of ``exc``: a library ParameterError as :func:`shown`
+    (a run specification's SpecError is named by the scene or command that read it), any
+    other error as its message."""
+    if isinstance(exc, ParameterError):
+        from granular_material.runs.spec_checks import SpecError
+
+        if not isinstance(exc, SpecError):
+            return shown(exc)
+    return str(exc)
+
+
+@contextlib.contextmanager
+def _as_option(option: str | None) -> Iterator[None]:
+    """ParameterErrors of the block as UsageErrors naming the option: ``option`` (a flag, or
+    words saying what set the value) in place of the field's own; None: the field's."""
+    try:
+        yield
+    except checks.WordedError as exc:
+        raise UsageError(shown(exc)) from None
+    except ParameterError as exc:
+        if option is None:
+            raise UsageError(shown(exc)) from None
+        raise UsageError(f"{option} {as_flags(exc.message)}") from None
+
+
+def check_output_file(path: Path | None, option: str = "--out") -> None:
+    """Before any work: the output file ``path`` (None: none) can be written
+    (:func:`granular_material.checks.check_output_file`); a UsageError naming ``option``."""
+    with _as_option(option):
+        checks.check_output_file(path)
+
+
+def check_output_dir(path: Path | None, option: str = "--out") -> None:
+    """Before any work: the output folder ``path`` (None: none) is one or can be made, and
+    written in (:func:`granular_material.checks.check_output_dir`); a UsageError naming
+    ``option``."""
+    with _as_option(option):
+        checks.check_output_dir(path)
+
+
+def rve_file_shape(path: Path, option: str = "--rve") -> tuple[int, int]:
+    """(B, N) of the RVE file ``path`` (:func:`granular_material.checks.rve_file_shape`); a
+    UsageError naming ``option`` where it does not exist."""
+    with _as_option(option):
+        return checks.rve_file_shape(path)
+
+
+def check_memory(needed: float, what: str) -> None:
+    """:func:`granular_material.checks.check_memory` (``what``: the options, in words), its
+    refusal a UsageError."""
+    try:
+        checks.check_memory(needed, what)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+
+
+def packing_parameters(args: argparse.Namespace, particles: int, pressure: float,
+                       pressure_option: str = "--pressure") -> Any:
+    """The RVE material options of ``args`` as
+    :class:`~granular_material.procedures.packing.PackingParameters`
+    (:func:`granular_material.checks.packing_parameters`); a UsageError naming the options
+    (the pressure as ``pressure_option``)."""
+    field = pressure_option.removeprefix("--").replace("-", "_")
+    with _as_option(None):
+        return checks.packing_parameters(args, particles, pressure, field)
 
 
 def positive(text: str) -> float:
@@ -98,11 +192,13 @@ def add_device(parser: argparse.ArgumentParser, what: str = "warp device") -> No
                         help=f"{what} (default: CUDA when present, else CPU)")
 
 
-def add_element(parser: argparse.ArgumentParser) -> None:
-    """``--element`` and ``--quadrature`` of the FEM commands (a group of their own)."""
+def add_element(parser: argparse.ArgumentParser, advanced: bool = False) -> None:
+    """``--element`` and ``--quadrature`` of the FEM commands (a group of their own; one
+    that only ``--help-all`` shows where ``advanced``)."""
     from granular_material.fem.problems import ELEMENTS
 
-    g = parser.add_argument_group("finite elements")
+    g = (parser.add_argument_group("finite elements", advanced=True) if advanced
+         else parser.add_argument_group("finite elements"))
     g.add_argument("--element", choices=tuple(ELEMENTS), default="quad4",
                    help="quad4: bilinear, 4 nodes, 2x2 Gauss points (full; default); quad8: "
                         "serendipity, 8 nodes (midside nodes), 2x2 Gauss points: REDUCED "
@@ -181,36 +277,44 @@ def add_max_dem_steps(parser: argparse.ArgumentParser | argparse._ArgumentGroup,
 
 
 def add_rve_material_options(parser: argparse.ArgumentParser | argparse._ArgumentGroup,
-                             ) -> None:
+                             defaults: bool = True) -> None:
     """The material of prepared RVEs and how they are packed (e0, radii, contact law,
     friction, damping, density, thickness): ``prepare`` and the FEM commands take the same;
-    :func:`packing_parameters` turns them into :class:`PackingParameters`."""
+    :func:`packing_parameters` turns them into :class:`PackingParameters`. With ``defaults``
+    False each defaults to None (its default is the material's, applied where the DEM
+    settings are built, and shown in the help), so an option given at its default value
+    still counts as given: refused beside a material that prepares no RVEs."""
     d = RVE_MATERIAL_DEFAULTS
-    parser.add_argument("--target-void-ratio", type=positive, default=d["target_void_ratio"],
+
+    def default(name: str) -> Any:
+        return d[name] if defaults else None
+
+    parser.add_argument("--target-void-ratio", type=positive, default=default("target_void_ratio"),
                         help="first compress the gas to this 2D void ratio (Wu et al.: 0.18)")
-    parser.add_argument("--radius-min", type=positive, default=d["radius_min"],
+    parser.add_argument("--radius-min", type=positive, default=default("radius_min"),
                         help=f"[m] ({d['radius_min']:g})")
-    parser.add_argument("--radius-max", type=positive, default=d["radius_max"],
+    parser.add_argument("--radius-max", type=positive, default=default("radius_max"),
                         help=f"[m] ({d['radius_max']:g})")
-    parser.add_argument("--law", choices=["constant", "frictmat"], default=d["law"],
-                        help="contact stiffness law (constant: Wu et al. Table 1)")
-    parser.add_argument("--kn", type=positive, default=d["kn"],
+    parser.add_argument("--law", choices=["constant", "frictmat"], default=default("law"),
+                        help=f"contact stiffness law (constant: Wu et al. Table 1; default "
+                             f"{d['law']})")
+    parser.add_argument("--kn", type=positive, default=default("kn"),
                         help=f"normal stiffness [N/m] ({d['kn']:g})")
-    parser.add_argument("--kt", type=positive, default=d["kt"],
+    parser.add_argument("--kt", type=positive, default=default("kt"),
                         help=f"tangential stiffness [N/m] ({d['kt']:g})")
-    parser.add_argument("--young", type=positive, default=d["young"],
+    parser.add_argument("--young", type=positive, default=default("young"),
                         help="--law frictmat: the discs' Young's modulus [Pa], which sets the "
                              f"contact stiffness kn = 2E r1 r2/(r1 + r2) ({d['young']:g}; not "
                              "the --E of a linear-elastic material)")
-    parser.add_argument("--kt-over-kn", type=positive, default=d["kt_over_kn"],
+    parser.add_argument("--kt-over-kn", type=positive, default=default("kt_over_kn"),
                         help=f"FrictMat kt/kn ({d['kt_over_kn']:g})")
-    parser.add_argument("--friction-angle", type=float, default=d["friction_angle"],
-                        help=f"[rad] ({d['friction_angle']:g})")
-    parser.add_argument("--damping", type=float, default=d["damping"],
+    parser.add_argument("--friction-angle", type=float, default=default("friction_angle"),
+                        help=f"contact friction angle [rad] ({d['friction_angle']:g})")
+    parser.add_argument("--damping", type=float, default=default("damping"),
                         help=f"local damping ({d['damping']:g})")
-    parser.add_argument("--density", type=positive, default=d["density"],
+    parser.add_argument("--density", type=positive, default=default("density"),
                         help=f"[kg/m³] ({d['density']:g})")
-    parser.add_argument("--thickness", type=positive, default=d["thickness"],
+    parser.add_argument("--thickness", type=positive, default=default("thickness"),
                         help=f"disc thickness [m] ({d['thickness']:g})")
 
 

@@ -10,7 +10,7 @@ import difflib
 from pathlib import Path
 from typing import Any
 
-from granular_material.cli.parsers import CommandParser
+from granular_material.cli.parsers import CommandParser, HelpAll
 from granular_material.cli.scene_toml import toml_repr
 
 __all__ = ["command_parsers", "convert", "help_of", "kind_of", "scene_keys", "suggest"]
@@ -40,7 +40,7 @@ def scene_keys(parser: CommandParser) -> dict[str, argparse.Action]:
     options of :data:`_NOT_KEYS` included, they are refused with advice), in the order the
     options were added (:attr:`CommandParser.arguments`)."""
     return {_key_name(a): a for a in parser.arguments
-            if not isinstance(a, (argparse._HelpAction, argparse._VersionAction))}
+            if not isinstance(a, (argparse._HelpAction, argparse._VersionAction, HelpAll))}
 
 
 def kind_of(action: argparse.Action) -> str:

@@ -7,7 +7,8 @@ the :class:`NewtonSolver` drives it on a scikit-fem basis, on the drained biaxia
 :func:`build_problem` (a mesh from a file, :func:`read_mesh`, or :func:`rectangle_mesh`; named
 boundaries, :func:`select_boundaries`; the conditions :class:`Fixed`, :class:`Roller`,
 :class:`Displacement`, :class:`RigidBody`, :class:`Pressure`, :class:`Gravity`; an initial
-state, :func:`geostatic_stress`); :class:`Tracking` names the
+state, :func:`geostatic_stress`); :class:`RunContext` is what a material is told of the run
+it is built for; :class:`Tracking` names the
 post-processors run on chosen Gauss points. :func:`default_settings` holds the Newton settings
 the commands use. The run loop that collects a run's tables and keeps its checkpoint is
 :func:`granular_material.runs.run_biaxial`.
@@ -40,6 +41,7 @@ from granular_material.fem.material import (
     MaterialResponse,
     PointStatus,
     QuadratureResponse,
+    RunContext,
     ScikitFemInterface,
     available_materials,
     create_material,
@@ -91,6 +93,7 @@ __all__ = [
     "QuadratureResponse",
     "RigidBody",
     "Roller",
+    "RunContext",
     "ScikitFemInterface",
     "StepRecord",
     "Tracking",

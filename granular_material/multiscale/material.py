@@ -25,11 +25,9 @@ keeps the protocol's increment.
 
 from __future__ import annotations
 
-import os
-import sys
 import warnings
 from collections.abc import Callable
-from dataclasses import fields, replace
+from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -38,7 +36,6 @@ import numpy as np
 from granular_material.dem import RVEData, load_rve, save_rve
 from granular_material.errors import ParameterError
 from granular_material.fem.material import (
-    FailureReason,
     MaterialResponse,
     PointStatus,
     ScikitFemInterface,
@@ -53,12 +50,14 @@ from granular_material.multiscale.confinement import (
 )
 from granular_material.multiscale.evaluation import Evaluation
 from granular_material.multiscale.isotropic import relax_to_isotropic
+from granular_material.multiscale.material_arguments import material_parameters, user_stacklevel
 from granular_material.multiscale.parameters import BACKENDS, DEMMaterialParameters
 from granular_material.multiscale.preparation import (
     StressPreparation,
     initial_rves,
     rves_at_stress,
 )
+from granular_material.multiscale.responses import measured_response, response_of
 from granular_material.multiscale.run_hooks import (
     DEMParameters,
     check_run,
@@ -67,64 +66,18 @@ from granular_material.multiscale.run_hooks import (
     run_summary,
     unit_weight,
 )
-from granular_material.typed_fields import conform_mapping
 
 if TYPE_CHECKING:
     import pandas as pd
 
+    from granular_material.fem.run_context import RunContext
     from granular_material.multiscale.mpi import MPIBackend
-    from granular_material.runs.context import RunContext
 
 __all__ = ["UNCONFINED_FRACTION", "DEMMaterial", "UnconfinedWarning"]
 
 #: the checkpoint's array of the committed total ∇u (a ``backend_*`` array: the RVE states
 #: of a checkpoint are read without it)
 _GRAD_KEY = "backend_material_grad_u"
-#: the material's settings, by name (:class:`DEMMaterialParameters`' fields)
-_SETTINGS = frozenset(f.name for f in fields(DEMMaterialParameters))
-
-
-def _user_stacklevel() -> int:
-    """The ``stacklevel`` of a warning issued by the caller of this function that points at
-    the first frame outside granular_material (the user's line)."""
-    import granular_material
-
-    root = os.path.dirname(granular_material.__file__) + os.sep
-    frame, level = sys._getframe(1), 1
-    while frame is not None and frame.f_code.co_filename.startswith(root):
-        frame, level = frame.f_back, level + 1
-    return level
-
-
-def _sym(stress: np.ndarray) -> np.ndarray:
-    return 0.5 * (stress + np.swapaxes(stress, 1, 2))
-
-
-def _parameters(given: DEMMaterialParameters | str | Path | None, pressure: float | None,
-                settings: dict[str, Any]) -> DEMMaterialParameters:
-    """The material's parameters of :class:`DEMMaterial`'s arguments."""
-    unknown = sorted(set(settings) - _SETTINGS)
-    if unknown:
-        raise TypeError(f"DEMMaterial() got an unexpected keyword {unknown[0]!r} (its settings "
-                        f"are {', '.join(sorted(_SETTINGS))})")
-    if pressure is not None:
-        if "confining" in settings:
-            raise ParameterError("confining", "is given twice: give confining (pressure is "
-                                              "its deprecated name), not both")
-        warnings.warn("DEMMaterial(pressure=...) is deprecated: call it confining= (the "
-                      "run specification's and the command line's name)",
-                      DeprecationWarning, stacklevel=_user_stacklevel())
-        settings = {**settings, "confining": pressure}
-    # types, named (the initial stress array has its own check, which says more)
-    settings = {**settings, **conform_mapping(DEMMaterialParameters, {
-        k: v for k, v in settings.items() if k != "initial_stress"})}
-    if isinstance(given, DEMMaterialParameters):
-        return replace(given, **settings) if settings else given
-    if given is not None:  # the RVE file, the first positional argument of old
-        settings = {**settings, **conform_mapping(DEMMaterialParameters, {"rve": given})}
-    if settings.get("packing") is None:
-        settings.pop("packing", None)
-    return DEMMaterialParameters(**settings)
 
 
 class DEMMaterial(ScikitFemInterface):
@@ -140,7 +93,7 @@ class DEMMaterial(ScikitFemInterface):
 
     In a run specification its parameters are :class:`DEMParameters` (``Parameters``), and
     ``check_run``, ``for_run`` and ``run_summary`` are its run hooks (see
-    :mod:`granular_material.runs.context`); its stress carries noise (``noisy``).
+    :mod:`granular_material.fem.run_context`); its stress carries noise (``noisy``).
     """
 
     #: the parameters of the material in a run specification
@@ -154,7 +107,7 @@ class DEMMaterial(ScikitFemInterface):
     def __init__(self, parameters: DEMMaterialParameters | str | Path | None = None, *,
                  progress: bool = False, pressure: float | None = None,
                  **settings: Any) -> None:
-        self.parameters = _parameters(parameters, pressure, settings)
+        self.parameters = material_parameters(parameters, pressure, settings)
         self.progress = progress
         self.backend: InProcessBackend | MPIBackend | None = None
         #: the response of the committed state (None until known: a commit, or a failure)
@@ -204,7 +157,7 @@ class DEMMaterial(ScikitFemInterface):
     @classmethod
     def for_run(cls, parameters: DEMParameters, context: RunContext) -> DEMMaterial:
         """The material of a run specification (not yet allocated): the run hook of
-        :mod:`granular_material.runs.context`."""
+        :mod:`granular_material.fem.run_context`."""
         keywords = material_keywords(parameters, context)
         return cls(progress=keywords.pop("progress"), **keywords)
 
@@ -266,7 +219,7 @@ class DEMMaterial(ScikitFemInterface):
                     f"compression): their targets were scaled up to it, ratios kept (points "
                     f"{clamped[:10].tolist()}{' …' if clamped.size > 10 else ''}; "
                     "material.preparation.clamped lists them all)",
-                    UserWarning, stacklevel=_user_stacklevel())
+                    UserWarning, stacklevel=user_stacklevel())
         else:
             data = initial_rves(self.parameters, n_points, self.progress)
         self.backend = self._backend(data)
@@ -329,59 +282,16 @@ class DEMMaterial(ScikitFemInterface):
         return response
 
     def _response_of(self, ev: Evaluation) -> MaterialResponse:
-        """The material response of a backend's evaluation; failed points (all points of an
-        incomplete one) get their committed state's response and a reason."""
-        h = ev.homogenized
-        reasons = ev.failure_reasons()
-        failed = np.asarray(ev.failed, dtype=bool).copy()
-        if not ev.complete:
-            reasons[~failed] = FailureReason.ABORTED.value
-            failed[:] = True
-        status = np.where(failed, PointStatus.FAILED, PointStatus.OK).astype(np.int8)
-
-        def f64(values: np.ndarray) -> np.ndarray:
-            return np.asarray(values, dtype=np.float64)
-
-        love = f64(h.stress)
-        stress, tangent = _sym(love), f64(h.tangent).copy()
-        fields = {"void_ratio": f64(h.void_ratio).copy(),
-                  "coordination": f64(h.coordination).copy(),
-                  "stress_skew": 0.5 * (love[:, 0, 1] - love[:, 1, 0])}
-        if failed.any():
-            committed = self._committed()
-            stress[failed] = committed.stress[failed]
-            tangent[failed] = committed.tangent[failed]
-            for name, values in fields.items():
-                values[failed] = np.asarray(committed.fields[name])[failed]
-        return MaterialResponse(
-            stress=stress, tangent=tangent, status=status,
-            costs={"dem_steps": ev.dem_steps, "rve_evaluations": ev.rve_evaluations,
-                   "particle_steps": ev.particle_steps},
-            fields=fields, reasons=reasons, timings=ev.timings,
-        )
+        """The material response of a backend's evaluation (:func:`response_of`)."""
+        return response_of(ev, self._committed)
 
     def _committed(self) -> MaterialResponse:
         """The response of the committed state: the last committed evaluation's, else
-        measured on the committed RVEs (homogenised, not stepped; objective tangent, which
-        needs no condensation of the committed states)."""
+        measured on the committed RVEs (:func:`measured_response`)."""
         if self._committed_response is None:
-            from granular_material.dem import DEMBatch
-            from granular_material.dem.homogenization import objective_tangent
-
             p = self.parameters
-            batch = DEMBatch(self.committed_rves(), device=p.device, shards=p.shards)
-            h = batch.homogenize()
-            love = np.asarray(h.stress, dtype=np.float64)
-            stress = _sym(love)
-            n = len(stress)
-            self._committed_response = MaterialResponse(
-                stress=stress,
-                tangent=np.asarray(objective_tangent(np.asarray(h.tangent, dtype=np.float64),
-                                                     stress), dtype=np.float64),
-                status=np.zeros(n, dtype=np.int8),
-                fields={"void_ratio": np.asarray(h.void_ratio, dtype=np.float64),
-                        "coordination": np.asarray(h.coordination, dtype=np.float64),
-                        "stress_skew": 0.5 * (love[:, 0, 1] - love[:, 1, 0])})
+            self._committed_response = measured_response(self.committed_rves(), p.device,
+                                                         p.shards)
         return self._committed_response
 
     def _initial_pressure(self) -> float | np.ndarray:
@@ -418,7 +328,7 @@ class DEMMaterial(ScikitFemInterface):
                 "its initial tangent there). A specimen needs a confining pressure on its "
                 "boundary (see docs/guide/scikit-fem.md); in a boundary-value problem, soil "
                 "that unloads to nothing (beside a footing's edge) is physical",
-                UnconfinedWarning, stacklevel=_user_stacklevel())
+                UnconfinedWarning, stacklevel=user_stacklevel())
         return response
 
     def hold_tangent(self, hold: bool) -> None:

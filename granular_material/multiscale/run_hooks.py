@@ -12,18 +12,19 @@ import numpy as np
 
 from granular_material.checks import (
     RVE_MATERIAL_DEFAULTS,
-    UsageError,
+    WordedError,
     packing_parameters,
     rve_file_shape,
     rve_material_given,
 )
 from granular_material.dem.tangents import TANGENTS
+from granular_material.errors import ParameterError
 from granular_material.multiscale.parameters import DRIVES, REUSE_CORRECTIONS, DEMRVEs
 from granular_material.reference_values import DEFAULT_DISCS
 
 if TYPE_CHECKING:
+    from granular_material.fem.run_context import RunContext
     from granular_material.procedures.packing import PackingParameters
-    from granular_material.runs.context import RunContext
 
 __all__ = ["RUN_TANGENT", "SHARE_TOLERANCE", "DEMParameters", "check_run", "material_keywords",
            "problem_keywords", "run_summary", "unit_weight"]
@@ -105,11 +106,11 @@ def _replicate(p: DEMParameters, context: RunContext) -> bool:
     if n_rve == n_points:
         return False
     if n_rve != 1:
-        raise UsageError(f"--rve {p.rve} holds {n_rve} RVEs; single-element takes 1 "
-                         f"(replicated to the {n_points} Gauss points) or {n_points} (one per "
-                         "point)")
+        raise ParameterError("rve", f"{p.rve} holds {n_rve} RVEs; single-element takes 1 "
+                                    f"(replicated to the {n_points} Gauss points) or "
+                                    f"{n_points} (one per point)")
     if p.independent:
-        raise UsageError(f"--independent needs {n_points} RVEs, --rve {p.rve} holds 1")
+        raise ParameterError("independent", f"needs {n_points} RVEs, `rve` {p.rve} holds 1")
     return True
 
 
@@ -117,28 +118,31 @@ def _packing(p: DEMParameters, context: RunContext) -> PackingParameters | None:
     """The material and packing of the RVEs the run prepares (None with an RVE file, which
     carries its own: then no RVE material field may be set)."""
     if p.rve is None:
-        return packing_parameters(p, _particles(p, context), context.confining, "--confining")
+        return packing_parameters(p, _particles(p, context), context.confining, "confining")
     given = rve_material_given(p)
     if given:
-        raise UsageError(f"{', '.join(given)} set{'s' if len(given) == 1 else ''} the "
-                         f"material of the RVEs a run prepares, but --rve {p.rve} carries its "
-                         "own (give them to `granular-material prepare` instead)")
+        named = ", ".join(f"`{name}`" for name in given)
+        raise WordedError(given[0], f"{named} set{'s' if len(given) == 1 else ''} the material "
+                                    f"of the RVEs a run prepares, but `rve` {p.rve} carries "
+                                    "its own (give them to `granular-material prepare` "
+                                    "instead)")
     return None
 
 
 def check_run(p: DEMParameters, context: RunContext) -> int:
     """Before any work: the parameters can run in ``context``; the discs per Gauss point."""
     if p.rve is not None and not p.rve.exists():
-        raise FileNotFoundError(f"--rve {p.rve} does not exist")
+        raise ParameterError("rve", f"{p.rve} does not exist")
     if p.reuse_tol > 0 and context.convergence in ("displacement", "residual-displacement"):
-        raise UsageError(f"--reuse-tol {p.reuse_tol:g} needs --convergence force (with "
-                         "--relaxation aitken, as measured): a reused RVE answers the same "
-                         "stress for any change of grad u below the tolerance, so the Newton "
-                         "corrections stall above --rtol and no increment passes the "
-                         "displacement test")
+        raise ParameterError("reuse_tol", f"{p.reuse_tol:g} needs `convergence` force (with "
+                                          "`relaxation` aitken, as measured): a reused RVE "
+                                          "answers the same stress for any change of grad u "
+                                          "below the tolerance, so the Newton corrections "
+                                          "stall above `rtol` and no increment passes the "
+                                          "displacement test")
     for name in ("independent", "compare_dem"):
         if getattr(p, name) and context.test != "single-element":
-            raise UsageError(f"--{name.replace('_', '-')} is single-element's")
+            raise ParameterError(name, "is single-element's")
     return _particles(p, context)
 
 

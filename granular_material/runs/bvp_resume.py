@@ -58,8 +58,8 @@ def check_not_stopped(spec: BoundaryValueSpec, out: Path) -> None:
         step = checkpoint.saved_step()
         raise SpecError("out", f"{out} holds a boundary-value run stopped after load step "
                                f"{step} of {spec.steps} (its checkpoint): continue it with "
-                               "--resume (resume=True), or write to another folder (delete "
-                               "its checkpoint folder to start it afresh)")
+                               "`resume`, or write to another folder (delete its checkpoint "
+                               "folder to start it afresh)")
 
 
 def open_bvp_checkpoint(spec: BoundaryValueSpec, out: Path | None, resume: bool,

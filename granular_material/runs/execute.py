@@ -19,12 +19,13 @@ import pandas as pd
 
 from granular_material.checks import (
     DISC_BYTES,
-    UsageError,
     check_memory,
     check_output_dir,
     cleanup_on_rejection,
 )
+from granular_material.errors import ParameterError
 from granular_material.fem import BiaxialSetup, Material, Tracking
+from granular_material.fem.run_context import RunContext
 from granular_material.results import (
     BiaxialResult,
     BiaxialWriter,
@@ -37,8 +38,7 @@ from granular_material.results import (
 )
 from granular_material.results.lock import FolderLock
 from granular_material.runs.checkpoint import RunCheckpoint
-from granular_material.runs.context import RunContext
-from granular_material.runs.resume import open_checkpoint, start_checkpoint
+from granular_material.runs.resume import StoppedRunError, open_checkpoint, start_checkpoint
 from granular_material.runs.runner import RunObserver, run_biaxial
 from granular_material.runs.spec import (
     FULL_SCALE,
@@ -100,8 +100,8 @@ def _tracking(spec: RunSpec, n_points: int) -> Tracking | None:
     if track is None:
         return None
     if not hasattr(spec.material.cls, "committed_rves"):
-        raise ValueError(f"--track needs --material dem (its Gauss points carry RVEs), not "
-                         f"{spec.material.name}")
+        raise ParameterError("track", f"needs `material` dem (its Gauss points carry RVEs), "
+                                      f"not {spec.material.name}")
     tracking = Tracking.parse(spec.output.postprocessors(), track, spec.output.every)
     tracking.check_points(n_points)
     rows = spec.output.tracked_rows(n_points, spec.problem.steps)
@@ -120,9 +120,10 @@ def _check_size(spec: RunSpec, setup: BiaxialSetup, discs: int) -> None:
     Gauss points its shear-band measures need."""
     steps = spec.problem.steps
     if spec.problem.test == "biaxial" and setup.n_points < 4:
-        raise UsageError(f"--element {setup.element} on --elements {setup.nx} {setup.ny} has "
-                         f"{setup.n_points} Gauss points; the shear-band measures of a "
-                         "biaxial run need at least 4 (more elements)")
+        raise ParameterError("element", f"{setup.element} on `elements` {setup.nx} {setup.ny} "
+                                        f"has {setup.n_points} Gauss points; the shear-band "
+                                        "measures of a biaxial run need at least 4 (more "
+                                        "elements)")
     needed = (float(setup.n_elements) * _ELEMENT_BYTES
               + float(setup.n_points) * discs * DISC_BYTES
               + float(setup.n_points) * (steps + 1) * _POINT_ROW_BYTES)
@@ -196,7 +197,8 @@ def run(spec: RunSpec, observer: RunObserver | None = None, *,
     ``resume`` continues the run whose checkpoint is in ``output.out`` (its spec must be this
     one, but for where and how it reports; with no saved step it starts afresh). A fresh run
     into a folder that holds the checkpoint of a run stopped before its last load step is
-    refused (a UsageError, nothing in the folder changed), as the commands refuse it:
+    refused (a ParameterError of ``out``, nothing in the folder changed), as the commands
+    refuse it:
     continue it with ``resume=True``, or pass ``fresh=True`` to throw that checkpoint away
     and start from step 0. A finished run's checkpoint is replaced. (``keep_stopped=False``
     is the older spelling of ``fresh=True``.)
@@ -213,21 +215,20 @@ def run(spec: RunSpec, observer: RunObserver | None = None, *,
     if keep_stopped is not None:
         fresh = fresh or not keep_stopped
     if resume and fresh:
-        raise UsageError("resume and fresh exclude each other: resume continues the stopped "
-                         "run, fresh throws its checkpoint away")
+        raise ParameterError("resume", "and fresh exclude each other: resume continues the "
+                                       "stopped run, fresh throws its checkpoint away")
     out = spec.output.out
     if resume and out is None:
-        raise UsageError("a resumed run needs its output folder (output.out)")
+        raise ParameterError("resume", "needs the run's output folder (output.out)")
     check_output_dir(out)
     times = PhaseTimes()
     with _locked(out):
         try:
             checkpoint, saved = open_checkpoint(spec, resume, keep_stopped=not fresh)
-        except UsageError as exc:
-            if resume or "stopped after load step" not in str(exc):
-                raise
-            raise UsageError(f"{exc} (from Python: run(spec, resume=True) continues it, "
-                             "run(spec, fresh=True) starts afresh over it)") from None
+        except StoppedRunError as exc:
+            raise StoppedRunError(exc.field, f"{exc.message} (from Python: run(spec, "
+                                             "resume=True) continues it, run(spec, "
+                                             "fresh=True) starts afresh over it)") from None
         plan = check(spec)
         material = _built(spec, plan.context)
         with cleanup_on_rejection(out), start_checkpoint(spec, checkpoint, saved):

@@ -11,13 +11,19 @@ from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
-from granular_material.checks import RVE_MATERIAL_DEFAULTS, UsageError
+from granular_material.checks import RVE_MATERIAL_DEFAULTS
+from granular_material.errors import ParameterError
 from granular_material.runs.checkpoint import CheckpointError, RunCheckpoint
 from granular_material.runs.serial import from_dict, from_flat, to_dict, to_flat
 from granular_material.runs.spec import RunSpec
 
-__all__ = ["differences_from_saved", "open_checkpoint", "resolved_newton", "spec_differences",
-           "start_checkpoint"]
+__all__ = ["StoppedRunError", "differences_from_saved", "open_checkpoint", "resolved_newton",
+           "spec_differences", "start_checkpoint"]
+
+
+class StoppedRunError(ParameterError):
+    """A fresh run refused over the checkpoint of a run stopped before its last load step
+    (``field``: ``out``), whose work a resume would continue; nothing was changed."""
 
 #: fields that may differ between a run and its resume: where it writes, how it reports and
 #: how often it saves, the CPU threads and the backend (neither changes a result)
@@ -67,7 +73,7 @@ def resolved_newton(spec: RunSpec) -> dict[str, Any] | None:
 
 def spec_differences(given: RunSpec, saved: RunSpec,
                      saved_newton: Mapping[str, Any] | None = None) -> list[str]:
-    """The fields (as ``--options``) of ``given`` that differ from ``saved``, but for those
+    """The fields (each named in backquotes) of ``given`` that differ from ``saved``, but for those
     a resume may change (:data:`RESUME_FREE`). With ``saved_newton`` (the run's
     :func:`resolved_newton`, recorded since the commands' defaults may change between
     versions) the Newton settings are compared as resolved: an option left to a default
@@ -78,14 +84,14 @@ def spec_differences(given: RunSpec, saved: RunSpec,
         # None: left to the material's default
         given = "not given" if value is None else repr(value)
         had = "the run did not give it" if before is None else f"the run had {before!r}"
-        return f"--{name.replace('_', '-')} {given} ({had})"
+        return f"`{name}` {given} ({had})"
 
     differ: list[str] = []
     resolved = resolved_newton(given) if saved_newton is not None else None
     if saved_newton is not None and resolved is not None:
         for name in sorted(set(resolved) & set(saved_newton)):
             if resolved[name] != saved_newton[name]:
-                option = f"--{name.replace('_', '-')}" if name in now else name
+                option = f"`{name}`" if name in now else name
                 how = " by default" if now.get(name) is None else ""
                 differ.append(f"{option} {resolved[name]!r}{how} (the run had "
                               f"{saved_newton[name]!r})")
@@ -117,25 +123,25 @@ def differences_from_saved(spec: RunSpec) -> list[str]:
 
 
 def _check_record(spec: RunSpec, checkpoint: RunCheckpoint, folder: Path) -> None:
-    """The checkpoint in ``folder`` is of a run of ``spec`` (UsageError naming what
-    differs; nothing is changed)."""
+    """The checkpoint in ``folder`` is of a run of ``spec`` (a ParameterError of ``resume``
+    naming what differs; nothing is changed)."""
     try:
         record = checkpoint.read_options()
     except CheckpointError as exc:
-        raise UsageError(f"--resume {folder}: {exc}; nothing in the folder was "
-                         "changed") from None
+        raise ParameterError("resume", f"{folder}: {exc}; nothing in the folder was "
+                                       "changed") from None
     command = record.get("command")
     if command not in (None, spec.problem.test):
-        raise UsageError(f"--resume {folder} is a {command} run, not {spec.problem.test}")
+        raise ParameterError("resume", f"{folder} is a {command} run, not {spec.problem.test}")
     differ = _record_differences(spec, record)
     if differ:
-        raise UsageError(f"--resume {folder}: give the options the run was started with; "
-                         f"these differ: {'; '.join(differ)} (nothing in the folder was "
-                         "changed)")
+        raise ParameterError("resume", f"{folder}: give the options the run was started "
+                                       f"with; these differ: {'; '.join(differ)} (nothing "
+                                       "in the folder was changed)")
 
 
 def _refuse_over_stopped_run(checkpoint: RunCheckpoint, out: Path) -> None:
-    """A fresh run would empty ``checkpoint``: refused (UsageError, nothing changed) where
+    """A fresh run would empty ``checkpoint``: refused (StoppedRunError, nothing changed) where
     it is of a run that stopped before its last load step, whose work a ``--resume`` would
     continue; a finished run's, a damaged or an unsaved one's may be replaced."""
     step = checkpoint.saved_step() if checkpoint.has_options() else None
@@ -147,10 +153,11 @@ def _refuse_over_stopped_run(checkpoint: RunCheckpoint, out: Path) -> None:
         return
     if step >= planned:
         return
-    raise UsageError(f"{out} holds the checkpoint of a run stopped after load step {step} of "
-                     f"{planned}: continue it with --resume (and the options it was started "
-                     f"with), or remove {checkpoint.folder} to start afresh there; nothing in "
-                     "the folder was changed")
+    raise StoppedRunError("out", f"{out} holds the checkpoint of a run stopped after load "
+                                 f"step {step} of {planned}: continue it with `resume` (and "
+                                 "the options it was started with), or remove "
+                                 f"{checkpoint.folder} to start afresh there; nothing in the "
+                                 "folder was changed")
 
 
 def open_checkpoint(spec: RunSpec, resume: bool, keep_stopped: bool = False,
@@ -169,9 +176,10 @@ def open_checkpoint(spec: RunSpec, resume: bool, keep_stopped: bool = False,
         return checkpoint, False
     if not checkpoint.has_options():
         if checkpoint.has_state():
-            raise UsageError(f"--resume {out}: {checkpoint.folder / 'options.json'} is "
-                             "missing, so the options the run was started with cannot be "
-                             "checked; nothing in the folder was changed")
+            raise ParameterError("resume", f"{out}: {checkpoint.folder / 'options.json'} is "
+                                           "missing, so the options the run was started "
+                                           "with cannot be checked; nothing in the folder "
+                                           "was changed")
     else:
         _check_record(spec, checkpoint, Path(out))
     if not checkpoint.has_state():
@@ -181,10 +189,12 @@ def open_checkpoint(spec: RunSpec, resume: bool, keep_stopped: bool = False,
     try:  # read and checked whole before anything in the folder is touched
         saved = checkpoint.verify()
     except CheckpointError as exc:
-        raise UsageError(f"--resume {out}: {exc}; nothing in the folder was changed") from None
+        raise ParameterError("resume", f"{out}: {exc}; nothing in the folder was "
+                                       "changed") from None
     if saved.step > spec.problem.steps:
-        raise UsageError(f"--resume {out}: its checkpoint is of load step {saved.step}, past "
-                         f"--steps {spec.problem.steps}; nothing in the folder was changed")
+        raise ParameterError("resume", f"{out}: its checkpoint is of load step {saved.step}, "
+                                       f"past `steps` {spec.problem.steps}; nothing in the "
+                                       "folder was changed")
     return checkpoint, True
 
 
