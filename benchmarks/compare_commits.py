@@ -73,7 +73,7 @@ def _label(rev: str) -> str:
     """A revision's short commit (``.``: HEAD's, with ``+dirty`` where the tree differs)."""
     from granular_material.provenance import code_commit
 
-    return code_commit() if rev == "." else code_commit(rev)
+    return code_commit() if rev == "." else code_commit(rev).removesuffix("+dirty")
 
 
 def _spread(values: list[float]) -> float:

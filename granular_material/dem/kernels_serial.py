@@ -151,7 +151,10 @@ def step_serial(
         if wp.static(TANGENTIAL):  # (frictionless: no torque, the spin keeps its value)
             w = w + dt * inv_inertia[i] * tq
         dx = dt * v
-        if not (wp.isfinite(v) and wp.isfinite(w)) or wp.length(dx) > type(dt)(0.25) * ra:
+        # finite iff x·0 is 0 (inf·0 and NaN·0 are NaN), without a call per component;
+        # and |dx| > r/4 compared in squares, without a root
+        finite = v[0] * zero + v[1] * zero + w * zero == zero
+        if not finite or wp.dot(dx, dx) > type(dt)(0.0625) * ra * ra:
             wp.atomic_or(status, b, STATUS_BLOWUP)
             continue
         velocity[i] = v
