@@ -1,5 +1,5 @@
-"""The CPU's step, one serial pass per RVE (``step_serial``), against the step of a thread
-per disc (``contact_forces`` → ``integrate``, CUDA's), both run on the CPU.
+"""The CPU's step, one serial pass per RVE (``kernels_step.step_serial``), against the step
+of a thread per disc (``contact_forces`` → ``integrate``, CUDA's), both run on the CPU.
 
 Where the lists are sorted by partner (every build leaves them so) the serial pass adds
 each disc's forces in the gather's order, so the two agree bit for bit."""

@@ -18,9 +18,9 @@ A step is ``contact_forces`` → ``integrate`` (gather, damping, leap-frog) → 
 ``servo`` → ``advance_cell_and_check`` (cell update, and whether the next step must rebuild
 the lists); a rebuild is ``begin_build`` → ``fill_bins`` → ``build_lists`` → ``commit_lists``.
 On the CPU, where a kernel's threads run one after the other, ``step_serial`` (a thread per
-RVE, ``kernels_serial``) does the work of the first two in one pass, with the same sums.
-The kernels are plain functions in ``kernels_lists``, ``kernels_step``, ``kernels_serial``
-and ``kernels_measures``; :func:`kernels_for` makes one warp module of them per float type and
+RVE) does the work of the first two in one pass, with the same sums.
+The kernels are plain functions in ``kernels_lists``, ``kernels_step`` and
+``kernels_measures``; :func:`kernels_for` makes one warp module of them per float type and
 replica (see there), each specialised to the float type before the module is built.
 
 A scene that makes a term of the step irrelevant need not pay for it: ``contact_forces``,
@@ -53,12 +53,12 @@ from granular_material.dem.kernels_lists import (
     link_lists,
 )
 from granular_material.dem.kernels_measures import contact_measures, reduce_measures
-from granular_material.dem.kernels_serial import step_serial
 from granular_material.dem.kernels_step import (
     advance_cell_and_check,
     contact_forces,
     integrate,
     servo,
+    step_serial,
 )
 
 __all__ = [

@@ -61,7 +61,7 @@ class Solver:
 
     Each step: contact forces of the pairs each disc owns, their gather with local damping
     and leap-frog integration (on CUDA two kernels, a thread per disc; on the CPU one serial
-    pass per RVE that adds each pair to both discs, ``kernels_serial``), optionally the
+    pass per RVE that adds each pair to both discs, ``step_serial``), optionally the
     stress servo, the cell update ``H ← E·H`` and the test of the Verlet skin; where the
     skin may have closed, the next step first rebuilds that RVE's lists (candidates from the
     3 × 3 bins of a per-RVE grid in fractional coordinates, or all discs in a cell under 3
