@@ -497,7 +497,7 @@ def _physics(args: argparse.Namespace, rve: Path, tqdm) -> pd.DataFrame:
     ]
     table["commit"] = code_commit()
     print(f"commit {code_commit()}; frictionless, undamped, no servo; build_s: the module's build "
-          "from an empty kernel cache (generic: the whole module, variants: two kernels); "
+          "from an empty kernel cache (generic: the whole module, variants: three kernels); "
           "prepare_s: the first prepare (module load from the cache, records, graph)")
     print(table.to_string(index=False, float_format=lambda v: f"{v:.4g}"))
     if args.out:

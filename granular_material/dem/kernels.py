@@ -17,14 +17,16 @@ pairs).
 A step is ``contact_forces`` → ``integrate`` (gather, damping, leap-frog) → optionally
 ``servo`` → ``advance_cell_and_check`` (cell update, and whether the next step must rebuild
 the lists); a rebuild is ``begin_build`` → ``fill_bins`` → ``build_lists`` → ``commit_lists``.
+On the CPU, where a kernel's threads run one after the other, ``step_serial`` (a thread per
+RVE) does the work of the first two in one pass, with the same sums.
 The kernels are plain functions in ``kernels_lists``, ``kernels_step`` and
 ``kernels_measures``; :func:`kernels_for` makes one warp module of them per float type and
 replica (see there), each specialised to the float type before the module is built.
 
-A scene that makes a term of the step irrelevant need not pay for it: ``contact_forces`` and
-``integrate`` test the compile-time flags ``TANGENTIAL``, ``DAMPING`` and ``STRESS`` of
-``kernels_step`` through ``wp.static``, and :func:`step_kernels_for` builds, for a
-:class:`StepFeatures` other than the generic one, copies of the two kernels that see other
+A scene that makes a term of the step irrelevant need not pay for it: ``contact_forces``,
+``integrate`` and ``step_serial`` test the compile-time flags ``TANGENTIAL``, ``DAMPING`` and
+``STRESS`` of ``kernels_step`` through ``wp.static``, and :func:`step_kernels_for` builds, for
+a :class:`StepFeatures` other than the generic one, copies of the three kernels that see other
 values (no tangential force, history or torque; no local damping; no stress sums) as a module
 of their own, built on first use only. A variant gives the generic kernels' results bit for
 bit (up to the sign of zeros) on the scenes it is made for.
@@ -56,6 +58,7 @@ from granular_material.dem.kernels_step import (
     contact_forces,
     integrate,
     servo,
+    step_serial,
 )
 
 __all__ = [
@@ -75,7 +78,7 @@ DTYPES = ("float64", "float32")  #: the float types the kernels are built for
 
 _KERNELS = (
     check_lists, any_rebuild, begin_build, fill_bins, build_lists, commit_lists, link_lists,
-    contact_forces, integrate, servo, advance_cell_and_check, contact_measures,
+    contact_forces, integrate, step_serial, servo, advance_cell_and_check, contact_measures,
     reduce_measures,
 )
 
@@ -93,6 +96,7 @@ class KernelSet:
     link_lists: wp.Kernel
     contact_forces: wp.Kernel
     integrate: wp.Kernel
+    step_serial: wp.Kernel
     servo: wp.Kernel
     advance_cell_and_check: wp.Kernel
     contact_measures: wp.Kernel
@@ -110,7 +114,7 @@ _ROLES = {
              "counts", "forces"),
     "mat22": ("cell", "cell_at_list_build", "velocity_gradient", "step_map", "part_stress",
               "part_fabric", "stress", "fabric"),
-    "vec3": ("pair",),
+    "vec3": ("pair", "disc_load"),
     "mat44": ("part_tangent", "tangent"),
 }
 
@@ -190,11 +194,12 @@ STEP_VARIANTS = tuple(StepFeatures(tangential, damping, stress)
 
 @dataclass(frozen=True)
 class StepKernels:
-    """``contact_forces`` and ``integrate`` of one :class:`StepFeatures` (same arguments
-    as the generic ones)."""
+    """``contact_forces``, ``integrate`` and ``step_serial`` of one :class:`StepFeatures`
+    (same arguments as the generic ones)."""
 
     contact_forces: wp.Kernel
     integrate: wp.Kernel
+    step_serial: wp.Kernel
 
 
 def _with_flags(function: Callable, flags: dict[str, bool]) -> Callable:
@@ -213,11 +218,11 @@ def _with_flags(function: Callable, flags: dict[str, bool]) -> Callable:
 def step_kernels_for(dtype: str = "float64", replica: int = 0,
                      features: StepFeatures = GENERIC_STEP) -> StepKernels:
     """The step kernels of ``features`` for ``dtype`` and ``replica``: the generic ones are
-    those of :func:`kernels_for`; any other variant is a warp module of its own (two
+    those of :func:`kernels_for`; any other variant is a warp module of its own (three
     kernels), built when first launched."""
     if features == GENERIC_STEP:
         ks = kernels_for(dtype, replica)
-        return StepKernels(ks.contact_forces, ks.integrate)
+        return StepKernels(ks.contact_forces, ks.integrate, ks.step_serial)
     ft = {"float64": wp.float64, "float32": wp.float32}[dtype]
     module = f"granular_material_dem_{dtype}_r{replica}_{features.tag}"
     flags = {"TANGENTIAL": features.tangential, "DAMPING": features.damping,
@@ -226,6 +231,7 @@ def step_kernels_for(dtype: str = "float64", replica: int = 0,
     return StepKernels(
         contact_forces=_kernel(_with_flags(contact_forces, flags), module, ft),
         integrate=_kernel(_with_flags(integrate, flags), module, ft),
+        step_serial=_kernel(_with_flags(step_serial, flags), module, ft),
     )
 
 

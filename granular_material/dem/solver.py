@@ -18,6 +18,7 @@ from granular_material.dem.kernel_common import (
 )
 from granular_material.dem.kernels import (
     StepFeatures,
+    StepKernels,
     kernels_for,
     launch,
     step_kernels_for,
@@ -59,10 +60,12 @@ class Solver:
     """Advances a :class:`State` of a :class:`Model` under a :class:`LoadingControl`.
 
     Each step: contact forces of the pairs each disc owns, their gather with local damping
-    and leap-frog integration, optionally the stress servo, the cell update ``H ← E·H`` and
-    the test of the Verlet skin; where the skin may have closed, the next step first rebuilds
-    that RVE's lists (candidates from the 3 × 3 bins of a per-RVE grid in fractional
-    coordinates, or all discs in a cell under 3 bins across). Blocks of steps are captured
+    and leap-frog integration (on CUDA two kernels, a thread per disc; on the CPU one serial
+    pass per RVE that adds each pair to both discs, ``step_serial``), optionally the
+    stress servo, the cell update ``H ← E·H`` and the test of the Verlet skin; where the
+    skin may have closed, the next step first rebuilds that RVE's lists (candidates from the
+    3 × 3 bins of a per-RVE grid in fractional coordinates, or all discs in a cell under 3
+    bins across). Blocks of steps are captured
     and replayed as one graph (CUDA graphs; on the CPU warp's launch capture, with the
     rebuild under the condition that some RVE needs it).
 
@@ -82,10 +85,13 @@ class Solver:
         replica: the kernel module to launch (one per CPU thread, see ``kernels_for``).
         features: the step kernels to use whatever the scene (``kernels.GENERIC_STEP`` forces
             the generic ones; a variant must fit the scene); None: picked from the scene.
+        serial: step with ``step_serial``, a thread per RVE (True) or with
+            ``contact_forces`` and ``integrate``, a thread per disc (False); None: serial on
+            the CPU, where a kernel's threads run one after the other anyway.
     """
 
     def __init__(self, model: Model, replica: int = 0,
-                 features: StepFeatures | None = None) -> None:
+                 features: StepFeatures | None = None, serial: bool | None = None) -> None:
         self.kernels = kernels_for(model.dtype, replica)
         self.replica = replica
         #: the step kernels used whatever the scene, or None to pick them from the scene
@@ -95,6 +101,8 @@ class Solver:
         b, n, k = model.n_rve, model.n_disc, model.capacity
         vec2 = wp.types.vector(2, ft)
         self.device = dev
+        #: whether a step is ``step_serial`` (a thread per RVE) rather than two kernels
+        self.serial = not wp.get_device(dev).is_cuda if serial is None else serial
         self.rebuild = wp.zeros(b, dtype=wp.int32, device=dev)
         self.partner_new = wp.zeros(b * n * k, dtype=wp.int32, device=dev)
         self.count_new = wp.zeros(b * n, dtype=wp.int32, device=dev)
@@ -104,6 +112,7 @@ class Solver:
                                   device=dev)
         self.pair = wp.zeros(b * n * k, dtype=wp.types.vector(3, ft), device=dev)
         self.pair_branch = wp.zeros(b * n * k, dtype=vec2, device=dev)
+        self.disc_load = wp.zeros(b * n, dtype=wp.types.vector(3, ft), device=dev)
         self.part_stress = wp.zeros(b * n, dtype=wp.types.matrix((2, 2), ft), device=dev)
         self.part_stiffness = wp.zeros(b * n, dtype=vec2, device=dev)
         self.rebuild_any = wp.zeros(1, dtype=wp.int32, device=dev)
@@ -180,7 +189,52 @@ class Solver:
         b, n, k = model.n_rve, model.n_disc, model.capacity
         c = model.constants
         servo = loading.servo
-        launches = [
+        if self.serial:
+            launches = [_record(
+                sk.step_serial, b, dev, n_disc=n, capacity=k, law=model.law,
+                damping=model.scalar(model.meta.damping), with_stress=int(servo is not None),
+                timestep=c.timestep, active=loading.active, friction=c.friction,
+                cell=state.cell, velocity_gradient=loading.velocity_gradient,
+                radius=c.radius, inv_mass=c.inv_mass, inv_inertia=c.inv_inertia,
+                contact_partner=state.contact_partner, contact_count=state.contact_count,
+                contact_shear_force=state.contact_shear_force,
+                fractional_position=state.fractional_position, velocity=state.velocity,
+                angular_velocity=state.angular_velocity,
+                verlet_displacement=state.verlet_displacement, disc_load=self.disc_load,
+                part_stress=self.part_stress, part_stiffness=self.part_stiffness,
+                status=state.status,
+            )]
+        else:
+            launches = self._parallel_launches(model, state, loading, sk)
+        if servo is not None:
+            launches.append(_record(
+                ks.servo, b, dev, n_disc=n, thickness=model.scalar(model.meta.thickness),
+                gain=model.scalar(servo.gain), max_strain=model.scalar(servo.max_strain),
+                timestep=c.timestep, active=loading.active, cell=state.cell,
+                part_stress=self.part_stress, part_stiffness=self.part_stiffness,
+                control=loading.control, target=loading.target,
+                velocity_gradient=loading.velocity_gradient, step_map=loading.step_map,
+            ))
+        launches.append(_record(
+            ks.advance_cell_and_check, b, dev, n_disc=n, skin=model.scalar(model.skin),
+            cutoff=model.scalar(model.cutoff), active=loading.active,
+            step_map=loading.step_map, cell=state.cell,
+            cell_at_list_build=state.cell_at_list_build,
+            verlet_displacement=state.verlet_displacement, force_rebuild=state.force_rebuild,
+            rebuild=self.rebuild, status=state.status,
+        ))
+        if self._host_rebuild is not None:
+            launches.append(self._any_launch(model))
+        return launches
+
+    def _parallel_launches(self, model: Model, state: State, loading: LoadingControl,
+                           sk: StepKernels) -> list[wp.Launch]:
+        """``contact_forces`` and ``integrate``, a thread per disc (CUDA)."""
+        dev = self.device
+        b, n, k = model.n_rve, model.n_disc, model.capacity
+        c = model.constants
+        servo = loading.servo
+        return [
             _record(sk.contact_forces, b * n, dev, n_disc=n, capacity=k, law=model.law,
                     timestep=c.timestep, active=loading.active, friction=c.friction,
                     cell=state.cell, velocity_gradient=loading.velocity_gradient,
@@ -203,29 +257,9 @@ class Solver:
                     verlet_displacement=state.verlet_displacement, part_stress=self.part_stress,
                     part_stiffness=self.part_stiffness, status=state.status),
         ]
-        if servo is not None:
-            launches.append(_record(
-                ks.servo, b, dev, n_disc=n, thickness=model.scalar(model.meta.thickness),
-                gain=model.scalar(servo.gain), max_strain=model.scalar(servo.max_strain),
-                timestep=c.timestep, active=loading.active, cell=state.cell,
-                part_stress=self.part_stress, part_stiffness=self.part_stiffness,
-                control=loading.control, target=loading.target,
-                velocity_gradient=loading.velocity_gradient, step_map=loading.step_map,
-            ))
-        launches.append(_record(
-            ks.advance_cell_and_check, b, dev, n_disc=n, skin=model.scalar(model.skin),
-            cutoff=model.scalar(model.cutoff), active=loading.active,
-            step_map=loading.step_map, cell=state.cell,
-            cell_at_list_build=state.cell_at_list_build,
-            verlet_displacement=state.verlet_displacement, force_rebuild=state.force_rebuild,
-            rebuild=self.rebuild, status=state.status,
-        ))
-        if self._host_rebuild is not None:
-            launches.append(self._any_launch(model))
-        return launches
 
     def _key(self, model: Model, state: State, loading: LoadingControl) -> tuple:
-        return (id(model), id(state), id(loading), loading.servo, self.features)
+        return (id(model), id(state), id(loading), loading.servo, self.features, self.serial)
 
     def prepare(self, model: Model, state: State, loading: LoadingControl) -> tuple:
         """The recorded launches (check, build, step) for this model, state and loading,
