@@ -10,7 +10,7 @@ from collections import namedtuple
 
 import pytest
 
-from granular_material.runs import spec_checks
+from granular_material.runs import bvp_checks
 from granular_material.runs.bvp_runner import run_boundary_value
 from granular_material.runs.bvp_spec import bvp_from_dict
 from granular_material.runs.spec import SpecError
@@ -57,7 +57,7 @@ def test_shards_beyond_the_cap_are_refused(tmp_path):
 
 
 def test_a_mesh_beyond_the_memory_is_refused_before_its_basis(tmp_path, monkeypatch):
-    monkeypatch.setattr(spec_checks, "available_memory", lambda: 10**9)
+    monkeypatch.setattr(bvp_checks, "available_memory", lambda: 10**9)
     spec = scene(tmp_path, mesh={"size": [1.0, 1.0], "elements": [300, 300]})
     start = time.perf_counter()
     with pytest.raises(SpecError, match=r"mesh 90000 quad4 elements \(360000 Gauss points\) "
@@ -68,7 +68,7 @@ def test_a_mesh_beyond_the_memory_is_refused_before_its_basis(tmp_path, monkeypa
 
 def test_tables_beyond_the_free_disk_are_refused_before_any_work(tmp_path, monkeypatch):
     usage = namedtuple("usage", "total used free")
-    monkeypatch.setattr(spec_checks.shutil, "disk_usage", lambda path: usage(10**6, 0, 10**4))
+    monkeypatch.setattr(bvp_checks.shutil, "disk_usage", lambda path: usage(10**6, 0, 10**4))
     spec = scene(tmp_path, steps=1000)
     with pytest.raises(SpecError, match=r"steps 1000 load steps of 16 Gauss points write at "
                                         r"least 1.63 MB of points.csv; .* has 10 kB free"):

@@ -47,11 +47,11 @@ from granular_material.fem.meshes import MeshData, read_mesh, rectangle_mesh
 from granular_material.multiscale.confinement import UNCONFINED_FRACTION
 from granular_material.results.bvp_plots import plot_load_displacement, plot_mechanism
 from granular_material.results.writers import FieldWriter, write_csv, write_json
+from granular_material.runs.bvp_checks import check_disk, check_memory, generated_size
 from granular_material.runs.bvp_material import material_for_problem, unit_weight_of
 from granular_material.runs.bvp_resume import open_bvp_checkpoint, remember
 from granular_material.runs.bvp_spec import BoundaryValueSpec, ConditionSpec
 from granular_material.runs.spec import SpecError
-from granular_material.runs.spec_checks import check_disk, check_memory, generated_size
 
 __all__ = [
     "BVPOutcome",
