@@ -18,6 +18,7 @@ from typing import Any, Protocol
 import pandas as pd
 
 from granular_material.entry_points import entry_point_names, load_entry_point
+from granular_material.errors import ParameterError
 
 __all__ = [
     "POSTPROCESSOR_GROUP",
@@ -84,12 +85,13 @@ class Tracking:
         """From command-line values: ``track`` holds point ids or the word ``all``."""
         if any(t == "all" for t in track):
             if len(track) > 1:
-                raise ValueError("--track takes point ids or 'all', not both")
+                raise ParameterError("track", "takes point ids or 'all', not both")
             return cls(tuple(postprocessors), None, every)
         try:
             points = tuple(int(t) for t in track)
         except ValueError as exc:
-            raise ValueError(f"--track takes point ids or 'all', got {list(track)}") from exc
+            raise ParameterError("track", f"takes point ids or 'all', got {list(track)}"
+                                 ) from exc
         return cls(tuple(postprocessors), points, every)
 
     def check_points(self, n_points: int) -> None:

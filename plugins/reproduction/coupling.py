@@ -21,6 +21,7 @@ import numpy as np
 import pandas as pd
 from scipy import ndimage, stats
 
+from granular_material.cli.options import as_flags
 from granular_material.dem import DEMBatch, load_rve, save_rve
 from granular_material.procedures import biaxial_test, prepare_packing
 from granular_material.results import shear_band, write_csv
@@ -65,7 +66,7 @@ def run_spec(spec: RunSpec, log_path: Path) -> int:
     if differ:
         aside = _set_aside(spec.output.out)
         note = (f"{spec.output.out} held a run started with other settings "
-                f"({'; '.join(differ)}); set aside as {aside.name}, started afresh")
+                f"({as_flags('; '.join(differ))}); set aside as {aside.name}, started afresh")
         print(f"granular-material reproduce: {note}", file=sys.stderr)
         with open(log_path, "a") as log:
             log.write(f"# {note}\n")
