@@ -17,6 +17,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from granular_material.filesafe import write_whole
+
 __all__ = ["HELP_OPTIONS", "asks_for_help", "generate", "installed", "print_stored", "write"]
 
 #: the options that print a command's help (``--help-all``: with every advanced group)
@@ -108,7 +110,8 @@ def write(path: Path | None = None) -> Path:
             out.append(f"            {key!r}: {_literal(text, ' ' * 12)},\n")
         out.append("        },\n")
     out.append("    },\n}\n")
-    path.write_text("".join(out))
+    text = "".join(out)
+    write_whole(path, lambda tmp: tmp.write_text(text, encoding="utf-8"))
     return path
 
 
