@@ -135,9 +135,10 @@ def half_width(data: dict[str, Any]) -> float:
 
 
 def bearing(steps: pd.DataFrame, b: float) -> pd.DataFrame:
-    """Settlement s [m] and bearing pressure q = −F_y / B [Pa] of each committed step."""
-    return pd.DataFrame({"settlement": -steps["footing_settlement"],
-                         "q": -steps["footing_force_y"] / b})
+    """Settlement s [m] (``footing_settlement``, positive down) and bearing pressure
+    q = −F_y / b [Pa] of each committed step."""
+    return pd.DataFrame({"settlement": steps["footing_settlement"].to_numpy(float),
+                         "q": -steps["footing_force_y"].to_numpy(float) / b})
 
 
 def q_at(curve: pd.DataFrame, s: float) -> float | None:
@@ -244,8 +245,20 @@ def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
                     help="elements of a generated mesh (the scene's)")
     ap.add_argument("--variant", action="append", default=None, metavar="NAME:SETTINGS",
                     help="a variant (repeatable; default the study's four)")
+    ap.add_argument("--report-only", action="store_true",
+                    help="rewrite the tables from OUT/footing_cost.json and each variant's "
+                         "steps.csv, running nothing")
     args = ap.parse_args(argv)
     args.out.mkdir(parents=True, exist_ok=True)
+    if args.report_only:
+        results = json.loads((args.out / "footing_cost.json").read_text())
+        for r in results:
+            steps = pd.read_csv(args.out / r["name"] / "steps.csv").iloc[1:]
+            r["curve"] = bearing(steps, r["half_width"]).to_dict(orient="list")
+        report = table(results)
+        (args.out / "footing_cost.md").write_text(report, encoding="utf-8")
+        print(report)
+        return results
     results = []
     for text in args.variant or VARIANTS:
         name, tables = parse_variant(text)

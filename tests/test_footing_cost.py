@@ -56,3 +56,6 @@ def test_the_study_runs_two_variants_with_their_work_counted(study, tmp_path):
         assert np.load(tmp_path / r["name"] / "rve_steps.npy").shape == (4 * 3 * 2 * 3,)
     report = (tmp_path / "footing_cost.md").read_text()
     assert "| scene |" in report and "| reuse |" in report
+    assert min(results[0]["curve"]["settlement"]) > 0  # down, as footing_settlement
+    again = study.main(["--out", str(tmp_path), "--report-only"])
+    assert [r["name"] for r in again] == ["scene", "reuse"]
