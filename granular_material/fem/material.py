@@ -70,12 +70,14 @@ Materials are found by name through the ``granular_material.materials`` entry-po
 
 from __future__ import annotations
 
+import inspect
 from pathlib import Path
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
 from granular_material.entry_points import entry_point_names, load_entry_point
+from granular_material.errors import ParameterError
 from granular_material.fem.response import (
     FailureReason,
     MaterialResponse,
@@ -149,8 +151,20 @@ def load_material(name: str) -> type:
 
 
 def create_material(name: str, **parameters: Any) -> Material:
-    """Instantiate the material ``name`` with keyword ``parameters`` (not yet allocated)."""
-    material = load_material(name)(**parameters)
+    """Instantiate the material ``name`` with keyword ``parameters`` (not yet allocated); a
+    keyword the material does not take is a :class:`ParameterError` naming it."""
+    cls = load_material(name)
+    try:
+        signature = inspect.signature(cls)
+    except (TypeError, ValueError):  # no signature to read: the class checks its keywords
+        signature = None
+    if signature is not None and not any(
+            p.kind is p.VAR_KEYWORD for p in signature.parameters.values()):
+        unknown = sorted(set(parameters) - set(signature.parameters))
+        if unknown:
+            raise ParameterError(unknown[0], f"is no parameter of material {name!r} (it takes "
+                                             f"{', '.join(signature.parameters)})")
+    material = cls(**parameters)
     if not isinstance(material, Material):
         raise TypeError(f"material {name!r} does not implement the Material protocol")
     return material

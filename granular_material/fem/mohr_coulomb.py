@@ -351,6 +351,9 @@ class MohrCoulomb(ScikitFemInterface):
         if [a.shape for a in state] != shapes or grad.shape != (n, 2, 2) or not all(
                 np.isfinite(a).all() for a in (*state[:3], grad)):
             raise ValueError(f"{path}: the state's arrays are inconsistent or not finite")
+        if self.n_points and self.n_points != n:
+            raise ValueError(f"{path} holds {n} points; this material is allocated for "
+                             f"{self.n_points}")
         self._stress, self._zz, self._gamma, self._yielding = state
         self._track_allocate(n)
         self._committed_grad = grad

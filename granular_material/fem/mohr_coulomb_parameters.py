@@ -15,7 +15,10 @@ __all__ = ["MohrCoulombParameters", "MohrCoulombRunParameters", "number"]
 
 
 def number(field: str, value: Any) -> float:
-    """``value`` as a finite float; :class:`ParameterError` naming ``field`` otherwise."""
+    """``value`` (a real number, not text or a bool) as a finite float;
+    :class:`ParameterError` naming ``field`` otherwise."""
+    if isinstance(value, (str, bytes, bool)):
+        raise ParameterError(field, f"must be a number, got {value!r}")
     try:
         value = float(value)
     except (TypeError, ValueError):

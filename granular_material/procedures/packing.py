@@ -165,8 +165,8 @@ def check_packing(n_disc: int, pressure: float, meta: RVEMeta,
     if pressure > highest:
         overlap = 2 * pressure * meta.thickness / smallest_normal_stiffness(meta, radius_range)
         raise ValueError(
-            f"{pressure_given} Pa would press the discs about {overlap:.0%} of their radius "
-            f"into each other (2·p·thickness/kn); the linear contact law holds to "
+            f"{pressure_given} Pa would press the discs about {100 * overlap:.3g} % of their "
+            f"radius into each other (2·p·thickness/kn); the linear contact law holds to "
             f"{MAX_OVERLAP:.0%} (the void space is gone near 20%): at most {highest:.4g} Pa "
             f"with these stiffnesses (or a stiffer {names['stiffness']})"
         )

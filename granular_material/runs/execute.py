@@ -211,7 +211,7 @@ def run(spec: RunSpec, observer: RunObserver | None = None, *,
     where it is one) before any work."""
     started = time.perf_counter()
     if not isinstance(spec, RunSpec):
-        raise TypeError(f"run() takes a RunSpec, got {type(spec).__name__}")
+        raise ParameterError("spec", f"run() takes a RunSpec, got {type(spec).__name__}")
     if keep_stopped is not None:
         fresh = fresh or not keep_stopped
     if resume and fresh:

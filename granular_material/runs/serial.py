@@ -236,9 +236,11 @@ def load(path: str | Path) -> RunSpec:
         text = path.read_text(encoding="utf-8")
     except UnicodeDecodeError:
         raise ValueError(f"{path} is no run spec: not UTF-8 text (TOML or JSON)") from None
+    kind = "TOML" if path.suffix == ".toml" else "JSON"
     try:
         data = tomllib.loads(text) if path.suffix == ".toml" else json.loads(text)
     except ValueError as exc:  # TOMLDecodeError, JSONDecodeError
-        kind = "TOML" if path.suffix == ".toml" else "JSON"
         raise ValueError(f"{path} is no {kind} run spec: {exc}") from None
+    except RecursionError:  # arrays or tables nested thousands deep
+        raise ValueError(f"{path} is no {kind} run spec: nested too deep to read") from None
     return from_dict(data)

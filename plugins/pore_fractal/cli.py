@@ -17,6 +17,7 @@ from .boxes import (
     DEFAULT_BOX_MIN,
     DEFAULT_MIN_FILL,
     DEFAULT_PER_OCTAVE,
+    MAX_PER_OCTAVE,
 )
 from .image import DEFAULT_PIXEL
 from .postprocess import analyse_rve, summary
@@ -137,11 +138,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 #: the most moment orders q of one spectrum (41 by default)
 _MAX_ORDERS = 10_000
-#: the most box sides per doubling of the physical rule (4 by default): sides closer than a
-#: pixel are the same box, and a 4096-pixel image has fewer than 4096 distinct sides, so more
-#: only makes the list of candidate sides long (1e8 took 33 s to fail for memory)
-_MAX_PER_OCTAVE = 1024
-
+# the most box sides per doubling of the physical rule: boxes.MAX_PER_OCTAVE, declared
+# beside the rule (1e8 took 33 s to fail for memory before it was bounded)
 
 #: the physical rule's options and their defaults (None on the parser: given or not)
 _PHYSICAL = {"box_min": DEFAULT_BOX_MIN, "box_max": DEFAULT_BOX_MAX,
@@ -163,18 +161,18 @@ def _physical_options(args: argparse.Namespace) -> None:
 
 
 def _check_per_octave(args: argparse.Namespace) -> None:
-    """The physical rule's sides per doubling: an integer in 1..:data:`_MAX_PER_OCTAVE`,
+    """The physical rule's sides per doubling: an integer in 1..:data:`MAX_PER_OCTAVE`,
     refused with the count of sides it would make before any work."""
     n = args.per_octave
     if n < 1:
         raise UsageError(f"--per-octave must be an integer >= 1, got {n}")
-    if n > _MAX_PER_OCTAVE:
+    if n > MAX_PER_OCTAVE:
         octaves = (math.log2(args.box_max / args.box_min)
                    if 0 < args.box_min < args.box_max and math.isfinite(args.box_max) else 1.0)
         raise UsageError(f"--per-octave {n} asks for about {n * octaves:.3g} box sides over "
                          f"{octaves:.3g} doublings (--box-min {args.box_min:g} to --box-max "
                          f"{args.box_max:g} m); sides closer than a pixel are the same box, so "
-                         f"at most {_MAX_PER_OCTAVE} per doubling are taken")
+                         f"at most {MAX_PER_OCTAVE} per doubling are taken")
 #: memory per pixel of the image while it is analysed, about [bytes]: the pore mask and the
 #: box masses of its finest level (float64), with room for their temporaries
 _PIXEL_BYTES = 24

@@ -1,0 +1,51 @@
+"""Refusals handed over by the hostile retry of issue 47: each a field-naming ValueError, not
+a traceback of another kind, and before any work."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from granular_material import runs
+from granular_material.errors import ParameterError
+from granular_material.fem.material import create_material
+from granular_material.fem.mohr_coulomb import MohrCoulomb
+
+
+def test_a_spec_nested_too_deep_is_no_spec(tmp_path):
+    path = tmp_path / "deep.json"
+    path.write_text("[" * 100_000 + "]" * 100_000)
+    with pytest.raises(ValueError, match="nested too deep"):
+        runs.load(path)
+
+
+@pytest.mark.parametrize("value", ["30", b"30", True])
+def test_mohr_coulomb_takes_numbers_not_text(value):
+    with pytest.raises(ParameterError) as refused:
+        MohrCoulomb(friction_angle=value)
+    assert refused.value.field == "friction_angle"
+
+
+def test_a_checkpoint_of_other_points_is_refused(tmp_path):
+    small = MohrCoulomb(initial_stress=-1e5)
+    small.allocate(2)
+    small.checkpoint(tmp_path / "two.npz")
+    large = MohrCoulomb(initial_stress=-1e5)
+    large.allocate(5)
+    with pytest.raises(ValueError, match="holds 2 points"):
+        large.restore(tmp_path / "two.npz")
+    assert large.n_points == 5
+    fresh = MohrCoulomb(initial_stress=-1e5)
+    fresh.restore(tmp_path / "two.npz")  # not allocated: it takes the checkpoint's points
+    assert fresh.n_points == 2 and np.allclose(fresh.stress, -1e5 * np.eye(2))
+
+
+def test_an_unknown_keyword_of_a_material_is_named():
+    with pytest.raises(ParameterError) as refused:
+        create_material("linear-elastic", yung=60e6)
+    assert refused.value.field == "yung" and "E" in str(refused.value)
+
+
+def test_run_of_no_spec_is_a_value_error():
+    with pytest.raises(ValueError, match="takes a RunSpec"):
+        runs.run(None)
