@@ -221,9 +221,8 @@ def footing_results(out: Path, parameters: dict[str, float]) -> dict[str, Any]:
     return res
 
 
-#: the footing runs in the figures (the softening and updated-Lagrangian Mohr–Coulomb runs
-#: are in the table only: on this mesh they are no solution, see the report)
-PLOTTED = ("dem", "mc-peak", "mc-cs")
+#: the footing runs in the figure: all (the softening twin's curve ends at its limit point)
+PLOTTED = ("dem", "mc", "mc-peak", "mc-cs", "mc-peak-ul")
 
 
 def _footing_maps(out: Path, res: dict[str, Any]) -> None:
