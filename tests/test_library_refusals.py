@@ -49,3 +49,28 @@ def test_an_unknown_keyword_of_a_material_is_named():
 def test_run_of_no_spec_is_a_value_error():
     with pytest.raises(ValueError, match="takes a RunSpec"):
         runs.run(None)
+
+
+@pytest.mark.parametrize(("keywords", "field"), [
+    ({"pressure": 1e300}, "pressure"), ({"device": 3}, "device"),
+    ({"elastic_window": "x"}, "elastic_window"), ({"frob": 0.1}, "frob"),
+    ({"dtype": "float16"}, "dtype")])
+def test_a_calibration_is_refused_before_its_dem_tests(tmp_path, keywords, field, monkeypatch):
+    from granular_material.dem import RVEData, RVEMeta
+    from granular_material.procedures import calibration
+
+    rng = np.random.default_rng(1)
+    data = RVEData(radius=rng.uniform(3e-3, 7e-3, (1, 16)),
+                   position=rng.uniform(0, 0.05, (1, 16, 2)),
+                   cell=np.array([[[0.05, 0.0], [0.0, 0.05]]]),
+                   velocity=np.zeros((1, 16, 2)), angular_velocity=np.zeros((1, 16)),
+                   meta=RVEMeta())
+
+    def no_dem(*args, **kwargs):  # the refusal comes before any DEM batch is built
+        raise AssertionError("a DEM batch was built")
+
+    monkeypatch.setattr("granular_material.dem.DEMBatch", no_dem)
+    arguments = {"pressure": 100e3, **keywords}
+    with pytest.raises(ParameterError) as refused:
+        calibration.calibrate_mohr_coulomb(data, **arguments)
+    assert refused.value.field == field

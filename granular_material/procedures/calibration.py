@@ -138,6 +138,36 @@ def model_curve(calibration: Calibration, axial_strain: float | None = None,
 
 
 # -- the DEM tests -------------------------------------------------------------------------
+def _check_reading(reading: dict[str, Any]) -> None:
+    """The window settings of :func:`read_parameters` given to a calibration: known names,
+    numbers; a ParameterError naming the first that is not, before any DEM step."""
+    import inspect
+
+    known = {name for name, p in inspect.signature(read_parameters).parameters.items()
+             if isinstance(p.default, float)}
+    for name, value in reading.items():
+        if name not in known:
+            raise ParameterError(name, f"is no setting of the calibration's reading (it "
+                                       f"takes {', '.join(sorted(known))})")
+        if isinstance(value, bool) or not isinstance(value, int | float) or not (
+                math.isfinite(value) and value > 0):
+            raise ParameterError(name, f"must be a positive number, got {value!r}")
+
+
+def _check_pressure_for(data: Any, pressure: float) -> None:
+    """``pressure`` [Pa] within what the RVEs' linear contact law holds (a contact overlap of
+    at most a tenth of the smallest radius: :func:`~granular_material.procedures.packing.
+    max_pressure`); a ParameterError on ``pressure`` before any DEM step."""
+    from granular_material.procedures.packing import max_pressure
+
+    radius = np.asarray(data.radius, dtype=float)
+    highest = max_pressure(data.meta, (float(radius.min()), float(radius.max())))
+    if pressure > highest:
+        raise ParameterError("pressure", f"{pressure:.4g} Pa is beyond what the RVEs' contact "
+                                         f"law holds: at most {highest:.4g} Pa (a contact "
+                                         "overlap of a tenth of the smallest radius)")
+
+
 def _rve_data(rve: Any, rves: int | None) -> tuple[Any, str]:
     """The RVEs to test (the first ``rves`` of a file or an RVEData) and their source."""
     from granular_material.dem import RVEData, load_rve
@@ -197,7 +227,14 @@ def calibrate_mohr_coulomb(rve_path_or_data: Any, pressure: float, axial_strain:
         check_biaxial(axial_strain, pressure, DEFAULT_STRAIN_PER_STEP, names=BIAXIAL_NAMES)
     except ValueError as exc:
         raise ParameterError("axial_strain", str(exc).removeprefix("axial_strain ")) from None
+    _check_reading(reading)
+    if device is not None and not isinstance(device, str):
+        raise ParameterError("device", f"must be a device name (cpu, cuda, cuda:N) or None, "
+                                       f"got {device!r}")
+    if dtype not in ("float64", "float32"):
+        raise ParameterError("dtype", f"must be float64 or float32, got {dtype!r}")
     data, source = _rve_data(rve_path_or_data, rves)
+    _check_pressure_for(data, pressure)
     batch = DEMBatch(data, device=device, dtype=dtype)
     notes: list[str] = []
     h = batch.homogenize()
