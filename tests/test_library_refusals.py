@@ -74,3 +74,20 @@ def test_a_calibration_is_refused_before_its_dem_tests(tmp_path, keywords, field
     with pytest.raises(ParameterError) as refused:
         calibration.calibrate_mohr_coulomb(data, **arguments)
     assert refused.value.field == field
+
+
+def test_an_rve_file_relaxed_beyond_its_contact_law_is_refused_before_work(tmp_path):
+    from granular_material.dem import RVEData, RVEMeta, save_rve
+
+    rng = np.random.default_rng(2)
+    path = tmp_path / "rve.npz"
+    save_rve(path, RVEData(radius=rng.uniform(3e-3, 7e-3, (1, 16)),
+                           position=rng.uniform(0, 0.05, (1, 16, 2)),
+                           cell=np.array([[[0.05, 0.0], [0.0, 0.05]]]),
+                           velocity=np.zeros((1, 16, 2)), angular_velocity=np.zeros((1, 16)),
+                           meta=RVEMeta()))
+    material = create_material("dem", rve=str(path), isotropic=True, confining=1e300,
+                               device="cpu")
+    with pytest.raises(ParameterError) as refused:
+        material.allocate(1)
+    assert refused.value.field == "confining"
