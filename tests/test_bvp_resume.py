@@ -104,3 +104,17 @@ def test_the_command_line_resumes_a_scene(tmp_path, monkeypatch, capsys):
     assert "--resume" in capsys.readouterr().err
     assert main(["run", str(scene), "--out", str(out), "--resume"]) == 0
     assert list(pd.read_csv(out / "steps.csv")["step"]) == [0, 1, 2, 3]
+
+
+def test_the_fields_carry_what_paraview_is_promised(tmp_path):
+    """fields.xdmf: the displacement and, per element, the stress, strains, rotation, mean
+    pressure, unconfined and failed points and the material's own fields."""
+    import meshio
+
+    run_boundary_value(_spec(MOHR_COULOMB, 2, "[4, 3]"), out=tmp_path / "run")
+    with meshio.xdmf.TimeSeriesReader(str(tmp_path / "run" / "fields.xdmf")) as reader:
+        reader.read_points_cells()
+        _, point_data, cell_data = reader.read_data(reader.num_steps - 1)
+    assert "displacement" in point_data
+    assert {"sxx", "shear_strain", "rotation", "mean_pressure", "unconfined", "failed",
+            "plastic_shear_strain", "friction_angle", "stress_zz"} <= set(cell_data)

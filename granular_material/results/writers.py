@@ -45,7 +45,9 @@ __all__ = ["BiaxialWriter", "FieldWriter", "append_csv", "read_run_tables", "rea
            "write_csv", "write_json", "write_outputs", "write_tables"]
 
 _CELL_FIELDS = ("sxx", "syy", "sxy", "exx", "eyy", "exy", "volumetric_strain",
-                "shear_strain", "void_ratio", "coordination")
+                "shear_strain", "rotation", "mean_pressure", "unconfined", "failed",
+                "void_ratio", "coordination", "stress_zz", "plastic_shear_strain",
+                "friction_angle", "return_region")
 
 
 def write_csv(frame: pd.DataFrame, path: str | Path, append: bool = False) -> Path:
