@@ -21,6 +21,7 @@ from granular_material.procedures.anisotropic import (
 from granular_material.procedures.packing import (
     VOID_RATIO_TOLERANCE,
     PackingParameters,
+    check_pressure_for_rves,
     prepare_packing,
 )
 from granular_material.procedures.servo import StressServoResult, stress_scale
@@ -33,18 +34,6 @@ from granular_material.procedures.servo import StressServoResult, stress_scale
 _SERVO = {"tolerance": 0.01, "shear_tolerance": 0.01}
 
 __all__ = ["StressPreparation", "initial_rves", "prepare_rves", "rves_at_stress"]
-
-
-def _check_confining_for(data: RVEData, confining: float) -> None:
-    """``confining`` [Pa] within what the file's contact law holds (an overlap of at most a
-    tenth of the smallest radius), before the RVEs are relaxed to it: a ParameterError on
-    ``confining`` (a pressure beyond it inverts cells after the work)."""
-    from granular_material.procedures.packing import max_pressure
-
-    highest = max_pressure(data.meta, (float(data.radius.min()), float(data.radius.max())))
-    if confining > highest:
-        raise ParameterError("confining", f"{confining:.4g} Pa is beyond what the RVE file's "
-                                          f"contact law holds: at most {highest:.4g} Pa")
 
 
 def initial_rves(parameters: DEMMaterialParameters, n_points: int,
@@ -60,7 +49,7 @@ def initial_rves(parameters: DEMMaterialParameters, n_points: int,
     if p.rve is not None:
         data = load_rve(p.rve)
         if p.isotropic:
-            _check_confining_for(data, p.confining)
+            check_pressure_for_rves(data, p.confining, "confining")
         if p.replicate or data.n_rve == 1:
             return data.replicate(n_points)
         if data.n_rve != n_points:

@@ -40,6 +40,7 @@ from granular_material.procedures.calibration_reading import (
     principal_ratio,
     read_parameters,
 )
+from granular_material.procedures.packing import check_pressure_for_rves
 
 __all__ = ["DEFAULT_CRITICAL_FRACTION", "DEFAULT_DILATANCY_WINDOW", "DEFAULT_ELASTIC_WINDOW",
            "DEFAULT_RECORD_EVERY", "PARAMETER_UNITS", "Calibration", "Reading",
@@ -154,20 +155,6 @@ def _check_reading(reading: dict[str, Any]) -> None:
             raise ParameterError(name, f"must be a positive number, got {value!r}")
 
 
-def _check_pressure_for(data: Any, pressure: float) -> None:
-    """``pressure`` [Pa] within what the RVEs' linear contact law holds (a contact overlap of
-    at most a tenth of the smallest radius: :func:`~granular_material.procedures.packing.
-    max_pressure`); a ParameterError on ``pressure`` before any DEM step."""
-    from granular_material.procedures.packing import max_pressure
-
-    radius = np.asarray(data.radius, dtype=float)
-    highest = max_pressure(data.meta, (float(radius.min()), float(radius.max())))
-    if pressure > highest:
-        raise ParameterError("pressure", f"{pressure:.4g} Pa is beyond what the RVEs' contact "
-                                         f"law holds: at most {highest:.4g} Pa (a contact "
-                                         "overlap of a tenth of the smallest radius)")
-
-
 def _rve_data(rve: Any, rves: int | None) -> tuple[Any, str]:
     """The RVEs to test (the first ``rves`` of a file or an RVEData) and their source."""
     from granular_material.dem import RVEData, load_rve
@@ -234,7 +221,7 @@ def calibrate_mohr_coulomb(rve_path_or_data: Any, pressure: float, axial_strain:
     if dtype not in ("float64", "float32"):
         raise ParameterError("dtype", f"must be float64 or float32, got {dtype!r}")
     data, source = _rve_data(rve_path_or_data, rves)
-    _check_pressure_for(data, pressure)
+    check_pressure_for_rves(data, pressure, "pressure")
     batch = DEMBatch(data, device=device, dtype=dtype)
     notes: list[str] = []
     h = batch.homogenize()

@@ -10,12 +10,14 @@ import numpy as np
 
 from granular_material.dem import DEMBatch, RVEData, RVEMeta
 from granular_material.dem.model import FLOAT32_MAX_RESOLUTION, SKIN_FRACTION
+from granular_material.errors import ParameterError
 from granular_material.procedures.servo import consolidate
 from granular_material.reference_values import DEFAULT_DISCS, DEFAULT_PRESSURE
 
 __all__ = ["DEFAULT_DISCS", "DEFAULT_PRESSURE", "DEFAULT_RADIUS_RANGE", "MAX_OVERLAP",
            "MIN_OVERLAP", "PACKING_NAMES", "VOID_RATIO_TOLERANCE", "PackingParameters",
-           "check_packing", "check_radius_range", "given_as", "max_pressure", "min_discs",
+           "check_packing", "check_pressure_for_rves", "check_radius_range", "given_as",
+           "max_pressure", "min_discs",
            "min_pressure", "prepare_packing", "random_gas", "smallest_normal_stiffness",
            "typical_normal_stiffness"]
 
@@ -109,6 +111,20 @@ def max_pressure(meta: RVEMeta, radius_range: tuple[float, float] = DEFAULT_RADI
     radius r carries about F = 2·p·r·t, so its contacts overlap δ/r ≈ 2·p·t/kn; this keeps
     that at most :data:`MAX_OVERLAP` (1.5 MPa for kn = 3e6 N/m, t = 0.1 m)."""
     return MAX_OVERLAP * smallest_normal_stiffness(meta, radius_range) / (2.0 * meta.thickness)
+
+
+def check_pressure_for_rves(data: Any, pressure: float, field: str) -> None:
+    """``pressure`` [Pa] within what the linear contact law of the RVEs ``data`` (an
+    ``RVEData``) holds: at most :func:`max_pressure` over their radii (a contact overlap of
+    at most :data:`MAX_OVERLAP` of the smallest radius); a ParameterError on ``field``
+    otherwise, for a caller to raise before any DEM step (a pressure beyond it inverts
+    cells after the work)."""
+    radius = np.asarray(data.radius, dtype=float)
+    highest = max_pressure(data.meta, (float(radius.min()), float(radius.max())))
+    if pressure > highest:
+        raise ParameterError(field, f"{pressure:.4g} Pa is beyond what the RVEs' contact law "
+                                    f"holds: at most {highest:.4g} Pa (a contact overlap of "
+                                    f"{MAX_OVERLAP:.0%} of the smallest radius)")
 
 
 #: how the checks of a packing name its values in their messages, by default (a library
