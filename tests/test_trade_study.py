@@ -17,6 +17,7 @@ from granular_material.results.compare import curve_errors, mean_curve
 from granular_material.results.trade_plots import pareto_front
 from granular_material.runs.presets import Preset
 from granular_material.studies import SCALES, plan_runs
+from granular_material.studies.band import BAND_SCALES, band_rows
 from granular_material.studies.trade import PRESETS, accuracy, knobs, read_trade_table, recommend
 
 
@@ -78,28 +79,28 @@ def test_recommend_takes_the_cheapest_within_budget():
 
 
 def test_recommend_counts_the_tangent_s_own_work():
-    """A tangent with fewer particle-steps whose condensation costs more than the DEM it
-    saves is not the cheaper one."""
+    """A value with fewer particle-steps whose tangent costs more than the DEM it saves is
+    not the cheaper one."""
     scale = SCALES["smoke"]
-    rows = [("objective", 0.0, 100, 110.0), ("condensed-hold", 0.5, 80, 160.0)]
-    table = pd.DataFrame([{"knob": "tangent", "value": value, "peak_error_pct": error,
-                           "stress_ratio_rms_pct": 0.0, "wall_s": 1.0,
-                           "particle_steps": steps, "cost_particle_steps": cost, "error": ""}
-                          for value, error, steps, cost in rows])
-    assert recommend(table, scale)["quick"]["tangent"] == "objective"
+    rows = [("1e-05", 0.0, 100, 110.0), ("4e-05", 0.5, 80, 160.0)]
+    table = pd.DataFrame([{"knob": "strain_per_step", "value": value, "test": "dem",
+                           "peak_error_pct": error, "stress_ratio_rms_pct": 0.0,
+                           "wall_s": 1.0, "particle_steps": steps, "cost_particle_steps": cost,
+                           "error": ""} for value, error, steps, cost in rows])
+    assert recommend(table, scale)["quick"]["strain_per_step"] == 1e-5
     cheaper = table.assign(cost_particle_steps=[110.0, 90.0])
-    assert recommend(cheaper, scale)["quick"]["tangent"] == "condensed-hold"
+    assert recommend(cheaper, scale)["quick"]["strain_per_step"] == 4e-5
     # a table of an older study, without the cost, is judged by its particle-steps
     assert recommend(table.drop(columns="cost_particle_steps"), scale)["quick"][
-        "tangent"] == "condensed-hold"
+        "strain_per_step"] == 4e-5
     # a saving within what round-off alone moves the reference's cost is a tie: the
     # reference wins it
-    keyed = cheaper.assign(test="element", run=["ref", "cond"], reference_run="ref")
+    keyed = cheaper.assign(run=["ref", "coarse"], reference_run="ref")
     noise = keyed.iloc[[0]].assign(knob="noise", value="1e-09", run="jiggled",
                                    cost_particle_steps=137.5)  # 25 % off the reference
-    assert recommend(pd.concat([keyed, noise]), scale)["quick"]["tangent"] == "objective"
+    assert recommend(pd.concat([keyed, noise]), scale)["quick"]["strain_per_step"] == 1e-5
     noise = noise.assign(cost_particle_steps=112.2)  # 2 %: the 18 % saving is real
-    assert recommend(pd.concat([keyed, noise]), scale)["quick"]["tangent"] == "condensed-hold"
+    assert recommend(pd.concat([keyed, noise]), scale)["quick"]["strain_per_step"] == 4e-5
 
 
 def test_a_run_s_cost_adds_its_tangent_s_share_of_the_material_s_time():
@@ -141,9 +142,25 @@ def test_smoke_study_writes_every_row_figure_and_section(smoke_study):
         assert Preset(name=name, **values).tangent_update in ("none", "secant", "hold")
     assert len(table[table["knob"] == "preset"]) == 2 * len(PRESETS)
     report = (out / "report.md").read_text()
-    for heading in ("## strain_per_step", "## mesh", "## preset", "## Recommended settings"):
+    for heading in ("## strain_per_step", "## mesh", "## preset", "## Recommended settings",
+                    "## The shear band", "### convergence", "### What each preset keeps"):
         assert heading in report
-    assert (out / "pareto.png").stat().st_size > 1000
+    for figure in ("pareto.png", "band_pareto.png", "band_histories.png"):
+        assert (out / figure).stat().st_size > 1000
+    band = pd.read_csv(out / "band.csv")
+    band_scale = BAND_SCALES["smoke"]
+    expected = {(r.knob, r.value) for r in band_rows(band_scale)}
+    assert expected <= set(zip(band["knob"], band["value"], strict=True))
+    reference = band[band["knob"] == "reference"].iloc[0]
+    assert reference["cost_ratio"] == 1.0 and reference["seeds"] == len(band_scale.seeds)
+    assert band["particle_steps"].gt(0).all()
+    # every preset with a band budget ran on the band specimen
+    assert {"quick", "engineering"} <= set(band.loc[band["knob"] == "preset", "value"])
+    footing = pd.read_csv(out / "footing.csv")
+    assert {"reference", "seed", "convergence", "reuse_tol", "material"} <= set(
+        footing["knob"])
+    assert footing["q_peak"].gt(0).all() and "## The footing" in report
+    assert (out / "footing_pareto.png").stat().st_size > 1000
 
 
 def test_error_grows_with_the_strain_per_dem_step(smoke_study):
@@ -166,6 +183,7 @@ def test_restarted_study_runs_nothing_again(smoke_study, capsys):
     captured = capsys.readouterr()
     assert code == 0
     assert not re.search(r"^(dem|element|specimen)-[0-9a-f]{10}: ", captured.err, re.M)
+    assert "band/runs/" not in captured.err  # no band run again either
     assert (out / "trade.csv").read_text() == before
 
 
@@ -193,7 +211,12 @@ def test_preset_sets_the_options_left_at_their_defaults(tmp_path, capsys):
     assert dem.particles == quick.discs
     assert dem.max_strain_per_step == quick.strain_per_step
     assert dem.reuse_tol == quick.reuse_tol
-    assert spec.newton.stress_tol == pytest.approx(quick.stress_floor * args.confining)
+    assert spec.newton.convergence == quick.convergence
+    assert spec.material.parameters.drive == quick.drive
+    if quick.stress_floor is None:  # the commands' own floor
+        assert spec.newton.stress_tol is None
+    else:
+        assert spec.newton.stress_tol == pytest.approx(quick.stress_floor * args.confining)
     code = main(["single-element", "--material", "linear-elastic", "--preset", "quick",
                  "--steps", "2"])
     assert code == 2 and "--material dem" in capsys.readouterr().err

@@ -15,6 +15,7 @@ from granular_material.cli.options import (
     add_progress,
     check_output_dir,
     emit,
+    positive_int,
     progress_enabled,
 )
 
@@ -30,7 +31,7 @@ def run_trade_study_command(args: argparse.Namespace) -> int:
     started = time.perf_counter()
     table = run_trade_study(args.scale, args.out, device=device,
                             progress=progress_enabled(args),
-                            log=lambda line: print(line, file=sys.stderr))
+                            log=lambda line: print(line, file=sys.stderr), jobs=args.jobs)
     presets = table[table["knob"] == "preset"].assign(accuracy=accuracy)
     report: dict[str, Any] = {
         "scale": args.scale, "device": device, "rows": len(table),
@@ -53,18 +54,25 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description="Each knob (discs per RVE, strain per DEM step, time-step safety, "
                     "damping, float32, Newton tolerance and stress floor, tangent, predictor "
                     "and relaxation, reuse of undisturbed RVEs, mesh) varied alone against a "
-                    "high-fidelity reference from the same RVEs; writes trade.csv, "
-                    "pareto.png, a figure per knob, presets.json and report.md with three "
-                    "recommended settings, measured. A restarted study skips the runs it "
-                    "has done.",
+                    "high-fidelity reference from the same RVEs, and the band rows: the "
+                    "reduced specimen past its peak (the shear band's onset and place, "
+                    "softening, dilatancy) against the commands' defaults, and the footing "
+                    "rows: Guo & Zhao's reduced footing (bearing pressure, mechanism) beside "
+                    "its Mohr-Coulomb twin; writes trade.csv, band.csv, footing.csv, Pareto "
+                    "figures, a figure per knob, presets.json and report.md "
+                    "with three recommended settings, measured. A restarted study skips the "
+                    "runs it has done.",
     )
     p.add_argument("--scale", choices=("smoke", "cpu", "gpu"), default="cpu",
-                   help="smoke: under a minute, checks the machinery; cpu: the study for 2 CPU "
-                        "cores (5–15 min of runs here); gpu: 5 seeds, 400-disc elements, the "
+                   help="smoke: a few minutes, checks the machinery; cpu: the study for 2 CPU "
+                        "cores (about 2 h of runs here with --jobs 2, the band and footing "
+                        "rows most of it); gpu: 5 seeds, 400-disc elements, the "
                         "10 x 15 mesh (default cpu)")
     p.add_argument("--out", type=Path, default=Path("out/trade-study"),
                    help="output folder (default out/trade-study); an existing one is "
                         "continued")
+    p.add_argument("--jobs", type=positive_int, default=1,
+                   help="band rows run at once, each in its own process (default 1)")
     add_device(p)
     add_progress(p)
     add_json(p)

@@ -3,6 +3,11 @@ writers (CSV, XDMF), figures, localisation (shear-band) measures, peak finding a
 summaries the commands report. Reads what the procedures and
 the FEM produce; imports nothing above it."""
 
+from granular_material.results.band_measures import (
+    band_measures,
+    band_onset,
+    localisation_history,
+)
 from granular_material.results.biaxial import COST_COLUMNS, BiaxialResult
 from granular_material.results.localization import (
     ShearBand,
@@ -38,8 +43,11 @@ __all__ = [
     "BiaxialWriter",
     "FieldWriter",
     "ShearBand",
+    "band_measures",
+    "band_onset",
     "band_summary",
     "find_peak",
+    "localisation_history",
     "mohr_coulomb_inclination",
     "plot_biaxial_curves",
     "plot_maps",

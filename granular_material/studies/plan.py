@@ -15,7 +15,7 @@ from typing import Any
 from granular_material.procedures.packing import DEFAULT_PRESSURE
 
 __all__ = ["NOISE", "REFERENCE", "SCALES", "SPECIMEN_NEWTON", "Knob", "PlannedRow",
-           "StudyScale", "knobs", "plan_runs", "run_key", "tangent_settings"]
+           "StudyScale", "knobs", "plan_runs", "run_key", "tangent_knob", "tangent_settings"]
 
 
 @dataclass(frozen=True)
@@ -137,6 +137,14 @@ def tangent_settings(value: str) -> dict[str, str]:
     return {"tangent": value, "tangent_update": "none"}
 
 
+def tangent_knob(tangent: str, update: str) -> str:
+    """The tangent knob's value of a material tangent and Newton's update of it (the
+    inverse of :func:`tangent_settings`)."""
+    if update == "secant":
+        return "secant"
+    return f"{tangent}-hold" if update == "hold" else tangent
+
+
 def knobs(scale: StudyScale) -> list[Knob]:
     """The knobs of a study, in the order of the report."""
     ref = _reference(scale)
@@ -175,6 +183,10 @@ def _settings(scale: StudyScale, test: str, **change: Any) -> dict[str, Any]:
                                        "dtype")} | {"test": "dem"} | noise
     common = {k: values[k] for k in ("rtol", "stress_floor", "tangent", "acceleration",
                                      "reuse_tol")}
+    # a preset's Newton test and drive where they are not the study's (the force test,
+    # every trial from the committed state): absent otherwise, so that the knobs' run keys
+    # stay those of earlier studies
+    common |= {k: values[k] for k in ("convergence", "drive") if k in values}
     if test == "element":
         return common | {"test": "element",
                          "discs": values.get("discs", scale.element_discs)} | noise
@@ -215,12 +227,20 @@ def plan_runs(scale: StudyScale) -> list[PlannedRow]:
 
 
 def _preset_rows(presets: dict[str, dict[str, Any]], scale: StudyScale) -> list[PlannedRow]:
-    """The presets measured: a pure-DEM run and a single-element run of each."""
+    """The presets measured: a pure-DEM run and a single-element run of each (its Newton
+    test, tangent, relaxation and reuse; the force test's floor where it has one)."""
     rows = []
     for name, values in presets.items():
         dem = {k: values[k] for k in ("discs", "strain_per_step")}
-        element = {k: values[k] for k in ("rtol", "stress_floor", "tangent", "acceleration",
-                                          "reuse_tol")}
+        element = {"rtol": values["rtol"], "tangent": tangent_knob(values["tangent"],
+                                                                   values["tangent_update"]),
+                   "acceleration": values["acceleration"], "reuse_tol": values["reuse_tol"],
+                   "stress_floor": values["stress_floor"]
+                   if values.get("stress_floor") is not None else REFERENCE["stress_floor"]}
+        if values.get("convergence", "force") != "force":
+            element["convergence"] = values["convergence"]
+        if values.get("drive", "restart") != "restart":
+            element["drive"] = values["drive"]
         rows.append(PlannedRow("preset", name, _settings(scale, "dem", **dem),
                                _settings(scale, "dem", discs=max(scale.discs)),
                                per_seed=False))

@@ -10,6 +10,7 @@ from typing import Any
 import pandas as pd
 
 from granular_material.results.compare import markdown_table
+from granular_material.runs.presets import SETTING_NAMES
 from granular_material.studies.plan import (
     NOISE,
     SPECIMEN_NEWTON,
@@ -17,7 +18,6 @@ from granular_material.studies.plan import (
     StudyScale,
     _reference,
     knobs,
-    tangent_settings,
 )
 from granular_material.studies.scoring import PRESETS, accuracy
 
@@ -25,12 +25,10 @@ __all__ = ["presets_file", "report"]
 
 
 def presets_file(presets: dict[str, dict[str, Any]]) -> str:
-    """``presets.json``: each preset's knob values, the tangent knob's as the material tangent
-    and Newton's tangent update it names (:func:`tangent_settings`), so that each preset
-    holds the fields of :class:`~granular_material.runs.presets.Preset`."""
-    entries = {name: {field: value for knob, chosen in values.items()
-                      for field, value in (tangent_settings(chosen) if knob == "tangent"
-                                           else {knob: chosen}).items()}
+    """``presets.json``: each preset's settings in the order of
+    :data:`~granular_material.runs.presets.SETTING_NAMES`, the fields of
+    :class:`~granular_material.runs.presets.Preset`."""
+    entries = {name: {field: values[field] for field in SETTING_NAMES}
                for name, values in presets.items()}
     return json.dumps(entries, indent=2) + "\n"
 
@@ -88,12 +86,19 @@ def report(table: pd.DataFrame, presets: dict[str, dict[str, Any]], scale: Study
         if knob.name != "preset":
             lines += [f"![{knob.name}](knob_{knob.name}.png)", ""]
     lines += ["## Recommended settings", "",
-              "Rule: per knob, the value of the least `cost` (DEM particle-steps, the "
-              "tangent's work included) whose accuracy is within the budget (the reference on "
-              "a tie) "
+              "Rule (`granular_material.studies.scoring.recommend`): the discs, the strain per "
+              "DEM step and the reuse tolerance take the value of the least `cost` (DEM "
+              "particle-steps, the tangent's work included) whose peak accuracy is within the "
+              "preset's budget (the reference on a tie) "
               f"({', '.join(f'{k}: {v:g} %' for k, v in PRESETS.items() if v is not None)}); "
-              "publication is the reference. Each preset then ran itself (rows `preset` "
-              "above: pure DEM and single element).", ""]
+              "Newton's test, tangent, relaxation and drive are the commands' defaults, each "
+              "changed only where a band row (below) of that knob keeps the preset's band "
+              "budget for less work; a strain per DEM step that breaks the band budget is "
+              "replaced by the largest that keeps it. A preset whose combination breaks its "
+              "band budget falls back to the commands' Newton settings. Publication is the "
+              "commands' defaults with the most discs and the finest strain per DEM step. "
+              "Each preset then ran itself (rows `preset` above: pure DEM and single element; "
+              "below: the band specimen).", ""]
     preset_rows = []
     for name, values in presets.items():
         measured = table[(table["knob"] == "preset") & (table["value"] == name)]

@@ -123,16 +123,21 @@ class _Runner:
         fields) on the RVE file ``rve`` (one RVE, copied to every point) or, without one,
         packings prepared from the study's first seed, run by :func:`run`."""
         predictor, relaxation = s["acceleration"].split("/")
-        # the knobs are those of the force test (rtol of ‖R‖/‖R₀‖, the stress floor, reuse)
+        # the knobs are those of the force test (rtol of ‖R‖/‖R₀‖, the stress floor, reuse),
+        # but for a preset whose Newton test is a displacement test
         spec = from_flat({
             **problem, "material": "dem", "confining": self.scale.confining,
             "axial_strain": self.scale.axial_strain, "rve": rve,
             # the file carries its discs; only prepared packings are told how many
             "particles": None if rve is not None else s["discs"],
             "seed": self.scale.seeds[0], **tangent_settings(s["tangent"]),
-            "reuse_tol": s["reuse_tol"], "convergence": "force", "max_iterations": 25,
-            "rtol": s["rtol"], "predictor": predictor, "relaxation": relaxation,
-            "stress_tol": s["stress_floor"] * self.scale.confining, "device": self.device})
+            "reuse_tol": s["reuse_tol"], "rtol": s["rtol"], "predictor": predictor,
+            "relaxation": relaxation, "drive": s.get("drive", "restart"),
+            **({"convergence": "force", "max_iterations": 25,
+                "stress_tol": s["stress_floor"] * self.scale.confining}
+               if s.get("convergence", "force") == "force"
+               else {"convergence": s["convergence"]}),
+            "device": self.device})
         started = time.perf_counter()
         outcome = run_spec(spec)
         result = outcome.result

@@ -11,6 +11,14 @@ import numpy as np
 import pandas as pd
 
 from granular_material.results.compare import ERROR_COLUMNS, curve_errors, mean_curve
+from granular_material.runs.presets import SETTING_NAMES
+from granular_material.studies.band import (
+    BAND_SCALES,
+    NEWTON_KNOBS,
+    band_rows,
+    command_settings,
+)
+from granular_material.studies.band_scoring import BAND_BUDGETS, keeps_band
 from granular_material.studies.plan import (
     Knob,
     PlannedRow,
@@ -21,7 +29,7 @@ from granular_material.studies.plan import (
 )
 from granular_material.studies.running import RunResult
 
-__all__ = ["PRESETS", "PRESET_KNOBS", "accuracy", "recommend"]
+__all__ = ["PRESETS", "PRESET_KNOBS", "accuracy", "band_scale_name", "recommend"]
 
 
 def _errors(row: PlannedRow, curve: pd.DataFrame, reference: pd.DataFrame) -> dict[str, float]:
@@ -64,44 +72,101 @@ def accuracy(rows: pd.DataFrame) -> pd.Series:
 #: reference settings themselves)
 PRESETS: dict[str, float | None] = {"quick": 10.0, "engineering": 3.0, "publication": None}
 
-#: the knobs a preset sets: what the FEM commands take as options (the mesh, the test and
-#: the physics stay the user's; float32 is measured but the DEM material runs float64)
-PRESET_KNOBS = ("discs", "strain_per_step", "rtol", "stress_floor", "tangent",
-                "acceleration", "reuse_tol")
+#: the knobs of the pure-DEM and single-element rows a preset takes its value from (the
+#: mesh, the test and the physics stay the user's; float32 is measured but the DEM material
+#: runs float64); Newton's test, tangent, relaxation and drive come from the band rows
+PRESET_KNOBS = ("discs", "strain_per_step", "reuse_tol")
 
 
-def recommend(table: pd.DataFrame, scale: StudyScale) -> dict[str, dict[str, Any]]:
-    """The presets' values from the measured rows. Rule: for each knob of
-    :data:`PRESET_KNOBS`, the value with the least cost in DEM particle-steps, the tangent's
-    work included (:func:`~granular_material.studies.running._dem_equivalent`: a cost that
-    does not depend on the machine's load; wall time on a shared machine does), among those
-    that ran without error and whose :func:`accuracy` is within the preset's budget. Costs
-    within the scatter that round-off alone gives the test's reference run
-    (:func:`_cost_scatter`, the ``noise`` row: a FEM run's Newton path, and so its
-    particle-steps, is chaotic) are a tie, which the reference value wins, else the least
-    cost among them. The reference value when none is within
-    the budget, and for ``publication``."""
+def recommend(table: pd.DataFrame, scale: StudyScale,
+              band: pd.DataFrame | None = None) -> dict[str, dict[str, Any]]:
+    """The presets' settings (:data:`~granular_material.runs.presets.SETTING_NAMES`) from the
+    measured rows.
+
+    Rule, per preset:
+
+    - ``discs``, ``strain_per_step`` and ``reuse_tol``: the value of the pure-DEM or
+      single-element rows with the least cost in DEM particle-steps, the tangent's work
+      included (:func:`~granular_material.studies.running._dem_equivalent`: a cost that does
+      not depend on the machine's load), among those that ran without error and whose
+      :func:`accuracy` (the peak) is within the preset's budget; costs within the scatter
+      that round-off alone gives the test's reference run (:func:`_cost_scatter`) are a tie,
+      which the reference value wins. A strain per DEM step whose band row (``band``, the
+      specimen's rows of :mod:`granular_material.studies.band_scoring`) breaks the preset's
+      band budget is replaced by the largest that keeps it (the commands' 1e-5 does);
+    - Newton's test, tangent, relaxation and the drive: the commands' defaults
+      (:func:`~granular_material.studies.band.command_settings`), each changed to the
+      cheapest band row of its knob that keeps the preset's band budget
+      (:data:`~granular_material.studies.band_scoring.BAND_BUDGETS`) and costs less than the
+      reference by more than the reference's own scatter between seeds. Without band rows
+      they stay the defaults;
+    - reuse of undisturbed RVEs only with the force test (the displacement tests judge a
+      correction a reused response does not make);
+    - ``publication``: the commands' defaults with the finest strain per DEM step and the
+      most discs of the pure-DEM rows.
+    """
     ref = _reference(scale) | {"discs": max(scale.discs)}
     chosen: dict[str, dict[str, Any]] = {}
     for name, budget in PRESETS.items():
-        values: dict[str, Any] = {}
-        for knob in knobs(scale):
-            if knob.name not in PRESET_KNOBS:
-                continue
-            values[knob.name] = ref[knob.name]
-            rows = table[(table["knob"] == knob.name) & (table["error"] == "")]
-            if budget is None or rows.empty:
-                continue
-            fine = rows[accuracy(rows) <= budget]
-            fine = fine.assign(not_reference=fine["value"] != str(ref[knob.name]))
-            if not fine.empty:
-                fine = fine.assign(cost=_cost(fine))
-                scatter = _cost_scatter(table, knob.test)
-                tied = fine[fine["cost"] <= fine["cost"].min() * (1.0 + scatter)]
-                best = tied.sort_values(["not_reference", "cost"]).iloc[0]["value"]
-                values[knob.name] = _typed(best, knob)
+        values: dict[str, Any] = {**command_settings(), "discs": ref["discs"],
+                                  "strain_per_step": ref["strain_per_step"]}
+        if budget is not None:
+            for knob in knobs(scale):
+                if knob.name in PRESET_KNOBS:
+                    values[knob.name] = _cheapest_within(table, knob, budget, ref)
+            if band is not None:
+                values.update(_newton_from_band(band, scale, BAND_BUDGETS[name]))
+                values["strain_per_step"] = _band_strain_per_step(
+                    band, values["strain_per_step"], BAND_BUDGETS[name])
+        if values["convergence"] != "force":
+            values["reuse_tol"] = 0.0
         chosen[name] = values
     return chosen
+
+
+def _cheapest_within(table: pd.DataFrame, knob: Knob, budget: float,
+                     ref: dict[str, Any]) -> Any:
+    """The value of ``knob`` the peak rule chooses (see :func:`recommend`)."""
+    rows = table[(table["knob"] == knob.name) & (table["error"] == "")]
+    fine = rows[accuracy(rows) <= budget] if not rows.empty else rows
+    if fine.empty:
+        return ref[knob.name]
+    fine = fine.assign(not_reference=fine["value"] != str(ref[knob.name]), cost=_cost(fine))
+    scatter = _cost_scatter(table, knob.test)
+    tied = fine[fine["cost"] <= fine["cost"].min() * (1.0 + scatter)]
+    return _typed(tied.sort_values(["not_reference", "cost"]).iloc[0]["value"], knob)
+
+
+def _newton_from_band(band: pd.DataFrame, scale: StudyScale,
+                      budget: dict[str, float]) -> dict[str, Any]:
+    """Newton's settings the band rows allow a preset (see :func:`recommend`)."""
+    rows = {(r.knob, r.value): r for r in band_rows(BAND_SCALES[band_scale_name(scale)])}
+    reference = band[band["knob"] == "reference"].iloc[0]
+    margin = 1.0 - reference["particle_steps_scatter"] / reference["particle_steps"]
+    settings: dict[str, Any] = {}
+    for knob in NEWTON_KNOBS:
+        lines = band[(band["knob"] == knob)]
+        lines = lines[[keeps_band(line, budget) and line["cost_ratio"] < margin
+                       for _, line in lines.iterrows()]]
+        if not lines.empty:
+            best = lines.sort_values("cost_ratio").iloc[0]
+            settings.update(rows[(knob, best["value"])].settings)
+    return {k: v for k, v in settings.items() if k in SETTING_NAMES}
+
+
+def _band_strain_per_step(band: pd.DataFrame, value: float, budget: dict[str, float]) -> float:
+    """``value`` if its band row keeps ``budget`` (or it is no coarser than the commands'),
+    else the largest strain per DEM step whose row does."""
+    default = command_settings()["strain_per_step"]
+    kept = [default] + [float(line["value"]) for _, line in
+                        band[band["knob"] == "strain_per_step"].iterrows()
+                        if keeps_band(line, budget)]
+    return value if value <= default or value in kept else max(v for v in kept if v <= value)
+
+
+def band_scale_name(scale: StudyScale) -> str:
+    """The band rows' scale of a study scale (the GPU study's band rows are the CPU's)."""
+    return scale.name if scale.name in BAND_SCALES else "cpu"
 
 
 def _cost(rows: pd.DataFrame) -> pd.Series:

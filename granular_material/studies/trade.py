@@ -7,7 +7,16 @@ Three tests carry the knobs:
   strain per DEM step, time-step safety factor, local damping, float32 against float64;
 - ``element``: the FEM × DEM single element (one RVE copied to its 4 Gauss points): Newton
   tolerance, stress floor, tangent, predictor and relaxation, reuse of undisturbed RVEs;
-- ``specimen``: the biaxial specimen: the mesh.
+- ``specimen``: the biaxial specimen: the mesh;
+- the band rows (:mod:`~granular_material.studies.band`): the commands' reduced specimen on
+  several sets of RVEs, scored past its peak (when and where its shear band forms, σ1/σ3
+  and εv at 5 and 10 %) against the commands' defaults: Newton's test and tolerance, the
+  relaxation, the drive, the tangent, the strain per DEM step, the load steps, the mesh,
+  the discs;
+- the footing rows (:mod:`~granular_material.studies.footing_rows`): Guo & Zhao's reduced
+  strip footing under the scene's settings, another packing, the force test, reuse, the
+  presets, and the Mohr–Coulomb twin, scored by the bearing pressure at s/B = 0.05 and 0.1,
+  the peak and the mechanism.
 
 Every knob varies one setting with the others at the reference (:data:`REFERENCE`). A run's
 errors (:func:`~granular_material.results.compare.curve_errors`) are taken against the
@@ -20,7 +29,8 @@ Everything is written under the output folder as it goes: ``curves/`` (each run'
 ``trade.csv`` (one row per knob value, appended after each run; a restarted study skips the
 runs already in it), then ``pareto.png``, ``knob_<name>.png``, ``presets.json`` and
 ``report.md``. The three recommended settings are chosen from the rows by a stated rule
-(:func:`recommend`) and then run and measured themselves.
+(:func:`recommend`: the peak for the DEM knobs, the band for Newton's) and then run and
+measured themselves, the band rows' presets against their band budget.
 
 The study is in five modules: :mod:`~granular_material.studies.plan` (scales, knobs, rows),
 :mod:`~granular_material.studies.running` (one run), :mod:`~granular_material.studies.scoring`
@@ -32,12 +42,39 @@ them in order (:func:`run_trade_study`) and gives their public names.
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import replace
 from pathlib import Path
 
 import pandas as pd
 
 from granular_material.filesafe import write_whole
 from granular_material.provenance import code_commit
+from granular_material.results import write_csv
+from granular_material.runs.presets import load_presets
+from granular_material.studies.band import (
+    BAND_SCALES,
+    BandRow,
+    BandScale,
+    band_rows,
+    command_settings,
+    preset_band_row,
+    run_band_rows,
+)
+from granular_material.studies.band_report import band_figures, band_section
+from granular_material.studies.band_scoring import (
+    BAND_BUDGETS,
+    band_table,
+    keeps_band,
+    run_measures,
+)
+from granular_material.studies.footing_report import footing_section, plot_footing_pareto
+from granular_material.studies.footing_rows import (
+    FOOTING_SCALES,
+    footing_rows,
+    footing_table,
+    half_width,
+    run_footing_rows,
+)
 from granular_material.studies.measure import _drop_rows, _measure, read_trade_table
 from granular_material.studies.plan import (
     NOISE,
@@ -56,7 +93,13 @@ from granular_material.studies.plan import (
 from granular_material.studies.report import presets_file, report
 from granular_material.studies.running import RunResult, _Runner
 from granular_material.studies.running import _dem_equivalent as _dem_equivalent
-from granular_material.studies.scoring import PRESET_KNOBS, PRESETS, accuracy, recommend
+from granular_material.studies.scoring import (
+    PRESET_KNOBS,
+    PRESETS,
+    accuracy,
+    band_scale_name,
+    recommend,
+)
 
 __all__ = ["NOISE", "PRESETS", "PRESET_KNOBS", "REFERENCE", "SCALES", "SPECIMEN_NEWTON", "Knob",
            "PlannedRow", "RunResult", "StudyScale", "accuracy", "knobs", "plan_runs",
@@ -66,11 +109,15 @@ __all__ = ["NOISE", "PRESETS", "PRESET_KNOBS", "REFERENCE", "SCALES", "SPECIMEN_
 
 def run_trade_study(scale: str | StudyScale, out: str | Path, device: str = "cpu",
                     progress: bool = False,
-                    log: Callable[[str], None] = lambda _: None) -> pd.DataFrame:
+                    log: Callable[[str], None] = lambda _: None,
+                    jobs: int = 1) -> pd.DataFrame:
     """Run (or finish) the study ``scale`` into ``out``; returns ``trade.csv`` as a table.
 
-    Writes ``trade.csv``, ``curves/``, ``rves/``, ``pareto.png``, ``knob_<name>.png``,
-    ``presets.json`` and ``report.md`` (see the module docstring).
+    Writes ``trade.csv``, ``curves/``, ``rves/``, ``band/`` (the band rows' runs,
+    ``band.csv``), ``pareto.png``, ``knob_<name>.png``, ``band_pareto.png``,
+    ``band_histories.png``, ``footing/`` (the footing rows' runs, ``footing.csv``),
+    ``footing_pareto.png``, ``presets.json`` and ``report.md`` (see the module docstring);
+    ``jobs``: band rows run at once, each in its own process.
     """
     from granular_material.results.trade_plots import plot_knob, plot_pareto
 
@@ -85,7 +132,30 @@ def run_trade_study(scale: str | StudyScale, out: str | Path, device: str = "cpu
         {(r.knob, str(r.value), run_key(r.settings)) for r in planned}))
     _measure(planned, runner, out, device, commit, progress, log)
     table = read_trade_table(out / "trade.csv")
-    presets = recommend(table[table["knob"] != "preset"], study)
+    band_scale = BAND_SCALES[band_scale_name(study)]
+    rows = band_rows(band_scale)
+    run_band_rows(rows, band_scale, out, device, jobs, progress, log)
+    band = band_table(run_measures(out, rows, band_scale), band_scale)
+    presets = recommend(table[table["knob"] != "preset"], study, band)
+    rows += _measure_preset_bands(presets, band_scale, out, device, jobs, progress, log)
+    band = band_table(run_measures(out, rows, band_scale), band_scale)
+    # a preset whose combination of settings breaks its band budget falls back to the
+    # commands' Newton settings (each setting kept it alone; together they did not)
+    newton = {k: v for k, v in command_settings().items() if k != "strain_per_step"}
+    for name, budget in BAND_BUDGETS.items():
+        line = band[(band["knob"] == "preset") & (band["value"] == name)]
+        if line.empty or keeps_band(line.iloc[0], budget):
+            continue
+        if any(presets[name][k] != v for k, v in newton.items()):
+            log(f"preset {name} breaks its band budget; it takes the commands' Newton "
+                "settings")
+            rows = [replace(r, value=f"{name} (first choice)")
+                    if r.knob == "preset" and r.value == name else r for r in rows]
+            presets[name] = {**presets[name], **newton}
+            rows += _measure_preset_bands({name: presets[name]}, band_scale, out, device,
+                                          jobs, progress, log, in_force=False)
+    band = band_table(run_measures(out, rows, band_scale), band_scale)
+    write_csv(band, out / "band.csv")
     preset_rows = _preset_rows(presets, study)
     _drop_rows(out / "trade.csv", lambda t: (t["knob"] == "preset") & ~t["run"].isin(
         {run_key(r.settings) for r in preset_rows}))
@@ -95,8 +165,32 @@ def run_trade_study(scale: str | StudyScale, out: str | Path, device: str = "cpu
     plot_pareto(table, accuracy(table), out / "pareto.png")
     for name in dict.fromkeys(k.name for k in knobs(study)):
         plot_knob(table[table["knob"] == name], name, out / f"knob_{name}.png")
-    _write_text(out / "report.md", report(table, presets, study, device, commit))
+    band_figures(out, band, rows, band_scale)
+    footing_scale = FOOTING_SCALES[band_scale_name(study)]
+    footing = footing_rows(presets)
+    run_footing_rows(footing, footing_scale, out, log)
+    footing_results = footing_table(footing, out, half_width())
+    write_csv(footing_results, out / "footing.csv")
+    plot_footing_pareto(footing_results, out / "footing_pareto.png")
+    _write_text(out / "report.md", "\n".join([
+        report(table, presets, study, device, commit), "",
+        *band_section(band, presets, band_scale),
+        *footing_section(footing_results, footing_scale)]))
     return table
+
+
+def _measure_preset_bands(presets: dict[str, dict], band_scale: BandScale, out: Path,
+                          device: str, jobs: int, progress: bool,
+                          log: Callable[[str], None], in_force: bool = True) -> list[BandRow]:
+    """The band rows of ``presets`` (``in_force``: and of the presets in force when the
+    study began, where they differ), run; returns the rows."""
+    rows = [preset_band_row(name, values, band_scale) for name, values in presets.items()
+            if name in BAND_BUDGETS]
+    for name, preset in load_presets().items() if in_force else ():
+        if name in presets and name in BAND_BUDGETS and preset.settings() != presets[name]:
+            rows.append(preset_band_row(f"{name} (in force)", preset.settings(), band_scale))
+    run_band_rows(rows, band_scale, out, device, jobs, progress, log)
+    return rows
 
 
 def _write_text(path: Path, text: str) -> None:

@@ -1,0 +1,72 @@
+"""The footing rows' measures (issue 49) on a made-up footing whose answer is known, and
+the scene variants a preset makes."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from granular_material.studies.band import command_settings
+from granular_material.studies.footing_rows import (
+    MECHANISM_FRACTION,
+    footing_measures,
+    footing_rows,
+    half_width,
+)
+
+B_HALF = 0.05
+
+
+def _footing(settlements: np.ndarray, pressures: np.ndarray) -> tuple[pd.DataFrame,
+                                                                      pd.DataFrame]:
+    steps = pd.DataFrame({"step": np.arange(len(settlements)),
+                          "footing_settlement": settlements,
+                          "footing_force_y": -pressures * B_HALF})
+    x, y = np.meshgrid(np.linspace(0.01, 0.59, 30), np.linspace(0.01, 0.39, 20))
+    x, y = x.ravel(), y.ravel()
+    tables = []
+    for step in steps["step"]:
+        # shear strain concentrated in a wedge under the footing: 0.12 m wide, 0.08 m deep
+        gamma = np.where((x < 0.12) & (y > 0.4 - 0.08), 0.1, 0.001) * step
+        tables.append(pd.DataFrame({"step": step, "x": x, "y": y, "shear_strain": gamma}))
+    return steps, pd.concat(tables, ignore_index=True)
+
+
+def test_the_bearing_pressures_and_the_mechanism_are_read_where_they_are():
+    s = np.linspace(0.0, 0.0145, 59)
+    q = 200e3 * np.minimum(s / 0.004, 1.0) - 2e6 * np.maximum(s - 0.008, 0.0)
+    steps, points = _footing(s, q)
+    measures = footing_measures(steps, points, B_HALF)
+    assert measures["q_0.05"] == pytest.approx(200.0)  # at 5 mm, before the softening
+    assert measures["q_0.1"] == pytest.approx((200e3 - 2e6 * 0.002) / 1e3)
+    assert measures["q_peak"] == pytest.approx(200.0)
+    assert 4.0 <= measures["s_peak_mm"] <= 8.0
+    # the wedge reaches x < 0.12 m and 0.08 m down: in B = 0.1 m, up to one grid spacing
+    assert 1.0 <= measures["mechanism_reach_B"] <= 1.2
+    assert 0.6 <= measures["mechanism_depth_B"] <= 0.8
+    assert 0 < MECHANISM_FRACTION < 1
+
+
+def test_a_footing_that_stopped_short_has_no_pressure_at_s_over_b_0_1():
+    s = np.linspace(0.0, 0.006, 25)
+    steps, points = _footing(s, 1e5 * np.ones_like(s))
+    measures = footing_measures(steps, points, B_HALF)
+    assert measures["q_0.05"] == pytest.approx(100.0)
+    assert math.isnan(measures["q_0.1"]) and math.isnan(measures["mechanism_depth_B"])
+
+
+def test_a_preset_changes_the_scene_only_where_it_differs_from_the_commands():
+    assert half_width() == pytest.approx(0.05)
+    same = footing_rows({"engineering": command_settings()})
+    assert "preset" not in {r.knob for r in same}
+    faster = {**command_settings(), "drive": "continue", "strain_per_step": 3e-5}
+    row = next(r for r in footing_rows({"engineering": faster}) if r.knob == "preset")
+    assert row.parameters == {"drive": "continue", "max_strain_per_step": 3e-5}
+    assert row.newton == {}
+    force = {**command_settings(), "convergence": "force", "rtol": 1e-3, "stress_floor": 0.02}
+    row = next(r for r in footing_rows({"quick": force}) if r.knob == "preset")
+    assert row.newton["convergence"] == "force" and row.newton["max_iterations"] == 25
+    assert row.newton["stress_tol"] == pytest.approx(0.02 * 20e3)  # of the surcharge
