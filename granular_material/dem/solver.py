@@ -101,8 +101,7 @@ class Solver:
         b, n, k = model.n_rve, model.n_disc, model.capacity
         vec2 = wp.types.vector(2, ft)
         self.device = dev
-        #: whether a step is ``step_serial`` (a thread per RVE) rather than two kernels
-        self.serial = not wp.get_device(dev).is_cuda if serial is None else serial
+        self._sizes = (b * n, k, ft)
         self.rebuild = wp.zeros(b, dtype=wp.int32, device=dev)
         self.partner_new = wp.zeros(b * n * k, dtype=wp.int32, device=dev)
         self.count_new = wp.zeros(b * n, dtype=wp.int32, device=dev)
@@ -110,9 +109,7 @@ class Solver:
         self.bin_count = wp.zeros(b * model.max_bins**2, dtype=wp.int32, device=dev)
         self.bin_items = wp.zeros(b * model.max_bins**2 * BIN_CAPACITY, dtype=wp.int32,
                                   device=dev)
-        self.pair = wp.zeros(b * n * k, dtype=wp.types.vector(3, ft), device=dev)
-        self.pair_branch = wp.zeros(b * n * k, dtype=vec2, device=dev)
-        self.disc_load = wp.zeros(b * n, dtype=wp.types.vector(3, ft), device=dev)
+        self.serial = not wp.get_device(dev).is_cuda if serial is None else serial
         self.part_stress = wp.zeros(b * n, dtype=wp.types.matrix((2, 2), ft), device=dev)
         self.part_stiffness = wp.zeros(b * n, dtype=vec2, device=dev)
         self.rebuild_any = wp.zeros(1, dtype=wp.int32, device=dev)
@@ -121,6 +118,28 @@ class Solver:
         # keyed by the ids of (model, state, loading); each entry holds those objects, so
         # that an id is never reused by another object while its launches are cached
         self._recorded: dict[tuple, tuple[tuple, tuple[list, list, list]]] = {}
+
+    @property
+    def serial(self) -> bool:
+        """Whether a step is ``step_serial`` (a thread per RVE) rather than two kernels."""
+        return self._serial
+
+    @serial.setter
+    def serial(self, value: bool) -> None:
+        self._serial = bool(value)
+        self._allocate_step_buffers()
+
+    def _allocate_step_buffers(self) -> None:
+        """The work arrays of this step path only, the others empty: the pairs' force
+        records ``pair`` and ``pair_branch`` (per slot) for ``contact_forces`` →
+        ``integrate``, ``disc_load`` (per disc) for ``step_serial``. Fresh records are
+        zero, as a step expects of a pair that has not touched yet."""
+        discs, k, ft = self._sizes
+        vec3 = wp.types.vector(3, ft)
+        slots = 0 if self.serial else discs * k
+        self.pair = wp.zeros(slots, dtype=vec3, device=self.device)
+        self.pair_branch = wp.zeros(slots, dtype=wp.types.vector(2, ft), device=self.device)
+        self.disc_load = wp.zeros(discs if self.serial else 0, dtype=vec3, device=self.device)
 
     # -- recorded launches ----------------------------------------------------------------
     def _check_launch(self, model: Model, state: State, loading: LoadingControl) -> wp.Launch:
