@@ -162,3 +162,24 @@ def test_block_path_refuses_rves_beyond_its_tiles(small_rve_path, monkeypatch):
     monkeypatch.setattr("granular_material.dem.solver.BLOCK_DISCS", 50)
     with pytest.raises(ValueError, match="at most 50 discs"):
         solver.block = True
+
+
+def test_switching_paths_within_a_run_keeps_the_results(small_rve_path):
+    """The two-kernel step, the block path, then the two-kernel step again on one batch
+    (each switch gives fresh records and drops the launches recorded with the old ones)
+    against the two-kernel step throughout, with a snapshot restored on the way."""
+    batch = _batch(small_rve_path, False)
+    reference = _batch(small_rve_path, False)
+    solver = batch.shards[0].solver
+    for b in (batch, reference):
+        _load(b, False)
+        b.run(100)
+    start = batch.snapshot()
+    solver.block = True
+    batch.run(60)
+    batch.restore(start)
+    batch.run(100)
+    solver.block = False
+    batch.run(100)
+    reference.run(200)
+    assert max(_differences(batch, reference).values()) == 0.0

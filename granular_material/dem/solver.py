@@ -118,6 +118,10 @@ class Solver:
         self.device = dev
         self._sizes = (b, n, k, ft)
         self._block = False
+        self._graphs: dict[tuple, wp.Graph] = {}
+        # keyed by the ids of (model, state, loading); each entry holds those objects, so
+        # that an id is never reused by another object while its launches are cached
+        self._recorded: dict[tuple, tuple[tuple, tuple[list, list, list]]] = {}
         self.rebuild = wp.zeros(b, dtype=wp.int32, device=dev)
         self.partner_new = wp.zeros(b * n * k, dtype=wp.int32, device=dev)
         self.count_new = wp.zeros(b * n, dtype=wp.int32, device=dev)
@@ -138,10 +142,6 @@ class Solver:
         self.part_stiffness = wp.zeros(b * n, dtype=vec2, device=dev)
         self.rebuild_any = wp.zeros(1, dtype=wp.int32, device=dev)
         self._host_rebuild = None if wp.get_device(dev).is_cuda else self.rebuild_any.numpy()
-        self._graphs: dict[tuple, wp.Graph] = {}
-        # keyed by the ids of (model, state, loading); each entry holds those objects, so
-        # that an id is never reused by another object while its launches are cached
-        self._recorded: dict[tuple, tuple[tuple, tuple[list, list, list]]] = {}
 
     @property
     def serial(self) -> bool:
@@ -173,7 +173,10 @@ class Solver:
         records ``pair`` and ``pair_branch`` (per slot) for ``contact_forces`` →
         ``integrate`` and the block path, ``disc_load`` (per disc) for ``step_serial``, the
         steps each RVE has left for the block path. Fresh records are zero, as a step
-        expects of a pair that has not touched yet."""
+        expects of a pair that has not touched yet; the launches recorded with the old
+        arrays are dropped."""
+        self._recorded.clear()
+        self._graphs.clear()
         n_rve, n_disc, k, ft = self._sizes
         discs = n_rve * n_disc
         vec3 = wp.types.vector(3, ft)
