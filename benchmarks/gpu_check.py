@@ -1,6 +1,7 @@
 """Pieces of ``benchmarks/gpu_check.sh`` that are Python: is a CUDA device there, does a
-sheared batch on it agree with the CPU, and does the condensed tangent's CG on it agree
-with the LU on the host.
+sheared batch on it agree with the CPU, does the condensed tangent's CG on it agree
+with the LU on the host, and how fast are the two step paths (the two-kernel step and the
+block path) on it.
 
 Usage::
 
@@ -9,6 +10,10 @@ Usage::
         [--batch 16] [--particles 400] [--strain 2e-3] [--dtypes float64,float32]
     python benchmarks/gpu_check.py condensed --out DIR [--device cuda] [--batch 8]
         [--particles 400] [--strain 2e-3] [--sliding free|stick]
+    python benchmarks/gpu_check.py paths --out DIR [--device cuda]
+        [--batches 1,64,1024,4096] [--particles 400] [--dtypes float64,float32]
+        [--seconds 0.5]
+    python benchmarks/gpu_check.py block-specimen -- BIAXIAL-OPTIONS...
 
 ``agreement`` prepares one packing (seed 1, 100 kPa, on the reference device, float64),
 gives each of the B copies its own displacement gradient (simple and pure shear,
@@ -28,7 +33,18 @@ from the batch's own arrays (``granular_material.dem.condensed_device``; its dif
 the LU too) and, beside them, 200 DEM steps of the same batch on ``--device``.
 ``--sliding`` is the contacts at their Coulomb cap (``free``: no tangential stiffness,
 ``--tangent condensed``; ``stick``: kt, ``--tangent condensed-sticking``).
-Measures; exit 1 only where the agreement is outside the tolerance.
+``paths`` times both step paths of the engine on ``--device``: for each float type and B
+it prepares B copies of one packing (as ``agreement``), shears them at 1e-5 a step (as
+``dem_throughput.py``), and from one snapshot steps them by the two-kernel step
+(``contact_forces`` → ``integrate``, the engine's CUDA path) and by the block path
+(``kernels_block``, one thread block an RVE), the same number of steps each (about
+``--seconds`` of the two-kernel step), after a warm-up of each: ``paths.csv`` and
+``paths.json`` hold the particle-steps/s of each, their ratio, the block path's launch
+rounds, and the largest difference of their stresses against the tolerance above. Its
+ratios are what ``solver_block.BLOCK_MIN_RVES`` (the engine's rule) waits for.
+``block-specimen`` runs ``granular_material.cli`` with the given options in this process,
+with the engine's rule set to take the block path for every batch whose discs fit it.
+Measures; exit 1 only where an agreement is outside the tolerance.
 """
 
 from __future__ import annotations
@@ -205,6 +221,97 @@ def condensed(out: Path, device: str = "cuda", n_rve: int = 8, particles: int = 
     return summary
 
 
+def _use_block_path(batch, block: bool) -> None:
+    """Step every shard of ``batch`` by the block path (True) or the two-kernel step."""
+    for shard in batch.shards:
+        shard.solver.serial = False
+        shard.solver.block = block
+
+
+def paths(out: Path, device: str = "cuda", batches: tuple[int, ...] = (1, 64, 1024, 4096),
+          particles: int = 400, dtypes: tuple[str, ...] = ("float64", "float32"),
+          seconds: float = 0.5) -> dict:
+    """Time the two-kernel step and the block path from one snapshot per float type and
+    B; writes ``paths.csv`` and ``paths.json`` under ``out`` and returns the summary."""
+    verbose(False)
+    from granular_material.dem import DEMBatch
+    from granular_material.procedures import prepare_packing
+    from granular_material.procedures.packing import DEFAULT_PRESSURE
+    from granular_material.procedures.strain_path import DEFAULT_STRAIN_PER_STEP
+    from granular_material.results import write_csv, write_json
+
+    out.mkdir(parents=True, exist_ok=True)
+    one = prepare_packing(n_disc=particles, seed=1, pressure=DEFAULT_PRESSURE,
+                          device=device).to_data().select(0)
+    rows, summary = [], {"device": device, "particles": particles, "cases": []}
+    for dtype in dtypes:
+        for n_rve in batches:
+            batch = DEMBatch(one.replicate(n_rve), device=device, dtype=dtype)
+            shear = np.zeros((n_rve, 2, 2))
+            shear[:, 0, 1] = DEFAULT_STRAIN_PER_STEP / batch.dt
+            batch.set_affine(shear)
+            _use_block_path(batch, False)
+            batch.run(20)  # lists built, kernels loaded
+            start = batch.snapshot()
+            t0 = time.perf_counter()
+            batch.run(20)
+            steps = max(20, int(seconds / ((time.perf_counter() - t0) / 20)))
+            rates, stress, rounds = {}, {}, 0
+            for path in ("two_kernel", "block"):
+                _use_block_path(batch, path == "block")
+                batch.restore(start)
+                batch.run(20)  # this path's module loaded, its launches recorded
+                batch.restore(start)
+                before = sum(s.solver.block_rounds for s in batch.shards)
+                t0 = time.perf_counter()
+                batch.run(steps, check_every=steps)  # ends reading the status back
+                rates[path] = n_rve * batch.n_disc * steps / (time.perf_counter() - t0)
+                stress[path] = batch.homogenize().stress
+                rounds = sum(s.solver.block_rounds for s in batch.shards) - before
+            pressure = np.abs(np.trace(stress["two_kernel"], axis1=1, axis2=2)) / 2
+            diff = float((np.abs(stress["block"] - stress["two_kernel"]).max(axis=(1, 2))
+                          / pressure).max())
+            case = {"dtype": dtype, "n_rve": n_rve, "steps": steps,
+                    "two_kernel_particle_steps_per_s": rates["two_kernel"],
+                    "block_particle_steps_per_s": rates["block"],
+                    "block_over_two_kernel": rates["block"] / rates["two_kernel"],
+                    "block_rounds": rounds, "stress_rel_diff": diff,
+                    "tolerance": TOLERANCE[dtype],
+                    "within_tolerance": bool(diff <= TOLERANCE[dtype])}
+            rows.append(case)
+            summary["cases"].append(case)
+            print(f"{dtype} B = {n_rve}: two-kernel {rates['two_kernel']:.3g}, block "
+                  f"{rates['block']:.3g} particle-steps/s (x{case['block_over_two_kernel']:.2f}"
+                  f"), {rounds} rounds for {steps} steps, stress rel. diff {diff:.2g}",
+                  flush=True)
+    write_csv(pd.DataFrame(rows), out / "paths.csv")
+    summary["within_tolerance"] = all(c["within_tolerance"] for c in summary["cases"])
+    write_json(summary, out / "paths.json")
+    return summary
+
+
+def block_specimen(cli_arguments: list[str]) -> int:
+    """``granular_material.cli`` with ``cli_arguments``, the engine's rule set to take the
+    block path for every batch whose discs fit it (on any device); its exit code, or 1
+    where no solver took the block path."""
+    verbose(False)
+    from granular_material.cli import main as cli_main
+    from granular_material.dem import solver
+    from granular_material.dem.kernels_block import BLOCK_DISCS
+
+    taken = []
+
+    def rule(cuda: bool, n_rve: int, n_disc: int) -> bool:
+        taken.append(n_disc <= BLOCK_DISCS)
+        return taken[-1]
+
+    solver.block_path_expected_to_pay = rule
+    code = cli_main(cli_arguments)
+    print(f"block-specimen: {sum(taken)} of {len(taken)} solvers took the block path",
+          flush=True)
+    return code if any(taken) else 1
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     sub = parser.add_subparsers(dest="command", required=True)
@@ -227,7 +334,26 @@ def main(argv: list[str] | None = None) -> int:
     tangent.add_argument("--sliding", choices=("free", "stick"), default="free",
                          help="contacts at their Coulomb cap: no tangential stiffness "
                               "(free) or kt (stick)")
+    timing = sub.add_parser("paths", help="the two-kernel step against the block path")
+    timing.add_argument("--out", type=Path, required=True)
+    timing.add_argument("--device", default="cuda")
+    timing.add_argument("--batches", default="1,64,1024,4096")
+    timing.add_argument("--particles", type=int, default=400)
+    timing.add_argument("--dtypes", default="float64,float32")
+    timing.add_argument("--seconds", type=float, default=0.5)
+    specimen = sub.add_parser("block-specimen", help="the command line, block path taken")
+    specimen.add_argument("cli", nargs=argparse.REMAINDER,
+                          help="the options of granular_material.cli (after --)")
     args = parser.parse_args(argv)
+    if args.command == "block-specimen":
+        cli = args.cli[1:] if args.cli[:1] == ["--"] else args.cli
+        return block_specimen(cli)
+    if args.command == "paths":
+        if args.device.startswith("cuda"):
+            require_cuda()
+        summary = paths(args.out, args.device, tuple(int(b) for b in args.batches.split(",")),
+                        args.particles, tuple(args.dtypes.split(",")), args.seconds)
+        return 0 if summary["within_tolerance"] else 1
     if args.command == "require-cuda":
         print(require_cuda())
         return 0

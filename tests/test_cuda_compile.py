@@ -17,6 +17,7 @@ import warp as wp
 
 from granular_material.dem import condensed_cg_kernels, condensed_device_kernels
 from granular_material.dem.kernels import DTYPES, STEP_VARIANTS, kernel_modules
+from granular_material.dem.kernels_block import BLOCK_THREADS
 
 ARCH = 90  #: Hopper (H100, H200)
 
@@ -47,7 +48,10 @@ def _base_name(name: str) -> str:
 
 def test_kernel_modules_cover_every_variant_and_kernel():
     modules = kernel_modules()
-    assert len(modules) == len(DTYPES) * len(STEP_VARIANTS) == 16
+    # per float type the step's variants and the block path's module
+    assert len(modules) == len(DTYPES) * (len(STEP_VARIANTS) + 1) == 18
+    assert {name for name in modules if "_block_" in name} == {
+        f"granular_material_dem_block_{dtype}_r0" for dtype in DTYPES}
     for name, module in modules.items():
         kernels = [k for k in module.kernels.values()
                    if not k.is_generic or k.overloads]
@@ -85,3 +89,8 @@ def test_module_compiles_to_ptx_for_sm90(name: str, tmp_path: Path):
         # every kernel of the module (its one overload where generic), forward only
         assert any(entry.startswith(kernel.key) and entry.endswith("_cuda_kernel_forward")
                    for entry in entries), f"{kernel.key} missing from the PTX of {name}"
+    if "_block_" in name:
+        # the block path: compiled for its blocks, its tiles in shared memory, and the
+        # block's barriers in the code
+        assert module.options["block_dim"] == BLOCK_THREADS
+        assert "dynamic_smem_base" in ptx and "bar.sync" in ptx

@@ -15,6 +15,9 @@ import pytest
 import warp as wp
 
 BENCH = Path(__file__).resolve().parents[1] / "benchmarks"
+#: the script's steps, in order
+STEPS = ("tests", "throughput", "agreement", "condensed", "specimen", "paths",
+         "block_specimen")
 
 
 def _module():
@@ -47,12 +50,12 @@ def test_require_cuda_prints_nothing_but_the_device_to_stdout():
 def test_script_is_valid_bash_and_names_every_step():
     text = (BENCH / "gpu_check.sh").read_text()
     assert subprocess.run(["bash", "-n", str(BENCH / "gpu_check.sh")]).returncode == 0
-    for step in ("tests", "throughput", "agreement", "condensed", "specimen"):
+    for step in STEPS:
         assert f"run_step {step} " in text
     limits = [int(v) for v in re.findall(r"T_\w+=\$\{T_\w+:-(\d+)\}", text)]
-    # the limits are caps (an H200 took 244 s for all five, 2026-12-04): together they fit,
-    # with the install and start-up, in one 10-minute command on a lent GPU machine
-    assert len(limits) == 5 and sum(limits) <= 480
+    # the limits are caps (an H200 took 244 s for the first five, 2026-12-04): together they
+    # fit, with the install and start-up, in one 10-minute command on a lent GPU machine
+    assert len(limits) == len(STEPS) and sum(limits) <= 480
 
 
 def test_gradients_cover_the_batch():
@@ -75,7 +78,8 @@ def test_agreement_of_a_device_with_itself(tmp_path):
 @pytest.mark.slow
 def test_whole_script_at_smoke_size_on_the_cpu(tmp_path):
     """GPU_CHECK_SMOKE=1: every step of the script on the CPU at toy sizes (about 80 s on
-    2 busy cores), its results and summary.json where the script says."""
+    2 busy cores before the two steps of the block path), its results and summary.json
+    where the script says."""
     out = tmp_path / "check"
     done = subprocess.run(["bash", str(BENCH / "gpu_check.sh"), str(out)],
                           capture_output=True, text=True, timeout=600,
@@ -83,11 +87,12 @@ def test_whole_script_at_smoke_size_on_the_cpu(tmp_path):
                                "GPU_CHECK_SMOKE": "1"})
     assert done.returncode == 0, done.stdout[-3000:]
     summary = json.loads((out / "summary.json").read_text())
-    assert {name: step["exit"] for name, step in summary["steps"].items()} == {
-        "tests": 0, "throughput": 0, "agreement": 0, "condensed": 0, "specimen": 0}
+    assert {name: step["exit"] for name, step in summary["steps"].items()} == dict.fromkeys(
+        STEPS, 0)
     for name in ("tests.xml", "throughput.csv", "throughput.json", "agreement.csv",
                  "agreement.json", "condensed.json", "specimen/steps.csv",
-                 "specimen/summary.json"):
+                 "specimen/summary.json", "paths.csv", "paths.json",
+                 "block_specimen/steps.csv", "block_specimen/summary.json"):
         assert (out / name).exists(), name
 
 
@@ -105,3 +110,16 @@ def test_condensed_cg_against_the_lu_on_the_cpu(tmp_path, sliding):
                                                                               rel=0.2)
     assert seconds["dem_200_steps"] > 0 and seconds["device_assembly"] > 0
     assert summary["device_assembly_max_rel_diff"] <= 1e-8
+
+
+def test_paths_times_both_step_paths_on_the_cpu(tmp_path):
+    """The two-kernel step and the block path from one snapshot: on the CPU (one thread a
+    block) they give the same stress bit for bit; the block path ran in rounds."""
+    summary = _module().paths(tmp_path, device="cpu", batches=(2,), particles=30,
+                              dtypes=("float64",), seconds=0.05)
+    (case,) = summary["cases"]
+    assert case["stress_rel_diff"] == 0 and summary["within_tolerance"]
+    assert case["two_kernel_particle_steps_per_s"] > 0 and case["block_rounds"] >= 1
+    assert case["block_over_two_kernel"] == pytest.approx(
+        case["block_particle_steps_per_s"] / case["two_kernel_particle_steps_per_s"])
+    assert json.loads((tmp_path / "paths.json").read_text())["cases"][0]["n_rve"] == 2

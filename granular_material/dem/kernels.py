@@ -18,7 +18,9 @@ A step is ``contact_forces`` → ``integrate`` (gather, damping, leap-frog) → 
 ``servo`` → ``advance_cell_and_check`` (cell update, and whether the next step must rebuild
 the lists); a rebuild is ``begin_build`` → ``fill_bins`` → ``build_lists`` → ``commit_lists``.
 On the CPU, where a kernel's threads run one after the other, ``step_serial`` (a thread per
-RVE) does the work of the first two in one pass, with the same sums.
+RVE) does the work of the first two in one pass, with the same sums. The block path
+(``kernels_block.step_block``, :func:`block_kernels_for`) does a whole step, servo and cell
+update included, with one thread block an RVE, many steps a launch.
 The kernels are plain functions in ``kernels_lists``, ``kernels_step`` and
 ``kernels_measures``; :func:`kernels_for` makes one warp module of them per float type and
 replica (see there), each specialised to the float type before the module is built.
@@ -43,6 +45,7 @@ from typing import Any
 import warp as wp
 
 from granular_material.dem import kernels_step
+from granular_material.dem.kernels_block import BLOCK_THREADS, block_pending, step_block
 from granular_material.dem.kernels_lists import (
     any_rebuild,
     begin_build,
@@ -65,9 +68,11 @@ __all__ = [
     "DTYPES",
     "GENERIC_STEP",
     "STEP_VARIANTS",
+    "BlockKernels",
     "KernelSet",
     "StepFeatures",
     "StepKernels",
+    "block_kernels_for",
     "kernel_modules",
     "kernels_for",
     "launch",
@@ -235,26 +240,57 @@ def step_kernels_for(dtype: str = "float64", replica: int = 0,
     )
 
 
+@dataclass(frozen=True)
+class BlockKernels:
+    """The block path's kernels (:mod:`~.kernels_block`): ``step_block``, launched tiled
+    with ``BLOCK_THREADS`` threads an RVE, and ``block_pending``."""
+
+    step_block: wp.Kernel
+    block_pending: wp.Kernel
+
+
+@cache
+def block_kernels_for(dtype: str = "float64", replica: int = 0) -> BlockKernels:
+    """The block path's kernels for ``dtype`` as a warp module of their own per replica
+    (as :func:`kernels_for`), generic in the step's terms (:data:`GENERIC_STEP`), compiled
+    for blocks of ``BLOCK_THREADS`` threads (on the CPU for the width a launch resolves
+    to)."""
+    ft = {"float64": wp.float64, "float32": wp.float32}[dtype]
+    module = f"granular_material_dem_block_{dtype}_r{replica}"
+    kernels = BlockKernels(step_block=_kernel(step_block, module, ft),
+                           block_pending=_kernel(block_pending, module, ft))
+    kernels.step_block.module.options["block_dim"] = BLOCK_THREADS
+    return kernels
+
+
 def kernel_modules(replica: int = 0) -> dict[str, wp.Module]:
     """Every warp module the engine can launch, for ``replica``, by name: per float type
-    the generic module of :func:`kernels_for` and the module of each other variant of
-    :data:`STEP_VARIANTS` (created, not built: e.g. for an ahead-of-time compile)."""
+    the generic module of :func:`kernels_for`, the module of each other variant of
+    :data:`STEP_VARIANTS` and the block path's module (:func:`block_kernels_for`); created,
+    not built (e.g. for an ahead-of-time compile)."""
     modules = {}
     for dtype in DTYPES:
         for features in STEP_VARIANTS:
             module = step_kernels_for(dtype, replica, features).contact_forces.module
             modules[module.name] = module
+        module = block_kernels_for(dtype, replica).step_block.module
+        modules[module.name] = module
     return modules
 
 
 def launch(kernel: wp.Kernel, dim: int, device: str, record: bool = False,
-           **arguments: Any) -> wp.Launch | None:
+           block_dim: int | None = None, **arguments: Any) -> wp.Launch | None:
     """Launch ``kernel`` with its arguments by name (all of them, no others); with
-    ``record`` return the recorded launch instead, to be replayed by ``.launch()``."""
+    ``record`` return the recorded launch instead, to be replayed by ``.launch()``; with
+    ``block_dim`` launch it tiled, ``dim`` blocks of ``block_dim`` threads (on the CPU one
+    thread a block unless ``warp.config.enable_cpu_blocks``)."""
     names = [arg.label for arg in kernel.adj.args]
     if set(names) != set(arguments):
         missing = sorted(set(names) - set(arguments))
         unknown = sorted(set(arguments) - set(names))
         raise TypeError(f"{kernel.key}: missing arguments {missing}, unknown {unknown}")
-    return wp.launch(kernel, dim=dim, inputs=[arguments[n] for n in names], device=device,
-                     record_cmd=record)
+    inputs = [arguments[n] for n in names]
+    if block_dim is not None:
+        return wp.launch_tiled(kernel, dim=[dim], inputs=inputs, device=device,
+                               block_dim=block_dim, record_cmd=record)
+    return wp.launch(kernel, dim=dim, inputs=inputs, device=device, record_cmd=record)

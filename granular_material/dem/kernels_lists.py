@@ -251,17 +251,20 @@ def commit_lists(
     verlet_displacement: AnyArray, pair: AnyArray,
 ):
     """Per disc of a rebuilding RVE: the new list becomes current, partners linked, the
-    slots' force records zeroed (a slot may now hold another pair)."""
+    slots' force records zeroed (a slot may now hold another pair; ``pair`` is empty
+    where the step keeps no records)."""
     i = wp.tid()
     b = i // n_disc
     if rebuild[b] == 0:
         return
     count = count_new[i]
     contact_count[i] = count
+    records = pair.shape[0] != 0
     for k in range(count):
         contact_partner[i * capacity + k] = partner_new[i * capacity + k]
         contact_shear_force[i * capacity + k] = shear_new[i * capacity + k]
-        pair[i * capacity + k] = type(pair[i * capacity + k])()
+        if records:
+            pair[i * capacity + k] = type(pair[i * capacity + k])()
     # the partners' new lists are complete (build_lists ran before): link from them
     link_mirrors(i, b * n_disc, capacity, partner_new, count_new, contact_mirror_slot)
     verlet_displacement[i] = type(verlet_displacement[i])()

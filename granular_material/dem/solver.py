@@ -23,8 +23,14 @@ from granular_material.dem.kernels import (
     launch,
     step_kernels_for,
 )
+from granular_material.dem.kernels_block import BLOCK_DISCS, BLOCK_THREADS
 from granular_material.dem.loading import LoadingControl
 from granular_material.dem.model import Model
+from granular_material.dem.solver_block import (
+    advance_block,
+    block_launches,
+    block_path_expected_to_pay,
+)
 from granular_material.dem.state import State
 
 __all__ = ["BIN_CAPACITY", "CONTROL_STRAIN", "CONTROL_STRESS", "DEMInstabilityError", "Solver"]
@@ -69,6 +75,12 @@ class Solver:
     and replayed as one graph (CUDA graphs; on the CPU warp's launch capture, with the
     rebuild under the condition that some RVE needs it).
 
+    The block path (``block``; :mod:`~.kernels_block`, :mod:`~.solver_block`) does the
+    same steps with one thread block an RVE, many steps a launch, each RVE stopping where
+    its lists need a rebuild; the engine takes it only where
+    :func:`block_path_expected_to_pay` says so (at present never: see
+    :data:`~.solver_block.BLOCK_MIN_RVES`).
+
     The step kernels are the variant (see :func:`step_kernels_for`) that leaves out what the
     scene makes irrelevant: the tangential force and its history where every RVE of the
     model is frictionless, local damping where the damping is 0, and then also the stress
@@ -88,10 +100,13 @@ class Solver:
         serial: step with ``step_serial``, a thread per RVE (True) or with
             ``contact_forces`` and ``integrate``, a thread per disc (False); None: serial on
             the CPU, where a kernel's threads run one after the other anyway.
+        block: step with the block path (True; for tests and benchmarks) or not (False);
+            None: the engine's rule, :func:`block_path_expected_to_pay`.
     """
 
     def __init__(self, model: Model, replica: int = 0,
-                 features: StepFeatures | None = None, serial: bool | None = None) -> None:
+                 features: StepFeatures | None = None, serial: bool | None = None,
+                 block: bool | None = None) -> None:
         self.kernels = kernels_for(model.dtype, replica)
         self.replica = replica
         #: the step kernels used whatever the scene, or None to pick them from the scene
@@ -101,8 +116,12 @@ class Solver:
         b, n, k = model.n_rve, model.n_disc, model.capacity
         vec2 = wp.types.vector(2, ft)
         self.device = dev
-        #: whether a step is ``step_serial`` (a thread per RVE) rather than two kernels
-        self.serial = not wp.get_device(dev).is_cuda if serial is None else serial
+        self._sizes = (b, n, k, ft)
+        self._block = False
+        self._graphs: dict[tuple, wp.Graph] = {}
+        # keyed by the ids of (model, state, loading); each entry holds those objects, so
+        # that an id is never reused by another object while its launches are cached
+        self._recorded: dict[tuple, tuple[tuple, tuple[list, list, list]]] = {}
         self.rebuild = wp.zeros(b, dtype=wp.int32, device=dev)
         self.partner_new = wp.zeros(b * n * k, dtype=wp.int32, device=dev)
         self.count_new = wp.zeros(b * n, dtype=wp.int32, device=dev)
@@ -110,17 +129,64 @@ class Solver:
         self.bin_count = wp.zeros(b * model.max_bins**2, dtype=wp.int32, device=dev)
         self.bin_items = wp.zeros(b * model.max_bins**2 * BIN_CAPACITY, dtype=wp.int32,
                                   device=dev)
-        self.pair = wp.zeros(b * n * k, dtype=wp.types.vector(3, ft), device=dev)
-        self.pair_branch = wp.zeros(b * n * k, dtype=vec2, device=dev)
-        self.disc_load = wp.zeros(b * n, dtype=wp.types.vector(3, ft), device=dev)
+        self.serial = not wp.get_device(dev).is_cuda if serial is None else serial
+        #: threads a block of the block path asks for (on the CPU one, unless
+        #: ``warp.config.enable_cpu_blocks``)
+        self.block_threads = BLOCK_THREADS
+        #: rounds of the block path so far (a ``step_block`` launch each, after the
+        #: rebuild of the lists of the RVEs that stopped for it)
+        self.block_rounds = 0
+        self.block = (block_path_expected_to_pay(wp.get_device(dev).is_cuda, b, n)
+                      if block is None else block)
         self.part_stress = wp.zeros(b * n, dtype=wp.types.matrix((2, 2), ft), device=dev)
         self.part_stiffness = wp.zeros(b * n, dtype=vec2, device=dev)
         self.rebuild_any = wp.zeros(1, dtype=wp.int32, device=dev)
         self._host_rebuild = None if wp.get_device(dev).is_cuda else self.rebuild_any.numpy()
-        self._graphs: dict[tuple, wp.Graph] = {}
-        # keyed by the ids of (model, state, loading); each entry holds those objects, so
-        # that an id is never reused by another object while its launches are cached
-        self._recorded: dict[tuple, tuple[tuple, tuple[list, list, list]]] = {}
+
+    @property
+    def serial(self) -> bool:
+        """Whether a step is ``step_serial`` (a thread per RVE) rather than two kernels."""
+        return self._serial
+
+    @serial.setter
+    def serial(self, value: bool) -> None:
+        self._serial = bool(value)
+        self._allocate_step_buffers()
+
+    @property
+    def block(self) -> bool:
+        """Whether a step is the block path's (``step_block``: one thread block an RVE,
+        many steps a launch); it takes precedence over ``serial``."""
+        return self._block
+
+    @block.setter
+    def block(self, value: bool) -> None:
+        n_disc = self._sizes[1]
+        if value and n_disc > BLOCK_DISCS:
+            raise ValueError(f"the block path holds at most {BLOCK_DISCS} discs an RVE in "
+                             f"shared memory, got {n_disc}")
+        self._block = bool(value)
+        self._allocate_step_buffers()
+
+    def _allocate_step_buffers(self) -> None:
+        """The work arrays of this step path only, the others empty: the pairs' force
+        records ``pair`` and ``pair_branch`` (per slot) for ``contact_forces`` →
+        ``integrate`` and the block path, ``disc_load`` (per disc) for ``step_serial``, the
+        steps each RVE has left for the block path. Fresh records are zero, as a step
+        expects of a pair that has not touched yet; the launches recorded with the old
+        arrays are dropped."""
+        self._recorded.clear()
+        self._graphs.clear()
+        n_rve, n_disc, k, ft = self._sizes
+        discs = n_rve * n_disc
+        vec3 = wp.types.vector(3, ft)
+        serial = self.serial and not self.block
+        slots = 0 if serial else discs * k
+        self.pair = wp.zeros(slots, dtype=vec3, device=self.device)
+        self.pair_branch = wp.zeros(slots, dtype=wp.types.vector(2, ft), device=self.device)
+        self.disc_load = wp.zeros(discs if serial else 0, dtype=vec3, device=self.device)
+        self.steps_left = wp.zeros(n_rve if self.block else 0, dtype=wp.int32,
+                                   device=self.device)
 
     # -- recorded launches ----------------------------------------------------------------
     def _check_launch(self, model: Model, state: State, loading: LoadingControl) -> wp.Launch:
@@ -189,6 +255,8 @@ class Solver:
         b, n, k = model.n_rve, model.n_disc, model.capacity
         c = model.constants
         servo = loading.servo
+        if self.block:  # the servo and the cell's update are the block's own
+            return block_launches(self, model, state, loading)
         if self.serial:
             launches = [_record(
                 sk.step_serial, b, dev, n_disc=n, capacity=k, law=model.law,
@@ -259,7 +327,8 @@ class Solver:
         ]
 
     def _key(self, model: Model, state: State, loading: LoadingControl) -> tuple:
-        return (id(model), id(state), id(loading), loading.servo, self.features, self.serial)
+        return (id(model), id(state), id(loading), loading.servo, self.features, self.serial,
+                self.block, self.block_threads)
 
     def prepare(self, model: Model, state: State, loading: LoadingControl) -> tuple:
         """The recorded launches (check, build, step) for this model, state and loading,
@@ -276,7 +345,8 @@ class Solver:
                 self._step_launches(model, state, loading),
             ))
             _, build, step = self._recorded[key][1]
-            self._graphs[key] = self._capture(build, step)
+            if not self.block:  # the block path runs many steps a launch, uncaptured
+                self._graphs[key] = self._capture(build, step)
         return self._recorded[key][1]
 
     # -- stepping -------------------------------------------------------------------------
@@ -303,7 +373,10 @@ class Solver:
         done = 0
         while done < steps:
             chunk = min(check_every, steps - done)
-            self._advance(self._key(model, state, loading), build, step, chunk)
+            if self.block:
+                advance_block(self, check, build, step, chunk)
+            else:
+                self._advance(self._key(model, state, loading), build, step, chunk)
             done += chunk
             self.check(state)
             if callback is not None and callback(done):
