@@ -69,7 +69,7 @@ BAND_SCALES: dict[str, BandScale] = {
     "smoke": BandScale("smoke", (1, 2), (1, 1), 36, (), 4, 0.02, (1, 101), (1,)),
     # the commands' reduced specimen (5 × 10 quad4 of 64 discs, 100 steps to 10 %): its
     # band forms at about 2 % with the defaults, in 2–3 min a run on one core
-    "cpu": BandScale("cpu", (5, 10), (3, 6), 64, (36, 100), 100, 0.10, (1, 1001, 2001),
+    "cpu": BandScale("cpu", (5, 10), (3, 6), 64, (36,), 100, 0.10, (1, 1001, 2001),
                      (1, 1001)),
 }
 
@@ -120,25 +120,20 @@ NEWTON_KNOBS = ("convergence", "relaxation", "tangent", "drive")
 
 def band_rows(scale: BandScale) -> list[BandRow]:
     """The knobs' rows, the reference (the commands' defaults, :func:`command_settings`)
-    first; each other row changes one setting."""
+    first; each other row changes one setting. (Not measured here, for the CPU's time: the
+    plain displacement test, the Kruyt–Rothenburg tangent, the load steps, more discs.)"""
     seeds, knob_seeds = scale.seeds, scale.knob_seeds
     rows = [BandRow("reference", "defaults", {}, seeds),
             BandRow("relaxation", "none", {"acceleration": "extrapolate/none"}, knob_seeds),
             BandRow("convergence", "residual-displacement 3e-2", {"rtol": 3e-2}, knob_seeds),
-            BandRow("convergence", "displacement 1e-2", {"convergence": "displacement"},
-                    knob_seeds),
             BandRow("convergence", "force 1e-3 floor 0.02p0", dict(FORCE_TEST), knob_seeds),
             BandRow("convergence", "force 1e-3 floor 0.02p0 no acceptance",
                     {**FORCE_TEST, "accept_correction": 0.0}, knob_seeds),
             BandRow("drive", "continue", {"drive": "continue"}, knob_seeds),
             BandRow("tangent", "objective", {"tangent": "objective", "tangent_update": "none"},
                     knob_seeds),
-            BandRow("tangent", "kruyt-rothenburg held", {"tangent": "kruyt-rothenburg"},
-                    knob_seeds),
             BandRow("strain_per_step", "3e-5", {"strain_per_step": 3e-5}, knob_seeds),
             BandRow("strain_per_step", "1e-4", {"strain_per_step": 1e-4}, knob_seeds),
-            BandRow("load_steps", f"{scale.steps // 2}", {"steps": scale.steps // 2},
-                    knob_seeds),
             BandRow("mesh", "{}x{}".format(*scale.coarse_elements),
                     {"elements": scale.coarse_elements}, knob_seeds)]
     rows += [BandRow("discs", str(n), {"discs": n}, knob_seeds) for n in scale.disc_values]

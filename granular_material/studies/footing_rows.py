@@ -81,13 +81,19 @@ class FootingRow:
 def footing_rows(presets: dict[str, dict[str, Any]] | None = None) -> list[FootingRow]:
     """The rows: the scene as written (the reference), another packing (the scatter
     between RVEs), the force test and the force test with reuse (what issue 44 measured),
-    the Mohr–Coulomb twin, and each preset's Newton settings (``presets``: the study's, in
-    its terms) where they differ from the scene's."""
+    the band rows' knobs (the RVEs' drive continued, a coarser strain per DEM step, no
+    relaxation, a looser displacement test), the Mohr–Coulomb twin, and each preset's
+    Newton settings (``presets``: the study's, in its terms) where they differ from the
+    scene's."""
     rows = [FootingRow("reference", "scene"),
             FootingRow("seed", "2", {"seed": 2}),
             FootingRow("convergence", "force", newton={"convergence": "force"}),
             FootingRow("reuse_tol", "1e-5 with force test", {"reuse_tol": 1e-5},
                        {"convergence": "force"}),
+            FootingRow("drive", "continue", {"drive": "continue"}),
+            FootingRow("strain_per_step", "3e-5", {"max_strain_per_step": 3e-5}),
+            FootingRow("relaxation", "none", newton={"relaxation": "none"}),
+            FootingRow("convergence", "residual-displacement 3e-2", newton={"rtol": 3e-2}),
             FootingRow("material", "mohr-coulomb twin",
                        material=("mohr-coulomb", dict(MOHR_COULOMB_TWIN)),
                        newton={"formulation": "small-strain"})]
