@@ -121,6 +121,21 @@ def test_a_preset_takes_a_newton_setting_only_where_it_keeps_the_band():
         "convergence", "relaxation", "tangent", "drive", "strain_per_step"}
 
 
+def test_a_setting_that_breaks_the_footing_s_budget_is_not_taken():
+    """Continuing the RVEs' drive keeps the band but moves the footing's pressure at
+    s/B = 0.1 by 28 %: within quick's footing budget, not engineering's."""
+    scale = SCALES["smoke"]
+    band = pd.DataFrame([_band_line("reference", "defaults"),
+                         _band_line("drive", "continue", delay=0.3, cost=0.3)])
+    footing = pd.DataFrame([{"knob": "drive", "value": "continue", "q_0.05_pct": -6.5,
+                             "q_0.1_pct": -28.4, "error": ""}])
+    empty = pd.DataFrame(columns=["knob", "value", "error"])
+    chosen = recommend(empty, scale, band, footing)
+    assert chosen["quick"]["drive"] == "continue"
+    assert chosen["engineering"]["drive"] == "restart"
+    assert recommend(empty, scale, band)["engineering"]["drive"] == "continue"
+
+
 def test_a_strain_per_step_that_breaks_the_band_is_replaced():
     scale = SCALES["smoke"]  # its pure-DEM knob offers 1e-5, 4e-5 and 1e-4
     table = pd.DataFrame([{"knob": "strain_per_step", "value": v, "test": "dem",

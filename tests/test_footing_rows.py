@@ -11,10 +11,13 @@ import pytest
 
 from granular_material.studies.band import command_settings
 from granular_material.studies.footing_rows import (
+    FOOTING_BUDGETS,
     MECHANISM_FRACTION,
     footing_measures,
     footing_rows,
     half_width,
+    keeps_footing,
+    preset_footing_row,
 )
 
 B_HALF = 0.05
@@ -60,13 +63,23 @@ def test_a_footing_that_stopped_short_has_no_pressure_at_s_over_b_0_1():
 
 def test_a_preset_changes_the_scene_only_where_it_differs_from_the_commands():
     assert half_width() == pytest.approx(0.05)
-    same = footing_rows({"engineering": command_settings()})
-    assert "preset" not in {r.knob for r in same}
+    assert preset_footing_row("engineering", command_settings()) is None
     faster = {**command_settings(), "drive": "continue", "strain_per_step": 3e-5}
-    row = next(r for r in footing_rows({"engineering": faster}) if r.knob == "preset")
+    row = preset_footing_row("engineering", faster)
     assert row.parameters == {"drive": "continue", "max_strain_per_step": 3e-5}
     assert row.newton == {}
+    # two presets of the same changes share their run
+    assert preset_footing_row("quick", faster).key == row.key
     force = {**command_settings(), "convergence": "force", "rtol": 1e-3, "stress_floor": 0.02}
-    row = next(r for r in footing_rows({"quick": force}) if r.knob == "preset")
+    row = preset_footing_row("quick", force)
     assert row.newton["convergence"] == "force" and row.newton["max_iterations"] == 25
     assert row.newton["stress_tol"] == pytest.approx(0.02 * 20e3)  # of the surcharge
+    assert {"reference", "seed", "material"} <= {r.knob for r in footing_rows()}
+
+
+def test_keeps_footing_reads_both_pressures_and_the_run_s_end():
+    budget = FOOTING_BUDGETS["engineering"]
+    line = pd.Series({"q_0.05_pct": 5.0, "q_0.1_pct": -12.0, "error": ""})
+    assert keeps_footing(line, budget)
+    assert not keeps_footing(line.copy().replace(-12.0, -28.0), budget)
+    assert not keeps_footing(pd.Series({**line, "error": "stopped at step 20"}), budget)

@@ -42,7 +42,10 @@ def plot_load_displacement(steps: pd.DataFrame, bodies: Sequence[tuple[str, str,
         ax.set_ylabel(f"{name} mean pressure [kPa] (force / {1e3 * width:g} mm)")
         ax.grid(alpha=0.3)
         ax.set_title(name)
-    return save_figure(fig, path)
+    try:
+        return save_figure(fig, path)
+    finally:
+        plt.close(fig)
 
 
 def plot_mechanism(xy: np.ndarray, cells: np.ndarray, kind: str, ux: np.ndarray,
@@ -74,4 +77,7 @@ def plot_mechanism(xy: np.ndarray, cells: np.ndarray, kind: str, ux: np.ndarray,
     ax.set_xlabel("x [mm]")
     ax.set_ylabel("y [mm]")
     ax.set_title(title)
-    return save_figure(fig, path)
+    try:
+        return save_figure(fig, path)
+    finally:
+        plt.close(fig)

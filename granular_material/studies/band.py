@@ -181,9 +181,10 @@ def run_band_rows(rows: list[BandRow], scale: BandScale, out: Path, device: str 
                   jobs: int = 1, progress: bool = False,
                   log: Callable[[str], None] = lambda _: None) -> None:
     """Run every (row, seed) of ``rows`` not yet done (a run is done once its folder holds
-    ``summary.json``), ``jobs`` at a time in processes of their own."""
-    todo = [(row, seed) for row in rows for seed in row.seeds
-            if not (run_folder(out, row, seed) / "summary.json").is_file()]
+    ``summary.json``; rows of equal settings share it), ``jobs`` at a time in processes of
+    their own."""
+    todo = list({run_folder(out, row, seed): (row, seed) for row in rows for seed in row.seeds
+                 if not (run_folder(out, row, seed) / "summary.json").is_file()}.values())
     if not todo:
         return
     (out / "band").mkdir(parents=True, exist_ok=True)

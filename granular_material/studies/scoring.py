@@ -5,6 +5,7 @@ presets from the rows (:func:`recommend`)."""
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -19,6 +20,7 @@ from granular_material.studies.band import (
     command_settings,
 )
 from granular_material.studies.band_scoring import BAND_BUDGETS, keeps_band
+from granular_material.studies.footing_rows import FOOTING_BUDGETS, keeps_footing
 from granular_material.studies.plan import (
     Knob,
     PlannedRow,
@@ -78,8 +80,8 @@ PRESETS: dict[str, float | None] = {"quick": 10.0, "engineering": 3.0, "publicat
 PRESET_KNOBS = ("discs", "strain_per_step", "reuse_tol")
 
 
-def recommend(table: pd.DataFrame, scale: StudyScale,
-              band: pd.DataFrame | None = None) -> dict[str, dict[str, Any]]:
+def recommend(table: pd.DataFrame, scale: StudyScale, band: pd.DataFrame | None = None,
+              footing: pd.DataFrame | None = None) -> dict[str, dict[str, Any]]:
     """The presets' settings (:data:`~granular_material.runs.presets.SETTING_NAMES`) from the
     measured rows.
 
@@ -98,7 +100,9 @@ def recommend(table: pd.DataFrame, scale: StudyScale,
       (:func:`~granular_material.studies.band.command_settings`), each changed to the
       cheapest band row of its knob that keeps the preset's band budget
       (:data:`~granular_material.studies.band_scoring.BAND_BUDGETS`) and costs less than the
-      reference by more than the reference's own scatter between seeds. Without band rows
+      reference by more than the reference's own scatter between seeds, and whose footing
+      row (``footing``, where the knob's value has one) keeps the preset's footing budget
+      (:data:`~granular_material.studies.footing_rows.FOOTING_BUDGETS`). Without band rows
       they stay the defaults;
     - reuse of undisturbed RVEs only with the force test (the displacement tests judge a
       correction a reused response does not make);
@@ -115,9 +119,10 @@ def recommend(table: pd.DataFrame, scale: StudyScale,
                 if knob.name in PRESET_KNOBS:
                     values[knob.name] = _cheapest_within(table, knob, budget, ref)
             if band is not None:
-                values.update(_newton_from_band(band, scale, BAND_BUDGETS[name]))
+                allowed = _allowed(band, footing, name)
+                values.update(_newton_from_band(band, scale, allowed))
                 values["strain_per_step"] = _band_strain_per_step(
-                    band, values["strain_per_step"], BAND_BUDGETS[name])
+                    band, values["strain_per_step"], allowed)
         if values["convergence"] != "force":
             values["reuse_tol"] = 0.0
         chosen[name] = values
@@ -137,16 +142,33 @@ def _cheapest_within(table: pd.DataFrame, knob: Knob, budget: float,
     return _typed(tied.sort_values(["not_reference", "cost"]).iloc[0]["value"], knob)
 
 
+def _allowed(band: pd.DataFrame, footing: pd.DataFrame | None,
+             name: str) -> Callable[[pd.Series], bool]:
+    """Whether a band row's setting is allowed to preset ``name``: it keeps the preset's
+    band budget, and its footing row, where the same knob and value has one, the footing
+    budget."""
+    def allowed(line: pd.Series) -> bool:
+        if not keeps_band(line, BAND_BUDGETS[name]):
+            return False
+        if footing is None or footing.empty:
+            return True
+        same = footing[(footing["knob"] == line["knob"])
+                       & (footing["value"].astype(str) == str(line["value"]))]
+        return same.empty or keeps_footing(same.iloc[0], FOOTING_BUDGETS[name])
+    return allowed
+
+
 def _newton_from_band(band: pd.DataFrame, scale: StudyScale,
-                      budget: dict[str, float]) -> dict[str, Any]:
-    """Newton's settings the band rows allow a preset (see :func:`recommend`)."""
+                      allowed: Callable[[pd.Series], bool]) -> dict[str, Any]:
+    """Newton's settings the band (and footing) rows allow a preset (see
+    :func:`recommend`)."""
     rows = {(r.knob, r.value): r for r in band_rows(BAND_SCALES[band_scale_name(scale)])}
     reference = band[band["knob"] == "reference"].iloc[0]
     margin = 1.0 - reference["particle_steps_scatter"] / reference["particle_steps"]
     settings: dict[str, Any] = {}
     for knob in NEWTON_KNOBS:
         lines = band[(band["knob"] == knob)]
-        lines = lines[[keeps_band(line, budget) and line["cost_ratio"] < margin
+        lines = lines[[allowed(line) and line["cost_ratio"] < margin
                        for _, line in lines.iterrows()]]
         if not lines.empty:
             best = lines.sort_values("cost_ratio").iloc[0]
@@ -154,13 +176,13 @@ def _newton_from_band(band: pd.DataFrame, scale: StudyScale,
     return {k: v for k, v in settings.items() if k in SETTING_NAMES}
 
 
-def _band_strain_per_step(band: pd.DataFrame, value: float, budget: dict[str, float]) -> float:
-    """``value`` if its band row keeps ``budget`` (or it is no coarser than the commands'),
-    else the largest strain per DEM step whose row does."""
+def _band_strain_per_step(band: pd.DataFrame, value: float,
+                          allowed: Callable[[pd.Series], bool]) -> float:
+    """``value`` if its band row is allowed (or it is no coarser than the commands'), else
+    the largest strain per DEM step whose row is."""
     default = command_settings()["strain_per_step"]
     kept = [default] + [float(line["value"]) for _, line in
-                        band[band["knob"] == "strain_per_step"].iterrows()
-                        if keeps_band(line, budget)]
+                        band[band["knob"] == "strain_per_step"].iterrows() if allowed(line)]
     return value if value <= default or value in kept else max(v for v in kept if v <= value)
 
 

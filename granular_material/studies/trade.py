@@ -42,7 +42,6 @@ them in order (:func:`run_trade_study`) and gives their public names.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import replace
 from pathlib import Path
 
 import pandas as pd
@@ -50,21 +49,14 @@ import pandas as pd
 from granular_material.filesafe import write_whole
 from granular_material.provenance import code_commit
 from granular_material.results import write_csv
-from granular_material.runs.presets import load_presets
 from granular_material.studies.band import (
     BAND_SCALES,
-    BandRow,
-    BandScale,
     band_rows,
-    command_settings,
-    preset_band_row,
     run_band_rows,
 )
 from granular_material.studies.band_report import band_figures, band_section
 from granular_material.studies.band_scoring import (
-    BAND_BUDGETS,
     band_table,
-    keeps_band,
     run_measures,
 )
 from granular_material.studies.footing_report import footing_section, plot_footing_pareto
@@ -90,6 +82,7 @@ from granular_material.studies.plan import (
     run_key,
     tangent_settings,
 )
+from granular_material.studies.preset_check import check_presets
 from granular_material.studies.report import presets_file, report
 from granular_material.studies.running import RunResult, _Runner
 from granular_material.studies.running import _dem_equivalent as _dem_equivalent
@@ -133,29 +126,20 @@ def run_trade_study(scale: str | StudyScale, out: str | Path, device: str = "cpu
     _measure(planned, runner, out, device, commit, progress, log)
     table = read_trade_table(out / "trade.csv")
     band_scale = BAND_SCALES[band_scale_name(study)]
+    footing_scale = FOOTING_SCALES[band_scale_name(study)]
     rows = band_rows(band_scale)
     run_band_rows(rows, band_scale, out, device, jobs, progress, log)
-    band = band_table(run_measures(out, rows, band_scale), band_scale)
-    presets = recommend(table[table["knob"] != "preset"], study, band)
-    rows += _measure_preset_bands(presets, band_scale, out, device, jobs, progress, log)
-    band = band_table(run_measures(out, rows, band_scale), band_scale)
-    # a preset whose combination of settings breaks its band budget falls back to the
-    # commands' Newton settings (each setting kept it alone; together they did not)
-    newton = {k: v for k, v in command_settings().items() if k != "strain_per_step"}
-    for name, budget in BAND_BUDGETS.items():
-        line = band[(band["knob"] == "preset") & (band["value"] == name)]
-        if line.empty or keeps_band(line.iloc[0], budget):
-            continue
-        if any(presets[name][k] != v for k, v in newton.items()):
-            log(f"preset {name} breaks its band budget; it takes the commands' Newton "
-                "settings")
-            rows = [replace(r, value=f"{name} (first choice)")
-                    if r.knob == "preset" and r.value == name else r for r in rows]
-            presets[name] = {**presets[name], **newton}
-            rows += _measure_preset_bands({name: presets[name]}, band_scale, out, device,
-                                          jobs, progress, log, in_force=False)
+    footing = footing_rows()
+    run_footing_rows(footing, footing_scale, out, log)
+    presets = recommend(table[table["knob"] != "preset"], study,
+                        band_table(run_measures(out, rows, band_scale), band_scale),
+                        footing_table(footing, out, half_width()))
+    presets, rows, footing = check_presets(presets, rows, footing, band_scale, footing_scale,
+                                           out, device, jobs, progress, log)
     band = band_table(run_measures(out, rows, band_scale), band_scale)
     write_csv(band, out / "band.csv")
+    footing_results = footing_table(footing, out, half_width())
+    write_csv(footing_results, out / "footing.csv")
     preset_rows = _preset_rows(presets, study)
     _drop_rows(out / "trade.csv", lambda t: (t["knob"] == "preset") & ~t["run"].isin(
         {run_key(r.settings) for r in preset_rows}))
@@ -166,31 +150,12 @@ def run_trade_study(scale: str | StudyScale, out: str | Path, device: str = "cpu
     for name in dict.fromkeys(k.name for k in knobs(study)):
         plot_knob(table[table["knob"] == name], name, out / f"knob_{name}.png")
     band_figures(out, band, rows, band_scale)
-    footing_scale = FOOTING_SCALES[band_scale_name(study)]
-    footing = footing_rows(presets)
-    run_footing_rows(footing, footing_scale, out, log)
-    footing_results = footing_table(footing, out, half_width())
-    write_csv(footing_results, out / "footing.csv")
     plot_footing_pareto(footing_results, out / "footing_pareto.png")
     _write_text(out / "report.md", "\n".join([
         report(table, presets, study, device, commit), "",
         *band_section(band, presets, band_scale),
         *footing_section(footing_results, footing_scale)]))
     return table
-
-
-def _measure_preset_bands(presets: dict[str, dict], band_scale: BandScale, out: Path,
-                          device: str, jobs: int, progress: bool,
-                          log: Callable[[str], None], in_force: bool = True) -> list[BandRow]:
-    """The band rows of ``presets`` (``in_force``: and of the presets in force when the
-    study began, where they differ), run; returns the rows."""
-    rows = [preset_band_row(name, values, band_scale) for name, values in presets.items()
-            if name in BAND_BUDGETS]
-    for name, preset in load_presets().items() if in_force else ():
-        if name in presets and name in BAND_BUDGETS and preset.settings() != presets[name]:
-            rows.append(preset_band_row(f"{name} (in force)", preset.settings(), band_scale))
-    run_band_rows(rows, band_scale, out, device, jobs, progress, log)
-    return rows
 
 
 def _write_text(path: Path, text: str) -> None:
