@@ -16,7 +16,7 @@ from granular_material.results.band_measures import (
     localisation_history,
 )
 from granular_material.studies.band import BAND_SCALES, band_rows, command_settings
-from granular_material.studies.band_scoring import BAND_BUDGETS, keeps_band
+from granular_material.studies.band_scoring import BAND_BUDGETS, band_table, keeps_band
 from granular_material.studies.plan import SCALES
 from granular_material.studies.scoring import recommend
 
@@ -150,3 +150,31 @@ def test_a_strain_per_step_that_breaks_the_band_is_replaced():
     chosen = recommend(table, scale, band)
     assert chosen["quick"]["strain_per_step"] == 4e-5
     assert chosen["engineering"]["strain_per_step"] == 4e-5
+
+
+def test_errors_are_taken_seed_by_seed_so_the_scatter_between_rves_drops_out():
+    """Two sets of RVEs whose bands form 1.5 points apart; a knob that delays each by
+    exactly 0.4 points is measured as 0.4 with no spread, its cost as its own ratio."""
+    def run(knob: str, value: str, seed: int, onset: float, ratio: float, steps: float):
+        return {"knob": knob, "value": value, "seed": seed, "onset": onset,
+                "final_strain": 0.1, "ratio_2": 1.0, "ratio_3": 2.0, "ratio_5": 2.5,
+                "ratio_10": 2.6, "inclination_deg": 50.0, "elongation": 0.9,
+                "crossing_x": 0.02, "stress_ratio_5": ratio, "stress_ratio_10": ratio,
+                "volumetric_strain_5": 0.02, "volumetric_strain_10": 0.03,
+                "particle_steps": steps, "iterations": 300, "wall_s": 100.0, "error": ""}
+    runs = pd.DataFrame([run("reference", "defaults", 1, 0.020, 2.0, 1e9),
+                         run("reference", "defaults", 2, 0.035, 2.4, 2e9),
+                         run("drive", "continue", 1, 0.024, 2.1, 3e8),
+                         run("drive", "continue", 2, 0.039, 2.52, 6e8),
+                         run("mesh", "3x6", 1, math.nan, 2.0, 5e8)])
+    table = band_table(runs, BAND_SCALES["cpu"]).set_index(["knob", "value"])
+    drive = table.loc[("drive", "continue")]
+    assert drive["onset_delay_pp"] == pytest.approx(0.4)
+    assert drive["onset_delay_spread_pp"] == pytest.approx(0.0, abs=1e-9)
+    assert drive["stress_ratio_10_pct"] == pytest.approx(5.0)
+    assert drive["cost_ratio"] == pytest.approx(0.3)
+    reference = table.loc[("reference", "defaults")]
+    assert reference["onset_scatter_pp"] == pytest.approx(100 * 0.015 / math.sqrt(2))
+    # a run without a band counts at its last strain and is not banded
+    mesh = table.loc[("mesh", "3x6")]
+    assert mesh["banded"] == "0/1" and mesh["onset_delay_pp"] == pytest.approx(8.0)
