@@ -1,8 +1,9 @@
 """The presets measured past the peak: each preset with a budget runs on the band specimen
 and the reduced footing, and one whose combination of settings breaks a budget (each
-setting kept it alone; together they did not) falls back to the commands' Newton settings
-and runs again. The presets in force when the study began run beside them, where they
-differ, so that the report shows what changed."""
+setting kept it alone; together they did not) takes the Newton settings of a stricter
+preset that kept its own budgets (else the commands') and runs again. The presets in
+force when the study began run beside them, where they differ, so that the report shows
+what changed."""
 
 from __future__ import annotations
 
@@ -47,8 +48,9 @@ def check_presets(presets: dict[str, dict[str, Any]], band: list[BandRow],
                   progress: bool, log: Callable[[str], None]
                   ) -> tuple[dict[str, dict[str, Any]], list[BandRow], list[FootingRow]]:
     """Run the presets' band and footing rows (and those of the presets in force, where
-    they differ); a preset that breaks its band or footing budget takes the commands'
-    Newton settings and runs again. Returns the presets and every band and footing row."""
+    they differ); a preset that breaks its band or footing budget takes the Newton
+    settings of :func:`_fallback` and runs again. Returns the presets and every band and
+    footing row."""
     presets = {name: dict(values) for name, values in presets.items()}
     band, footing = list(band), list(footing)
     new_band, new_footing = _preset_rows(presets, band_scale, in_force=True)
@@ -56,24 +58,47 @@ def check_presets(presets: dict[str, dict[str, Any]], band: list[BandRow],
     _run(new_band, new_footing, band_scale, footing_scale, out, device, jobs, progress, log)
     bands = band_table(run_measures(out, band, band_scale), band_scale)
     footings = footing_table(footing, out, half_width())
-    newton = {k: v for k, v in command_settings().items() if k != "strain_per_step"}
     for name in BAND_BUDGETS:
-        if _keeps(name, bands, footings) or all(presets[name][k] == v
-                                                 for k, v in newton.items()):
+        if _keeps(name, bands, footings):
             continue
-        log(f"preset {name} breaks its budget past the peak; it takes the commands' Newton "
-            "settings")
+        fallback = _fallback(name, presets, bands, footings)
+        if all(presets[name][k] == v for k, v in fallback.items()):
+            continue
+        log(f"preset {name} breaks its budget past the peak; it takes the Newton settings "
+            "of a stricter preset that kept its own, else the commands'")
         band = [replace(r, value=f"{name} (first choice)")
                 if r.knob == "preset" and r.value == name else r for r in band]
         footing = [replace(r, value=f"{name} (first choice)")
                    if r.knob == "preset" and r.value == name else r for r in footing]
-        presets[name] = {**presets[name], **newton}
+        presets[name] = {**presets[name], **fallback}
         new_band, new_footing = _preset_rows({name: presets[name]}, band_scale,
                                              in_force=False)
         band, footing = band + new_band, footing + new_footing
         _run(new_band, new_footing, band_scale, footing_scale, out, device, jobs, progress,
              log)
     return presets, band, footing
+
+
+#: the settings a fallback replaces: Newton's (the strain per DEM step and the discs stay the
+#: preset's own, each kept its budgets alone)
+_NEWTON = ("convergence", "rtol", "stress_floor", "tangent", "tangent_update", "acceleration",
+           "drive", "reuse_tol")
+
+
+def _fallback(name: str, presets: dict[str, dict[str, Any]], bands: pd.DataFrame,
+              footings: pd.DataFrame) -> dict[str, Any]:
+    """Newton's settings of the first preset whose budgets are all at most ``name``'s and
+    which kept them (its settings then keep ``name``'s too: the band and footing rows run
+    without the discs), else the commands' own."""
+    for other in BAND_BUDGETS:
+        stricter = other != name and all(
+            budgets[other][k] <= budgets[name][k]
+            for budgets in (BAND_BUDGETS, FOOTING_BUDGETS) for k in budgets[name])
+        if stricter and presets[other]["strain_per_step"] == presets[name]["strain_per_step"] \
+                and _keeps(other, bands, footings):
+            return {k: presets[other][k] for k in _NEWTON}
+    defaults = command_settings()
+    return {k: defaults[k] for k in _NEWTON}
 
 
 def _keeps(name: str, bands: pd.DataFrame, footings: pd.DataFrame) -> bool:

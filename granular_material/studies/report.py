@@ -93,12 +93,14 @@ def report(table: pd.DataFrame, presets: dict[str, dict[str, Any]], scale: Study
               f"({', '.join(f'{k}: {v:g} %' for k, v in PRESETS.items() if v is not None)}); "
               "Newton's test, tangent, relaxation and drive are the commands' defaults, each "
               "changed only where a band row (below) of that knob keeps the preset's band "
-              "budget for less work; a strain per DEM step that breaks the band budget is "
-              "replaced by the largest that keeps it. A preset whose combination breaks its "
-              "band budget falls back to the commands' Newton settings. Publication is the "
-              "commands' defaults with the most discs and the finest strain per DEM step. "
-              "Each preset then ran itself (rows `preset` above: pure DEM and single element; "
-              "below: the band specimen).", ""]
+              "budget for clearly less work and the footing row of the same setting, where "
+              "there is one, its footing budget; a strain per DEM step that breaks a budget "
+              "is replaced by the largest that keeps it. A preset whose combination breaks a "
+              "budget takes the Newton settings of a stricter preset that kept its own, else "
+              "the commands'. Publication is the commands' defaults with the most discs and "
+              "the finest strain per DEM step. Each preset then ran itself (rows `preset` "
+              "above: pure DEM and single element; below: the band specimen and the "
+              "footing).", ""]
     preset_rows = []
     for name, values in presets.items():
         measured = table[(table["knob"] == "preset") & (table["value"] == name)]
