@@ -7,7 +7,7 @@ them, rebuilding the lists of the RVEs that stopped for it, until every RVE has 
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import Any, Protocol
 
 import warp as wp
 
@@ -17,8 +17,22 @@ from granular_material.dem.loading import LoadingControl
 from granular_material.dem.model import Model
 from granular_material.dem.state import State
 
-if TYPE_CHECKING:
-    from granular_material.dem.solver import Solver
+
+class BlockSolver(Protocol):
+    """What the block path reads and sets of a :class:`~.solver.Solver`: its device,
+    its thread blocks' size and rounds, its replicas, its pair records, the flags of the
+    RVEs whose lists need a rebuild and their steps left (stated here so that this module
+    needs nothing of ``solver``, which imports it)."""
+
+    device: Any
+    block_threads: int
+    block_rounds: int
+    replica: Any
+    pair: Any
+    pair_branch: Any
+    rebuild: Any
+    rebuild_any: Any
+    steps_left: Any
 
 __all__ = ["BLOCK_MIN_RVES", "advance_block", "block_launches", "block_path_expected_to_pay"]
 
@@ -38,7 +52,7 @@ def block_path_expected_to_pay(cuda: bool, n_rve: int, n_disc: int) -> bool:
             and n_disc <= BLOCK_DISCS)
 
 
-def block_launches(solver: Solver, model: Model, state: State,
+def block_launches(solver: BlockSolver, model: Model, state: State,
                    loading: LoadingControl) -> list[wp.Launch]:
     """``step_block`` (one block of ``solver.block_threads`` threads an RVE) and
     ``block_pending``, recorded for this model, state and loading."""
@@ -76,7 +90,7 @@ def block_launches(solver: Solver, model: Model, state: State,
     ]
 
 
-def advance_block(solver: Solver, check: list, build: list, step: list, steps: int) -> None:
+def advance_block(solver: BlockSolver, check: list, build: list, step: list, steps: int) -> None:
     """Step every active RVE ``steps`` steps by the block path: the lists' test (as at the
     start of every run), then, until no RVE has steps left, the rebuild of the flagged
     RVEs' lists and a ``step_block`` launch (each RVE steps until it is done or its lists
