@@ -68,7 +68,8 @@ class BandScale:
 BAND_SCALES: dict[str, BandScale] = {
     "smoke": BandScale("smoke", (1, 2), (1, 1), 36, (), 4, 0.02, (1, 101), (1,)),
     # the commands' reduced specimen (5 × 10 quad4 of 64 discs, 100 steps to 10 %): its
-    # band forms at about 2 % with the defaults, in 2–3 min a run on one core
+    # band forms at 2.42 ± 0.26 % with the defaults (3 sets of RVEs), in 4–7 min a run on
+    # one core of this shared 2-core machine
     "cpu": BandScale("cpu", (5, 10), (3, 6), 64, (36,), 100, 0.10, (1, 1001, 2001),
                      (1, 1001)),
 }
