@@ -186,9 +186,9 @@ def _common_arguments(parser: argparse.ArgumentParser) -> None:
     add_device(parser, "DEM device")
     parser.add_argument("--preset", choices=PRESET_NAMES, default=None,
                         help="settings the trade study recommends (docs/trade-study): discs "
-                             "per RVE, strain per DEM step, Newton stress floor, tangent, "
-                             "predictor and relaxation, reuse; an option given beside it (not "
-                             "at its default) wins")
+                             "per RVE, strain per DEM step, Newton's test and tolerance, "
+                             "tangent, predictor and relaxation, drive, reuse; an option given "
+                             "beside it (not at its default) wins")
     parser.add_argument("--resume", type=Path, default=None, metavar="DIR",
                         help="continue the stopped or killed run whose --out was DIR, in DIR, "
                              "from its last checkpoint (give the other options as then); the "
