@@ -16,6 +16,7 @@ import json
 import math
 import sys
 from dataclasses import dataclass, field
+from importlib.resources import files
 from pathlib import Path
 from typing import Any
 
@@ -35,9 +36,9 @@ __all__ = ["FOOTING_BUDGETS", "FOOTING_SCALES", "FOOTING_SCENE", "MECHANISM_FRAC
            "footing_rows", "footing_table", "half_width", "keeps_footing", "preset_footing_row",
            "run_footing_rows"]
 
-#: the reduced footing scene
-FOOTING_SCENE = Path(__file__).resolve().parents[2] / "examples" / "scenes" / \
-    "footing-gz2016-cpu.toml"
+#: the reduced footing scene, as the package installs it (``examples/scenes`` of a checkout)
+FOOTING_SCENE = Path(str(files("granular_material_examples") / "scenes"
+                         / "footing-gz2016-cpu.toml"))
 #: the mechanism: the Gauss points whose shear strain is at least this fraction of the
 #: largest at s/B = 0.1
 MECHANISM_FRACTION = 0.25
