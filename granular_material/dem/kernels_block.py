@@ -46,6 +46,7 @@ from granular_material.dem.kernel_common import (
     IntArray,
 )
 from granular_material.dem.kernels_lists import lists_stale
+from granular_material.dem.kernels_step import clear_pair
 from granular_material.dem.laws import (
     ContactLaw,
     branch_vector,
@@ -56,6 +57,7 @@ from granular_material.dem.laws import (
     pair_stiffness,
     perpendicular_heights,
     servo_stiffness_term,
+    slip_rate,
 )
 
 __all__ = ["BLOCK_DISCS", "BLOCK_THREADS", "block_pending", "step_block"]
@@ -65,16 +67,6 @@ __all__ = ["BLOCK_DISCS", "BLOCK_THREADS", "block_pending", "step_block"]
 BLOCK_DISCS = 512
 #: threads of a block (one block per RVE): about 3 discs a thread for 400 discs
 BLOCK_THREADS = 128
-
-
-@wp.func
-def _clear_pair(pair: AnyArray, slot: int, mirror: int):
-    """Zero both records of a pair that does not touch (as ``kernels_step.clear_pair``)."""
-    record = pair[slot]
-    zero = record[0] - record[0]
-    if record[0] != zero or record[1] != zero or record[2] != zero:
-        pair[slot] = type(record)()
-        pair[mirror] = type(record)()
 
 
 def step_block(
@@ -141,26 +133,23 @@ def step_block(
                 mirror = base * capacity + wp.max(contact_mirror_slot[slot], 0)
                 if wp.dot(d, d) >= (ra + rc) * (ra + rc) * type(dt)(1.000001):
                     contact_shear_force[slot] = zero
-                    _clear_pair(pair, slot, mirror)
+                    clear_pair(pair, slot, mirror)
                     continue
                 dist = wp.length(d)
                 overlap = ra + rc - dist
                 if overlap <= zero:
                     contact_shear_force[slot] = zero
-                    _clear_pair(pair, slot, mirror)
+                    clear_pair(pair, slot, mirror)
                     continue
                 if dist <= type(dt)(1.0e-12) * (ra + rc):
                     wp.atomic_or(status, b, STATUS_COINCIDENT)
                     bad = 1
-                    _clear_pair(pair, slot, mirror)
+                    clear_pair(pair, slot, mirror)
                     continue
                 n = d / dist
-                t = type(n)(-n[1], n[0])
                 kn, kt = pair_stiffness(law, ra, rc)
                 v_rel = v_all[cj] - v_all[j] + lg * d
-                # slip rate as in contact_forces (YADE's ScGeom, avoidGranularRatcheting)
-                v_t = (ra + rc) / dist * wp.dot(v_rel, t) \
-                    - (w_all[j] * ra + w_all[cj] * rc) - spin * (ra + rc)
+                v_t = slip_rate(v_rel, n, dist, ra, rc, w_all[j], w_all[cj], spin)
                 fn = kn * overlap
                 fs = coulomb_shear(contact_shear_force[slot], kt, v_t, dt, mu, fn)
                 contact_shear_force[slot] = fs

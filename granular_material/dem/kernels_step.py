@@ -41,6 +41,7 @@ from granular_material.dem.laws import (
     love_term,
     pair_stiffness,
     servo_stiffness_term,
+    slip_rate,
 )
 
 __all__ = ["DAMPING", "STRESS", "TANGENTIAL", "advance_cell_and_check", "contact_forces",
@@ -114,14 +115,10 @@ def contact_forces(
             clear_pair(pair, slot, mirror)
             continue
         n = d / dist
-        t = type(n)(-n[1], n[0])
         kn, kt = pair_stiffness(law, ra, rc)
         v_rel = velocity[c] - velocity[i] + lg * d
-        # slip rate at the contact (YADE's ScGeom with avoidGranularRatcheting, after
-        # McNamara et al.): full radii for the spins and the centres' relative velocity scaled
-        # by (ra + rc)/|d|, so that a rigid rotation (affine spin included) gives v_t = 0
-        v_t = (ra + rc) / dist * wp.dot(v_rel, t) \
-            - (angular_velocity[i] * ra + angular_velocity[c] * rc) - spin * (ra + rc)
+        v_t = slip_rate(v_rel, n, dist, ra, rc, angular_velocity[i], angular_velocity[c],
+                        spin)
         fn = kn * overlap
         half = type(dt)(0.5)
         if wp.static(TANGENTIAL):
@@ -280,11 +277,8 @@ def step_serial(
             tq_a = zero
             tq_c = zero
             if wp.static(TANGENTIAL):
-                t = type(n)(-n[1], n[0])
                 v_rel = velocity[c] - v + lg * d
-                # slip rate as in contact_forces (YADE's ScGeom, avoidGranularRatcheting)
-                v_t = (ra + rc) / dist * wp.dot(v_rel, t) \
-                    - (w * ra + angular_velocity[c] * rc) - spin * (ra + rc)
+                v_t = slip_rate(v_rel, n, dist, ra, rc, w, angular_velocity[c], spin)
                 fs = coulomb_shear(contact_shear_force[slot], kt, v_t, dt, mu, fn)
                 contact_shear_force[slot] = fs
                 f_a = contact_force(fn, fs, n)

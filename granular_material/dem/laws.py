@@ -94,6 +94,17 @@ def coulomb_shear(shear: Any, kt: Any, slip_velocity: Any, dt: Any, mu: Any, fn:
 
 
 @wp.func
+def slip_rate(v_rel: Any, n: Any, dist: Any, ra: Any, rc: Any, w_a: Any, w_c: Any,
+              spin: Any):
+    """Tangential slip rate at a contact [m/s] (YADE's ScGeom with avoidGranularRatcheting,
+    after McNamara et al.): the centres' relative velocity ``v_rel`` along t = perp(n),
+    scaled by (ra + rc)/|d|, less the discs' spins ``w_a``, ``w_c`` and the affine ``spin``
+    on full radii, so that a rigid rotation gives 0."""
+    t = type(n)(-n[1], n[0])
+    return (ra + rc) / dist * wp.dot(v_rel, t) - (w_a * ra + w_c * rc) - spin * (ra + rc)
+
+
+@wp.func
 def contact_force(fn: Any, fs: Any, n: Any):
     """Force on disc a [N]: ``−fn·n + fs·t`` with t = perp(n)."""
     return -fn * n + fs * type(n)(-n[1], n[0])
