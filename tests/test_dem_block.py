@@ -10,11 +10,10 @@ under the servo agree to rounding, within the tolerances of CUDA against the CPU
 
 from __future__ import annotations
 
-from dataclasses import replace
-
 import numpy as np
 import pytest
 import warp as wp
+from dem_helpers import calm_and_violent, load_shear_or_servo
 
 from granular_material.dem import DEMBatch, DEMInstabilityError, load_rve, solver_block
 from granular_material.dem.kernels_block import BLOCK_DISCS
@@ -46,14 +45,7 @@ def _batch(path, block: bool, dtype: str = "float64", threads: int = 1,
 
 
 def _load(batch: DEMBatch, servo: bool) -> None:
-    if servo:
-        target = np.tile([[-100e3, -SHEAR]], (batch.n_rve, 1))  # sxx held, eyy compressed
-        batch.set_servo(np.tile([[1, 0]], (batch.n_rve, 1)), target, gain=0.5,
-                        max_strain=1e-4)
-    else:
-        grad = np.zeros((batch.n_rve, 2, 2))
-        grad[:, 0, 1] = SHEAR / batch.dt
-        batch.set_affine(grad)
+    load_shear_or_servo(batch, servo, SHEAR)
 
 
 def _run(batch: DEMBatch) -> None:
@@ -124,16 +116,7 @@ def test_frozen_rves_stay_as_they_are(small_rve_path):
 def test_blow_up_names_the_rve_on_the_block_path(two_discs):
     """RVE 1 starts with two discs almost on top of each other: it, and only it, is named
     (as on the existing path, tests/test_dem_errors.py); the calm one steps on."""
-    calm = two_discs((0.05, 0.1), (0.08, 0.1))
-    violent = two_discs((0.05, 0.1), (0.0502, 0.1))
-    data = replace(
-        calm,
-        radius=np.concatenate([calm.radius, violent.radius]),
-        position=np.concatenate([calm.position, violent.position]),
-        cell=np.concatenate([calm.cell, violent.cell]),
-        velocity=np.zeros((2, 2, 2)),
-        angular_velocity=np.zeros((2, 2)),
-    )
+    data = calm_and_violent(two_discs)
     batch = DEMBatch(data, device="cpu", shards=1)
     batch.shards[0].solver.block = True
     batch.set_affine(np.zeros((2, 2, 2)))

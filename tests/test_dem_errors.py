@@ -6,6 +6,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from dem_helpers import calm_and_violent
 
 from granular_material.dem import (
     DEMBatch,
@@ -61,16 +62,7 @@ def test_unreadable_file(tmp_path):
 
 def test_blow_up_names_the_rve(two_discs):
     """RVE 1 starts with two discs almost on top of each other: it, and only it, is named."""
-    calm = two_discs((0.05, 0.1), (0.08, 0.1))
-    violent = two_discs((0.05, 0.1), (0.0502, 0.1))
-    data = replace(
-        calm,
-        radius=np.concatenate([calm.radius, violent.radius]),
-        position=np.concatenate([calm.position, violent.position]),
-        cell=np.concatenate([calm.cell, violent.cell]),
-        velocity=np.zeros((2, 2, 2)),
-        angular_velocity=np.zeros((2, 2)),
-    )
+    data = calm_and_violent(two_discs)
     batch = DEMBatch(data, device="cpu")
     batch.set_affine(np.zeros((2, 2, 2)))
     with pytest.raises(DEMInstabilityError, match=r"RVE\(s\) 1 ") as info:

@@ -10,6 +10,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from dem_helpers import load_shear_or_servo
 
 from granular_material.dem import DEMBatch, load_rve
 from granular_material.dem.kernels import GENERIC_STEP
@@ -32,14 +33,7 @@ def _batch(path, serial: bool, dtype: str = "float64", damping: float | None = N
 
 
 def _load(batch: DEMBatch, servo: bool) -> None:
-    if servo:
-        target = np.tile([[-100e3, -SHEAR]], (batch.n_rve, 1))  # sxx held, eyy compressed
-        batch.set_servo(np.tile([[1, 0]], (batch.n_rve, 1)), target, gain=0.5,
-                        max_strain=1e-4)
-    else:
-        grad = np.zeros((batch.n_rve, 2, 2))
-        grad[:, 0, 1] = SHEAR / batch.dt
-        batch.set_affine(grad)
+    load_shear_or_servo(batch, servo, SHEAR)
 
 
 def _assert_same(batch: DEMBatch, reference: DEMBatch) -> None:
