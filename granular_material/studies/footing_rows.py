@@ -25,6 +25,8 @@ import pandas as pd
 
 from granular_material.runs.bvp_runner import run_boundary_value
 from granular_material.runs.bvp_spec import bvp_from_dict
+from granular_material.runs.presets import settings_fields
+from granular_material.studies.band import command_settings
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -121,30 +123,25 @@ def preset_footing_row(name: str, settings: dict[str, Any]) -> FootingRow | None
     return FootingRow("preset", name, parameters, newton) if parameters or newton else None
 
 
+#: the footing scene's ``[material.parameters]`` among a preset's run-spec fields (the others
+#: are its ``[newton]`` table's)
+_MATERIAL_FIELDS = ("max_strain_per_step", "drive", "reuse_tol")
+
+
 def _preset_tables(values: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
     """A preset's settings as the footing scene's material and Newton tables, only where
     they change the scene (its tangent, the Kruyt–Rothenburg one, stays: the footing's own
-    choice; the discs stay the scene's)."""
-    from granular_material.studies.band import command_settings
-
+    choice; the discs stay the scene's); the force test with all its settings (its
+    tolerance, its floor of the surcharge, its iterations: ``settings_fields``)."""
     defaults = command_settings()
-    parameters: dict[str, Any] = {}
-    newton: dict[str, Any] = {}
-    for key in ("strain_per_step", "drive", "reuse_tol"):
-        if values[key] != defaults[key]:
-            parameters["max_strain_per_step" if key == "strain_per_step" else key] = values[key]
-    for key in ("convergence", "rtol"):
-        if values[key] != defaults[key]:
-            newton[key] = values[key]
-    if values["acceleration"] != defaults["acceleration"]:
-        newton["predictor"], newton["relaxation"] = values["acceleration"].split("/")
-    if values["convergence"] == "force":
-        newton.setdefault("convergence", "force")
-        newton.setdefault("rtol", values["rtol"])
-        newton["max_iterations"] = 25
-        if values["stress_floor"] is not None:
-            newton["stress_tol"] = values["stress_floor"] * _surcharge()
-    return parameters, newton
+    changed = {key: value for key, value in values.items()
+               if key not in ("discs", "tangent", "tangent_update")
+               and (value != defaults[key] or (values["convergence"] == "force"
+                                               and key in ("convergence", "rtol",
+                                                           "stress_floor")))}
+    fields = settings_fields(changed, _surcharge())
+    return ({k: v for k, v in fields.items() if k in _MATERIAL_FIELDS},
+            {k: v for k, v in fields.items() if k not in _MATERIAL_FIELDS})
 
 
 def half_width(scene: dict[str, Any] | None = None) -> float:
