@@ -148,7 +148,7 @@ def _costs(data: RVEData, increment: float, repeats: int = 5, solver: str = "dir
 
 def main(argv: list[str] | None = None) -> pd.DataFrame:
     """Run the study; the prediction table (one row per state, protocol, direction, seed)."""
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
     parser.add_argument("--particles", type=int, default=100)
     parser.add_argument("--seeds", default="1,2,3")
     parser.add_argument("--increment", type=float, default=1e-4)

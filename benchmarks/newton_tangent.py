@@ -164,7 +164,7 @@ def summary(table: pd.DataFrame) -> pd.DataFrame:
 
 def main(argv: list[str] | None = None) -> pd.DataFrame:
     """Run the measurement and write the tables; returns the per-seed table."""
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
     parser.add_argument("--particles", type=int, default=400)
     parser.add_argument("--seeds", default="1,2,3")
     parser.add_argument("--strains", default="0.1,0.5,1.5,3,6",

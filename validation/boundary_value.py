@@ -19,6 +19,7 @@ import json
 import math
 import sys
 import time
+from importlib.resources import files
 from pathlib import Path
 from typing import Any
 
@@ -36,7 +37,8 @@ else:  # Python 3.10
 
 __all__ = ["bearing_factor", "main", "mechanism_from_fields", "rankine", "rve_friction_angles"]
 
-SCENES = Path(__file__).resolve().parents[1] / "examples" / "scenes"
+#: the scenes, as the package installs them (``examples/scenes`` of a checkout)
+SCENES = Path(str(files("granular_material_examples") / "scenes"))
 #: the surcharge of Guo & Zhao's footing and wall [Pa], and the footing's half-width and the
 #: wall's height [m]
 SURCHARGE, HALF_WIDTH, WALL_HEIGHT = 20e3, 0.05, 0.17
@@ -142,7 +144,7 @@ def _mohr_coulomb(scene: dict[str, Any], phi: float, psi: float) -> dict[str, An
 
 def main(argv: list[str] | None = None) -> int:
     """Run the study into ``--out`` and write its report."""
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
     parser.add_argument("--out", type=Path, required=True)
     args = parser.parse_args(argv)
     out: Path = args.out
