@@ -139,6 +139,49 @@ def test_follower_pressure_acts_on_the_current_length():
     assert problem.boundary_force("top", f0)[1] == pytest.approx(-p * width, rel=1e-12)
 
 
+@pytest.mark.parametrize("formulation", ["small-strain", "updated-lagrangian"])
+def test_a_pressure_with_an_end_rises_linearly_with_the_load_factor(formulation):
+    # a laterally confined column under a top pressure raised from p0 to p1 in 4 steps: the
+    # base carries p(λ)·W at every step (the rollers keep the width); in small strain the
+    # top settles by p(λ)·H/M (Loading.follower_end under finite strain)
+    width, height, p0, p1 = 0.2, 0.5, 20e3, 100e3
+    data = rectangle_mesh(width, height, 2, 4, "quad8")
+    problem = build_problem(data, [Fixed("bottom"), Roller("left", 0), Roller("right", 0),
+                                   Pressure("top", p0, end=p1)])
+    loading = problem.loading
+    assert loading.follower_end is not None
+    zero = np.zeros(problem.basis.N)
+    for lam in (0.0, 0.25, 1.0):
+        for u in (None, zero):
+            load = problem.boundary_force("top", loading.at(lam, u)[1])[1]
+            assert load == pytest.approx(-(p0 + lam * (p1 - p0)) * width, rel=1e-12)
+    seen: list[tuple[float, float, float]] = []
+
+    def record(solver, _record):
+        seen.append((solver.load_factor,
+                     problem.boundary_force("bottom", solver.reaction)[1],
+                     problem.boundary_displacement("top", solver.u)[1]))
+
+    solver = NewtonSolver(problem.basis, LinearElastic(E, NU), loading,
+                          NewtonSettings(formulation=formulation))
+    solver.run(4, on_step=record)
+    m = E * (1 - NU) / ((1 + NU) * (1 - 2 * NU))
+    assert [lam for lam, _, _ in seen] == pytest.approx([0.25, 0.5, 0.75, 1.0])
+    for lam, base, settlement in seen:
+        p = p0 + lam * (p1 - p0)
+        assert base == pytest.approx(p * width, rel=1e-9)
+        assert settlement == pytest.approx(-p * height / m,
+                                           rel=1e-9 if formulation == "small-strain" else 1e-2)
+    # an end equal to the value is a constant pressure
+    assert build_problem(data, [Fixed("bottom"), Pressure("top", p0, end=p0)]
+                         ).loading.follower_end is None
+
+
+def test_a_pressure_end_must_be_finite():
+    with pytest.raises(ParameterError, match="end must be a finite number"):
+        Pressure("top", 1e3, end=float("nan"))
+
+
 @pytest.mark.parametrize("rough", [True, False])
 def test_rigid_body_rough_ties_x_smooth_does_not(rough):
     d = -1e-3

@@ -12,8 +12,10 @@ from test_bvp_run import FOOTING
 
 from granular_material.cli import main
 from granular_material.fem.newton import NewtonSolver
+from granular_material.runs.bvp_resume import scene_record
 from granular_material.runs.bvp_runner import run_boundary_value
 from granular_material.runs.bvp_spec import bvp_from_dict
+from granular_material.runs.checkpoint import RunCheckpoint
 from granular_material.runs.spec import SpecError
 
 if sys.version_info >= (3, 11):
@@ -90,6 +92,21 @@ def test_a_resume_with_another_scene_is_refused_naming_the_field(tmp_path, monke
     with pytest.raises(SpecError, match="no boundary-value run to resume"):
         run_boundary_value(_spec(MOHR_COULOMB, 3, "[4, 3]"), out=tmp_path / "other",
                            resume=True)
+
+
+def test_a_checkpoint_written_before_a_field_was_added_still_resumes(tmp_path):
+    # a checkpoint whose scene lacks a field added since (a pressure's end, at its default
+    # None) is the same scene; one whose steps differ is not
+    spec = _spec(MOHR_COULOMB, 3, "[4, 3]", -0.0015)
+    old = scene_record(spec)
+    for condition in old["conditions"]:
+        assert condition.pop("end") is None
+    RunCheckpoint(tmp_path / "run" / "checkpoint").start({"scene": old})
+    outcome = run_boundary_value(spec, out=tmp_path / "run", resume=True)
+    assert list(outcome.steps["step"]) == [0, 1, 2, 3]
+    RunCheckpoint(tmp_path / "other" / "checkpoint").start({"scene": dict(old, steps=4)})
+    with pytest.raises(SpecError, match="steps"):
+        run_boundary_value(spec, out=tmp_path / "other", resume=True)
 
 
 def test_the_command_line_resumes_a_scene(tmp_path, monkeypatch, capsys):

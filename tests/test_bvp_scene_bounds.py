@@ -91,3 +91,23 @@ def test_a_generated_mesh_beyond_the_memory_is_refused_before_it_is_made(tmp_pat
                                         r"points\) needs about 360 GB of memory"):
         run_boundary_value(spec, None if out is None else tmp_path / out)
     assert time.perf_counter() - start < 5.0  # making the mesh took more than 60 s before
+
+
+def test_a_pressure_rises_to_its_end_and_only_a_pressure_has_one(tmp_path):
+    ramp = {"type": "pressure", "boundary": "top", "value": 1e5, "end": 3e5}
+    rollers = [{"type": "roller", "boundary": side, "component": "x"}
+               for side in ("left", "right")]
+    spec = scene(tmp_path, conditions=[{"type": "fixed", "boundary": "bottom"}, *rollers,
+                                       ramp])
+    assert spec.conditions[-1].end == 3e5
+    outcome = run_boundary_value(spec)
+    load = -outcome.steps["top_force_y"].to_numpy()  # the load on the body's top [N/m]
+    assert load == pytest.approx([1e5, 2e5, 3e5], rel=1e-9)
+    with pytest.raises(SpecError, match="only a pressure has an end") as refused:
+        scene(tmp_path, conditions=[{"type": "displacement", "boundary": "top",
+                                     "component": "y", "value": -1e-3, "end": -2e-3}])
+    assert refused.value.field == "conditions.end"
+    with pytest.raises(SpecError, match="compression positive") as refused:
+        scene(tmp_path, conditions=[{"type": "fixed", "boundary": "bottom"},
+                                    dict(ramp, end=-1.0)])
+    assert refused.value.field == "conditions.end"

@@ -10,15 +10,18 @@ boundary (gravity on the whole body):
 - :class:`RigidBody`: a footing or a wall moved as one by λ · ``displacement``; rough: both
   components of every node prescribed; smooth: only the component along the motion (which
   must then be along x or y), the other free;
-- :class:`Pressure`: a pressure [Pa], compression positive, normal to the boundary; under
-  finite strain it follows the boundary's current length and normal (Nanson's formula,
-  the ``follower`` of the :class:`~granular_material.fem.loading.Loading`); consistent nodal
-  forces with the element's own shape functions;
+- :class:`Pressure`: a pressure [Pa], compression positive, normal to the boundary,
+  constant or linear in λ from ``value`` to ``end``; under finite strain it follows the
+  boundary's current length and normal (Nanson's formula, the ``follower`` of the
+  :class:`~granular_material.fem.loading.Loading`); consistent nodal forces with the
+  element's own shape functions;
 - :class:`Gravity`: the body force −γ e_y [N/m³] on the reference configuration (per
   reference volume, so it needs no update under finite strain).
 
-Pressure and gravity are constant in λ (applied in full from step 0: ``force_start`` =
-``force_end``); prescribed displacements grow linearly with λ. Conflicts: where two
+Gravity is constant in λ (applied in full from step 0), and so is a pressure without an
+``end``; a pressure with one goes linearly from ``value`` at λ = 0 to ``end`` at λ = 1
+(a surcharge raised, or a flexible footing loaded by its pressure: load control, which cannot
+pass the collapse load); prescribed displacements grow linearly with λ. Conflicts: where two
 conditions prescribe the same dof, **the later in the list wins** (a wall listed after the
 fixed base it stands on owns their shared node); equal values are no conflict. A problem
 whose prescribed dofs leave a rigid-body motion free (a translation in x or y, or a
@@ -127,16 +130,21 @@ class RigidBody:
 
 @dataclass(frozen=True)
 class Pressure:
-    """A pressure ``value`` [Pa], compression positive, normal to ``boundary`` (traction
-    t = −p n, n the outward normal), on its current length under finite strain."""
+    """A pressure [Pa], compression positive, normal to ``boundary`` (traction t = −p n, n
+    the outward normal), on its current length under finite strain: ``value`` at λ = 0,
+    linear in λ to ``end`` at λ = 1 (None: ``value`` throughout)."""
 
     boundary: str
     value: float
+    end: float | None = None
 
     def __post_init__(self) -> None:
-        conform_fields(self)
-        if not math.isfinite(self.value):
-            raise ParameterError("value", f"of a pressure must be finite Pa, got {self.value!r}")
+        conform_fields(self)  # finite numbers, end or none
+
+    @property
+    def at_end(self) -> float:
+        """The pressure [Pa] at λ = 1."""
+        return self.value if self.end is None else self.end
 
 
 @dataclass(frozen=True)
@@ -276,6 +284,18 @@ def _check_rigid_modes(basis: Basis, prescribed: dict[int, tuple[float, int]]) -
                                            "point)")
 
 
+def _follower(body: np.ndarray, pressures: list[tuple[FacetBasis, float]],
+              ) -> Callable[[np.ndarray], np.ndarray]:
+    """The nodal forces [N/m] of ``body`` and of each pressure [Pa] on its facets, on the
+    configuration displaced by u [m]."""
+    def on_current_boundary(u: np.ndarray) -> np.ndarray:
+        out = body.copy()
+        for fb, p in pressures:
+            out += follower_traction.assemble(fb, p=p, u=fb.interpolate(u))
+        return out
+    return on_current_boundary
+
+
 def build_problem(mesh_data: MeshData, conditions: Sequence[Condition],
                   gauss: int | None = None) -> Problem:
     """Basis, loading, Gauss weights and points, and boundary dofs of ``mesh_data`` under
@@ -309,7 +329,8 @@ def build_problem(mesh_data: MeshData, conditions: Sequence[Condition],
         exact = Basis(mesh, basis.elem, intorder=2 * degree)
         body = _body_force.assemble(exact, gamma=gravity)
     force = body.copy()
-    pressures: list[tuple[FacetBasis, float]] = []
+    force_end = body.copy()
+    pressures: list[tuple[FacetBasis, float, float]] = []
     outer = set(mesh.boundary_facets().tolist())
     for c in conditions:
         if not isinstance(c, Pressure):
@@ -319,20 +340,22 @@ def build_problem(mesh_data: MeshData, conditions: Sequence[Condition],
             raise ParameterError("boundary", f"{c.boundary!r} of a Pressure has facets inside "
                                              "the body: a pressure acts on the boundary only")
         fb = FacetBasis(mesh, basis.elem, facets=facets, intorder=2 * degree + 1)
-        pressures.append((fb, c.value))
+        pressures.append((fb, c.value, c.at_end))
         force += confining_traction.assemble(fb, p=c.value)
-    follower: Callable[[np.ndarray], np.ndarray] | None = None
+        force_end += confining_traction.assemble(fb, p=c.at_end)
+    follower = follower_end = None
     if pressures:
-        def follower(u: np.ndarray) -> np.ndarray:
-            out = body.copy()
-            for fb, p in pressures:
-                out += follower_traction.assemble(fb, p=p, u=fb.interpolate(u))
-            return out
+        follower = _follower(body, [(fb, start) for fb, start, _ in pressures])
+        if any(end != start for _, start, end in pressures):
+            follower_end = _follower(body, [(fb, end) for fb, _, end in pressures])
+        else:
+            force_end = force.copy()
 
     loading = Loading(
         dirichlet_dofs=np.asarray(order, dtype=np.int64),
         dirichlet_end=np.asarray([prescribed[d][0] for d in order], dtype=np.float64),
-        force_start=force, force_end=force.copy(), follower=follower,
+        force_start=force, force_end=force_end, follower=follower,
+        follower_end=follower_end,
     )
     points = to_points(np.asarray(basis.global_coordinates()))
     return Problem(mesh_data, conditions, basis, loading, to_points(basis.dx), points, dofs)

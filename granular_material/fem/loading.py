@@ -19,11 +19,13 @@ class Loading:
         dirichlet_end: prescribed displacement at λ = 1 [m], shape (m,); u_D(λ) = λ · end.
         force_start: external nodal forces at λ = 0 [N/m], shape (ndofs,) (e.g. confinement).
         force_end: external nodal forces at λ = 1 [N/m], shape (ndofs,).
-        follower: None, or the nodal forces [N/m] (ndofs,) of the same load acting on the
-            configuration displaced by u [m] (ndofs,) — a pressure on the current sides,
-            for the finite-strain formulation; it needs a load constant in λ
-            (``force_start`` equal to ``force_end``), which it replaces where a displacement
-            is given.
+        follower: None, or the nodal forces [N/m] (ndofs,) of the load at λ = 0 acting on
+            the configuration displaced by u [m] (ndofs,) — a pressure on the current sides,
+            for the finite-strain formulation; it replaces ``force_start`` where a
+            displacement is given.
+        follower_end: None (the follower load is constant in λ: ``force_start`` equal to
+            ``force_end``), or the follower of the load at λ = 1, which replaces
+            ``force_end``; between them f_ext = (1 − λ)·follower(u) + λ·follower_end(u).
     """
 
     dirichlet_dofs: np.ndarray
@@ -31,6 +33,7 @@ class Loading:
     force_start: np.ndarray
     force_end: np.ndarray
     follower: Callable[[np.ndarray], np.ndarray] | None = None
+    follower_end: Callable[[np.ndarray], np.ndarray] | None = None
 
     def __post_init__(self) -> None:
         if self.dirichlet_dofs.shape != self.dirichlet_end.shape:
@@ -43,9 +46,12 @@ class Loading:
                 f"force_end shape {self.force_end.shape} differs from force_start "
                 f"shape {self.force_start.shape}"
             )
-        if self.follower is not None and not np.array_equal(self.force_start, self.force_end):
-            raise ValueError("a follower load must be constant in the load factor "
-                             "(force_start equal to force_end)")
+        if self.follower_end is not None and self.follower is None:
+            raise ValueError("a follower_end needs the follower of the load at λ = 0")
+        if (self.follower is not None and self.follower_end is None
+                and not np.array_equal(self.force_start, self.force_end)):
+            raise ValueError("a follower load that changes with the load factor "
+                             "(force_start differs from force_end) needs its follower_end")
 
     def at(self, load_factor: float, u: np.ndarray | None = None,
            ) -> tuple[np.ndarray, np.ndarray]:
@@ -53,6 +59,9 @@ class Loading:
         follower load and a displacement ``u`` [m], f_ext acts on the displaced
         configuration."""
         if u is not None and self.follower is not None:
-            return load_factor * self.dirichlet_end, self.follower(u)
+            f = self.follower(u)
+            if self.follower_end is not None:
+                f = (1.0 - load_factor) * f + load_factor * self.follower_end(u)
+            return load_factor * self.dirichlet_end, f
         f = (1.0 - load_factor) * self.force_start + load_factor * self.force_end
         return load_factor * self.dirichlet_end, f

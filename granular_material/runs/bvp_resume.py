@@ -41,9 +41,19 @@ def scene_record(spec: BoundaryValueSpec) -> dict[str, Any]:
     return json.loads(json.dumps(asdict(spec), default=str))
 
 
+def _same(now: Any, then: Any) -> bool:
+    """``now`` equals ``then``, where a key missing from a table of either counts as None (a
+    field added since the checkpoint was written, at its default None, is no difference)."""
+    if isinstance(now, dict) and isinstance(then, dict):
+        return all(_same(now.get(k), then.get(k)) for k in set(now) | set(then))
+    if isinstance(now, list) and isinstance(then, list):
+        return len(now) == len(then) and all(map(_same, now, then))
+    return now == then
+
+
 def _differences(now: dict[str, Any], then: dict[str, Any]) -> list[str]:
     keys = sorted((set(now) | set(then)) - RESUME_FREE)
-    return [k for k in keys if now.get(k) != then.get(k)]
+    return [k for k in keys if not _same(now.get(k), then.get(k))]
 
 
 def _checkpoint(out: Path) -> RunCheckpoint:

@@ -123,7 +123,7 @@ def _condition(c: ConditionSpec) -> Any:
         return Displacement(c.boundary, c.component, c.value)
     if c.type == "rigid":
         return RigidBody(c.boundary, displacement=tuple(c.displacement), rough=c.rough)
-    return Pressure(c.boundary, c.value)
+    return Pressure(c.boundary, c.value, c.end)
 
 
 def _initial_stress(spec: BoundaryValueSpec, xy: np.ndarray, unit_weight: float,

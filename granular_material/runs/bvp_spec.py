@@ -27,6 +27,12 @@ into a :class:`BoundaryValueSpec` by :func:`bvp_from_dict` (every key checked, a
     displacement = [0.0, -0.0145]   # [m] at the last step
     rough = true
 
+    [[conditions]]
+    type = "pressure"
+    boundary = "top"
+    value = 20e3                    # [Pa], compression positive, at step 0 ...
+    end = 60e3                      # ... and at the last step (default: value throughout)
+
     [gravity]
     unit_weight = 0.0               # [N/m³]; "rve": from the RVEs' grain density and e
 
@@ -155,10 +161,12 @@ class ConditionSpec:
             (the boundary moved as one body by ``displacement`` [m] at the end; ``rough``
             ties both components of every node, smooth only the one along the motion) or
             "pressure" (``value`` [Pa], compression positive, normal to the boundary on its
-            current length, constant through the run).
+            current length: constant through the run, or linear to ``end`` at the last
+            step).
         boundary: the boundary's name.
         component: 0 (x) or 1 (y), for roller and displacement.
-        value: the end displacement [m] or the pressure [Pa].
+        value: the end displacement [m] or the pressure [Pa] (at step 0).
+        end: a pressure's value [Pa] at the last step (None: ``value`` throughout).
         displacement: (dx, dy) [m] of a rigid body at the end.
         rough: a rigid body's nodes keep both components tied (True) or slide (False).
     """
@@ -167,6 +175,7 @@ class ConditionSpec:
     boundary: str
     component: int | None = None
     value: float | None = None
+    end: float | None = None
     displacement: tuple[float, float] | None = None
     rough: bool = True
 
@@ -179,9 +188,14 @@ class ConditionSpec:
             raise SpecError("conditions.component", f"a {self.type} needs component x or y")
         if self.type in ("displacement", "pressure") and self.value is None:
             raise SpecError("conditions.value", f"a {self.type} needs a value")
-        if self.type == "pressure" and self.value is not None and self.value < 0:
-            raise SpecError("conditions.value", f"a pressure is compression positive, >= 0 "
-                                                f"Pa, got {self.value:g}")
+        if self.end is not None and self.type != "pressure":
+            raise SpecError("conditions.end", f"only a pressure has an end value (a "
+                                              f"{self.type}'s value is its end)")
+        for name in ("value", "end"):
+            p = getattr(self, name)
+            if self.type == "pressure" and p is not None and not p >= 0:
+                raise SpecError(f"conditions.{name}", f"a pressure is compression positive, "
+                                                      f">= 0 Pa, got {p:g}")
         if self.type == "rigid" and self.displacement is None:
             raise SpecError("conditions.displacement", "a rigid body needs displacement "
                                                        "[dx, dy] [m]")
@@ -303,8 +317,8 @@ _GENERATED_SIDES = frozenset({"left", "right", "bottom", "top"})
 
 def _condition(entry: Any, index: int) -> ConditionSpec:
     entry = _table(f"conditions[{index}]", entry)
-    _unknown("conditions", entry, {"type", "boundary", "component", "value", "displacement",
-                                   "rough"})
+    _unknown("conditions", entry, {"type", "boundary", "component", "value", "end",
+                                   "displacement", "rough"})
     component = entry.get("component")
     if component is not None:
         if isinstance(component, bool) or not isinstance(component, str | int) \
@@ -313,7 +327,8 @@ def _condition(entry: Any, index: int) -> ConditionSpec:
         component = _COMPONENTS[component]
     return _within("conditions", lambda: ConditionSpec(
         type=entry.get("type"), boundary=entry.get("boundary"), component=component,
-        value=entry.get("value"), displacement=entry.get("displacement"),
+        value=entry.get("value"), end=entry.get("end"),
+        displacement=entry.get("displacement"),
         rough=entry.get("rough", True)))
 
 
