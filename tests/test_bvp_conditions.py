@@ -177,6 +177,36 @@ def test_a_pressure_with_an_end_rises_linearly_with_the_load_factor(formulation)
                          ).loading.follower_end is None
 
 
+@pytest.mark.parametrize("formulation", ["small-strain", "updated-lagrangian"])
+def test_gravity_with_an_end_rises_linearly_under_a_constant_pressure(formulation):
+    # gravity raised from γ to 2γ under a constant top pressure q (a follower under finite
+    # strain): the base carries (q + γ(λ)·H)·W at every step; in small strain the top
+    # settles by q·H/M + γ(λ)·H²/(2M)
+    width, height, q, gamma = 0.3, 1.0, 10e3, 18e3
+    data = rectangle_mesh(width, height, 1, 4, "quad8")
+    problem = build_problem(data, [Roller("left", 0), Roller("right", 0), Fixed("bottom"),
+                                   Pressure("top", q), Gravity(gamma, end=2 * gamma)])
+    assert problem.loading.follower_end is not None
+    seen: list[tuple[float, float, float]] = []
+
+    def record(solver, _record):
+        seen.append((solver.load_factor,
+                     problem.boundary_force("bottom", solver.reaction)[1],
+                     problem.boundary_displacement("top", solver.u)[1]))
+
+    solver = NewtonSolver(problem.basis, LinearElastic(E, NU), problem.loading,
+                          NewtonSettings(formulation=formulation))
+    solver.run(2, on_step=record)
+    m = E * (1 - NU) / ((1 + NU) * (1 - 2 * NU))
+    for lam, base, settlement in seen:
+        weight = gamma * (1 + lam)
+        assert base == pytest.approx((q + weight * height) * width, rel=1e-9)
+        assert settlement == pytest.approx(-(q * height + weight * height ** 2 / 2) / m,
+                                           rel=1e-9 if formulation == "small-strain" else 1e-2)
+    with pytest.raises(ParameterError, match="end must be >= 0"):
+        Gravity(gamma, end=-1.0)
+
+
 def test_a_pressure_end_must_be_finite():
     with pytest.raises(ParameterError, match="end must be a finite number"):
         Pressure("top", 1e3, end=float("nan"))

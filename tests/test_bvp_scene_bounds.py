@@ -111,3 +111,25 @@ def test_a_pressure_rises_to_its_end_and_only_a_pressure_has_one(tmp_path):
         scene(tmp_path, conditions=[{"type": "fixed", "boundary": "bottom"},
                                     dict(ramp, end=-1.0)])
     assert refused.value.field == "conditions.end"
+
+
+def test_gravity_increased_from_a_geostatic_start(tmp_path):
+    # a column starts in equilibrium under its weight at step 0 (f0·γ) and carries
+    # (q + f·γ·H)·W at the base as f rises to f1
+    gamma, q, factor = 18e3, 10e3, [1.0, 1.5]
+    rollers = [{"type": "roller", "boundary": side, "component": "x"}
+               for side in ("left", "right")]
+    spec = scene(tmp_path, mesh={"size": [0.2, 1.0], "elements": [1, 4]},
+                 conditions=[{"type": "fixed", "boundary": "bottom"}, *rollers,
+                             {"type": "pressure", "boundary": "top", "value": q}],
+                 gravity={"unit_weight": gamma, "factor": factor},
+                 initial={"state": "geostatic", "k0": 0.5, "surcharge": q},
+                 newton={"formulation": "small-strain"})
+    assert spec.gravity_factor == (1.0, 1.5)
+    outcome = run_boundary_value(spec)
+    assert outcome.summary["initial_residual"]["relative"] < 1e-12
+    base = outcome.steps["bottom_force_y"].to_numpy()
+    assert base == pytest.approx([(q + f * gamma) * 0.2 for f in (1.0, 1.25, 1.5)], rel=1e-9)
+    for bad in ([1.0], [1.0, -0.5], "2"):
+        with pytest.raises(SpecError, match=r"gravity\.factor"):
+            scene(tmp_path, gravity={"unit_weight": gamma, "factor": bad})

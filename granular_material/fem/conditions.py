@@ -18,12 +18,13 @@ boundary (gravity on the whole body):
 - :class:`Gravity`: the body force −γ e_y [N/m³] on the reference configuration (per
   reference volume, so it needs no update under finite strain).
 
-Gravity is constant in λ (applied in full from step 0), and so is a pressure without an
-``end``; a pressure with one goes linearly from ``value`` at λ = 0 to ``end`` at λ = 1
-(a surcharge raised, or a flexible footing loaded by its pressure: load control, which cannot
-pass the collapse load); prescribed displacements grow linearly with λ. Conflicts: where two
-conditions prescribe the same dof, **the later in the list wins** (a wall listed after the
-fixed base it stands on owns their shared node); equal values are no conflict. A problem
+Gravity and pressures are constant in λ (applied in full from step 0) unless given an
+``end``: then they go linearly from their value at λ = 0 to ``end`` at λ = 1 (a surcharge
+raised, a flexible footing loaded by its pressure, gravity switched on or increased: load
+control, which cannot pass a collapse load); prescribed displacements grow linearly with λ.
+Conflicts: where two conditions prescribe the same dof, **the later in the list wins** (a
+wall listed after the fixed base it stands on owns their shared node); equal values are no
+conflict. A problem
 whose prescribed dofs leave a rigid-body motion free (a translation in x or y, or a
 rotation) is refused, a :class:`~granular_material.errors.ParameterError` naming it.
 """
@@ -149,14 +150,23 @@ class Pressure:
 
 @dataclass(frozen=True)
 class Gravity:
-    """Body force −γ e_y of unit weight ``unit_weight`` γ [N/m³] (>= 0) over the body."""
+    """Body force −γ e_y over the body: unit weight γ = ``unit_weight`` [N/m³] (>= 0) at
+    λ = 0, linear in λ to ``end`` at λ = 1 (None: ``unit_weight`` throughout; a gravity
+    switched on, or increased to find a slope's factor of safety)."""
 
     unit_weight: float
+    end: float | None = None
 
     def __post_init__(self) -> None:
         conform_fields(self)
-        if not (math.isfinite(self.unit_weight) and self.unit_weight >= 0):
-            raise ParameterError("unit_weight", f"must be >= 0 N/m³, got {self.unit_weight!r}")
+        for name, weight in (("unit_weight", self.unit_weight), ("end", self.end)):
+            if weight is not None and not weight >= 0:
+                raise ParameterError(name, f"must be >= 0 N/m³, got {weight!r}")
+
+    @property
+    def at_end(self) -> float:
+        """The unit weight [N/m³] at λ = 1."""
+        return self.unit_weight if self.end is None else self.end
 
 
 #: any of the conditions
@@ -296,6 +306,41 @@ def _follower(body: np.ndarray, pressures: list[tuple[FacetBasis, float]],
     return on_current_boundary
 
 
+def _external_loads(mesh_data: MeshData, basis: Basis, conditions: Sequence[Condition],
+                    ) -> tuple[np.ndarray, np.ndarray, Callable | None, Callable | None]:
+    """The nodal forces [N/m] of gravity and the pressures at λ = 0 and λ = 1, and the
+    followers of both (None where there is no pressure; the end one None where nothing
+    changes in λ)."""
+    mesh = mesh_data.mesh
+    degree = max(int(getattr(basis.elem, "maxdeg", 1)), 1)
+    weights = (sum(c.unit_weight for c in conditions if isinstance(c, Gravity)),
+               sum(c.at_end for c in conditions if isinstance(c, Gravity)))
+    exact = Basis(mesh, basis.elem, intorder=2 * degree) if any(weights) else None
+    bodies = [_body_force.assemble(exact, gamma=w) if w else np.zeros(basis.N)
+              for w in weights]
+    force_start, force_end = bodies[0].copy(), bodies[1].copy()
+    pressures: list[tuple[FacetBasis, float, float]] = []
+    outer = set(mesh.boundary_facets().tolist())
+    for c in conditions:
+        if not isinstance(c, Pressure):
+            continue
+        facets = mesh_data.boundaries[c.boundary]
+        if not set(facets.tolist()) <= outer:
+            raise ParameterError("boundary", f"{c.boundary!r} of a Pressure has facets inside "
+                                             "the body: a pressure acts on the boundary only")
+        fb = FacetBasis(mesh, basis.elem, facets=facets, intorder=2 * degree + 1)
+        pressures.append((fb, c.value, c.at_end))
+        force_start += confining_traction.assemble(fb, p=c.value)
+        force_end += confining_traction.assemble(fb, p=c.at_end)
+    if not pressures:
+        return force_start, force_end, None, None
+    follower = _follower(bodies[0], [(fb, start) for fb, start, _ in pressures])
+    if weights[0] == weights[1] and all(end == start for _, start, end in pressures):
+        return force_start, force_start.copy(), follower, None
+    return force_start, force_end, follower, _follower(bodies[1], [(fb, end) for fb, _, end
+                                                                   in pressures])
+
+
 def build_problem(mesh_data: MeshData, conditions: Sequence[Condition],
                   gauss: int | None = None) -> Problem:
     """Basis, loading, Gauss weights and points, and boundary dofs of ``mesh_data`` under
@@ -321,40 +366,12 @@ def build_problem(mesh_data: MeshData, conditions: Sequence[Condition],
     prescribed = _prescribed(conditions, dofs)
     _check_rigid_modes(basis, prescribed)
     order = sorted(prescribed)
-    body = np.zeros(basis.N)
-    mesh = mesh_data.mesh
-    degree = max(int(getattr(basis.elem, "maxdeg", 1)), 1)
-    gravity = sum(c.unit_weight for c in conditions if isinstance(c, Gravity))
-    if gravity:
-        exact = Basis(mesh, basis.elem, intorder=2 * degree)
-        body = _body_force.assemble(exact, gamma=gravity)
-    force = body.copy()
-    force_end = body.copy()
-    pressures: list[tuple[FacetBasis, float, float]] = []
-    outer = set(mesh.boundary_facets().tolist())
-    for c in conditions:
-        if not isinstance(c, Pressure):
-            continue
-        facets = mesh_data.boundaries[c.boundary]
-        if not set(facets.tolist()) <= outer:
-            raise ParameterError("boundary", f"{c.boundary!r} of a Pressure has facets inside "
-                                             "the body: a pressure acts on the boundary only")
-        fb = FacetBasis(mesh, basis.elem, facets=facets, intorder=2 * degree + 1)
-        pressures.append((fb, c.value, c.at_end))
-        force += confining_traction.assemble(fb, p=c.value)
-        force_end += confining_traction.assemble(fb, p=c.at_end)
-    follower = follower_end = None
-    if pressures:
-        follower = _follower(body, [(fb, start) for fb, start, _ in pressures])
-        if any(end != start for _, start, end in pressures):
-            follower_end = _follower(body, [(fb, end) for fb, _, end in pressures])
-        else:
-            force_end = force.copy()
-
+    force_start, force_end, follower, follower_end = _external_loads(mesh_data, basis,
+                                                                      conditions)
     loading = Loading(
         dirichlet_dofs=np.asarray(order, dtype=np.int64),
         dirichlet_end=np.asarray([prescribed[d][0] for d in order], dtype=np.float64),
-        force_start=force, force_end=force_end, follower=follower,
+        force_start=force_start, force_end=force_end, follower=follower,
         follower_end=follower_end,
     )
     points = to_points(np.asarray(basis.global_coordinates()))

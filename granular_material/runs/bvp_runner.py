@@ -160,12 +160,13 @@ def build(spec: BoundaryValueSpec, allocate: bool = True) -> Built:
     check_memory(spec, mesh.n_elements, mesh.element)
     conditions = [_condition(c) for c in spec.conditions]
     unit_weight = unit_weight_of(spec)
-    if unit_weight > 0:
-        conditions.append(Gravity(unit_weight))
+    start, end = (f * unit_weight for f in spec.gravity_factor)
+    if start > 0 or end > 0:
+        conditions.append(Gravity(start, end=end))
     problem = build_problem(mesh, conditions, spec.mesh.quadrature)
     xy = problem.points
     top = mesh.bounding_box[3]
-    sigma0 = _initial_stress(spec, xy, unit_weight, top)
+    sigma0 = _initial_stress(spec, xy, start, top)  # in equilibrium with step 0's weight
     t0 = time.perf_counter()
     material = material_for_problem(spec, xy.shape[0], sigma0, allocate)
     preparation = time.perf_counter() - t0
@@ -366,6 +367,7 @@ def _summary(b: Built, solver: NewtonSolver, steps: pd.DataFrame, points: pd.Dat
         "elements": int(b.problem.basis.nelems),
         "gauss_points": int(b.initial_stress.shape[0]),
         "material": spec.material.name, "unit_weight": b.unit_weight,
+        "gravity_factor": list(spec.gravity_factor),
         "initial_state": spec.initial.state, "initial_residual": initial,
         "steps": int(len(steps) - 1), "steps_planned": spec.steps, "error": error,
         "iterations": [int(i) for i in steps["iterations"].iloc[1:]],

@@ -35,11 +35,12 @@ into a :class:`BoundaryValueSpec` by :func:`bvp_from_dict` (every key checked, a
 
     [gravity]
     unit_weight = 0.0               # [N/m³]; "rve": from the RVEs' grain density and e
+    factor = [1.0, 1.0]             # γ's multiple at step 0 and at the last step
 
     [initial]
     state = "uniform"               # or "geostatic"
     pressure = 20e3                 # uniform: isotropic stress [Pa], compression positive
-    # geostatic: sigma_v = surcharge + unit_weight * depth, sigma_h = k0 * sigma_v
+    # geostatic: sigma_v = surcharge + f0 * unit_weight * depth, sigma_h = k0 * sigma_v
     # k0 = 0.5, surcharge = 20e3, surface = 0.4 (default: the top of the mesh)
 
     [material]                      # as a run specification's: name and parameters
@@ -253,6 +254,9 @@ class BoundaryValueSpec:
         conditions: the conditions, applied in order (a later one on the same degree of
             freedom wins).
         unit_weight: γ [N/m³] of the body force, or "rve" (from the RVEs).
+        gravity_factor: (f0, f1): the body force is f0·γ at step 0 and f1·γ at the last
+            step, linear in the load factor between (gravity switched on, or increased until
+            a slope fails); (1, 1): γ throughout.
         initial: the initial state.
         steps: load steps.
         material: the material (as in a run specification).
@@ -268,6 +272,7 @@ class BoundaryValueSpec:
     boundaries: dict[str, str] = field(default_factory=dict)
     conditions: tuple[ConditionSpec, ...] = ()
     unit_weight: float | str = 0.0
+    gravity_factor: tuple[float, float] = (1.0, 1.0)
     initial: InitialStateSpec = field(default_factory=lambda: InitialStateSpec(
         pressure=100e3))
     steps: int = 10
@@ -300,6 +305,11 @@ class BoundaryValueSpec:
             if weight < 0:
                 raise SpecError("gravity.unit_weight", f"must be >= 0 N/m³, got {weight:g}")
             object.__setattr__(self, "unit_weight", weight)
+        factor = conform("gravity.factor", self.gravity_factor, tuple[float, float],
+                         SpecError)
+        if min(factor) < 0:
+            raise SpecError("gravity.factor", f"must be >= 0, got {list(factor)}")
+        object.__setattr__(self, "gravity_factor", factor)
 
     @property
     def reference_pressure(self) -> float:
@@ -309,8 +319,8 @@ class BoundaryValueSpec:
 
 #: the fields of BoundaryValueSpec that are sections, each checked by its own class (or,
 #: ``unit_weight``, a number or "rve")
-_SECTIONS = ("mesh", "boundaries", "conditions", "unit_weight", "initial", "material",
-             "newton")
+_SECTIONS = ("mesh", "boundaries", "conditions", "unit_weight", "gravity_factor", "initial",
+             "material", "newton")
 #: the sides every generated rectangle names
 _GENERATED_SIDES = frozenset({"left", "right", "bottom", "top"})
 
@@ -372,7 +382,7 @@ def bvp_from_dict(data: Mapping[str, Any], folder: Path | str = ".") -> Boundary
     if not isinstance(conditions, list):
         raise SpecError("conditions", "must be an array of tables ([[conditions]])")
     gravity = _table("gravity", data.get("gravity"))
-    _unknown("gravity", gravity, {"unit_weight"})
+    _unknown("gravity", gravity, {"unit_weight", "factor"})
     material = _table("material", data.get("material"))
     _unknown("material", material, {"name", "parameters"})
     newton = _table("newton", data.get("newton"))
@@ -393,7 +403,8 @@ def bvp_from_dict(data: Mapping[str, Any], folder: Path | str = ".") -> Boundary
     try:
         return BoundaryValueSpec(
             **sections, boundaries={str(k): v for k, v in boundaries.items()},
-            unit_weight=gravity.get("unit_weight", 0.0), steps=data.get("steps", 10),
+            unit_weight=gravity.get("unit_weight", 0.0),
+            gravity_factor=gravity.get("factor", (1.0, 1.0)), steps=data.get("steps", 10),
             newton=newton_spec, out=output.get("out", data.get("out")),
             device=output.get("device"), shards=output.get("shards"),
             progress=output.get("progress", False), fields=output.get("fields", True),
