@@ -95,10 +95,11 @@ def test_a_resume_with_another_scene_is_refused_naming_the_field(tmp_path, monke
 
 
 def test_a_checkpoint_written_before_a_field_was_added_still_resumes(tmp_path):
-    # a checkpoint whose scene lacks a field added since (a pressure's end, at its default
-    # None) is the same scene; one whose steps differ is not
+    # a checkpoint whose scene lacks fields added since (a pressure's end, the gravity
+    # factor, at their default None) is the same scene; one whose steps differ is not
     spec = _spec(MOHR_COULOMB, 3, "[4, 3]", -0.0015)
     old = scene_record(spec)
+    assert old.pop("gravity_factor") is None
     for condition in old["conditions"]:
         assert condition.pop("end") is None
     RunCheckpoint(tmp_path / "run" / "checkpoint").start({"scene": old})

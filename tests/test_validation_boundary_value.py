@@ -17,3 +17,37 @@ def test_rankine_coefficients():
     assert k_p == pytest.approx(3.0)
     assert k_a == pytest.approx(1 / 3)
     assert rankine(0.0) == pytest.approx((1.0, 1.0))
+
+
+def test_a_run_records_its_load_continues_when_stopped_and_is_reused(tmp_path, monkeypatch):
+    import json
+
+    from granular_material_validation import boundary_value as report
+
+    from granular_material.fem.newton import NewtonSolver
+
+    scene = {"test": "boundary-value", "steps": 3,
+             "mesh": {"size": [1.0, 1.0], "elements": [2, 2]},
+             "conditions": [{"type": "fixed", "boundary": "bottom"},
+                            {"type": "displacement", "boundary": "top", "component": "y",
+                             "value": -0.001}],
+             "initial": {"state": "uniform", "pressure": 1e5},
+             "material": {"name": "linear-elastic"}, "output": {"fields": False}}
+    folder = tmp_path / "run"
+    original = NewtonSolver.step
+
+    def stop_at_two(self, target, k):
+        if k == 2:
+            raise KeyboardInterrupt
+        return original(self, target, k)
+
+    with monkeypatch.context() as m:
+        m.setattr(NewtonSolver, "step", stop_at_two)
+        assert report._run(scene, folder)["error"].startswith("interrupted after load step 1")
+    summary = report._run(scene, folder)  # continued from its checkpoint, not refused
+    assert summary["steps"] == 3 and summary["error"] is None
+    host = json.loads((folder / "host.json").read_text())
+    assert host["cores"] >= 1 and host["load_max"] >= host["load_median"] >= 0
+    assert report._load(folder) != "–" and report._load(tmp_path) == "–"
+    (folder / "steps.csv").unlink()  # a reused run is read from its summary, not rerun
+    assert report._run(scene, folder) == summary

@@ -17,7 +17,9 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import sys
+import threading
 import time
 from importlib.resources import files
 from pathlib import Path
@@ -117,12 +119,58 @@ def wall_stress_thrust(points: pd.DataFrame, height: float = WALL_HEIGHT) -> np.
     return -beside.groupby("step")["sxx"].mean().to_numpy() * height
 
 
+class _LoadSampler:
+    """The machine's one-minute load average, sampled every ``every`` seconds while the
+    ``with`` block runs (in a thread of its own), kept as (median, max)."""
+
+    def __init__(self, every: float = 30.0) -> None:
+        self.every, self.samples = every, [os.getloadavg()[0]]
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._sample, daemon=True)
+
+    def _sample(self) -> None:
+        while not self._stop.wait(self.every):
+            self.samples.append(os.getloadavg()[0])
+
+    def __enter__(self) -> _LoadSampler:
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._stop.set()
+        self._thread.join()
+        self.samples.append(os.getloadavg()[0])
+
+    def record(self) -> dict[str, Any]:
+        return {"cores": os.cpu_count(), "load_median": float(np.median(self.samples)),
+                "load_max": float(max(self.samples))}
+
+
 def _run(scene: dict[str, Any], folder: Path) -> dict[str, Any]:
-    """The scene's summary, run into ``folder`` unless it already holds one."""
+    """The scene's summary, run into ``folder`` unless it already holds a finished one (a
+    run interrupted there is continued from its checkpoint), with the machine's load while
+    it ran in ``host.json``."""
     summary = folder / "summary.json"
-    if not summary.is_file():
-        run_boundary_value(bvp_from_dict(scene, SCENES), out=folder)
+    if not summary.is_file() or _interrupted(summary):
+        stopped = (folder / "checkpoint" / "options.json").is_file()
+        with _LoadSampler() as load:
+            run_boundary_value(bvp_from_dict(scene, SCENES), out=folder, resume=stopped)
+        (folder / "host.json").write_text(json.dumps(load.record(), indent=1))
     return json.loads(summary.read_text())
+
+
+def _interrupted(summary: Path) -> bool:
+    """The run of this ``summary.json`` was interrupted (Ctrl-C, a signal) before its end."""
+    return str(json.loads(summary.read_text()).get("error") or "").startswith("interrupted")
+
+
+def _load(folder: Path) -> str:
+    """The load average a run met, "median (max)", or "–" where it was not recorded."""
+    host = folder / "host.json"
+    if not host.is_file():
+        return "–"
+    record = json.loads(host.read_text())
+    return f"{record['load_median']:.1f} ({record['load_max']:.1f})"
 
 
 def _condensed(scene: dict[str, Any]) -> dict[str, Any]:
@@ -244,8 +292,12 @@ def main(argv: list[str] | None = None) -> int:
                 "Rankine, φ peak [N/m]": bound, "σxx / Rankine(φ peak)": limit / bound,
                 "Rankine, φ 10 % [N/m]": bound_end, "σxx / Rankine(φ 10 %)": limit / bound_end})
     wall_table = pd.DataFrame(wall_rows)
+    folders = {"footing-dem": runs / "footing-dem",
+               "footing-dem-condensed": runs / "footing-dem-condensed",
+               **{name: runs / f"wall-{name}" for name in walls}}
     timing = pd.DataFrame([{"run": name, **{k: v for k, v in s["timing_s"].items()},
-                            "wall_s": s["wall_s"], "error": s["error"]}
+                            "wall_s": s["wall_s"], "load average": _load(folders[name]),
+                            "error": s["error"]}
                            for name, s in {"footing-dem": dem,
                                            "footing-dem-condensed": dem_condensed,
                                            **walls}.items()])
@@ -285,12 +337,11 @@ def _report(out: Path, lines: list[str], footing: pd.DataFrame, walls: pd.DataFr
         "wall: the mean −σxx of the Gauss points of the element column at the wall, above its "
         "foot, times the wall's height (0.17 m).", "", markdown_table(walls, 3), "",
         "## Cost (seconds by phase)", "",
-        "The `-condensed` runs of the committed report were made before 5d4173d, whose servo "
-        "brings each RVE within 1 % of its initial stress instead of 2 %; the others after.",
-        "",
-        "On this 2-core machine, shared with other work while these ran (a load average of "
-        "7 to 13; the condensed-sticking runs met the heavier load): the times are several "
-        "times an idle machine's, and their ratios indicative only.", "",
+        f"Wall-clock seconds on a machine of {os.cpu_count()} cores. The load average is "
+        "the machine's one-minute load while each run ran, the median of samples every "
+        "30 s (their largest in brackets; – where the run was reused without a record): "
+        "a load above the cores' count means the run shared them with other work, and "
+        "its times are that much longer than an idle machine's.", "",
         markdown_table(timing, 4), "",
         f"This report took {wall / 60:.1f} min to write (runs already in `runs/` are "
         "reused; each run's own time is in the table).", ""]

@@ -160,7 +160,7 @@ def build(spec: BoundaryValueSpec, allocate: bool = True) -> Built:
     check_memory(spec, mesh.n_elements, mesh.element)
     conditions = [_condition(c) for c in spec.conditions]
     unit_weight = unit_weight_of(spec)
-    start, end = (f * unit_weight for f in spec.gravity_factor)
+    start, end = (f * unit_weight for f in spec.gravity_factor or (1.0, 1.0))
     if start > 0 or end > 0:
         conditions.append(Gravity(start, end=end))
     problem = build_problem(mesh, conditions, spec.mesh.quadrature)
@@ -367,7 +367,7 @@ def _summary(b: Built, solver: NewtonSolver, steps: pd.DataFrame, points: pd.Dat
         "elements": int(b.problem.basis.nelems),
         "gauss_points": int(b.initial_stress.shape[0]),
         "material": spec.material.name, "unit_weight": b.unit_weight,
-        "gravity_factor": list(spec.gravity_factor),
+        "gravity_factor": list(spec.gravity_factor or (1.0, 1.0)),
         "initial_state": spec.initial.state, "initial_residual": initial,
         "steps": int(len(steps) - 1), "steps_planned": spec.steps, "error": error,
         "iterations": [int(i) for i in steps["iterations"].iloc[1:]],

@@ -35,7 +35,7 @@ into a :class:`BoundaryValueSpec` by :func:`bvp_from_dict` (every key checked, a
 
     [gravity]
     unit_weight = 0.0               # [N/m³]; "rve": from the RVEs' grain density and e
-    factor = [1.0, 1.0]             # γ's multiple at step 0 and at the last step
+    factor = [1.0, 1.5]             # γ's multiple at step 0 and at the last step (default: 1)
 
     [initial]
     state = "uniform"               # or "geostatic"
@@ -255,8 +255,8 @@ class BoundaryValueSpec:
             freedom wins).
         unit_weight: γ [N/m³] of the body force, or "rve" (from the RVEs).
         gravity_factor: (f0, f1): the body force is f0·γ at step 0 and f1·γ at the last
-            step, linear in the load factor between (gravity switched on, or increased until
-            a slope fails); (1, 1): γ throughout.
+            step, linear in the load factor between (gravity switched on, or increased);
+            None: γ throughout.
         initial: the initial state.
         steps: load steps.
         material: the material (as in a run specification).
@@ -272,7 +272,7 @@ class BoundaryValueSpec:
     boundaries: dict[str, str] = field(default_factory=dict)
     conditions: tuple[ConditionSpec, ...] = ()
     unit_weight: float | str = 0.0
-    gravity_factor: tuple[float, float] = (1.0, 1.0)
+    gravity_factor: tuple[float, float] | None = None
     initial: InitialStateSpec = field(default_factory=lambda: InitialStateSpec(
         pressure=100e3))
     steps: int = 10
@@ -305,11 +305,12 @@ class BoundaryValueSpec:
             if weight < 0:
                 raise SpecError("gravity.unit_weight", f"must be >= 0 N/m³, got {weight:g}")
             object.__setattr__(self, "unit_weight", weight)
-        factor = conform("gravity.factor", self.gravity_factor, tuple[float, float],
-                         SpecError)
-        if min(factor) < 0:
-            raise SpecError("gravity.factor", f"must be >= 0, got {list(factor)}")
-        object.__setattr__(self, "gravity_factor", factor)
+        if self.gravity_factor is not None:
+            factor = conform("gravity.factor", self.gravity_factor, tuple[float, float],
+                             SpecError)
+            if min(factor) < 0:
+                raise SpecError("gravity.factor", f"must be >= 0, got {list(factor)}")
+            object.__setattr__(self, "gravity_factor", factor)
 
     @property
     def reference_pressure(self) -> float:
@@ -404,7 +405,7 @@ def bvp_from_dict(data: Mapping[str, Any], folder: Path | str = ".") -> Boundary
         return BoundaryValueSpec(
             **sections, boundaries={str(k): v for k, v in boundaries.items()},
             unit_weight=gravity.get("unit_weight", 0.0),
-            gravity_factor=gravity.get("factor", (1.0, 1.0)), steps=data.get("steps", 10),
+            gravity_factor=gravity.get("factor"), steps=data.get("steps", 10),
             newton=newton_spec, out=output.get("out", data.get("out")),
             device=output.get("device"), shards=output.get("shards"),
             progress=output.get("progress", False), fields=output.get("fields", True),
