@@ -186,6 +186,32 @@ def test_failed_points_trigger_cut_back():
     np.testing.assert_allclose(solver.grad_u()[:, 1, 1], -0.01, rtol=1e-10)
 
 
+class _OneBlowsUp(_WrappedElastic):
+    """Linear elastic, but once loaded its last point blows up and the others are aborted
+    with it (as a DEM batch answers when one RVE blows up)."""
+
+    def __init__(self):
+        super().__init__(LinearElastic())
+
+    def evaluate(self, grad_u):
+        r = self.inner.evaluate(grad_u)
+        if not np.any(grad_u):
+            return r
+        n = r.status.shape[0]
+        reasons = np.array(["aborted"] * (n - 1) + ["blow_up"], dtype=object)
+        return MaterialResponse(r.stress, r.tangent,
+                                np.full(n, PointStatus.FAILED, dtype=np.int8), reasons=reasons)
+
+
+def test_a_failed_step_names_the_point_that_failed_not_those_aborted_with_it():
+    problem = build_biaxial(BiaxialSetup(width=1, height=1, nx=2, ny=2, confining=0.0,
+                                         axial_strain=0.01))
+    solver = NewtonSolver(problem.basis, _OneBlowsUp(), problem.loading)
+    with pytest.raises(NewtonError, match=r"material failed at points \[15\] "
+                                          r"\(aborted: 15, blow_up: 1\)"):
+        solver.step(1.0, step=1)
+
+
 class _Costly(_FailsAbove):
     """:class:`_FailsAbove` with costs of its own names: one call and 0.25 units of work an
     evaluation (a failed one too), and 3 "dem_steps" an evaluation that fails."""

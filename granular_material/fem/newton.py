@@ -258,7 +258,8 @@ class NewtonSolver:
             times.add_all(response.timings)
             _add_costs(cost, response.costs)
             if not response.ok:
-                bad = response.failed_points()
+                causes = response.failure_causes()  # not the points aborted with them
+                bad = causes if causes.size else response.failed_points()
                 counts = response.failure_counts()
                 why = ", ".join(f"{name}: {k}" for name, k in counts.items())
                 reason = f"material failed at points {bad[:8].tolist()} ({why})"

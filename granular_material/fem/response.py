@@ -112,6 +112,12 @@ class MaterialResponse:
         bad |= ~np.isfinite(self.tangent).all(axis=(1, 2, 3, 4))
         return np.flatnonzero(bad)
 
+    def failure_causes(self) -> np.ndarray:
+        """Indices of the points that failed of themselves, shape (k,): the failed points
+        but those aborted because another RVE of their batch failed."""
+        bad = self.failed_points()
+        return bad[np.asarray(self.reasons)[bad] != FailureReason.ABORTED.value]
+
     def _reasons(self, n: int) -> np.ndarray:
         finite = (np.isfinite(self.stress).all(axis=(1, 2))
                   & np.isfinite(self.tangent).all(axis=(1, 2, 3, 4)))
