@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from granular_material.dem.cell_basis import rebase_state
 from granular_material.dem.homogenization import Homogenized, MeasureBuffers, homogenize
 from granular_material.dem.loading import LoadingControl, ServoSettings
 from granular_material.dem.model import Model, build_model, resolve_device
@@ -250,6 +251,32 @@ class DEMBatch:
     def cell(self) -> np.ndarray:
         """Cell matrices H [m], shape (B, 2, 2), float64."""
         return np.concatenate([s.state.cell.numpy().astype(np.float64) for s in self.shards])
+
+    def rebase_cells(self, rves: np.ndarray) -> np.ndarray:
+        """Re-describe the cell of each RVE where the mask ``rves`` (B,) is True by its
+        lattice's least skewed basis (:mod:`granular_material.dem.cell_basis`): the same
+        packing, contacts and velocities, larger perpendicular heights; its neighbour lists
+        are rebuilt at its next step. Returns the mask (B,) of the RVEs whose basis changed."""
+        wanted = np.asarray(rves, dtype=bool)
+        changed = np.zeros(self.n_rve, dtype=bool)
+        for shard in self.shards:
+            mine = np.flatnonzero(wanted[shard.rves])
+            if not mine.size:
+                continue
+            state = shard.state
+            cell = state.cell.numpy()
+            frac = state.fractional_position.numpy().reshape(cell.shape[0], -1, 2)
+            rebuild = state.force_rebuild.numpy()
+            for b in mine:
+                cell_b, frac_b, moved = rebase_state(cell[b], frac[b])
+                if moved:
+                    cell[b], frac[b], rebuild[b] = cell_b, frac_b, 1
+                    changed[shard.first + b] = True
+            if changed[shard.rves].any():
+                state.cell.assign(cell)
+                state.fractional_position.assign(frac.reshape(-1, 2))
+                state.force_rebuild.assign(rebuild)
+        return changed
 
     def set_cell(self, cell: np.ndarray, refresh: bool = True) -> None:
         """Overwrite the cell matrices H [m], shape (B, 2, 2); discs keep their fractional

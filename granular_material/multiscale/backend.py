@@ -18,6 +18,7 @@ import numpy as np
 
 from granular_material.dem import DEMBatch, DEMInstabilityError, Homogenized, RVEData, save_rve
 from granular_material.dem.condensation import condense
+from granular_material.dem.model import cell_heights
 from granular_material.fem.material import FailureReason
 from granular_material.multiscale.evaluation import (
     Evaluation,
@@ -32,6 +33,9 @@ from granular_material.timing import PhaseTimes
 __all__ = ["Committed", "InProcessBackend", "Trial"]
 
 _COMPONENTS = ((0, 0), (0, 1), (1, 0), (1, 1))  # the (k, l) of ∂u_k/∂x_l
+#: a committed cell whose perpendicular height is below this many times the engine's limit
+#: (twice the contact cut-off) takes its lattice's least skewed basis
+REBASE_MARGIN = 1.5
 
 
 @dataclass(frozen=True)
@@ -337,8 +341,20 @@ class InProcessBackend:
             eye = np.eye(2)
             lag[reused] = ((eye + trial.target[reused])
                            @ np.linalg.inv(eye + trial.reached[reused]) - eye)
+        self._rebase_sheared_cells()
         self._committed = Committed(self.batch.snapshot(), lag, trial.response)
         self._trial = self._fresh_trial()
+
+    def _rebase_sheared_cells(self) -> None:
+        """Give every RVE whose cell has sheared to within :data:`REBASE_MARGIN` of the
+        engine's limit (a perpendicular height of twice the contact cut-off) its lattice's
+        least skewed basis (:meth:`DEMBatch.rebase_cells`): the same packing, so that the
+        soil can go on shearing (beside a footing's edge, in a band) instead of stopping
+        there. A cell far from the limit keeps its basis, and its results stay bit for bit
+        those of a run that never rebases."""
+        near = cell_heights(self.batch.cell()) < REBASE_MARGIN * 2.0 * self.batch.cutoff
+        if near.any():
+            self.batch.rebase_cells(near)
 
     def revert(self) -> None:
         """Drop the trial: every RVE back in its committed state."""

@@ -64,14 +64,17 @@ class Evaluation:
 #: tell them apart, most telling first, and the reason each gives a point
 _INSTABILITIES = (("non-finite", FailureReason.BLOW_UP),
                   ("cell became too small", FailureReason.CELL_TOO_THIN),
+                  ("thins its cell", FailureReason.CELL_TOO_THIN),  # refused before a step
+                  ("would collapse", FailureReason.OVERCOMPRESSED),  # refused before a step
                   ("overflowed", FailureReason.OVERCOMPRESSED),
                   ("coincide", FailureReason.COINCIDENT))
 
 
 def instability_reason(messages: list[str]) -> FailureReason:
     """The reason of the RVEs of a :class:`~granular_material.dem.DEMInstabilityError`: the
-    first of its messages, in the order blow-up, cell too thin, overcompressed, coincident
-    discs (the DEM reports the messages of the batch together, not one per RVE)."""
+    first of its messages, in the order blow-up, cell too thin (in a step, or a path refused
+    before any), overcompressed (likewise), coincident discs (the DEM reports the messages of
+    the batch together, not one per RVE)."""
     text = " ".join(messages)
     for words, reason in _INSTABILITIES:
         if words in text:
