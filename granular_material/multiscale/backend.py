@@ -34,8 +34,11 @@ __all__ = ["Committed", "InProcessBackend", "Trial"]
 
 _COMPONENTS = ((0, 0), (0, 1), (1, 0), (1, 1))  # the (k, l) of ∂u_k/∂x_l
 #: a committed cell whose perpendicular height is below this many times the engine's limit
-#: (twice the contact cut-off) takes its lattice's least skewed basis
-REBASE_MARGIN = 1.5
+#: (twice the contact cut-off) takes its lattice's least skewed basis: close to the limit, so
+#: that only RVEs about to stop are re-described (the others stay bit for bit as they were),
+#: and far enough that a load step's shear (a path that would cross the limit is refused
+#: and cut back, then rebased at its commit) seldom reaches it first
+REBASE_MARGIN = 1.1
 
 
 @dataclass(frozen=True)
