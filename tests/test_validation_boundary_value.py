@@ -23,26 +23,13 @@ def test_a_run_records_its_load_continues_when_stopped_and_is_reused(tmp_path, m
     import json
 
     from granular_material_validation import boundary_value as report
+    from test_bvp_resume import _stop_at
+    from test_bvp_scene_bounds import SCENE
 
-    from granular_material.fem.newton import NewtonSolver
-
-    scene = {"test": "boundary-value", "steps": 3,
-             "mesh": {"size": [1.0, 1.0], "elements": [2, 2]},
-             "conditions": [{"type": "fixed", "boundary": "bottom"},
-                            {"type": "displacement", "boundary": "top", "component": "y",
-                             "value": -0.001}],
-             "initial": {"state": "uniform", "pressure": 1e5},
-             "material": {"name": "linear-elastic"}, "output": {"fields": False}}
+    scene = {**SCENE, "steps": 3}
     folder = tmp_path / "run"
-    original = NewtonSolver.step
-
-    def stop_at_two(self, target, k):
-        if k == 2:
-            raise KeyboardInterrupt
-        return original(self, target, k)
-
     with monkeypatch.context() as m:
-        m.setattr(NewtonSolver, "step", stop_at_two)
+        _stop_at(m, 2)
         assert report._run(scene, folder)["error"].startswith("interrupted after load step 1")
     summary = report._run(scene, folder)  # continued from its checkpoint, not refused
     assert summary["steps"] == 3 and summary["error"] is None

@@ -344,20 +344,12 @@ class InProcessBackend:
             eye = np.eye(2)
             lag[reused] = ((eye + trial.target[reused])
                            @ np.linalg.inv(eye + trial.reached[reused]) - eye)
-        self._rebase_sheared_cells()
+        # a cell sheared near the engine's limit takes its least skewed basis (the same
+        # packing), so that the soil shears on (beside a footing's edge, in a band)
+        self.batch.rebase_cells(cell_heights(self.batch.cell())
+                                < REBASE_MARGIN * 2.0 * self.batch.cutoff)
         self._committed = Committed(self.batch.snapshot(), lag, trial.response)
         self._trial = self._fresh_trial()
-
-    def _rebase_sheared_cells(self) -> None:
-        """Give every RVE whose cell has sheared to within :data:`REBASE_MARGIN` of the
-        engine's limit (a perpendicular height of twice the contact cut-off) its lattice's
-        least skewed basis (:meth:`DEMBatch.rebase_cells`): the same packing, so that the
-        soil can go on shearing (beside a footing's edge, in a band) instead of stopping
-        there. A cell far from the limit keeps its basis, and its results stay bit for bit
-        those of a run that never rebases."""
-        near = cell_heights(self.batch.cell()) < REBASE_MARGIN * 2.0 * self.batch.cutoff
-        if near.any():
-            self.batch.rebase_cells(near)
 
     def revert(self) -> None:
         """Drop the trial: every RVE back in its committed state."""
