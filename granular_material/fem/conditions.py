@@ -24,9 +24,9 @@ raised, a flexible footing loaded by its pressure, gravity switched on or increa
 control, which cannot pass a collapse load); prescribed displacements grow linearly with λ.
 Conflicts: where two conditions prescribe the same dof, **the later in the list wins** (a
 wall listed after the fixed base it stands on owns their shared node); equal values are no
-conflict. A problem
-whose prescribed dofs leave a rigid-body motion free (a translation in x or y, or a
-rotation) is refused, a :class:`~granular_material.errors.ParameterError` naming it.
+conflict. A problem whose prescribed dofs leave a rigid-body motion free (a translation in x
+or y, or a rotation) is refused, a :class:`~granular_material.errors.ParameterError` naming
+it.
 """
 
 from __future__ import annotations
@@ -151,8 +151,8 @@ class Pressure:
 @dataclass(frozen=True)
 class Gravity:
     """Body force −γ e_y over the body: unit weight γ = ``unit_weight`` [N/m³] (>= 0) at
-    λ = 0, linear in λ to ``end`` at λ = 1 (None: ``unit_weight`` throughout; a gravity
-    switched on, or increased to find a slope's factor of safety)."""
+    λ = 0, linear in λ to ``end`` at λ = 1 (None: ``unit_weight`` throughout; gravity
+    switched on, or increased)."""
 
     unit_weight: float
     end: float | None = None
