@@ -25,8 +25,9 @@ _TIE = 1e-9
 
 def reduced_basis(cell: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(H', M) for a cell H [m] (2, 2) (columns = cell vectors): H' = H·M the Lagrange–Gauss
-    reduced basis of the same lattice (|h1'| <= |h2'|, |h1'·h2'| <= |h1'|²/2), M an integer
-    matrix of determinant +1 (the orientation kept); M = I where H is reduced already."""
+    reduced basis of the same lattice (its first column the shorter, and the projection of
+    the second on the first at most half the first's length), M an integer matrix of
+    determinant +1 (the orientation kept); M = I where H is reduced already."""
     h = np.asarray(cell, dtype=np.float64).copy()
     change = np.eye(2, dtype=np.int64)
     for _ in range(_MAX_ROUNDS):
