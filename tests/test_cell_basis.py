@@ -84,3 +84,22 @@ def test_an_rve_shears_past_its_cells_limit_where_it_used_to_stop(small_rve_path
     assert stopped[-1]["reasons"] == ["cell_too_thin"]
     assert not any(row.get("rebased") for row in stopped)
     assert limit - 2 * step < step * len(stopped) <= limit + 2 * step
+
+
+@pytest.mark.parametrize(("dtype", "rtol"), [("float64", 1e-12), ("float32", 1e-5)])
+def test_rebasing_a_batch_keeps_its_stress_and_fractions_in_the_unit_square(small_rve_path,
+                                                                            dtype, rtol):
+    batch = DEMBatch(load_rve(small_rve_path), device="cpu", dtype=dtype)
+    # a sheared cell (the discs keep their fractions: another packing, a valid one), whose
+    # basis is not the reduced one of its lattice
+    batch.set_cell(batch.cell() @ np.array([[1.0, 0.8], [0.0, 1.0]]))
+    before = batch.homogenize().stress[0]
+    heights = cell_heights(batch.cell()[0])
+    assert batch.rebase_cells(np.array([True])).tolist() == [True]
+    assert cell_heights(batch.cell()[0]) > 1.1 * heights
+    np.testing.assert_allclose(batch.homogenize().stress[0], before, rtol=rtol,
+                               atol=rtol * np.abs(before).max())
+    fractions = batch.to_data().extra["fractional_position"]
+    assert fractions.min() >= 0.0 and fractions.max() < 1.0
+    batch.run(50)  # steps on, its lists rebuilt for the new basis
+    assert batch.rebase_cells(np.array([True])).tolist() == [False]  # reduced already

@@ -271,6 +271,7 @@ class DEMBatch:
                 cell_b, frac_b, moved = rebase_state(cell[b], frac[b])
                 if moved:
                     cell[b], frac[b], rebuild[b] = cell_b, frac_b, 1
+                    frac[b][frac[b] >= 1.0] = 0.0  # 1 - ε rounded up in float32 wraps to 0
                     changed[shard.first + b] = True
             if changed[shard.rves].any():
                 state.cell.assign(cell)
