@@ -83,3 +83,28 @@ def test_keeps_footing_reads_both_pressures_and_the_run_s_end():
     assert keeps_footing(line, budget)
     assert not keeps_footing(line.copy().replace(-12.0, -28.0), budget)
     assert not keeps_footing(pd.Series({**line, "error": "stopped at step 20"}), budget)
+
+
+def test_an_interrupted_row_is_not_done_and_continues_where_it_stopped(tmp_path, monkeypatch):
+    from test_bvp_resume import _stop_at
+
+    from granular_material.runs.run_folder import ended_summary, resumable
+    from granular_material.studies.footing_rows import (
+        FOOTING_SCALES,
+        FootingRow,
+        footing_table,
+        run_footing_rows,
+    )
+
+    rows = [FootingRow("reference", "scene")]
+    folder = tmp_path / "footing" / rows[0].key
+    with monkeypatch.context() as m:
+        _stop_at(m, 2)
+        run_footing_rows(rows, FOOTING_SCALES["smoke"], tmp_path)
+    assert (folder / "summary.json").is_file() and ended_summary(folder) is None
+    assert resumable(folder) and footing_table(rows, tmp_path, B_HALF).empty
+    run_footing_rows(rows, FOOTING_SCALES["smoke"], tmp_path)
+    summary = ended_summary(folder)
+    assert summary is not None and summary["error"] is None and summary["steps"] == 3
+    assert summary["resumed_from_step"] is not None
+    assert list(footing_table(rows, tmp_path, B_HALF)["steps"]) == [3]

@@ -4,7 +4,7 @@ with Mohr–Coulomb on the same meshes.
 
     python -m granular_material_validation.boundary_value --out docs/validation/boundary-value
 
-runs (or reuses, where a run folder already holds its ``summary.json``) the reduced scenes of
+runs (or reuses, where a run has ended in its folder) the reduced scenes of
 ``examples/scenes`` and writes ``report.md`` with its figures. The friction angle of the
 bounds is measured on the footing's RVE material: drained biaxial DEM tests at the
 surcharge (20 kPa) of the RVE as the footing prepares it (seed 1) and of three more seeds, φ
@@ -31,6 +31,7 @@ import pandas as pd
 from granular_material.results.plots import pyplot, save_figure
 from granular_material.runs.bvp_runner import build, run_boundary_value
 from granular_material.runs.bvp_spec import bvp_from_dict
+from granular_material.runs.run_folder import ended_summary, resumable
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -147,21 +148,17 @@ class _LoadSampler:
 
 
 def _run(scene: dict[str, Any], folder: Path) -> dict[str, Any]:
-    """The scene's summary, run into ``folder`` unless it already holds a finished one (a
-    run interrupted there is continued from its checkpoint), with the machine's load while
-    it ran in ``host.json``."""
-    summary = folder / "summary.json"
-    if not summary.is_file() or _interrupted(summary):
-        stopped = (folder / "checkpoint" / "options.json").is_file()
+    """The scene's summary, run into ``folder`` unless a run has ended there (an
+    interrupted one is continued from its checkpoint), with the machine's load while it ran
+    in ``host.json``."""
+    summary = ended_summary(folder)
+    if summary is None:
         with _LoadSampler() as load:
-            run_boundary_value(bvp_from_dict(scene, SCENES), out=folder, resume=stopped)
+            run_boundary_value(bvp_from_dict(scene, SCENES), out=folder,
+                               resume=resumable(folder))
         (folder / "host.json").write_text(json.dumps(load.record(), indent=1))
-    return json.loads(summary.read_text())
-
-
-def _interrupted(summary: Path) -> bool:
-    """The run of this ``summary.json`` was interrupted (Ctrl-C, a signal) before its end."""
-    return str(json.loads(summary.read_text()).get("error") or "").startswith("interrupted")
+        summary = json.loads((folder / "summary.json").read_text())
+    return summary
 
 
 def _load(folder: Path) -> str:

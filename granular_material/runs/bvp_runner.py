@@ -51,6 +51,7 @@ from granular_material.runs.bvp_checks import check_disk, check_memory, generate
 from granular_material.runs.bvp_material import material_for_problem, unit_weight_of
 from granular_material.runs.bvp_resume import open_bvp_checkpoint, remember
 from granular_material.runs.bvp_spec import BoundaryValueSpec, ConditionSpec
+from granular_material.runs.run_folder import interrupted_error
 from granular_material.runs.spec import SpecError
 
 __all__ = [
@@ -318,7 +319,7 @@ def run_boundary_value(spec: BoundaryValueSpec, out: Path | None = None,
     except NewtonError as exc:
         error = str(exc)
     except KeyboardInterrupt:
-        error = f"interrupted after load step {len(rows) - 1} of {spec.steps}"
+        error = interrupted_error(len(rows) - 1, spec.steps)
     finally:
         if writer is not None:
             writer.__exit__(None, None, None)

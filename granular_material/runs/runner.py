@@ -29,6 +29,7 @@ from granular_material.fem import (
 )
 from granular_material.results.biaxial import COST_COLUMNS, BiaxialResult
 from granular_material.runs.checkpoint import RunCheckpoint, SavedRun
+from granular_material.runs.run_folder import interrupted_error
 from granular_material.timing import PhaseTimes
 
 __all__ = ["RunObserver", "run_biaxial"]
@@ -259,7 +260,7 @@ def run_biaxial(
         error = str(exc)
         unfinished = exc.records[len(solver.records):]
     except KeyboardInterrupt as exc:
-        error = f"interrupted after load step {len(steps.rows) - 1} of {n_steps}"
+        error = interrupted_error(len(steps.rows) - 1, n_steps)
         interrupt = exc
     result = steps.result(solver, error, saved, interrupt, unfinished)
     if observer is not None:

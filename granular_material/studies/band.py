@@ -5,8 +5,8 @@ measures (:mod:`granular_material.results.band_measures`) against the commands' 
 A row is one setting: what it changes from the commands' defaults, in the presets' terms (the
 ``reference`` row changes nothing). Each row runs once per seed of its scale (seed k gives
 the specimen's RVEs k, k + 1, …: seeds far apart are independent sets of RVEs), each run
-into its own folder under ``band/runs/`` (done once its ``summary.json`` is there, so a
-restarted study skips it). Runs go ``jobs`` at a time, each in its own process.
+into its own folder under ``band/runs/`` (done once it has ended there, so a restarted study
+skips it and continues an interrupted one). Runs go ``jobs`` at a time, each in its own process.
 """
 
 from __future__ import annotations
@@ -29,6 +29,7 @@ from granular_material.procedures.packing import DEFAULT_PRESSURE
 from granular_material.procedures.strain_path import DEFAULT_STRAIN_PER_STEP
 from granular_material.results import write_json
 from granular_material.runs.presets import settings_fields
+from granular_material.runs.run_folder import ended_summary, resumable
 
 __all__ = ["BAND_SCALES", "FORCE_TEST", "NEWTON_KNOBS", "BandRow", "BandScale", "band_rows",
            "command_settings", "preset_band_row", "read_band_run", "run_band_rows",
@@ -172,7 +173,7 @@ def _run_one(fields: dict[str, Any], folder: str) -> str:
 
     spec = from_flat({**fields, "out": folder})
     # a run stopped by an earlier, interrupted study continues from its checkpoint
-    outcome = run_spec(spec, resume=(Path(folder) / "checkpoint").is_dir())
+    outcome = run_spec(spec, resume=resumable(Path(folder)))
     error = outcome.result.error
     return f"{folder}: {outcome.summary.get('wall_time_s', 0.0):.0f} s" + (
         f" ({error})" if error else "")
@@ -181,11 +182,12 @@ def _run_one(fields: dict[str, Any], folder: str) -> str:
 def run_band_rows(rows: list[BandRow], scale: BandScale, out: Path, device: str = "cpu",
                   jobs: int = 1, progress: bool = False,
                   log: Callable[[str], None] = lambda _: None) -> None:
-    """Run every (row, seed) of ``rows`` not yet done (a run is done once its folder holds
-    ``summary.json``; rows of equal settings share it), ``jobs`` at a time in processes of
+    """Run every (row, seed) of ``rows`` not yet done (a run is done once it has ended in its
+    folder: :func:`~granular_material.runs.run_folder.ended_summary`; rows of equal settings
+    share it), ``jobs`` at a time in processes of
     their own."""
     todo = list({run_folder(out, row, seed): (row, seed) for row in rows for seed in row.seeds
-                 if not (run_folder(out, row, seed) / "summary.json").is_file()}.values())
+                 if ended_summary(run_folder(out, row, seed)) is None}.values())
     if not todo:
         return
     (out / "band").mkdir(parents=True, exist_ok=True)

@@ -16,6 +16,7 @@ from granular_material.results.band_measures import (
 )
 from granular_material.results.band_plots import plot_band_histories, plot_band_pareto
 from granular_material.results.compare import markdown_table
+from granular_material.runs.run_folder import ended_summary
 from granular_material.studies.band import BandRow, BandScale, read_band_run, run_folder
 from granular_material.studies.band_scoring import BAND_BUDGETS, keeps_band
 
@@ -49,7 +50,7 @@ def band_figures(out: Path, table: pd.DataFrame, rows: list[BandRow],
             done = [run_folder(out, shown, s) for s in shown.seeds]
             histories.setdefault(row.knob, {})[shown.value] = [
                 localisation_history(read_band_run(f)[1]) for f in done
-                if (f / "summary.json").is_file()]
+                if ended_summary(f) is not None]
     plot_band_histories(histories, out / "band_histories.png", ONSET_RATIO)
 
 

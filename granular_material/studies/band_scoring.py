@@ -20,6 +20,7 @@ import numpy as np
 import pandas as pd
 
 from granular_material.results.band_measures import band_measures
+from granular_material.runs.run_folder import ended_summary
 from granular_material.studies.band import BandRow, BandScale, read_band_run, run_folder
 
 __all__ = ["BAND_BUDGETS", "band_table", "keeps_band", "run_measures"]
@@ -39,7 +40,7 @@ def run_measures(out: Path, rows: list[BandRow], scale: BandScale) -> pd.DataFra
     for row in rows:
         for seed in row.seeds:
             folder = run_folder(out, row, seed)
-            if not (folder / "summary.json").is_file():
+            if ended_summary(folder) is None:
                 continue
             steps, points, summary = read_band_run(folder)
             done = steps[steps["step"] > 0]

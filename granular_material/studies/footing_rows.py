@@ -5,8 +5,8 @@ it comes, and the extent of the mechanism; the Mohr–Coulomb twin (the RVE mate
 calibration at the surcharge, ``docs/validation/mohr-coulomb``) as the cheapest row.
 
 A row is a variant of the scene: changes to its ``[material.parameters]`` and ``[newton]``
-tables, or another material. Each runs once into ``footing/<name>/`` (done once its
-``summary.json`` is there).
+tables, or another material. Each runs once into ``footing/<name>/`` (done once its run
+has ended there; an interrupted one continues).
 """
 
 from __future__ import annotations
@@ -26,6 +26,7 @@ import pandas as pd
 from granular_material.runs.bvp_runner import run_boundary_value
 from granular_material.runs.bvp_spec import bvp_from_dict
 from granular_material.runs.presets import settings_fields
+from granular_material.runs.run_folder import ended_summary, resumable
 from granular_material.studies.band import command_settings
 
 if sys.version_info >= (3, 11):
@@ -189,10 +190,10 @@ def run_footing_rows(rows: list[FootingRow], scale: FootingScale, out: Path,
     """Run every row not yet done, at ``scale``, into ``out / "footing" / row.key``."""
     for row in rows:
         folder = out / "footing" / row.key
-        if (folder / "summary.json").is_file():
+        if ended_summary(folder) is not None:
             continue
         run_boundary_value(bvp_from_dict(_scene_of(row, scale), FOOTING_SCENE.parent), out=folder,
-                           resume=(folder / "checkpoint").is_dir())
+                           resume=resumable(folder))
         log(f"footing/{row.key}: done")
 
 
@@ -238,11 +239,11 @@ def footing_table(rows: list[FootingRow], out: Path, b: float) -> pd.DataFrame:
     lines = []
     for row in rows:
         folder = out / "footing" / row.key
-        if not (folder / "summary.json").is_file():
+        summary = ended_summary(folder)
+        if summary is None:
             continue
         steps = pd.read_csv(folder / "steps.csv")
         points = pd.read_csv(folder / "points.csv")
-        summary = json.loads((folder / "summary.json").read_text())
         done = steps[steps["step"] > 0]
         lines.append({"knob": row.knob, "value": row.value,
                       **footing_measures(steps, points, b),
