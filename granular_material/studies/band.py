@@ -32,7 +32,7 @@ from granular_material.runs.presets import settings_fields
 from granular_material.runs.run_folder import ended_summary, resumable
 
 __all__ = ["BAND_SCALES", "FORCE_TEST", "NEWTON_KNOBS", "BandRow", "BandScale", "band_rows",
-           "command_settings", "preset_band_row", "read_band_run", "run_band_rows",
+           "command_settings", "preset_band_row", "read_band_run", "row_key", "run_band_rows",
            "run_folder"]
 
 
@@ -90,12 +90,17 @@ class BandRow:
 
     @property
     def key(self) -> str:
-        """The row's folder name: its knob and value, a preset's by its settings (two
-        presets of equal settings share their runs)."""
-        if self.knob == "preset":
-            text = json.dumps(self.settings, sort_keys=True, default=str)
-            return f"preset-{hashlib.sha1(text.encode()).hexdigest()[:10]}"
-        return f"{self.knob}-{self.value}".replace(" ", "_").replace("/", "-")
+        """The row's folder name (:func:`row_key` of its settings)."""
+        return row_key(self.knob, self.value, self.settings)
+
+
+def row_key(knob: str, value: str, changes: Any) -> str:
+    """A study row's folder name: its knob and value; a preset's by what it changes (JSON
+    values), so that two presets of equal changes share their runs."""
+    if knob == "preset":
+        text = json.dumps(changes, sort_keys=True, default=str)
+        return f"preset-{hashlib.sha1(text.encode()).hexdigest()[:10]}"
+    return f"{knob}-{value}".replace(" ", "_").replace("/", "-")
 
 
 def command_settings() -> dict[str, Any]:
@@ -184,8 +189,7 @@ def run_band_rows(rows: list[BandRow], scale: BandScale, out: Path, device: str 
                   log: Callable[[str], None] = lambda _: None) -> None:
     """Run every (row, seed) of ``rows`` not yet done (a run is done once it has ended in its
     folder: :func:`~granular_material.runs.run_folder.ended_summary`; rows of equal settings
-    share it), ``jobs`` at a time in processes of
-    their own."""
+    share it), ``jobs`` at a time in processes of their own."""
     todo = list({run_folder(out, row, seed): (row, seed) for row in rows for seed in row.seeds
                  if ended_summary(run_folder(out, row, seed)) is None}.values())
     if not todo:

@@ -11,8 +11,6 @@ has ended there; an interrupted one continues).
 
 from __future__ import annotations
 
-import hashlib
-import json
 import math
 import sys
 from dataclasses import dataclass, field
@@ -27,7 +25,7 @@ from granular_material.runs.bvp_runner import run_boundary_value
 from granular_material.runs.bvp_spec import bvp_from_dict
 from granular_material.runs.presets import settings_fields
 from granular_material.runs.run_folder import ended_summary, resumable
-from granular_material.studies.band import command_settings
+from granular_material.studies.band import command_settings, row_key
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -89,12 +87,9 @@ class FootingRow:
 
     @property
     def key(self) -> str:
-        """The row's folder name: its knob and value, a preset's by its changes (two
-        presets of equal changes share their run)."""
-        if self.knob == "preset":
-            text = json.dumps([self.parameters, self.newton], sort_keys=True, default=str)
-            return f"preset-{hashlib.sha1(text.encode()).hexdigest()[:10]}"
-        return f"{self.knob}-{self.value}".replace(" ", "_").replace("/", "-")
+        """The row's folder name (:func:`~granular_material.studies.band.row_key` of its
+        changes)."""
+        return row_key(self.knob, self.value, [self.parameters, self.newton])
 
 
 def footing_rows() -> list[FootingRow]:
