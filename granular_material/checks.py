@@ -20,7 +20,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-from granular_material.dem.rve_file import FRICTMAT_STIFFNESS, RVEMeta
+from granular_material.dem.rve.file import FRICTMAT_STIFFNESS, RVEMeta
 from granular_material.errors import ParameterError
 from granular_material.memory import (
     MEMORY_LIMIT,

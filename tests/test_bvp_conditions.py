@@ -1,5 +1,5 @@
 """Named boundaries by predicate and the conditions of boundary-value problems
-(fem/boundaries.py, fem/conditions.py, fem/reactions.py)."""
+(fem/boundary_value/: boundaries.py, conditions.py, reactions.py)."""
 
 from __future__ import annotations
 
@@ -7,8 +7,12 @@ import numpy as np
 import pytest
 
 from granular_material.errors import ParameterError
-from granular_material.fem.boundaries import parse_predicate, select_boundaries, select_facets
-from granular_material.fem.conditions import (
+from granular_material.fem.boundary_value.boundaries import (
+    parse_predicate,
+    select_boundaries,
+    select_facets,
+)
+from granular_material.fem.boundary_value.conditions import (
     Displacement,
     Fixed,
     Gravity,
@@ -17,9 +21,9 @@ from granular_material.fem.conditions import (
     Roller,
     build_problem,
 )
-from granular_material.fem.linear_elastic import LinearElastic
-from granular_material.fem.meshes import rectangle_mesh
-from granular_material.fem.newton import NewtonSettings, NewtonSolver
+from granular_material.fem.boundary_value.meshes import rectangle_mesh
+from granular_material.fem.materials.linear_elastic import LinearElastic
+from granular_material.fem.solver.newton import NewtonSettings, NewtonSolver
 
 E, NU = 40e6, 0.3
 SMALL = NewtonSettings(formulation="small-strain")

@@ -15,8 +15,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from granular_material.errors import ParameterError
-from granular_material.fem.boundaries import select_boundaries, select_facets
-from granular_material.fem.conditions import (
+from granular_material.fem.boundary_value.boundaries import select_boundaries, select_facets
+from granular_material.fem.boundary_value.conditions import (
     Displacement,
     Fixed,
     Gravity,
@@ -25,8 +25,8 @@ from granular_material.fem.conditions import (
     Roller,
     build_problem,
 )
-from granular_material.fem.geostatic import geostatic_stress, uniform_stress
-from granular_material.fem.meshes import read_mesh, rectangle_mesh
+from granular_material.fem.boundary_value.initial_stress import geostatic_stress, uniform_stress
+from granular_material.fem.boundary_value.meshes import read_mesh, rectangle_mesh
 
 ANY_VALUE = st.one_of(
     st.none(), st.booleans(), st.text(max_size=6), st.floats(), st.complex_numbers(),

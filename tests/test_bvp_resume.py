@@ -1,5 +1,5 @@
 """A boundary-value run stopped part-way resumes to the run that never stopped
-(granular_material.runs.bvp_resume), and a fresh run into its folder is refused."""
+(granular_material.runs.boundary_value.resume), and a fresh run into its folder is refused."""
 
 from __future__ import annotations
 
@@ -11,10 +11,10 @@ import pytest
 from test_bvp_run import FOOTING
 
 from granular_material.cli import main
-from granular_material.fem.newton import NewtonSolver
-from granular_material.runs.bvp_resume import scene_record
-from granular_material.runs.bvp_runner import run_boundary_value
-from granular_material.runs.bvp_spec import bvp_from_dict
+from granular_material.fem.solver.newton import NewtonSolver
+from granular_material.runs.boundary_value.resume import scene_record
+from granular_material.runs.boundary_value.runner import run_boundary_value
+from granular_material.runs.boundary_value.spec import bvp_from_dict
 from granular_material.runs.checkpoint import RunCheckpoint
 from granular_material.runs.spec import SpecError
 

@@ -12,8 +12,8 @@ import pandas as pd
 import pytest
 
 from granular_material.cli import main
-from granular_material.runs.bvp_runner import run_boundary_value
-from granular_material.runs.bvp_spec import bvp_from_dict
+from granular_material.runs.boundary_value.runner import run_boundary_value
+from granular_material.runs.boundary_value.spec import bvp_from_dict
 
 FOOTING = """
 test = "boundary-value"
@@ -211,7 +211,7 @@ def test_geostatic_dem_start_is_within_newtons_tolerance():
     import tomllib
 
     from granular_material.fem import NewtonSolver
-    from granular_material.runs.bvp_runner import _initial_residual, build
+    from granular_material.runs.boundary_value.runner import _initial_residual, build
 
     scene = tomllib.loads((EXAMPLES / "footing-geostatic.toml").read_text())
     scene["output"]["progress"] = False

@@ -10,9 +10,9 @@ from collections import namedtuple
 
 import pytest
 
-from granular_material.runs import bvp_checks
-from granular_material.runs.bvp_runner import run_boundary_value
-from granular_material.runs.bvp_spec import bvp_from_dict
+from granular_material.runs.boundary_value import checks as bvp_checks
+from granular_material.runs.boundary_value.runner import run_boundary_value
+from granular_material.runs.boundary_value.spec import bvp_from_dict
 from granular_material.runs.spec import SpecError
 
 SCENE = {"test": "boundary-value", "steps": 2,

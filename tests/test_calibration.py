@@ -16,8 +16,8 @@ import tomllib
 import granular_material
 from granular_material.cli import main
 from granular_material.errors import ParameterError
-from granular_material.fem.linear_elastic import LinearElastic
-from granular_material.fem.mohr_coulomb import MohrCoulomb
+from granular_material.fem.materials.linear_elastic import LinearElastic
+from granular_material.fem.materials.mohr_coulomb import MohrCoulomb
 from granular_material.procedures.calibration import (
     calibrate_mohr_coulomb,
     drained_point_curve,

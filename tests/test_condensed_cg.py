@@ -1,4 +1,4 @@
-"""The condensed tangent by the batched warp CG (granular_material.dem.condensed_cg), on
+"""The condensed tangent by the batched warp CG (granular_material.dem.condensed.cg), on
 warp's CPU device: the scipy LU's result, its symmetries, per-RVE convergence, and a clear
 error where CG does not converge."""
 
@@ -10,13 +10,13 @@ import numpy as np
 import pytest
 
 from granular_material.dem import DEMBatch, RVEData, RVEMeta
-from granular_material.dem.condensed import condensed_tangent
-from granular_material.dem.condensed_cg import (
+from granular_material.dem.condensed.cg import (
     CGFallbackWarning,
     CGNotConvergedError,
     _raise_unless_converged,
     condensed_tangent_cg,
 )
+from granular_material.dem.condensed.tangent import condensed_tangent
 from granular_material.procedures import drive_grad_u, prepare_packing
 
 SPIN = np.array([[0.0, -1.0], [1.0, 0.0]])
@@ -158,7 +158,7 @@ def test_the_dem_backend_takes_the_lu_where_the_cg_does_not_converge(
     names it, instead of ending the run; the CG's other RVEs keep their own."""
     from dataclasses import dataclass
 
-    from granular_material.dem import condensation
+    from granular_material.dem.condensed import dispatch as condensation
 
     calls = []
 

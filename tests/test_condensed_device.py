@@ -1,5 +1,5 @@
 """The condensed tangent assembled on the batch's own device
-(granular_material.dem.condensed_device), run on warp's CPU device: scipy's LU result from
+(granular_material.dem.condensed.device), run on warp's CPU device: scipy's LU result from
 the engine's arrays, RVE by RVE and shard by shard, lattices with mechanisms and rattlers,
 and which path the DEM material takes on CUDA."""
 
@@ -12,12 +12,12 @@ import pytest
 from test_condensed_cg import _honeycomb_with_rattlers
 
 from granular_material.dem import DEMBatch, RVEData
-from granular_material.dem.condensed import condensed_tangent
-from granular_material.dem.condensed_cg import CGNotConvergedError, condensed_tangent_cg
-from granular_material.dem.condensed_device import (
+from granular_material.dem.condensed.cg import CGNotConvergedError, condensed_tangent_cg
+from granular_material.dem.condensed.device import (
     condensed_tangent_of_batch,
     condensed_tangent_on_device,
 )
+from granular_material.dem.condensed.tangent import condensed_tangent
 from granular_material.procedures import drive_grad_u, prepare_packing
 
 COUNTERS = ("n_contacts", "n_sliding", "n_left_out", "n_unknowns")
@@ -136,7 +136,7 @@ def test_the_dem_backend_assembles_on_a_float64_cuda_batch(sheared: DEMBatch,
                                                              monkeypatch) -> None:
     """``condense``: a float64 batch on "cuda…" takes the device assembly, a float32
     one the host-assembled CG, a CPU batch scipy's LU."""
-    from granular_material.dem import condensation
+    from granular_material.dem.condensed import dispatch as condensation
 
     calls = []
 

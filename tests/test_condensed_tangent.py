@@ -1,5 +1,5 @@
 """The condensed (non-affine) tangent: closed forms of lattices, the DEM's own relaxed
-response, symmetry and objectivity (granular_material.dem.condensed)."""
+response, symmetry and objectivity (granular_material.dem.condensed.tangent)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from granular_material.dem import DEMBatch, RVEData, RVEMeta
-from granular_material.dem.condensed import condensed_tangent, contact_network
+from granular_material.dem.condensed.tangent import condensed_tangent, contact_network
 from granular_material.dem.homogenization import spin_tangent
 from granular_material.procedures import drive_grad_u, prepare_packing
 

@@ -15,9 +15,10 @@ from pathlib import Path
 import pytest
 import warp as wp
 
-from granular_material.dem import condensed_cg_kernels, condensed_device_kernels
-from granular_material.dem.kernels import DTYPES, STEP_VARIANTS, kernel_modules
-from granular_material.dem.kernels_block import BLOCK_THREADS
+from granular_material.dem.condensed import cg_kernels as condensed_cg_kernels
+from granular_material.dem.condensed import device_kernels as condensed_device_kernels
+from granular_material.dem.kernels.block import BLOCK_THREADS
+from granular_material.dem.kernels.sets import DTYPES, STEP_VARIANTS, kernel_modules
 
 ARCH = 90  #: Hopper (H100, H200)
 

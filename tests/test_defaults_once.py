@@ -15,7 +15,7 @@ from granular_material.checks import RVE_MATERIAL_DEFAULTS
 from granular_material.cli import build_parser
 from granular_material.cli.options import UsageError, packing_parameters
 from granular_material.dem import RVEMeta
-from granular_material.dem.rve_file import FRICTMAT_STIFFNESS
+from granular_material.dem.rve.file import FRICTMAT_STIFFNESS
 from granular_material.procedures.driven_path import plan_path
 from granular_material.procedures.element_tests import (
     DEFAULT_AXIAL_STRAIN,

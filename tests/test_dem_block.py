@@ -16,7 +16,7 @@ import warp as wp
 from dem_helpers import calm_and_violent, load_shear_or_servo
 
 from granular_material.dem import DEMBatch, DEMInstabilityError, load_rve, solver_block
-from granular_material.dem.kernels_block import BLOCK_DISCS
+from granular_material.dem.kernels.block import BLOCK_DISCS
 from granular_material.dem.solver_block import BLOCK_MIN_RVES, block_path_expected_to_pay
 
 SHEAR = 2e-5  #: strain a step, enough for several list rebuilds within the run

@@ -13,7 +13,7 @@ import pytest
 from dem_helpers import load_shear_or_servo
 
 from granular_material.dem import DEMBatch, load_rve
-from granular_material.dem.kernels import GENERIC_STEP
+from granular_material.dem.kernels.sets import GENERIC_STEP
 
 SHEAR = 2e-5  #: strain a step, enough for list rebuilds within the run
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from granular_material.dem import DEMBatch, load_rve
-from granular_material.dem.kernels import GENERIC_STEP, StepFeatures
+from granular_material.dem.kernels.sets import GENERIC_STEP, StepFeatures
 
 SHEAR = 2e-5  #: strain a step, enough for list rebuilds within the run
 

@@ -17,9 +17,9 @@ from granular_material.fem import (
     build_biaxial,
     newton,
 )
-from granular_material.fem.acceleration import AitkenRelaxation, SecantTangent
 from granular_material.fem.forms import stiffness
-from granular_material.fem.linear_elastic import isotropic_tangent
+from granular_material.fem.materials.linear_elastic import isotropic_tangent
+from granular_material.fem.solver.acceleration import AitkenRelaxation, SecantTangent
 
 
 def test_aitken_learns_the_factor_of_a_uniformly_too_stiff_tangent():

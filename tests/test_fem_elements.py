@@ -34,8 +34,13 @@ from granular_material.fem import (
     default_stress_tol,
     to_points,
 )
+from granular_material.fem.boundary_value.biaxial import (
+    DEFAULT_GAUSS,
+    ELEMENTS,
+    TRIANGLES,
+    element_of,
+)
 from granular_material.fem.forms import gauss_points_grad, internal_force, stiffness
-from granular_material.fem.problems import DEFAULT_GAUSS, ELEMENTS, TRIANGLES, element_of
 from granular_material.runs import RunCheckpoint, run_biaxial
 
 ELEMENT_NAMES = tuple(ELEMENTS)
@@ -302,7 +307,7 @@ def test_convergence_setting_is_checked():
         NewtonSettings(convergence="energy")
     assert default_settings("dem", convergence="displacement").convergence == "displacement"
     # the commands' default for DEM: Guo & Zhao's test judged one iterate earlier
-    # (docs/physics.md); for a smooth material the force residual (fem/defaults.py)
+    # (docs/physics.md); for a smooth material the force residual (fem/solver/defaults.py)
     assert default_settings("dem").convergence == "residual-displacement"
     assert default_settings("linear-elastic").convergence == "force"
     assert default_settings("dem", convergence="force").convergence == "force"

@@ -20,13 +20,13 @@ from granular_material.fem import (
     NewtonSolver,
     build_biaxial,
 )
+from granular_material.fem.boundary_value.biaxial import follower_traction
 from granular_material.fem.kinematics import (
     Kinematics,
     first_piola,
     logarithmic_strain,
     reference_tangent,
 )
-from granular_material.fem.problems import follower_traction
 from granular_material.multiscale import DEMMaterial
 from granular_material.procedures import prepare_packing
 from granular_material.runs import run_biaxial

@@ -21,7 +21,7 @@ from granular_material.fem import (
     PointStatus,
     build_biaxial,
 )
-from granular_material.fem.linear_elastic import isotropic_tangent
+from granular_material.fem.materials.linear_elastic import isotropic_tangent
 from granular_material.results import COST_COLUMNS, BiaxialWriter
 from granular_material.runs import run_biaxial
 

@@ -1,5 +1,5 @@
 """Geostatic and uniform initial stress, and the FEM in equilibrium at step 0
-(fem/geostatic.py)."""
+(fem/boundary_value/initial_stress.py)."""
 
 from __future__ import annotations
 
@@ -10,12 +10,18 @@ import pytest
 from skfem import MeshQuad1
 
 from granular_material.errors import ParameterError
-from granular_material.fem.boundaries import select_boundaries
-from granular_material.fem.conditions import Fixed, Gravity, Pressure, Roller, build_problem
-from granular_material.fem.geostatic import geostatic_stress, uniform_stress
-from granular_material.fem.linear_elastic import LinearElastic
-from granular_material.fem.meshes import MeshData, read_mesh, rectangle_mesh
-from granular_material.fem.newton import NewtonSettings, NewtonSolver
+from granular_material.fem.boundary_value.boundaries import select_boundaries
+from granular_material.fem.boundary_value.conditions import (
+    Fixed,
+    Gravity,
+    Pressure,
+    Roller,
+    build_problem,
+)
+from granular_material.fem.boundary_value.initial_stress import geostatic_stress, uniform_stress
+from granular_material.fem.boundary_value.meshes import MeshData, read_mesh, rectangle_mesh
+from granular_material.fem.materials.linear_elastic import LinearElastic
+from granular_material.fem.solver.newton import NewtonSettings, NewtonSolver
 
 FOOTING = Path("/usr/share/doc/yade/examples/FEMxDEM/footing.msh")
 GAMMA, Q, K0 = 16e3, 20e3, 0.5

@@ -8,8 +8,8 @@ import pytest
 
 from granular_material import runs
 from granular_material.errors import ParameterError
-from granular_material.fem.material import create_material
-from granular_material.fem.mohr_coulomb import MohrCoulomb
+from granular_material.fem.materials.mohr_coulomb import MohrCoulomb
+from granular_material.fem.materials.protocol import create_material
 
 
 def test_a_spec_nested_too_deep_is_no_spec(tmp_path):

@@ -1,5 +1,5 @@
 """LinearElastic: per-point initial stress, non-finite input, whole-file checkpoints
-(fem/linear_elastic.py)."""
+(fem/materials/linear_elastic.py)."""
 
 from __future__ import annotations
 
@@ -7,12 +7,12 @@ import numpy as np
 import pytest
 
 from granular_material.errors import ParameterError
-from granular_material.fem.linear_elastic import (
+from granular_material.fem.materials.linear_elastic import (
     LinearElastic,
     LinearElasticParameters,
     isotropic_tangent,
 )
-from granular_material.fem.material import FailureReason, PointStatus
+from granular_material.fem.materials.protocol import FailureReason, PointStatus
 
 RNG = np.random.default_rng(44)
 E, NU = 60e6, 0.3

@@ -1,4 +1,4 @@
-"""Mesh files and generated meshes of boundary-value problems (fem/meshes.py)."""
+"""Mesh files and generated meshes of boundary-value problems (fem/boundary_value/meshes.py)."""
 
 from __future__ import annotations
 
@@ -9,13 +9,13 @@ import numpy as np
 import pytest
 
 from granular_material.errors import ParameterError
-from granular_material.fem.boundaries import select_facets
+from granular_material.fem.boundary_value.boundaries import select_facets
+from granular_material.fem.boundary_value.loading import Loading
+from granular_material.fem.boundary_value.meshes import make_basis, read_mesh, rectangle_mesh
+from granular_material.fem.boundary_value.reactions import boundary_dofs
 from granular_material.fem.forms import gauss_points_grad
-from granular_material.fem.linear_elastic import LinearElastic, isotropic_tangent
-from granular_material.fem.loading import Loading
-from granular_material.fem.meshes import make_basis, read_mesh, rectangle_mesh
-from granular_material.fem.newton import NewtonSettings, NewtonSolver
-from granular_material.fem.reactions import boundary_dofs
+from granular_material.fem.materials.linear_elastic import LinearElastic, isotropic_tangent
+from granular_material.fem.solver.newton import NewtonSettings, NewtonSolver
 
 FOOTING = Path("/usr/share/doc/yade/examples/FEMxDEM/footing.msh")
 E, NU = 50e6, 0.25

@@ -12,17 +12,17 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-import granular_material.fem.mohr_coulomb as mc_module
+import granular_material.fem.materials.mohr_coulomb as mc_module
 from granular_material.errors import ParameterError
-from granular_material.fem.linear_elastic import LinearElastic, isotropic_tangent
-from granular_material.fem.material import FailureReason, Material, PointStatus
-from granular_material.fem.mohr_coulomb import (
+from granular_material.fem.boundary_value.biaxial import BiaxialSetup, build_biaxial
+from granular_material.fem.materials.linear_elastic import LinearElastic, isotropic_tangent
+from granular_material.fem.materials.mohr_coulomb import (
     APEX_TANGENT,
     MohrCoulomb,
     MohrCoulombParameters,
     MohrCoulombRunParameters,
 )
-from granular_material.fem.mohr_coulomb_return import (
+from granular_material.fem.materials.mohr_coulomb_return import (
     APEX,
     EDGE_MAJOR,
     EDGE_MINOR,
@@ -30,8 +30,8 @@ from granular_material.fem.mohr_coulomb_return import (
     FACE,
     principal_return,
 )
-from granular_material.fem.newton import NewtonSettings, NewtonSolver
-from granular_material.fem.problems import BiaxialSetup, build_biaxial
+from granular_material.fem.materials.protocol import FailureReason, Material, PointStatus
+from granular_material.fem.solver.newton import NewtonSettings, NewtonSolver
 
 P = 100e3  # confining pressure [Pa], compression positive
 

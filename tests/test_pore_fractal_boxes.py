@@ -18,7 +18,7 @@ from test_pore_fractal_rve import as_rve_data, random_packing
 from test_pore_fractal_spectrum import WEIGHT_SETS, cascade
 
 from granular_material.cli import main
-from granular_material.dem.rve_file import save_rve
+from granular_material.dem.rve.file import save_rve
 
 TOL = 1e-8
 

@@ -18,7 +18,7 @@ from granular_material_pore_fractal import (
 )
 
 from granular_material.cli import main
-from granular_material.dem.rve_file import RVEData, load_rve, save_rve
+from granular_material.dem.rve.file import RVEData, load_rve, save_rve
 
 R_MIN, R_MAX = 3e-3, 7e-3  # radii of Wu et al. 2025, Table 1 (docs/design.md#wu-2025)
 

@@ -18,7 +18,7 @@ import pytest
 from granular_material.cli import main
 from granular_material.errors import ParameterError
 from granular_material.fem import LinearElastic
-from granular_material.fem.mohr_coulomb import MohrCoulomb
+from granular_material.fem.materials.mohr_coulomb import MohrCoulomb
 from granular_material.runs import (
     MaterialSpec,
     OutputSpec,

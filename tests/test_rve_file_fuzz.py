@@ -25,7 +25,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from granular_material.dem import DEMBatch, DEMInstabilityError, load_rve, save_rve
-from granular_material.dem.rve_file import CONTACT_HISTORY_KEYS
+from granular_material.dem.rve.file import CONTACT_HISTORY_KEYS
 from granular_material.procedures import drive_grad_u
 
 N_DISC = 64

@@ -14,7 +14,7 @@ import pytest
 from granular_material.cli import main
 from granular_material.dem import DEMBatch, RVEFileError, load_rve, save_rve
 from granular_material.dem.model import build_model
-from granular_material.dem.rve_file import CONTACT_HISTORY_KEYS
+from granular_material.dem.rve.file import CONTACT_HISTORY_KEYS
 from granular_material.dem.state import HISTORY_KEYS
 from granular_material.procedures import drive_grad_u
 

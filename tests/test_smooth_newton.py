@@ -1,5 +1,5 @@
 """A smooth material's Newton steps end in equilibrium: the commands' default convergence
-test for linear-elastic and Mohr–Coulomb is the force residual, to 1e-4 (fem/defaults.py).
+test for linear-elastic and Mohr–Coulomb is the force residual, to 1e-4 (fem/solver/defaults.py).
 
 The case is the one that showed the need: Guo & Zhao's reduced footing with the Mohr–Coulomb
 twin calibrated from their RVE at 20 kPa (φ 35.8° softening to 22.4° over γp = 0.043),
@@ -20,8 +20,8 @@ if sys.version_info >= (3, 11):
 else:  # Python 3.10
     import tomli as tomllib
 
-from granular_material.runs.bvp_runner import run_boundary_value
-from granular_material.runs.bvp_spec import bvp_from_dict
+from granular_material.runs.boundary_value.runner import run_boundary_value
+from granular_material.runs.boundary_value.spec import bvp_from_dict
 
 SCENE = Path(__file__).resolve().parents[1] / "examples" / "scenes" / "footing-gz2016-cpu.toml"
 #: the twin calibrated from the footing's RVE (docs/validation/mohr-coulomb, "gz20k")

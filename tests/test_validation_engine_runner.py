@@ -83,7 +83,7 @@ def test_a_cached_femxdem_run_is_keyed_by_the_defaults_it_ran_under(monkeypatch)
     """A run folder's ``run.json`` is read back only for the run the same options make
     today: the key holds every spec field with its default and the Newton settings the DEM
     material gets, so a change of the commands' defaults reruns it."""
-    from granular_material.fem import defaults
+    from granular_material.fem.solver import defaults
 
     flat = {"test": "biaxial", "rve": "rve.npz", "elements": [2, 4], "steps": 30,
             "axial_strain": 0.03, "out": "run", "element": "quad8"}

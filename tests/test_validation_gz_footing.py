@@ -52,7 +52,7 @@ def test_mesh_covers_their_half_domain_with_a_node_at_the_footing_edge() -> None
 
 
 def test_gmsh22_file_round_trips_and_loads_in_ours(tmp_path: Path) -> None:
-    from granular_material.fem.meshes import read_mesh
+    from granular_material.fem.boundary_value.meshes import read_mesh
 
     mesh = footing_mesh((0.0, 0.05, 0.2, 0.6), (-0.4, -0.1, 0.0))
     path = write_gmsh22(mesh, tmp_path / "m.msh")
@@ -136,7 +136,7 @@ def test_shipped_footing_script_takes_every_patch() -> None:
 
 
 def test_our_scene_holds_their_conditions(tmp_path: Path) -> None:
-    from granular_material.runs.bvp_spec import bvp_from_dict
+    from granular_material.runs.boundary_value.spec import bvp_from_dict
 
     write_gmsh22(footing_mesh(), tmp_path / "m.msh")
     text = gz_footing.scene_text(tmp_path / "m.msh", tmp_path / "rve.npz", steps=12)

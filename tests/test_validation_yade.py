@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from granular_material_validation import yade_runner
 
-from granular_material.dem.rve_file import RVEData, RVEMeta
+from granular_material.dem.rve.file import RVEData, RVEMeta
 
 needs_yade = pytest.mark.skipif(shutil.which("yade") is None, reason="needs Debian's yade")
 pytestmark = [pytest.mark.yade]

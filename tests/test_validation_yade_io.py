@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from granular_material_validation import yade_io, yade_runner
 
-from granular_material.dem.rve_file import RVEData, RVEMeta, load_rve, save_rve
+from granular_material.dem.rve.file import RVEData, RVEMeta, load_rve, save_rve
 
 
 def grid_rve(seed: int = 0, law: str = "frictmat", shear: float = 0.02) -> RVEData:

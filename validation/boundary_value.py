@@ -29,8 +29,8 @@ import numpy as np
 import pandas as pd
 
 from granular_material.results.plots import pyplot, save_figure
-from granular_material.runs.bvp_runner import build, run_boundary_value
-from granular_material.runs.bvp_spec import bvp_from_dict
+from granular_material.runs.boundary_value.runner import build, run_boundary_value
+from granular_material.runs.boundary_value.spec import bvp_from_dict
 from granular_material.runs.run_folder import ended_summary, resumable
 
 if sys.version_info >= (3, 11):

@@ -356,7 +356,7 @@ def ours_tangents(rve: str | Path, grad_u: list[float], increments: int, at: lis
     way ``dem-drive`` applies the increments; the homogenised tangent is Kruyt–Rothenburg's.
     """
     from granular_material.dem.batch import DEMBatch
-    from granular_material.dem.rve_file import load_rve
+    from granular_material.dem.rve.file import load_rve
     from granular_material.procedures import drive_grad_u, path_increment
 
     data = load_rve(rve).select(0)

@@ -40,7 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
-from granular_material.dem.rve_file import RVEData, load_rve
+from granular_material.dem.rve.file import RVEData, load_rve
 from granular_material.procedures.strain_path import DEFAULT_STRAIN_PER_STEP
 
 __all__ = [

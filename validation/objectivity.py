@@ -19,7 +19,7 @@ from granular_material_validation.yade_io import export_rve
 from granular_material_validation.yade_runner import DEFAULT_TIMEOUT, _workdir, run_script
 
 from granular_material.dem import DEMBatch
-from granular_material.dem.rve_file import RVEData, load_rve
+from granular_material.dem.rve.file import RVEData, load_rve
 from granular_material.procedures import drive_grad_u
 from granular_material.procedures.strain_path import DEFAULT_STRAIN_PER_STEP
 

@@ -27,8 +27,8 @@ from typing import Any
 
 import numpy as np
 
-from granular_material.dem.rve_checks import validate_rve
-from granular_material.dem.rve_file import RVEData, RVEMeta, load_rve, save_rve
+from granular_material.dem.rve.checks import validate_rve
+from granular_material.dem.rve.file import RVEData, RVEMeta, load_rve, save_rve
 
 __all__ = [
     "SCENE_FORMAT",

@@ -20,7 +20,7 @@ from typing import Any
 import pandas as pd
 from granular_material_validation.yade_io import export_rve, import_scene
 
-from granular_material.dem.rve_file import RVEData
+from granular_material.dem.rve.file import RVEData
 from granular_material.procedures.element_tests import DEFAULT_AXIAL_STRAIN
 from granular_material.procedures.packing import DEFAULT_PRESSURE
 from granular_material.procedures.strain_path import DEFAULT_STRAIN_PER_STEP

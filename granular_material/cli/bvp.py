@@ -1,7 +1,8 @@
 """``granular-material run SCENE`` for a boundary-value problem (``test = "boundary-value"``):
-the scene is read whole into a :class:`~granular_material.runs.bvp_spec.BoundaryValueSpec`
+the scene is read whole into a
+:class:`~granular_material.runs.boundary_value.spec.BoundaryValueSpec`
 (a refusal names the key and its line, exit 2, nothing written), then run into its folder
-(:func:`~granular_material.runs.bvp_runner.run_boundary_value`), the scene copied in as
+(:func:`~granular_material.runs.boundary_value.runner.run_boundary_value`), the scene copied in as
 ``scene.toml``."""
 
 from __future__ import annotations
@@ -61,9 +62,9 @@ def run_bvp_scene(path: Path, text: str, data: dict[str, Any],
     """Check and run the boundary-value scene ``path`` (``data``: its TOML); the exit code
     (0: it reached the end, 1: it stopped short). ``args``: the ``run`` command's (``out``,
     ``check``, ``resume``: continue a stopped run in the same folder)."""
-    from granular_material.runs.bvp_resume import check_not_stopped
-    from granular_material.runs.bvp_runner import build, run_boundary_value
-    from granular_material.runs.bvp_spec import bvp_from_dict
+    from granular_material.runs.boundary_value.resume import check_not_stopped
+    from granular_material.runs.boundary_value.runner import build, run_boundary_value
+    from granular_material.runs.boundary_value.spec import bvp_from_dict
 
     resume = bool(getattr(args, "resume", False))
     try:

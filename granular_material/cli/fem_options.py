@@ -26,9 +26,9 @@ from granular_material.cli.options import (
 )
 from granular_material.cli.parsers import CommandParser
 from granular_material.fem import available_postprocessors, load_material
+from granular_material.fem.boundary_value.biaxial import PLATENS
 from granular_material.fem.kinematics import FORMULATIONS
-from granular_material.fem.newton import PREDICTORS, RELAXATIONS, TANGENT_UPDATES
-from granular_material.fem.problems import PLATENS
+from granular_material.fem.solver.newton import PREDICTORS, RELAXATIONS, TANGENT_UPDATES
 from granular_material.runs import OutputSpec
 from granular_material.runs.presets import PRESET_NAMES
 from granular_material.runs.spec import BACKENDS, SCALES, NewtonSpec, ProblemSpec

@@ -21,8 +21,8 @@ else:  # Python 3.10
 
 from granular_material.cli.options import UsageError
 from granular_material.fem import available_materials, load_material
-from granular_material.fem.linear_elastic import LinearElasticRunParameters
-from granular_material.fem.mohr_coulomb import MohrCoulombRunParameters
+from granular_material.fem.materials.linear_elastic import LinearElasticRunParameters
+from granular_material.fem.materials.mohr_coulomb import MohrCoulombRunParameters
 
 __all__ = ["MATERIAL_OPTIONS", "add_material_arguments", "check_material_options",
            "material_file_values"]

@@ -195,7 +195,7 @@ def add_device(parser: argparse.ArgumentParser, what: str = "warp device") -> No
 def add_element(parser: argparse.ArgumentParser, advanced: bool = False) -> None:
     """``--element`` and ``--quadrature`` of the FEM commands (a group of their own; one
     that only ``--help-all`` shows where ``advanced``)."""
-    from granular_material.fem.problems import ELEMENTS
+    from granular_material.fem.boundary_value.biaxial import ELEMENTS
 
     g = (parser.add_argument_group("finite elements", advanced=True) if advanced
          else parser.add_argument_group("finite elements"))
@@ -221,7 +221,7 @@ def add_convergence(group: Any, default: str | None = "force", rtol: float | Non
                     ) -> None:
     """``--convergence`` of the FEM commands' Newton solver, in ``group`` (``default`` None:
     residual-displacement for a noisy (DEM) material, force for any other)."""
-    from granular_material.fem.newton import CONVERGENCE_TESTS
+    from granular_material.fem.solver.newton import CONVERGENCE_TESTS
 
     said = (default if default is not None
             else "residual-displacement for dem, force for linear-elastic and mohr-coulomb")
@@ -244,7 +244,7 @@ def add_convergence(group: Any, default: str | None = "force", rtol: float | Non
 
 def add_dtype(parser: argparse.ArgumentParser) -> None:
     """``--dtype float64|float32`` of the DEM."""
-    from granular_material.dem.kernels import DTYPES
+    from granular_material.dem.kernels.sets import DTYPES
 
     parser.add_argument("--dtype", choices=DTYPES, default="float64",
                         help="floating-point precision of the DEM (default: float64)")

@@ -13,7 +13,7 @@ from granular_material.dem.batch import DEMBatch
 from granular_material.dem.homogenization import Homogenized, homogenize, void_ratio
 from granular_material.dem.loading import LoadingControl, ServoSettings
 from granular_material.dem.model import Model, build_model, critical_timestep, resolve_device
-from granular_material.dem.rve_file import (
+from granular_material.dem.rve.file import (
     FORMAT_VERSION,
     RVEData,
     RVEFileError,

@@ -23,8 +23,8 @@ from granular_material.dem.cell_basis import rebase_state
 from granular_material.dem.homogenization import Homogenized, MeasureBuffers, homogenize
 from granular_material.dem.loading import LoadingControl, ServoSettings
 from granular_material.dem.model import Model, build_model, resolve_device
-from granular_material.dem.rve_checks import validate_rve
-from granular_material.dem.rve_file import RVEData
+from granular_material.dem.rve.checks import validate_rve
+from granular_material.dem.rve.file import RVEData
 from granular_material.dem.solver import DEMInstabilityError, Solver
 from granular_material.dem.state import State, state_from_data, state_to_data
 

@@ -10,7 +10,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 import warp as wp
 
-from granular_material.dem.kernels import KernelSet, kernels_for, launch
+from granular_material.dem.kernels.sets import KernelSet, kernels_for, launch
 from granular_material.dem.model import Model
 from granular_material.dem.state import State
 

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
-from granular_material.dem.kernel_common import CONTROL_STRAIN, CONTROL_STRESS
+from granular_material.dem.kernels.common import CONTROL_STRAIN, CONTROL_STRESS
 from granular_material.dem.model import Model
 
 __all__ = ["CONTROL_STRAIN", "CONTROL_STRESS", "LoadingControl", "ServoSettings", "expm_2x2"]

@@ -9,9 +9,9 @@ from typing import Any
 import numpy as np
 import warp as wp
 
-from granular_material.dem.laws import LAW_CONSTANT, LAW_FRICTMAT, ContactLaw
-from granular_material.dem.rve_checks import validate_rve
-from granular_material.dem.rve_file import RVEData, RVEFileError, RVEMeta, _touching_pairs
+from granular_material.dem.kernels.laws import LAW_CONSTANT, LAW_FRICTMAT, ContactLaw
+from granular_material.dem.rve.checks import validate_rve
+from granular_material.dem.rve.file import RVEData, RVEFileError, RVEMeta, _touching_pairs
 
 __all__ = [
     "DEFAULT_CAPACITY",

@@ -8,7 +8,8 @@ from typing import Any
 import numpy as np
 import warp as wp
 
-from granular_material.dem.kernel_common import (
+from granular_material.dem.kernels.block import BLOCK_DISCS, BLOCK_THREADS
+from granular_material.dem.kernels.common import (
     CONTROL_STRAIN,
     CONTROL_STRESS,
     STATUS_BLOWUP,
@@ -16,14 +17,13 @@ from granular_material.dem.kernel_common import (
     STATUS_COINCIDENT,
     STATUS_OVERFLOW,
 )
-from granular_material.dem.kernels import (
+from granular_material.dem.kernels.sets import (
     StepFeatures,
     StepKernels,
     kernels_for,
     launch,
     step_kernels_for,
 )
-from granular_material.dem.kernels_block import BLOCK_DISCS, BLOCK_THREADS
 from granular_material.dem.loading import LoadingControl
 from granular_material.dem.model import Model
 from granular_material.dem.solver_block import (

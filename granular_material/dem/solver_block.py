@@ -11,8 +11,8 @@ from typing import Any, Protocol
 
 import warp as wp
 
-from granular_material.dem.kernels import block_kernels_for, launch
-from granular_material.dem.kernels_block import BLOCK_DISCS
+from granular_material.dem.kernels.block import BLOCK_DISCS
+from granular_material.dem.kernels.sets import block_kernels_for, launch
 from granular_material.dem.loading import LoadingControl
 from granular_material.dem.model import Model
 from granular_material.dem.state import State

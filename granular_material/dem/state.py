@@ -7,9 +7,9 @@ from dataclasses import dataclass, fields, replace
 import numpy as np
 import warp as wp
 
-from granular_material.dem.kernels import kernels_for, launch
+from granular_material.dem.kernels.sets import kernels_for, launch
 from granular_material.dem.model import Model
-from granular_material.dem.rve_file import RVEData
+from granular_material.dem.rve.file import RVEData
 
 __all__ = ["HISTORY_KEYS", "State", "state_from_data", "state_to_data"]
 

@@ -2,7 +2,7 @@
 
 A :class:`TangentMethod` says what a tangent costs and how it is finished: whether it needs
 four extra DEM runs (forward differences of the RVE's own response), whether it condenses
-the contact network (:func:`~granular_material.dem.condensation.condense`), whether it may
+the contact network (:func:`~granular_material.dem.condensed.dispatch.condense`), whether it may
 be held over a Newton increment, and what the stress's spin adds to it.
 
 - ``objective``: Kruyt–Rothenburg applied to sym ∇u plus the stress's spin

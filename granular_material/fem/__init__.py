@@ -14,8 +14,9 @@ the commands use. The run loop that collects a run's tables and keeps its checkp
 :func:`granular_material.runs.run_biaxial`.
 """
 
-from granular_material.fem.boundaries import select_boundaries, select_facets
-from granular_material.fem.conditions import (
+from granular_material.fem.boundary_value.biaxial import BiaxialProblem, BiaxialSetup, build_biaxial
+from granular_material.fem.boundary_value.boundaries import select_boundaries, select_facets
+from granular_material.fem.boundary_value.conditions import (
     Condition,
     Displacement,
     Fixed,
@@ -26,15 +27,19 @@ from granular_material.fem.conditions import (
     Roller,
     build_problem,
 )
-from granular_material.fem.defaults import (
-    default_settings,
-    default_stress_tol,
+from granular_material.fem.boundary_value.initial_stress import geostatic_stress, uniform_stress
+from granular_material.fem.boundary_value.loading import Loading
+from granular_material.fem.boundary_value.meshes import (
+    MeshData,
+    make_basis,
+    read_mesh,
+    rectangle_mesh,
 )
-from granular_material.fem.geostatic import geostatic_stress, uniform_stress
+from granular_material.fem.boundary_value.reactions import BoundaryDofs, boundary_dofs
 from granular_material.fem.layout import Layout, grad_points, to_points, to_quadrature
-from granular_material.fem.linear_elastic import LinearElastic, LinearElasticParameters
-from granular_material.fem.loading import Loading
-from granular_material.fem.material import (
+from granular_material.fem.materials.linear_elastic import LinearElastic, LinearElasticParameters
+from granular_material.fem.materials.mohr_coulomb import MohrCoulomb, MohrCoulombParameters
+from granular_material.fem.materials.protocol import (
     MEASURES,
     FailureReason,
     Material,
@@ -47,17 +52,17 @@ from granular_material.fem.material import (
     create_material,
     load_material,
 )
-from granular_material.fem.meshes import MeshData, make_basis, read_mesh, rectangle_mesh
-from granular_material.fem.mohr_coulomb import MohrCoulomb, MohrCoulombParameters
-from granular_material.fem.newton import (
+from granular_material.fem.solver.defaults import (
+    default_settings,
+    default_stress_tol,
+)
+from granular_material.fem.solver.newton import (
     CommittedState,
     NewtonError,
     NewtonSettings,
     NewtonSolver,
     StepRecord,
 )
-from granular_material.fem.problems import BiaxialProblem, BiaxialSetup, build_biaxial
-from granular_material.fem.reactions import BoundaryDofs, boundary_dofs
 from granular_material.fem.tracking import (
     Tracking,
     available_postprocessors,

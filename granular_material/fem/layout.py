@@ -5,7 +5,8 @@ scikit-fem stores a field at quadrature points with the tensor axes first and
 first, ``(n, 2, 2)``, with Gauss point ``p = element * nqp + q``. Every conversion in the
 package goes through :func:`to_points` and :func:`to_quadrature`.
 
-A material's user-facing :meth:`~granular_material.fem.material.ScikitFemInterface.response`
+A material's user-facing
+:meth:`~granular_material.fem.materials.protocol.ScikitFemInterface.response`
 accepts three layouts of ∇u and answers in the one it was given (:func:`grad_points`):
 
 - batch-first ``(n, 2, 2)`` (the driver's, and the materials' own);

@@ -17,9 +17,9 @@ from typing import Any
 import numpy as np
 
 from granular_material.dem import DEMBatch, DEMInstabilityError, Homogenized, RVEData, save_rve
-from granular_material.dem.condensation import condense
+from granular_material.dem.condensed.dispatch import condense
 from granular_material.dem.model import cell_heights
-from granular_material.fem.material import FailureReason
+from granular_material.fem.materials.protocol import FailureReason
 from granular_material.multiscale.evaluation import (
     Evaluation,
     instability_reason,
@@ -112,7 +112,7 @@ class InProcessBackend:
     from the committed state with ∇u + h E_kl, h = max(perturbation · max|∇u|,
     :data:`~granular_material.multiscale.parameters.MIN_PERTURBATION`) per RVE; the condensed
     ones condense each moved RVE's contact network on the batch's device
-    (:func:`~granular_material.dem.condensation.condense`).
+    (:func:`~granular_material.dem.condensed.dispatch.condense`).
 
     Args:
         batch: the RVEs, in their committed state.

@@ -12,7 +12,7 @@ from typing import Protocol
 import numpy as np
 
 from granular_material.dem import Homogenized, RVEData
-from granular_material.fem.material import FailureReason
+from granular_material.fem.materials.protocol import FailureReason
 
 __all__ = ["DEMBackend", "Evaluation", "instability_reason", "nan_like", "totals"]
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from granular_material.fem.material import Material
+from granular_material.fem.materials.protocol import Material
 
 __all__ = ["relax_to_isotropic"]
 

@@ -15,11 +15,11 @@ RVE, the tangent D_ijkl = ∂σ_ij/∂(∂u_k/∂x_l) on that configuration. D h
 symmetry (D_ijkl = D_jikl: σ is symmetrised) but not the second (D_ijkl ≠ D_ijlk): the spin
 term responds to skw ∇u. Keep the full (2, 2, 2, 2) tangent; a Voigt/Mandel 3 × 3 user
 takes ½ (D_ijkl + D_ijlk) and loses the stress's rotation (see
-:mod:`granular_material.fem.material`).
+:mod:`granular_material.fem.materials.protocol`).
 
 A scikit-fem user calls :meth:`DEMMaterial.response` with the *total* ∇u, in scikit-fem's
 quadrature-last layout if they like (see
-:class:`~granular_material.fem.material.ScikitFemInterface`); :meth:`DEMMaterial.evaluate`
+:class:`~granular_material.fem.materials.protocol.ScikitFemInterface`); :meth:`DEMMaterial.evaluate`
 keeps the protocol's increment.
 """
 
@@ -35,12 +35,12 @@ import numpy as np
 
 from granular_material.dem import RVEData, load_rve, save_rve
 from granular_material.errors import ParameterError
-from granular_material.fem.material import (
+from granular_material.fem.materials.checks import check_grad, check_points, checkpoint_archive
+from granular_material.fem.materials.protocol import (
     MaterialResponse,
     PointStatus,
     ScikitFemInterface,
 )
-from granular_material.fem.material_checks import check_grad, check_points, checkpoint_archive
 from granular_material.multiscale.backend import InProcessBackend
 from granular_material.multiscale.confinement import (
     UNCONFINED_FRACTION,
@@ -70,7 +70,7 @@ from granular_material.multiscale.run_hooks import (
 if TYPE_CHECKING:
     import pandas as pd
 
-    from granular_material.fem.run_context import RunContext
+    from granular_material.fem.materials.run_context import RunContext
     from granular_material.multiscale.mpi import MPIBackend
 
 __all__ = ["UNCONFINED_FRACTION", "DEMMaterial", "UnconfinedWarning"]
@@ -93,7 +93,7 @@ class DEMMaterial(ScikitFemInterface):
 
     In a run specification its parameters are :class:`DEMParameters` (``Parameters``), and
     ``check_run``, ``for_run`` and ``run_summary`` are its run hooks (see
-    :mod:`granular_material.fem.run_context`); its stress carries noise (``noisy``).
+    :mod:`granular_material.fem.materials.run_context`); its stress carries noise (``noisy``).
     """
 
     #: the parameters of the material in a run specification
@@ -157,7 +157,7 @@ class DEMMaterial(ScikitFemInterface):
     @classmethod
     def for_run(cls, parameters: DEMParameters, context: RunContext) -> DEMMaterial:
         """The material of a run specification (not yet allocated): the run hook of
-        :mod:`granular_material.fem.run_context`."""
+        :mod:`granular_material.fem.materials.run_context`."""
         keywords = material_keywords(parameters, context)
         return cls(progress=keywords.pop("progress"), **keywords)
 
@@ -264,7 +264,7 @@ class DEMMaterial(ScikitFemInterface):
         over the paths); ``fields`` holds ``void_ratio``,
         ``coordination`` and ``stress_skew`` (σxy − σyx of the Love sum over 2 [Pa], what
         the symmetrisation removed). A point that fails has ``PointStatus.FAILED``, a reason
-        in ``reasons`` (:class:`~granular_material.fem.material.FailureReason`:
+        in ``reasons`` (:class:`~granular_material.fem.materials.protocol.FailureReason`:
         ``max_dem_steps``, ``cell_inverted``, ``cell_too_thin``, ``blow_up``,
         ``overcompressed``, ``coincident_discs``, ``non_finite_input``; ``aborted`` for
         the other points when an RVE of the batch blew up, which sends the whole batch back

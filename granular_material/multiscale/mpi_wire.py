@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from granular_material.dem import Homogenized, resolve_device
-from granular_material.fem.material import FailureReason
+from granular_material.fem.materials.protocol import FailureReason
 from granular_material.filesafe import deferred_signals
 from granular_material.timing import MATERIAL_PHASES
 

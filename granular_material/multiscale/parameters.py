@@ -58,7 +58,7 @@ BACKENDS = ("inprocess", "mpi")
 MIN_PERTURBATION = 1.0e-4
 #: most CPU shards (threads) of a batch: a batch runs min(shards, RVEs) threads, each with its
 #: own build of the DEM kernels (a CPU kernel module cannot serve two threads at once,
-#: :func:`~granular_material.dem.kernels.kernels_for`), and no machine this runs on has more
+#: :func:`~granular_material.dem.kernels.sets.kernels_for`), and no machine this runs on has more
 #: cores than this, so more threads only add builds and never step faster
 MAX_SHARDS = 1024
 
@@ -102,7 +102,7 @@ class DEMDriving:
             tangent at every iterate, and a condensation costs more than the DEM run itself;
             a run specification (and so the commands) defaults to "condensed-sticking",
             held over each increment by its Newton loop
-            (:data:`~granular_material.fem.defaults.NOISY_DEFAULTS`).
+            (:data:`~granular_material.fem.solver.defaults.NOISY_DEFAULTS`).
         perturbation: relative perturbation of ∇u of the "perturbation" tangent [-], > 0
             (at least :data:`MIN_PERTURBATION` in absolute terms).
         reuse_tol: strain [-]: an RVE whose ∇u moved by at most this (every component) since

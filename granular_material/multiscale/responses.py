@@ -9,7 +9,7 @@ from collections.abc import Callable
 import numpy as np
 
 from granular_material.dem import RVEData
-from granular_material.fem.material import FailureReason, MaterialResponse, PointStatus
+from granular_material.fem.materials.protocol import FailureReason, MaterialResponse, PointStatus
 from granular_material.multiscale.evaluation import Evaluation
 
 __all__ = ["measured_response", "response_of", "sym"]

@@ -23,7 +23,7 @@ from granular_material.multiscale.parameters import DRIVES, REUSE_CORRECTIONS, D
 from granular_material.reference_values import DEFAULT_DISCS
 
 if TYPE_CHECKING:
-    from granular_material.fem.run_context import RunContext
+    from granular_material.fem.materials.run_context import RunContext
     from granular_material.procedures.packing import PackingParameters
 
 __all__ = ["RUN_TANGENT", "SHARE_TOLERANCE", "DEMParameters", "check_run", "material_keywords",
@@ -39,7 +39,8 @@ SHARE_TOLERANCE = 0.02
 
 #: the tangent of a run (and so of the commands) where its spec names none: the condensed
 #: tangent with every touching contact sticking, held over each increment with Aitken
-#: relaxation by the commands' Newton loop (:data:`~granular_material.fem.defaults.NOISY_DEFAULTS`;
+#: relaxation by the commands' Newton loop
+#: (:data:`~granular_material.fem.solver.defaults.NOISY_DEFAULTS`;
 #: issue 26: plain Newton reaches 10 % with it too). A material built in Python defaults to
 #: the objective tangent instead (:class:`~granular_material.multiscale.parameters.DEMDriving`):
 #: a user's own loop asks for a tangent at every iterate, and a condensation costs more than

@@ -129,7 +129,7 @@ def model_curve(calibration: Calibration, axial_strain: float | None = None,
     """The calibrated ``MohrCoulomb`` material (at ``initial_stress`` −P) through the drained
     path of :func:`drained_point_curve`, to ``axial_strain`` (default: the end of the
     calibration's curve)."""
-    from granular_material.fem.mohr_coulomb import MohrCoulomb
+    from granular_material.fem.materials.mohr_coulomb import MohrCoulomb
 
     if axial_strain is None:
         axial_strain = float(calibration.curve["axial_strain"].max())

@@ -24,8 +24,8 @@ Tables (tension positive unless the column says otherwise):
 
 ``points`` — one row per load step and Gauss point:
     step, axial_strain, point (``element · nqp + q``, nqp = gauss² points per element, see
-    :mod:`granular_material.fem.problems`), element, x, y [m] (the Gauss point's reference
-    coordinates), sxx, syy, sxy [Pa] (Cauchy), exx, eyy, exy (sym ∇u in small strain, the
+    :mod:`granular_material.fem.boundary_value.biaxial`), element, x, y [m] (the Gauss point's
+    reference coordinates), sxx, syy, sxy [Pa] (Cauchy), exx, eyy, exy (sym ∇u in small strain, the
     Hencky strain ½ ln(F Fᵀ) in finite strain), volumetric_strain (tr ε; finite strain:
     J − 1, the area change), shear_strain (γ = √((ε_xx − ε_yy)² + (2ε_xy)²)), plus the
     material's own fields (void_ratio, coordination, stress_skew, ...).

@@ -38,7 +38,7 @@ from granular_material.filesafe import deferred_signals, write_whole
 from granular_material.results.plots import plot_maps, plot_stress_strain
 
 if TYPE_CHECKING:
-    from granular_material.fem.problems import BiaxialProblem
+    from granular_material.fem.boundary_value.biaxial import BiaxialProblem
     from granular_material.results.biaxial import BiaxialResult
 
 __all__ = ["BiaxialWriter", "FieldWriter", "append_csv", "read_run_tables", "read_table",

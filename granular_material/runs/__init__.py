@@ -15,7 +15,7 @@ which keeps the run's checkpoint in its folder (:class:`RunCheckpoint`,
     outcome.result.steps[["axial_strain", "stress_ratio"]]
 """
 
-from granular_material.fem.run_context import RunContext
+from granular_material.fem.materials.run_context import RunContext
 from granular_material.results.biaxial import BiaxialResult
 from granular_material.runs.checkpoint import CheckpointError, RunCheckpoint, SavedRun
 from granular_material.runs.execute import RunOutcome, RunPlan, check, run

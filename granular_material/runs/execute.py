@@ -25,7 +25,7 @@ from granular_material.checks import (
 )
 from granular_material.errors import ParameterError
 from granular_material.fem import BiaxialSetup, Material, Tracking
-from granular_material.fem.run_context import RunContext
+from granular_material.fem.materials.run_context import RunContext
 from granular_material.results import (
     BiaxialResult,
     BiaxialWriter,

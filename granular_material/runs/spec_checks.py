@@ -7,7 +7,7 @@ Every field is first conformed to its annotated type
 from __future__ import annotations
 
 from granular_material.errors import ParameterError
-from granular_material.fem.newton_settings import MAX_CUTBACKS
+from granular_material.fem.solver.settings import MAX_CUTBACKS
 from granular_material.typed_fields import (
     conform,
     conform_fields,

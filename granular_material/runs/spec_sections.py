@@ -12,9 +12,9 @@ from pathlib import Path
 from typing import Any
 
 from granular_material.errors import ParameterError
-from granular_material.fem.defaults import COMMAND_DEFAULTS
-from granular_material.fem.newton import NewtonSettings
-from granular_material.fem.problems import BiaxialSetup
+from granular_material.fem.boundary_value.biaxial import BiaxialSetup
+from granular_material.fem.solver.defaults import COMMAND_DEFAULTS
+from granular_material.fem.solver.newton import NewtonSettings
 from granular_material.procedures.element_tests import DEFAULT_AXIAL_STRAIN
 from granular_material.procedures.packing import DEFAULT_DISCS, DEFAULT_PRESSURE
 from granular_material.runs.spec_checks import (
@@ -157,7 +157,7 @@ def _newton_default(name: str) -> Any:
 @dataclass(frozen=True, kw_only=True)
 class NewtonSpec:
     """The Newton solver of the run (:class:`~granular_material.fem.NewtonSettings`, with the
-    commands' defaults: :data:`~granular_material.fem.defaults.COMMAND_DEFAULTS`).
+    commands' defaults: :data:`~granular_material.fem.solver.defaults.COMMAND_DEFAULTS`).
 
     Attributes:
         rtol: relative tolerance of the convergence test [-]; None: 1e-2 for a noisy
@@ -174,7 +174,7 @@ class NewtonSpec:
             none.
         convergence: "force", "displacement" or "residual-displacement"; None:
             residual-displacement for a noisy material, force otherwise
-            (:func:`~granular_material.fem.defaults.default_settings`).
+            (:func:`~granular_material.fem.solver.defaults.default_settings`).
         stall_window, max_iterations, max_cutbacks, predictor, formulation,
         secant_min_change: as :class:`~granular_material.fem.NewtonSettings`.
     """
@@ -204,7 +204,7 @@ class NewtonSpec:
     def settings(self, noisy: bool) -> NewtonSettings:
         """The solver's settings for a material whose stress is ``noisy`` (DEM RVEs); a value
         NewtonSettings refuses is a SpecError naming its field."""
-        from granular_material.fem.defaults import default_settings
+        from granular_material.fem.solver.defaults import default_settings
 
         values = {f.name: getattr(self, f.name) for f in fields(self) if f.name != "stress_tol"}
         try:
@@ -220,7 +220,7 @@ class NewtonSpec:
 
     def stress_tolerance(self, noisy: bool, confining: float) -> float:
         """The absolute tolerance [Pa] of the run."""
-        from granular_material.fem.defaults import default_stress_tol
+        from granular_material.fem.solver.defaults import default_stress_tol
 
         return default_stress_tol(noisy, confining) if self.stress_tol is None else self.stress_tol
 
@@ -240,7 +240,7 @@ class MaterialSpec:
     parameters: Any = None
 
     def __post_init__(self) -> None:
-        from granular_material.fem.material import load_material
+        from granular_material.fem.materials.protocol import load_material
 
         if not isinstance(self.name, str):
             raise SpecError("material", f"must name the material (a string), got "
@@ -248,7 +248,7 @@ class MaterialSpec:
         try:
             cls = load_material(self.name)
         except ValueError:
-            from granular_material.fem.material import available_materials
+            from granular_material.fem.materials.protocol import available_materials
 
             raise SpecError("material", f"{self.name!r} is no installed material (they are "
                                         f"{', '.join(available_materials())})") from None
@@ -281,7 +281,7 @@ class MaterialSpec:
     @property
     def cls(self) -> type:
         """The material class."""
-        from granular_material.fem.material import load_material
+        from granular_material.fem.materials.protocol import load_material
 
         return load_material(self.name)
 

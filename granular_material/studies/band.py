@@ -22,7 +22,7 @@ from typing import Any
 
 import pandas as pd
 
-from granular_material.fem.defaults import COMMAND_DEFAULTS, NOISY_DEFAULTS
+from granular_material.fem.solver.defaults import COMMAND_DEFAULTS, NOISY_DEFAULTS
 from granular_material.multiscale.run_hooks import RUN_TANGENT
 from granular_material.procedures import progress_bar
 from granular_material.procedures.packing import DEFAULT_PRESSURE
@@ -105,7 +105,7 @@ def row_key(knob: str, value: str, changes: Any) -> str:
 
 def command_settings() -> dict[str, Any]:
     """The commands' own settings of a DEM run in the study's terms: the band rows'
-    reference (:mod:`granular_material.fem.defaults`, the run tangent, Guo & Zhao's strain
+    reference (:mod:`granular_material.fem.solver.defaults`, the run tangent, Guo & Zhao's strain
     per DEM step, every trial from the committed state, no reuse)."""
     return {"strain_per_step": DEFAULT_STRAIN_PER_STEP,
             "convergence": COMMAND_DEFAULTS["convergence"], "rtol": COMMAND_DEFAULTS["rtol"],

@@ -21,8 +21,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from granular_material.runs.bvp_runner import run_boundary_value
-from granular_material.runs.bvp_spec import bvp_from_dict
+from granular_material.runs.boundary_value.runner import run_boundary_value
+from granular_material.runs.boundary_value.spec import bvp_from_dict
 from granular_material.runs.presets import settings_fields
 from granular_material.runs.run_folder import ended_summary, resumable
 from granular_material.studies.band import command_settings, row_key

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from granular_material.cli.options import UsageError, check_figure_file, check_memory, emit
-from granular_material.dem.rve_file import load_rve
+from granular_material.dem.rve.file import load_rve
 
 from .boxes import (
     BOX_RULES,

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
-from granular_material.dem.rve_file import RVEData
+from granular_material.dem.rve.file import RVEData
 
 __all__ = [
     "DEFAULT_PIXEL",

@@ -11,7 +11,7 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import ArrayLike
 
-from granular_material.dem.rve_file import RVEData
+from granular_material.dem.rve.file import RVEData
 
 from .boxes import (
     BOX_RULES,

@@ -1,0 +1,129 @@
+"""The constants of the Mohr–Coulomb material (:class:`MohrCoulombParameters`, angles in
+degrees, stresses in Pa) and their names in a run specification
+(:class:`MohrCoulombRunParameters`), each checked once where it is built."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+from granular_material.errors import ParameterError
+from granular_material.fem.materials.mohr_coulomb_return import Strength
+
+__all__ = ["MohrCoulombParameters", "MohrCoulombRunParameters", "number"]
+
+
+def number(field: str, value: Any) -> float:
+    """``value`` (a real number, not text or a bool) as a finite float;
+    :class:`ParameterError` naming ``field`` otherwise."""
+    if isinstance(value, (str, bytes, bool)):
+        raise ParameterError(field, f"must be a number, got {value!r}")
+    try:
+        value = float(value)
+    except (TypeError, ValueError):
+        raise ParameterError(field, f"must be a number, got {value!r}") from None
+    if not math.isfinite(value):
+        raise ParameterError(field, f"must be finite, got {value!r}")
+    return value
+
+
+@dataclass(frozen=True)
+class MohrCoulombParameters:
+    """The constants of :class:`MohrCoulomb` (angles in degrees, stresses in Pa).
+
+    Attributes:
+        young: Young's modulus E [Pa], > 0.
+        poisson: Poisson's ratio ν [-], in (−1, 0.5).
+        friction_angle: peak friction angle φ [°], in (0, 90).
+        dilation_angle: peak dilation angle ψ [°], 0 ≤ ψ ≤ φ.
+        cohesion: c [Pa], ≥ 0.
+        critical_friction_angle: φcs [°], 0 < φcs ≤ φ, or None (no softening).
+        softening_strain: plastic shear strain γp [-] over which φ falls linearly to φcs and
+            ψ to 0 (constant after); > 0 when φcs is given.
+    """
+
+    young: float = 60.0e6
+    poisson: float = 0.3
+    friction_angle: float = 30.0
+    dilation_angle: float = 0.0
+    cohesion: float = 0.0
+    critical_friction_angle: float | None = None
+    softening_strain: float = 0.0
+
+    def __post_init__(self) -> None:
+        for name in ("young", "poisson", "friction_angle", "dilation_angle", "cohesion",
+                     "softening_strain"):
+            object.__setattr__(self, name, number(name, getattr(self, name)))
+        if self.young <= 0:
+            raise ParameterError("young", f"must be a positive number of Pa, got {self.young!r}")
+        if not -1.0 < self.poisson < 0.5:
+            raise ParameterError("poisson", f"must lie in (-1, 0.5), got {self.poisson!r}")
+        if not 0 < self.friction_angle < 90:
+            raise ParameterError("friction_angle", "must lie in (0, 90) degrees, got "
+                                                   f"{self.friction_angle!r}")
+        if not 0 <= self.dilation_angle <= self.friction_angle:
+            raise ParameterError("dilation_angle", "must lie in [0, friction_angle] degrees, "
+                                                   f"got {self.dilation_angle!r}")
+        if self.cohesion < 0:
+            raise ParameterError("cohesion", f"must be >= 0 Pa, got {self.cohesion!r}")
+        if self.softening_strain < 0:
+            raise ParameterError("softening_strain", "must be >= 0, got "
+                                                     f"{self.softening_strain!r}")
+        if self.critical_friction_angle is not None:
+            phi_cs = number("critical_friction_angle", self.critical_friction_angle)
+            object.__setattr__(self, "critical_friction_angle", phi_cs)
+            if not 0 < phi_cs <= self.friction_angle:
+                raise ParameterError("critical_friction_angle", "must lie in (0, "
+                                     f"friction_angle] degrees, got {phi_cs!r}")
+            if self.softening_strain <= 0:
+                raise ParameterError("softening_strain", "must be > 0 when "
+                                     "critical_friction_angle is given, got "
+                                     f"{self.softening_strain!r}")
+
+    @property
+    def lame(self) -> tuple[float, float]:
+        """Lamé constants (λ, μ) [Pa]."""
+        e, nu = self.young, self.poisson
+        return e * nu / ((1 + nu) * (1 - 2 * nu)), e / (2 * (1 + nu))
+
+    def strength(self) -> Strength:
+        """The constants of the return mapping (radians)."""
+        lam, mu = self.lame
+        phi_cs = (self.friction_angle if self.critical_friction_angle is None
+                  else self.critical_friction_angle)
+        return Strength(mu, lam, math.radians(self.friction_angle),
+                        math.radians(self.dilation_angle), self.cohesion,
+                        math.radians(phi_cs),
+                        self.softening_strain if self.critical_friction_angle is not None
+                        else 0.0)
+
+
+@dataclass(frozen=True, kw_only=True)
+class MohrCoulombRunParameters:
+    """The material of a run specification (its initial stress is the run's confining
+    pressure): ``E`` [Pa], ``nu`` [-], ``phi``, ``psi``, ``phi_cs`` [°], ``cohesion`` [Pa],
+    ``softening_strain`` [-] (see :class:`MohrCoulombParameters`)."""
+
+    E: float = 60.0e6
+    nu: float = 0.3
+    phi: float = 30.0
+    psi: float = 0.0
+    cohesion: float = 0.0
+    phi_cs: float | None = None
+    softening_strain: float = 0.0
+
+    def __post_init__(self) -> None:
+        names = {"young": "E", "poisson": "nu", "friction_angle": "phi",
+                 "dilation_angle": "psi", "critical_friction_angle": "phi_cs"}
+        try:  # the material's own checks, named as the spec's fields
+            MohrCoulombParameters(young=self.E, poisson=self.nu, friction_angle=self.phi,
+                                  dilation_angle=self.psi, cohesion=self.cohesion,
+                                  critical_friction_angle=self.phi_cs,
+                                  softening_strain=self.softening_strain)
+        except ParameterError as exc:
+            if exc.field == "softening_strain" and self.softening_strain == 0.0:
+                raise ParameterError("phi_cs", "needs softening_strain > 0 (the plastic shear "
+                                               "strain over which phi softens to phi_cs), "
+                                               "which is 0") from None
+            raise ParameterError(names.get(exc.field, exc.field), exc.message) from None

@@ -1,0 +1,382 @@
+"""Newton–Raphson load stepping for the equilibrium problem, in small strain or, as Guo &
+Zhao's FEM×DEM code, updated-Lagrangian finite strain (:mod:`granular_material.fem.kinematics`).
+
+Each load step follows Wu, Fu & Zhou (2025) §1.4: (a) the equivalent nodal forces of the
+step, with prescribed displacements moved to the right-hand side by condensation;
+(b)–(d) the committed tangent gives a predictor; (e)–(f) the material is evaluated with the
+displacement gradient accumulated since the last commit; (g) the residual
+R = ∫ Bᵀσ dV − f_ext is compared with the step's load, ‖R‖₂ / ‖R₀‖₂ ≤ TOL (0.005);
+(h) otherwise the tangent of the current iterate gives the correction. A step that does not
+converge is reverted (the material returns to its committed state) and retried with half the
+increment, down to a limit.
+
+The convergence tests and the other rules that end an increment (stall, small correction,
+divergence, growth limit, iterations spent) are in :mod:`granular_material.fem.solver.convergence`;
+the settings, :class:`NewtonSettings`, in :mod:`granular_material.fem.solver.settings`; the
+step records, committed state and error in :mod:`granular_material.fem.solver.records`.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+from skfem import Basis, BilinearForm, condense, solve
+
+from granular_material.fem.boundary_value.loading import Loading
+from granular_material.fem.forms import gauss_points_grad, internal_force, stiffness
+from granular_material.fem.kinematics import Kinematics
+from granular_material.fem.materials.protocol import Material, MaterialResponse
+from granular_material.fem.solver.acceleration import AitkenRelaxation, SecantTangent
+from granular_material.fem.solver.convergence import RULES, IterationState, Outcome, Verdict, judge
+from granular_material.fem.solver.records import CommittedState, NewtonError, StepRecord
+from granular_material.fem.solver.settings import CONVERGENCE_TESTS as CONVERGENCE_TESTS
+from granular_material.fem.solver.settings import PREDICTORS as PREDICTORS
+from granular_material.fem.solver.settings import RELAXATIONS as RELAXATIONS
+from granular_material.fem.solver.settings import TANGENT_UPDATES as TANGENT_UPDATES
+from granular_material.fem.solver.settings import NewtonSettings
+from granular_material.progress import progress_bar
+from granular_material.timing import PhaseTimes
+
+__all__ = [
+    "CommittedState",
+    "Loading",
+    "NewtonError",
+    "NewtonSettings",
+    "NewtonSolver",
+    "StepRecord",
+]
+
+
+@dataclass
+class _Attempt:
+    """One try at an increment: the verdict that ended it and what it cost."""
+
+    verdict: Verdict
+    du: np.ndarray
+    response: MaterialResponse
+    f_int: np.ndarray | None
+    history: list[float]
+    corrections: list[float]
+    iterations: int
+    cost: dict[str, int | float]  # the material's costs, summed over the evaluations
+    failures: dict[str, int] = field(default_factory=dict)  # failed points by reason
+
+
+@BilinearForm
+def _mass(u, v, _):
+    return u[0] * v[0] + u[1] * v[1]
+
+
+def _add_costs(total: dict[str, int | float], costs: Mapping[str, int | float]) -> None:
+    """Add ``costs`` to ``total`` name by name (a name new to ``total`` starts at 0)."""
+    for name, value in costs.items():
+        total[name] = total.get(name, 0) + value
+
+
+class NewtonSolver:
+    """Load-stepping Newton solver for one basis, one material and one loading.
+
+    The committed state (displacement ``u``, the material response and the internal
+    force that belong to it) only changes when an increment converges.
+    """
+
+    def __init__(
+        self,
+        basis: Basis,
+        material: Material,
+        loading: Loading,
+        settings: NewtonSettings | None = None,
+    ) -> None:
+        self.basis = basis
+        self.material = material
+        self.loading = loading
+        self.settings = settings or NewtonSettings()
+        self.kinematics = Kinematics(self.settings.formulation,
+                                     self.settings.geometric_stiffness)
+        n_points = basis.nelems * basis.X.shape[-1]
+        if material.n_points == 0:
+            material.allocate(n_points)
+        if material.n_points != n_points:
+            raise ValueError(
+                f"material holds {material.n_points} points, the mesh has {n_points}"
+            )
+        self.u = np.zeros(basis.N)
+        self._grad_committed = np.zeros((n_points, 2, 2))
+        self.load_factor = 0.0
+        self._run_start = 0.0
+        self._last: tuple[float, np.ndarray] | None = None  # last converged (Δλ, Δu)
+        self.records: list[StepRecord] = []
+        # the committed state's stress and tangent (∇u = 0 until a step or a resume sets
+        # them), read from the material when first asked for (:meth:`_initial`)
+        self._response: MaterialResponse | None = None
+        self._f_int: np.ndarray | None = None
+        self._mass_matrix = None
+
+    def _initial(self) -> None:
+        """The material's stress and tangent in its committed state (∇u = 0), asked of it
+        once, when the solver first needs them; RuntimeError naming the points where it
+        fails."""
+        n_points = self.material.n_points
+        response = self.material.evaluate(np.zeros((n_points, 2, 2)))
+        self.material.revert()
+        if not response.ok:
+            raise RuntimeError(
+                f"material fails in its initial state at points {response.failed_points()}"
+            )
+        self._response = response
+        self._f_int = internal_force(self.basis, response.stress)
+
+    @property
+    def response(self) -> MaterialResponse:
+        """The material's response in the committed state (stress, tangent, fields)."""
+        if self._response is None:
+            self._initial()
+        return self._response
+
+    @response.setter
+    def response(self, value: MaterialResponse) -> None:
+        self._response = value
+
+    @property
+    def f_int(self) -> np.ndarray:
+        """Internal force [N/m] of the committed state, shape (ndofs,)."""
+        if self._f_int is None:
+            self._initial()
+        return self._f_int
+
+    @f_int.setter
+    def f_int(self, value: np.ndarray) -> None:
+        self._f_int = value
+
+    def _external(self, load_factor: float, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(u_D, f_ext) at ``load_factor`` with the displacement ``u`` [m] (a follower load
+        acts on the displaced configuration in the finite-strain formulation)."""
+        return self.loading.at(load_factor, u if self.kinematics.finite else None)
+
+    def l2_norm(self, v: np.ndarray) -> float:
+        """‖v‖_L2 = (∫ v·v dV)^½ [m · m] of a nodal displacement field ``v`` (ndofs,), with a
+        rule exact for the element (the Newton rule may be reduced)."""
+        if self._mass_matrix is None:
+            order = max(int(getattr(self.basis.elem, "maxdeg", 2)), 1)
+            exact = Basis(self.basis.mesh, self.basis.elem, intorder=2 * order)
+            self._mass_matrix = _mass.assemble(exact)
+        return math.sqrt(max(float(v @ (self._mass_matrix @ v)), 0.0))
+
+    def committed_state(self) -> CommittedState:
+        """The solver's committed state (copies), to checkpoint a run."""
+        last = None if self._last is None else (self._last[0], self._last[1].copy())
+        return CommittedState(self.u.copy(), self.load_factor, self._run_start, last,
+                              list(self.records), self.response)
+
+    def resume(self, state: CommittedState) -> None:
+        """Continue from ``state`` (from :meth:`committed_state`, perhaps of another process):
+        the material must already hold the committed state that belongs to it."""
+        if state.u.shape != self.u.shape:
+            raise ValueError(f"the saved displacement has shape {state.u.shape}, this mesh "
+                             f"{self.u.shape}")
+        if state.response.stress.shape[0] != self.material.n_points:
+            raise ValueError(f"the saved response has {state.response.stress.shape[0]} points, "
+                             f"the material {self.material.n_points}")
+        self.u = np.array(state.u, dtype=np.float64)
+        self.load_factor = float(state.load_factor)
+        self._run_start = float(state.run_start)
+        self._last = state.last_increment
+        self.records = list(state.records)
+        self.response = state.response
+        self._grad_committed = gauss_points_grad(self.basis, self.u)
+        self.f_int = internal_force(self.basis, self.kinematics.assembled_stress(
+            self.response.stress, self._grad_committed))
+
+    @property
+    def reaction(self) -> np.ndarray:
+        """f_int − f_ext [N/m] at the committed state, shape (ndofs,); nonzero at D only."""
+        return self.f_int - self._external(self.load_factor, self.u)[1]
+
+    def grad_u(self) -> np.ndarray:
+        """Total ∇u [-] at the Gauss points, committed state, shape (n, 2, 2)."""
+        return gauss_points_grad(self.basis, self.u)
+
+    def _tangents(self) -> Callable[[np.ndarray, MaterialResponse], np.ndarray]:
+        """The tangent [Pa] of an increment's corrections, from its iterate's ∇u [-] and the
+        material's response there, as ``tangent_update`` asks (a fresh one per increment)."""
+        s = self.settings
+        if s.tangent_update == "hold":
+            hold_tangent = getattr(self.material, "hold_tangent", None)
+            if callable(hold_tangent):
+                hold_tangent(True)  # the material need not measure the later iterates' tangents
+            held: list[np.ndarray] = []  # the first evaluation's
+
+            def first(grad_u: np.ndarray, response: MaterialResponse) -> np.ndarray:
+                if not held:
+                    held.append(response.tangent)
+                return held[0]
+            return first
+        if s.tangent_update == "secant":
+            stress = self.response.stress
+            secant = SecantTangent(np.zeros_like(stress), stress, self.response.tangent,
+                                   s.secant_min_change)
+            return lambda grad_u, response: secant.update(grad_u, response.stress)
+        return lambda grad_u, response: response.tangent
+
+    def _increment(self, target: float, times: PhaseTimes) -> _Attempt:
+        """One increment to load factor ``target`` from the committed state, ended by the
+        first verdict of the convergence rules (:mod:`granular_material.fem.solver.convergence`);
+        its phases' seconds are added to ``times``."""
+        s, D, kin = self.settings, self.loading.dirichlet_dofs, self.kinematics
+        grad_n = self._grad_committed
+        response = self.response
+        with times.phase("assembly"):
+            u_d, f_ext = self._external(target, self.u)
+            du = np.zeros_like(self.u)
+            du[D] = u_d - self.u[D]
+            K = stiffness(self.basis, kin.assembled_tangent(response.tangent, response.stress,
+                                                            grad_n, grad_n))
+            A, b, x, interior = condense(K, f_ext - self.f_int, x=du, D=D)
+        r0 = float(np.linalg.norm(b))
+        with times.phase("linear_solve"):
+            du = solve(A, b, x, interior)
+        if s.predictor == "extrapolate" and self._last is not None:
+            last_step, last_du = self._last
+            du[interior] = (target - self.load_factor) / last_step * last_du[interior]
+        predicted = self.l2_norm(du)  # the first iterate's increment, for max_growth
+        history: list[float] = []
+        corrections: list[float] = []
+        cost: dict[str, int | float] = {}
+        rules = RULES[s.convergence]
+        aitken = AitkenRelaxation() if s.relaxation == "aitken" else None
+        tangent_of = self._tangents()
+        for it in itertools.count(1):  # the rule ``spent`` ends it at max_iterations
+            grad_step = gauss_points_grad(self.basis, du)
+            grad_u = kin.material_gradient(grad_n, grad_step)
+            with times.phase("material"):
+                response = self.material.evaluate(grad_u)
+            times.add_all(response.timings)
+            _add_costs(cost, response.costs)
+            if not response.ok:
+                causes = response.failure_causes()  # not the points aborted with them
+                bad = causes if causes.size else response.failed_points()
+                counts = response.failure_counts()
+                why = ", ".join(f"{name}: {k}" for name, k in counts.items())
+                reason = f"material failed at points {bad[:8].tolist()} ({why})"
+                # as before, the corrections of an attempt the material failed are not kept
+                return _Attempt(Verdict(Outcome.FAILED, reason=reason), du, response, None,
+                                history, [], it, cost, failures=counts)
+            grad_total = grad_n + grad_step
+            with times.phase("assembly"):
+                f_int = internal_force(self.basis, kin.assembled_stress(response.stress,
+                                                                        grad_total))
+                if kin.finite:
+                    f_ext = self._external(target, self.u + du)[1]
+            residual = f_int - f_ext
+            r = float(np.linalg.norm(residual[interior]))
+            history.append(r / r0 if r0 > 0 else r)
+            state = IterationState(it, r0, r, tuple(history), tuple(corrections), predicted)
+            verdict = judge(rules.evaluated, state, s)
+            if verdict.outcome is not Outcome.GO_ON:
+                return _Attempt(verdict, du, response, f_int, history, corrections, it, cost)
+            tangent = tangent_of(grad_u, response)
+            with times.phase("assembly"):
+                K = stiffness(self.basis, kin.assembled_tangent(tangent, response.stress,
+                                                                grad_n, grad_total))
+                A, b, x, interior = condense(K, -residual, D=D)
+            with times.phase("linear_solve"):
+                correction = solve(A, b, x, interior)
+            proposed = du + correction if aitken is None else aitken.update(du, correction)
+            step_norm = self.l2_norm(proposed)
+            change = self.l2_norm(proposed - du)
+            corrections.append(change / step_norm if step_norm > 0 else 0.0)
+            state = replace(state, corrections=tuple(corrections), step_norm=step_norm)
+            verdict = judge(rules.corrected, state, s)
+            if verdict.outcome is not Outcome.GO_ON:
+                return _Attempt(verdict, du, response, f_int, history, corrections, it, cost)
+            du = proposed
+        raise AssertionError("unreachable: the rules end every increment")
+
+    def step(self, target: float, step: int) -> StepRecord:
+        """Advance the committed state to load factor ``target``, cutting back as needed.
+
+        Raises :class:`NewtonError` (the committed state is left at the last converged
+        increment) when the increment would have to fall below nominal / 2**max_cutbacks.
+        """
+        t0 = time.perf_counter()
+        record = StepRecord(step=step, load_factor=target)
+        times = PhaseTimes()
+        nominal = target - self.load_factor
+        increment = nominal
+        smallest = nominal / 2 ** self.settings.max_cutbacks
+        while self.load_factor < target - 1e-12 * max(abs(target), 1.0):
+            end = min(self.load_factor + increment, target)
+            attempt = self._increment(end, times)
+            record.iterations += attempt.iterations
+            _add_costs(record.costs, attempt.cost)
+            _add_costs(record.failures, attempt.failures)  # type: ignore[arg-type]
+            record.residual_history.append(attempt.history)
+            record.correction_history.append(attempt.corrections)
+            if attempt.verdict.accepted:
+                record.converged_by.append(attempt.verdict.by)
+                self.material.commit()
+                self.u = self.u + attempt.du
+                self._grad_committed = gauss_points_grad(self.basis, self.u)
+                self.response, self.f_int = attempt.response, attempt.f_int
+                self._last = (end - self.load_factor, attempt.du)
+                record.stalled += int(attempt.verdict.stalled)
+                self.load_factor = end
+                increment = min(2 * increment, nominal) if record.cutbacks else increment
+                continue
+            self.material.revert()
+            record.cutbacks += 1
+            increment = (end - self.load_factor) / 2  # half of what was tried (maybe clipped)
+            if increment < smallest * (1 - 1e-9):
+                record.wall_time = time.perf_counter() - t0
+                record.timings = times.as_dict()
+                raise NewtonError(
+                    f"load step {step} (load factor {self.load_factor:.6g} -> {target:.6g}) "
+                    f"did not converge ({attempt.verdict.reason}) even with the increment halved "
+                    f"{self.settings.max_cutbacks} times; the state committed at load factor "
+                    f"{self.load_factor:.6g} is kept",
+                    [*self.records, record],
+                )
+        record.wall_time = time.perf_counter() - t0
+        record.timings = times.as_dict()
+        self.records.append(record)
+        return record
+
+    def run(
+        self,
+        n_steps: int,
+        on_step: Callable[[NewtonSolver, StepRecord], None] | None = None,
+        progress: bool = False,
+        description: str = "load steps",
+        done: int = 0,
+    ) -> list[StepRecord]:
+        """Apply the loading in ``n_steps`` equal steps of λ from the current value to 1.
+
+        ``on_step(solver, record)`` is called after every committed step (for output).
+        ``done`` > 0 resumes a run (see :meth:`resume`) of which that many steps are
+        committed: the remaining steps go to the same load factors as in one go.
+        """
+        if n_steps < 1:
+            raise ValueError(f"n_steps must be >= 1, got {n_steps}")
+        if not 0 <= done <= n_steps:
+            raise ValueError(f"done must lie in [0, {n_steps}], got {done}")
+        if done == 0:
+            self._run_start = self.load_factor
+        start = self._run_start
+        first = len(self.records) + 1 - done
+        with progress_bar(n_steps, description, progress) as bar:
+            bar.update(done)
+            for k in range(done, n_steps):
+                target = start + (1.0 - start) * (k + 1) / n_steps
+                record = self.step(target, first + k)
+                if on_step is not None:
+                    on_step(self, record)
+                last = record.residual_history[-1][-1] if record.residual_history[-1] else 0.0
+                bar.set_postfix({"it": record.iterations, "cut": record.cutbacks,
+                                 "res": f"{last:.2g}", **record.costs})
+                bar.update()
+        return self.records

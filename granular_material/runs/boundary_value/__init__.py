@@ -1,0 +1,4 @@
+"""Boundary-value runs: their specification (``spec``), what they need told before they are
+made (``checks``), their material (``material``), the run (``runner``) and its checkpoint
+(``resume``).
+"""

@@ -1,0 +1,123 @@
+"""The checkpoint of a boundary-value run, so that a stopped one continues where it stopped.
+
+A boundary-value run keeps ``<out>/checkpoint/`` (a
+:class:`~granular_material.runs.checkpoint.RunCheckpoint`): the scene it was started with,
+every committed step's row, Gauss-point table and displacement, and the committed state of
+solver and material, saved by elapsed time (a cheap save after every step, an expensive one
+— thousands of RVEs with their contacts — at most about a tenth of the run's time, and at
+the latest every ten minutes). A run that reaches its last step removes it; one stopped by
+Ctrl-C, a kill or a step that did not converge keeps it, and
+``run_boundary_value(spec, resume=True)`` (``granular-material run SCENE --resume``) continues
+from its last saved state: the tables, fields and figures are those of a run that never
+stopped. A folder holding a stopped run's checkpoint is refused to a fresh run, so that hours
+of work are not thrown away by a run started twice.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+
+from granular_material.runs.boundary_value.spec import BoundaryValueSpec
+from granular_material.runs.checkpoint import CheckpointError, RunCheckpoint, SavedRun
+from granular_material.runs.spec import SpecError
+
+__all__ = ["RESUME_FREE", "check_not_stopped", "open_bvp_checkpoint", "remember",
+           "scene_record"]
+
+#: the scene's fields a resume may change: where it writes, how it reports, the device and
+#: the CPU shards (none changes a result beyond the DEM's float rounding)
+RESUME_FREE = frozenset({"out", "progress", "device", "shards", "fields"})
+#: minutes between saves of the committed state at the latest
+SAVE_MINUTES = 10.0
+
+
+def scene_record(spec: BoundaryValueSpec) -> dict[str, Any]:
+    """``spec`` as JSON values (paths as text), as a checkpoint records and compares it."""
+    return json.loads(json.dumps(asdict(spec), default=str))
+
+
+def _same(now: Any, then: Any) -> bool:
+    """``now`` equals ``then``, where a key missing from a table of either counts as None (a
+    field added since the checkpoint was written, at its default None, is no difference)."""
+    if isinstance(now, dict) and isinstance(then, dict):
+        return all(_same(now.get(k), then.get(k)) for k in set(now) | set(then))
+    if isinstance(now, list) and isinstance(then, list):
+        return len(now) == len(then) and all(map(_same, now, then))
+    return now == then
+
+
+def _differences(now: dict[str, Any], then: dict[str, Any]) -> list[str]:
+    keys = sorted((set(now) | set(then)) - RESUME_FREE)
+    return [k for k in keys if not _same(now.get(k), then.get(k))]
+
+
+def _checkpoint(out: Path) -> RunCheckpoint:
+    return RunCheckpoint(Path(out) / "checkpoint", every=None, minutes=SAVE_MINUTES)
+
+
+def check_not_stopped(spec: BoundaryValueSpec, out: Path) -> None:
+    """:class:`SpecError` on ``out`` when it holds the checkpoint of a stopped run (a fresh
+    run there would throw it away)."""
+    checkpoint = _checkpoint(out)
+    if checkpoint.has_state():
+        step = checkpoint.saved_step()
+        raise SpecError("out", f"{out} holds a boundary-value run stopped after load step "
+                               f"{step} of {spec.steps} (its checkpoint): continue it with "
+                               "`resume`, or write to another folder (delete its checkpoint "
+                               "folder to start it afresh)")
+
+
+def open_bvp_checkpoint(spec: BoundaryValueSpec, out: Path | None, resume: bool,
+                        ) -> tuple[RunCheckpoint | None, SavedRun | None]:
+    """The checkpoint of the run of ``spec`` in ``out``, and what it saved when resuming
+    (None, None for a run that writes nothing; such a run cannot be resumed).
+
+    ``resume``: the saved run, checked whole and against ``spec`` (:class:`SpecError`
+    naming the fields that differ; none saved yet: None, the run starts from step 0). A
+    fresh run into a folder whose checkpoint holds a stopped run is refused
+    (:class:`SpecError` on ``out``); an empty or finished one is started afresh.
+    """
+    if out is None:
+        if resume:
+            raise SpecError("out", "resume needs the run folder of the run to continue")
+        return None, None
+    checkpoint = _checkpoint(out)
+    record = scene_record(spec)
+    if not resume:
+        check_not_stopped(spec, out)
+        checkpoint.start({"scene": record})
+        return checkpoint, None
+    if not checkpoint.has_options():
+        raise SpecError("out", f"{out} holds no boundary-value run to resume (no "
+                               "checkpoint/options.json)")
+    saved_scene = checkpoint.read_options().get("scene")
+    if not isinstance(saved_scene, dict):
+        raise SpecError("out", f"{out}'s checkpoint is not a boundary-value run's")
+    differ = _differences(record, saved_scene)
+    if differ:
+        raise SpecError(differ[0], f"the scene differs from the one the run in {out} was "
+                                   f"started with in {', '.join(differ)}: resume it with "
+                                   "the same scene (nothing in the folder was changed)")
+    if not checkpoint.has_state():
+        return checkpoint, None
+    try:
+        return checkpoint, checkpoint.load()
+    except CheckpointError as exc:
+        raise SpecError("out", f"cannot resume: {exc}") from None
+
+
+def remember(checkpoint: RunCheckpoint | None, name: str,
+             values: dict[str, float] | None = None) -> dict[str, float]:
+    """``values`` (numbers by name) kept in the checkpoint as table ``name``; without
+    ``values``, those it kept ({} where none)."""
+    if values is not None:
+        if checkpoint is not None:
+            checkpoint.save_table(name, pd.DataFrame([values]))
+        return values
+    table = None if checkpoint is None else checkpoint.load_table(name)
+    return {} if table is None else {k: float(v) for k, v in table.iloc[0].items()}

@@ -1,0 +1,404 @@
+"""Run a boundary-value problem
+(:class:`~granular_material.runs.boundary_value.spec.BoundaryValueSpec`):
+build the mesh, boundaries, conditions and initial state, the material at every Gauss point,
+and step the Newton solver through the loading, writing as it goes.
+
+The run folder gets:
+
+- ``steps.csv``: one row per committed step (step 0 is the initial state): the load factor,
+  Newton's iterations, cut-backs and residuals, the wall time, the failed and unconfined
+  points, and for every boundary that carries a condition its force ``{name}_force_x``,
+  ``{name}_force_y`` [N/m] (the reaction of the supports on the body, or the load a pressure
+  puts on it) and its mean displacement ``{name}_displacement_x``, ``_y`` [m]; a rigid body
+  also ``{name}_displacement`` [m] along its motion (a footing pushed down: its settlement,
+  also as ``{name}_settlement``);
+- ``points.csv``: every Gauss point at every step (coordinates, stress [Pa], strain, shear
+  strain, mean pressure, the material's own fields such as the void ratio), appended a step
+  at a time before that step's ``steps.csv`` row (a killed run: read both with
+  :func:`~granular_material.results.writers.read_run_tables`);
+- ``fields.xdmf``: the same for ParaView at every committed step (XML, no HDF5 needed);
+- ``load_displacement.png``, ``mechanism.png`` and ``summary.json``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from granular_material.fem import NewtonError, NewtonSolver, PointStatus, StepRecord
+from granular_material.fem.boundary_value.boundaries import select_boundaries
+from granular_material.fem.boundary_value.conditions import (
+    Displacement,
+    Fixed,
+    Gravity,
+    Pressure,
+    RigidBody,
+    Roller,
+    build_problem,
+)
+from granular_material.fem.boundary_value.initial_stress import geostatic_stress
+from granular_material.fem.boundary_value.meshes import MeshData, read_mesh, rectangle_mesh
+from granular_material.multiscale.confinement import UNCONFINED_FRACTION
+from granular_material.results.bvp_plots import plot_load_displacement, plot_mechanism
+from granular_material.results.writers import FieldWriter, write_csv, write_json
+from granular_material.runs.boundary_value.checks import check_disk, check_memory, generated_size
+from granular_material.runs.boundary_value.material import material_for_problem, unit_weight_of
+from granular_material.runs.boundary_value.resume import open_bvp_checkpoint, remember
+from granular_material.runs.boundary_value.spec import BoundaryValueSpec, ConditionSpec
+from granular_material.runs.run_folder import interrupted_error
+from granular_material.runs.spec import SpecError
+
+__all__ = [
+    "BVPOutcome",
+    "Built",
+    "boundary_length",
+    "build",
+    "run_boundary_value",
+]
+
+
+@dataclass
+class BVPOutcome:
+    """What a boundary-value run produced.
+
+    Attributes:
+        steps: the steps table (see the module docstring).
+        summary: what ``summary.json`` holds.
+        error: why the run stopped short (None: it reached the end).
+        points: the Gauss-point table of the last committed step.
+        u: the last committed nodal displacement [m].
+    """
+
+    steps: pd.DataFrame
+    summary: dict[str, Any]
+    error: str | None = None
+    points: pd.DataFrame = field(default_factory=pd.DataFrame)
+    u: np.ndarray = field(default_factory=lambda: np.zeros(0))
+
+
+def _mesh(spec: BoundaryValueSpec) -> MeshData:
+    m = spec.mesh
+    if m.file is not None:
+        data = read_mesh(m.file)
+    else:
+        data = rectangle_mesh(m.size[0], m.size[1], m.elements[0], m.elements[1], m.element,
+                              grading=m.grading)
+        _align(data, 0, m.align_x)
+        _align(data, 1, m.align_y)
+    aliases = {name: data.boundaries[value] for name, value in spec.boundaries.items()
+               if value in data.boundaries}
+    predicates = {name: value for name, value in spec.boundaries.items() if name not in aliases}
+    return select_boundaries(data.with_boundaries(aliases), predicates)
+
+
+def _align(data: MeshData, axis: int, values: tuple[float, ...]) -> None:
+    """Move the grid line of a generated mesh nearest each of ``values`` [m] onto it (along
+    ``axis``), in place; refused where that would fold an element."""
+    p = data.mesh.p
+    for value in values:
+        lines = np.unique(p[axis])
+        if not lines[0] < value < lines[-1]:  # the mesh's own edges stay where they are
+            raise SpecError("mesh.align-" + "xy"[axis], f"{value:g} m lies outside the mesh "
+                                                        f"({lines[0]:g} to {lines[-1]:g} m)")
+        k = int(np.argmin(np.abs(lines - value)))
+        low = lines[k - 1] if k > 0 else -np.inf
+        high = lines[k + 1] if k + 1 < lines.size else np.inf
+        if not low < value < high:
+            raise SpecError("mesh.align-" + "xy"[axis], f"{value:g} m lies outside the mesh or "
+                                                        "would fold an element")
+        p[axis, p[axis] == lines[k]] = value
+
+
+def _condition(c: ConditionSpec) -> Any:
+    if c.type == "fixed":
+        return Fixed(c.boundary)
+    if c.type == "roller":
+        return Roller(c.boundary, c.component)
+    if c.type == "displacement":
+        return Displacement(c.boundary, c.component, c.value)
+    if c.type == "rigid":
+        return RigidBody(c.boundary, displacement=tuple(c.displacement), rough=c.rough)
+    return Pressure(c.boundary, c.value, c.end)
+
+
+def _initial_stress(spec: BoundaryValueSpec, xy: np.ndarray, unit_weight: float,
+                    top: float) -> np.ndarray:
+    """The initial Cauchy stress [Pa] (n, 2, 2), tension positive."""
+    s = spec.initial
+    if s.state == "uniform":
+        return np.broadcast_to(-s.pressure * np.eye(2), (xy.shape[0], 2, 2)).copy()
+    surface = top if s.surface is None else s.surface
+    return geostatic_stress(xy, surface, unit_weight, s.surcharge, s.k0)
+
+
+@dataclass
+class Built:
+    """The pieces of a boundary-value run before it steps (see :func:`build`)."""
+
+    spec: BoundaryValueSpec
+    mesh: MeshData
+    problem: Any
+    initial_stress: np.ndarray
+    unit_weight: float
+    material: Any
+    settings: Any
+    moved: dict[str, np.ndarray]  # rigid body / displacement name -> unit direction
+    preparation_s: float = 0.0  # seconds to build and allocate the material
+
+
+def build(spec: BoundaryValueSpec, allocate: bool = True) -> Built:
+    """Mesh, problem, initial stress and material of ``spec`` (no step taken; the material
+    not allocated, its RVEs not prepared, unless ``allocate``)."""
+    if spec.mesh.file is None:  # a generated mesh: checked before it is made
+        check_memory(spec, *generated_size(spec))
+    mesh = _mesh(spec)
+    check_memory(spec, mesh.n_elements, mesh.element)
+    conditions = [_condition(c) for c in spec.conditions]
+    unit_weight = unit_weight_of(spec)
+    start, end = (f * unit_weight for f in spec.gravity_factor or (1.0, 1.0))
+    if start > 0 or end > 0:
+        conditions.append(Gravity(start, end=end))
+    problem = build_problem(mesh, conditions, spec.mesh.quadrature)
+    xy = problem.points
+    top = mesh.bounding_box[3]
+    sigma0 = _initial_stress(spec, xy, start, top)  # in equilibrium with step 0's weight
+    t0 = time.perf_counter()
+    material = material_for_problem(spec, xy.shape[0], sigma0, allocate)
+    preparation = time.perf_counter() - t0
+    noisy = bool(getattr(type(material), "noisy", False))
+    settings = spec.newton.settings(noisy)
+    stress_tol = spec.newton.stress_tolerance(noisy, spec.reference_pressure)
+    if stress_tol > 0:
+        settings = replace(settings, atol=problem.force_tolerance(stress_tol))
+    moved = {}
+    for c in spec.conditions:
+        if c.type == "rigid":
+            d = np.asarray(c.displacement, dtype=float)
+            moved[c.boundary] = d / max(float(np.linalg.norm(d)), 1e-300)
+        elif c.type == "displacement":
+            direction = np.zeros(2)
+            direction[c.component] = math.copysign(1.0, c.value) if c.value else 1.0
+            moved[c.boundary] = direction
+    return Built(spec, mesh, problem, sigma0, unit_weight, material, settings, moved,
+                 preparation)
+
+
+def _rows(b: Built, solver: NewtonSolver, record: StepRecord | None, p0: np.ndarray,
+          ) -> tuple[dict[str, Any], pd.DataFrame]:
+    problem = b.problem
+    kin = solver.kinematics
+    grad = solver.grad_u()
+    strain = kin.strain(grad)
+    stress = solver.response.stress
+    pressure = -0.5 * np.trace(stress, axis1=1, axis2=2)
+    failed = np.asarray(solver.response.status) != PointStatus.OK
+    unconfined = pressure < UNCONFINED_FRACTION * p0
+    reaction = solver.reaction
+    _, f_ext = solver.loading.at(solver.load_factor, solver.u if kin.finite else None)
+    step = record.step if record else 0
+    row: dict[str, Any] = {
+        "step": step, "load_factor": solver.load_factor,
+        "iterations": record.iterations if record else 0,
+        "cutbacks": record.cutbacks if record else 0,
+        "stalled": record.stalled if record else 0,
+        "wall_time": record.wall_time if record else 0.0,
+        "failed_points": int(failed.sum()), "unconfined_points": int(unconfined.sum()),
+        "residual_history": json.dumps(record.residual_history if record else []),
+        # the material's costs (step 0: none spent, under the names its evaluations use)
+        **(dict(record.costs) if record else dict.fromkeys(solver.response.costs, 0)),
+    }
+    for name in sorted({c.boundary for c in b.spec.conditions}):
+        loaded = any(c.boundary == name and c.type == "pressure" for c in b.spec.conditions)
+        fx, fy = problem.boundary_force(name, f_ext if loaded else reaction)
+        ux, uy = problem.boundary_displacement(name, solver.u)
+        row.update({f"{name}_force_x": fx, f"{name}_force_y": fy,
+                    f"{name}_displacement_x": ux, f"{name}_displacement_y": uy})
+        if name in b.moved:
+            along = float(b.moved[name] @ np.array([ux, uy]))
+            row[f"{name}_displacement"] = along
+            if b.moved[name][1] < -0.5:
+                row[f"{name}_settlement"] = along
+    xy = problem.points
+    nqp = problem.basis.X.shape[-1]
+    fields = {k: np.asarray(v, dtype=float) for k, v in solver.response.fields.items()}
+    w = strain
+    points = pd.DataFrame({
+        "step": step, "point": np.arange(len(stress)),
+        "element": np.arange(len(stress)) // nqp, "x": xy[:, 0], "y": xy[:, 1],
+        "sxx": stress[:, 0, 0], "syy": stress[:, 1, 1], "sxy": stress[:, 0, 1],
+        "exx": w[:, 0, 0], "eyy": w[:, 1, 1], "exy": w[:, 0, 1],
+        "volumetric_strain": np.trace(w, axis1=1, axis2=2),
+        "shear_strain": np.hypot(w[:, 0, 0] - w[:, 1, 1], 2 * w[:, 0, 1]),
+        "rotation": 0.5 * (grad[:, 1, 0] - grad[:, 0, 1]),
+        "mean_pressure": pressure, "unconfined": unconfined.astype(np.int8),
+        "failed": failed.astype(np.int8), **fields,
+    })
+    return row, points
+
+
+def _where(points: pd.DataFrame, column: str) -> str:
+    """Where the points flagged in ``column`` are: their count and bounding box."""
+    flagged = points[points[column] > 0]
+    if flagged.empty:
+        return ""
+    return (f"{len(flagged)} points in x {flagged.x.min():.3g}–{flagged.x.max():.3g} m, "
+            f"y {flagged.y.min():.3g}–{flagged.y.max():.3g} m")
+
+
+def run_boundary_value(spec: BoundaryValueSpec, out: Path | None = None,
+                       resume: bool = False) -> BVPOutcome:
+    """Run ``spec`` into ``out`` (default ``spec.out``; None: nothing written) and return
+    what it produced. A Newton failure or Ctrl-C stops the run with the committed steps kept
+    and written (``error`` says why), and its checkpoint in ``out/checkpoint``; ``resume``
+    continues such a run (:mod:`~granular_material.runs.boundary_value.resume`)."""
+    t_start = time.perf_counter()
+    out = out if out is not None else spec.out
+    if out is not None:
+        out = Path(out)
+        if out.exists() and not out.is_dir():
+            raise SpecError("out", f"{out} is a file, not a folder")
+        check_disk(spec, next(p for p in (out, *out.absolute().parents) if p.exists()),
+                   _mesh)
+    checkpoint, saved = open_bvp_checkpoint(spec, out, resume)
+    b = build(spec, allocate=saved is None)
+    if saved is not None:
+        b.material.restore(saved.material_path)
+    problem = b.problem
+    solver = NewtonSolver(problem.basis, b.material, problem.loading, b.settings)
+    if saved is not None:
+        solver.resume(saved.state)
+    p0 = np.maximum(-0.5 * np.trace(b.initial_stress, axis1=1, axis2=2), 1e-300)
+    rows: list[dict[str, Any]] = []
+    last: dict[str, Any] = {}
+    writer = None
+    if out is not None:
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "points.csv").unlink(missing_ok=True)
+        if spec.fields:
+            writer = FieldWriter(out / "fields.xdmf", problem).__enter__()
+
+    def keep(row: dict[str, Any], points: pd.DataFrame, u: np.ndarray) -> None:
+        rows.append(row)
+        last.update(points=points, u=u.copy())
+        if out is not None:
+            first = row["step"] == 0
+            write_csv(points, out / "points.csv", append=not first)
+            write_csv(pd.DataFrame([row]), out / "steps.csv",  # last: the step's commit
+                      append=not first)
+            if writer is not None:
+                writer.write(float(row["load_factor"]), u, points)
+
+    def collect(s: NewtonSolver, record: StepRecord | None) -> None:
+        row, points = _rows(b, s, record, p0)
+        keep(row, points, s.u)
+        if checkpoint is not None:
+            checkpoint.save_step(row, points, s.u, None)
+            if checkpoint.due(int(row["step"]), spec.steps):
+                checkpoint.save_state(int(row["step"]), solver, b.material)
+
+    t_initial = time.perf_counter()
+    if saved is None:
+        collect(solver, None)
+        initial_residual = remember(checkpoint, "initial_residual", _initial_residual(solver))
+    else:
+        for step in saved.steps:
+            keep(step.row, step.points, step.u)
+        initial_residual = remember(checkpoint, "initial_residual")
+    t_initial = time.perf_counter() - t_initial
+    error = None
+    try:
+        solver.run(spec.steps, on_step=collect, progress=spec.progress,
+                   description=f"{spec.name} ({problem.basis.nelems} elements)",
+                   done=0 if saved is None else saved.step)
+    except NewtonError as exc:
+        error = str(exc)
+    except KeyboardInterrupt:
+        error = interrupted_error(len(rows) - 1, spec.steps)
+    finally:
+        if writer is not None:
+            writer.__exit__(None, None, None)
+    steps = pd.DataFrame(rows)
+    summary = _summary(b, solver, steps, last.get("points", pd.DataFrame()), error,
+                       initial_residual, t_initial, time.perf_counter() - t_start)
+    summary["resumed_from_step"] = None if saved is None else saved.step
+    if checkpoint is not None and error is None:
+        checkpoint.remove()  # finished: nothing to resume
+    if out is not None:
+        _figures(b, steps, last, out)
+        summary["out"] = str(out)
+        write_json(summary, out / "summary.json")
+    return BVPOutcome(steps, summary, error, last.get("points", pd.DataFrame()),
+                      last.get("u", np.zeros(0)))
+
+
+def _initial_residual(solver: NewtonSolver) -> dict[str, float]:
+    """‖R‖ [N/m] of the initial state at λ = 0 over the free dofs, against ‖f_ext‖: zero when
+    the initial stress is in equilibrium with the loads (a geostatic start)."""
+    _, f_ext = solver.loading.at(0.0, solver.u if solver.kinematics.finite else None)
+    residual = solver.f_int - f_ext
+    free = np.ones(residual.size, dtype=bool)
+    free[solver.loading.dirichlet_dofs] = False
+    norm = float(np.linalg.norm(residual[free]))
+    scale = float(np.linalg.norm(f_ext[free])) or float(np.linalg.norm(solver.f_int)) or 1.0
+    return {"norm": norm, "relative": norm / scale, "newton_atol": solver.settings.atol}
+
+
+def _summary(b: Built, solver: NewtonSolver, steps: pd.DataFrame, points: pd.DataFrame,
+             error: str | None, initial: dict[str, float], t_initial: float,
+             wall: float) -> dict[str, Any]:
+    spec = b.spec
+    timings: dict[str, float] = {"preparation": b.preparation_s, "initial_state": t_initial}
+    for record in solver.records:
+        for name, seconds in record.timings.items():
+            timings[name] = timings.get(name, 0.0) + seconds
+        timings["steps"] = timings.get("steps", 0.0) + record.wall_time
+    last = steps.iloc[-1].to_dict() if len(steps) else {}
+    bodies = {name: {"force_x": last.get(f"{name}_force_x"),
+                     "force_y": last.get(f"{name}_force_y"),
+                     "displacement": last.get(f"{name}_displacement")}
+              for name in b.moved}
+    return {
+        "name": spec.name, "mesh": b.mesh.source, "element": b.mesh.element,
+        "elements": int(b.problem.basis.nelems),
+        "gauss_points": int(b.initial_stress.shape[0]),
+        "material": spec.material.name, "unit_weight": b.unit_weight,
+        "gravity_factor": list(spec.gravity_factor or (1.0, 1.0)),
+        "initial_state": spec.initial.state, "initial_residual": initial,
+        "steps": int(len(steps) - 1), "steps_planned": spec.steps, "error": error,
+        "iterations": [int(i) for i in steps["iterations"].iloc[1:]],
+        "failed_points_last": int(last.get("failed_points", 0)),
+        "unconfined_points_last": int(last.get("unconfined_points", 0)),
+        "unconfined_where": _where(points, "unconfined") if len(points) else "",
+        "bodies": bodies, "timing_s": {k: round(v, 3) for k, v in timings.items()},
+        "wall_s": round(wall, 3),
+    }
+
+
+def _figures(b: Built, steps: pd.DataFrame, last: dict[str, Any], out: Path) -> None:
+    if len(steps) < 2 or "points" not in last:
+        return
+    bodies = []
+    for name, direction in b.moved.items():
+        axis = "y" if abs(direction[1]) >= abs(direction[0]) else "x"
+        bodies.append((name, axis, boundary_length(b.mesh, name)))
+    if bodies:
+        plot_load_displacement(steps, bodies, out / "load_displacement.png")
+    xy, cells, kind, dofs = b.problem.nodes()
+    u = last["u"]
+    gamma = last["points"].groupby("element")["shear_strain"].mean().to_numpy()
+    plot_mechanism(xy, cells, kind, u[dofs[0]], u[dofs[1]], gamma, out / "mechanism.png",
+                   title=f"{b.spec.name}: shear strain at step {int(steps['step'].iloc[-1])}")
+
+
+def boundary_length(mesh: MeshData, name: str) -> float:
+    """The reference length [m] of the boundary ``name`` (the sum of its facets')."""
+    m = mesh.mesh
+    ends = m.facets[:, mesh.boundaries[name]]
+    return float(np.linalg.norm(m.p[:, ends[0]] - m.p[:, ends[1]], axis=0).sum())
