@@ -43,8 +43,8 @@ import pandas as pd
 
 from granular_material.dem import DEMBatch, RVEData
 from granular_material.dem.batch import BatchSnapshot
-from granular_material.dem.condensed import condensed_tangent
-from granular_material.dem.condensed_cg import condensed_tangent_cg
+from granular_material.dem.condensed.cg import condensed_tangent_cg
+from granular_material.dem.condensed.tangent import condensed_tangent
 from granular_material.procedures import drive_grad_u, prepare_packing
 from granular_material.results.compare import markdown_table
 

@@ -108,7 +108,7 @@ def measure_physics(rve: Path, n_rve: int, seconds: float, repeats: int, device:
 
     wp.config.quiet = True
     from granular_material.dem import DEMBatch, load_rve
-    from granular_material.dem.kernels import StepFeatures
+    from granular_material.dem.kernels.sets import StepFeatures
     from granular_material.procedures.strain_path import DEFAULT_STRAIN_PER_STEP
 
     data = load_rve(rve).replicate(n_rve)
@@ -152,7 +152,7 @@ def measure_compile(device: str | None, dtype: str) -> dict[str, float]:
     import warp as wp
 
     wp.config.quiet = True
-    from granular_material.dem.kernels import StepFeatures, kernels_for, step_kernels_for
+    from granular_material.dem.kernels.sets import StepFeatures, kernels_for, step_kernels_for
     from granular_material.dem.model import resolve_device
 
     seconds = {}

@@ -168,8 +168,8 @@ def run_variant(scene: Path, name: str, tables: dict[str, dict[str, Any]], steps
                 particles: int | None, out: Path,
                 elements: tuple[int, int] | None = None) -> dict[str, Any]:
     """One variant: run it with its work counted; its results (and ``OUT/NAME/``)."""
-    from granular_material.runs.bvp_runner import run_boundary_value
-    from granular_material.runs.bvp_spec import bvp_from_dict
+    from granular_material.runs.boundary_value.runner import run_boundary_value
+    from granular_material.runs.boundary_value.spec import bvp_from_dict
 
     data = scene_data(scene, steps, particles, tables, elements)
     spec = bvp_from_dict(data, scene.parent)

@@ -25,11 +25,11 @@ rtol 1e-6 on stress for float64, 1e-3 for float32). The same device on both side
 against itself) checks the piece itself: every difference is then zero.
 ``condensed`` drives B copies of one packing as ``agreement`` does (on the CPU), then
 computes their condensed tangents by scipy's LU on the host and by the warp CG on
-``--device`` (``granular_material.dem.condensed_cg``): ``condensed.json`` holds the largest
+``--device`` (``granular_material.dem.condensed.cg``): ``condensed.json`` holds the largest
 relative difference max|ΔC|/max|C| per RVE (tolerance 1e-8), the CG's iterations, both
 paths' seconds (the CG's split into its assembly on the host and its solve, timed after a
 first call has compiled the kernels), the same with the systems assembled on ``--device``
-from the batch's own arrays (``granular_material.dem.condensed_device``; its difference to
+from the batch's own arrays (``granular_material.dem.condensed.device``; its difference to
 the LU too) and, beside them, 200 DEM steps of the same batch on ``--device``.
 ``--sliding`` is the contacts at their Coulomb cap (``free``: no tangential stiffness,
 ``--tangent condensed``; ``stick``: kt, ``--tangent condensed-sticking``).
@@ -163,9 +163,9 @@ def condensed(out: Path, device: str = "cuda", n_rve: int = 8, particles: int = 
     scipy's LU; writes ``condensed.json`` under ``out`` and returns it."""
     verbose(False)
     from granular_material.dem import DEMBatch
-    from granular_material.dem.condensed import condensed_tangent
-    from granular_material.dem.condensed_cg import condensed_tangent_cg
-    from granular_material.dem.condensed_device import condensed_tangent_of_batch
+    from granular_material.dem.condensed.cg import condensed_tangent_cg
+    from granular_material.dem.condensed.device import condensed_tangent_of_batch
+    from granular_material.dem.condensed.tangent import condensed_tangent
     from granular_material.procedures import drive_grad_u, prepare_packing
     from granular_material.procedures.packing import DEFAULT_PRESSURE
     from granular_material.results import write_json
@@ -297,7 +297,7 @@ def block_specimen(cli_arguments: list[str]) -> int:
     verbose(False)
     from granular_material.cli import main as cli_main
     from granular_material.dem import solver
-    from granular_material.dem.kernels_block import BLOCK_DISCS
+    from granular_material.dem.kernels.block import BLOCK_DISCS
 
     taken = []
 

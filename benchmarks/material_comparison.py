@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import re
 import statistics
 import subprocess
@@ -39,8 +38,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-import pandas as pd
+from material_comparison_measures import material_file  # beside this script
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -52,8 +50,6 @@ FOOTING_SCENE = ROOT / "examples" / "scenes" / "footing-gz2016-cpu.toml"
 #: Guo & Zhao's RVE material (the footing scene's), as ``prepare`` options
 GZ_MATERIAL = ("--law", "frictmat", "--young", "6e8", "--kt-over-kn", "0.8", "--radius-min",
                "3e-3", "--radius-max", "7e-3", "--friction-angle", "0.5", "--damping", "0.1")
-#: γmax/γmean [-] above which a specimen counts as localised
-LOCALISED = 2.0
 
 
 @dataclass(frozen=True)
@@ -80,64 +76,6 @@ SMOKE = Scale(discs=16, rves=2, axial_strain=0.03, element_steps=6, specimen_ste
               footing_elements=(4, 3), footing_settlement=0.0015, footing_particles=16)
 
 
-# -- pure helpers (tested) -----------------------------------------------------------------
-def prandtl_nq(phi_deg: float) -> float:
-    """Prandtl's bearing capacity factor N_q = e^(π tan φ) tan²(45° + φ/2) of φ [deg]."""
-    phi = math.radians(phi_deg)
-    return math.exp(math.pi * math.tan(phi)) * math.tan(math.pi / 4 + phi / 2) ** 2
-
-
-def band_angles(phi_deg: float, psi_deg: float) -> dict[str, float]:
-    """Shear-band inclinations [deg] to the minor principal stress direction: Coulomb
-    45° + φ/2, Roscoe 45° + ψ/2, Arthur 45° + (φ + ψ)/4."""
-    return {"coulomb": 45 + phi_deg / 2, "roscoe": 45 + psi_deg / 2,
-            "arthur": 45 + (phi_deg + psi_deg) / 4}
-
-
-def localisation_series(points: pd.DataFrame) -> pd.DataFrame:
-    """Per step of a Gauss-point table (``step``, ``axial_strain``, ``shear_strain``):
-    γmax/γmean and the first step at which it passes :data:`LOCALISED` (``onset``)."""
-    g = points.groupby("step")
-    out = pd.DataFrame({"axial_strain": g["axial_strain"].first(),
-                        "gamma_max": g["shear_strain"].max(),
-                        "gamma_mean": g["shear_strain"].mean()}).reset_index()
-    with np.errstate(invalid="ignore", divide="ignore"):
-        out["ratio"] = np.where(out["gamma_mean"] > 0, out["gamma_max"] / out["gamma_mean"],
-                                1.0)
-    return out
-
-
-def onset_strain(series: pd.DataFrame, threshold: float = LOCALISED) -> float | None:
-    """Axial strain [-] at which ``ratio`` first reaches ``threshold`` (None: never)."""
-    hit = series[series["ratio"] >= threshold]
-    return float(hit["axial_strain"].iloc[0]) if len(hit) else None
-
-
-def quadrant_angles(points: pd.DataFrame, step: int, fraction: float = 0.3) -> list[float]:
-    """|Inclination| [deg] of the band in each quadrant about the specimen's centre at
-    ``step`` (the top ``fraction`` of each quadrant's γ; see
-    :func:`~granular_material.results.localization.shear_band`): each arm of an X of
-    conjugate bands, where one axis for the whole specimen is none of them."""
-    from granular_material.results.localization import shear_band
-
-    at = points[points["step"] == step]
-    cx, cy = (at["x"].min() + at["x"].max()) / 2, (at["y"].min() + at["y"].max()) / 2
-    out = []
-    for right in (False, True):
-        for top in (False, True):
-            q = at[((at["x"] > cx) == right) & ((at["y"] > cy) == top)]
-            if len(q) >= 4:
-                out.append(abs(shear_band(q, step, fraction).inclination_deg))
-    return out
-
-
-def bearing_curve(steps: pd.DataFrame, half_width: float) -> pd.DataFrame:
-    """Settlement [m] and bearing pressure [Pa] (−footing_force_y / B) of a footing run's
-    ``steps.csv`` on a half domain of footing half-width ``half_width`` [m]."""
-    return pd.DataFrame({"settlement": steps["footing_settlement"].to_numpy(float),
-                         "pressure": -steps["footing_force_y"].to_numpy(float) / half_width})
-
-
 def scene_with(text: str, material: str, parameters: dict[str, Any],
                overrides: dict[str, str] | None = None) -> str:
     """A scene's TOML text with its ``[material]`` tables replaced by ``material`` and its
@@ -159,11 +97,6 @@ def scene_with(text: str, material: str, parameters: dict[str, Any],
     table = [f'[material]\nname = "{material}"', "[material.parameters]"]
     table += [f"{k} = {json.dumps(v)}" for k, v in parameters.items()]
     return body.rstrip() + "\n\n" + "\n".join(table) + "\n"
-
-
-def material_file(path: Path) -> dict[str, float]:
-    """The parameters of a material file ``calibrate`` writes."""
-    return tomllib.loads(path.read_text(encoding="utf-8"))
 
 
 # -- running the commands ------------------------------------------------------------------

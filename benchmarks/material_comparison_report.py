@@ -16,7 +16,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
-from material_comparison import (
+from material_comparison_measures import (
     LOCALISED,
     band_angles,
     bearing_curve,

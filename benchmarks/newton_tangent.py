@@ -44,7 +44,7 @@ import pandas as pd
 
 from granular_material.dem import DEMBatch, Homogenized, RVEData
 from granular_material.dem.batch import BatchSnapshot
-from granular_material.dem.condensed import condensed_tangent
+from granular_material.dem.condensed.tangent import condensed_tangent
 from granular_material.dem.homogenization import objective_tangent
 from granular_material.procedures import biaxial_test, drive_grad_u, prepare_packing
 from granular_material.results.compare import markdown_table

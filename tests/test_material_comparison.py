@@ -1,4 +1,5 @@
-"""benchmarks/material_comparison.py: its pure helpers, and its stages at smoke size."""
+"""benchmarks/material_comparison.py: its measures (material_comparison_measures.py), and its
+stages at smoke size."""
 
 from __future__ import annotations
 
@@ -20,30 +21,30 @@ else:  # Python 3.10
 BENCH = Path(__file__).resolve().parents[1] / "benchmarks"
 
 
-def _module():
+def _module(name: str):
     sys.path.insert(0, str(BENCH))
-    spec = importlib.util.spec_from_file_location("material_comparison",
-                                                  BENCH / "material_comparison.py")
+    spec = importlib.util.spec_from_file_location(name, BENCH / f"{name}.py")
     module = importlib.util.module_from_spec(spec)
-    sys.modules["material_comparison"] = module
+    sys.modules[name] = module
     spec.loader.exec_module(module)
     return module
 
 
-mc = _module()
+mc = _module("material_comparison")
+measures = _module("material_comparison_measures")
 
 
 def test_prandtl_nq_closed_form() -> None:
     """N_q(0) = 1; N_q(30°) = 18.40 (the textbook value); it grows with φ."""
-    assert mc.prandtl_nq(0.0) == pytest.approx(1.0)
-    assert mc.prandtl_nq(30.0) == pytest.approx(18.401, abs=1e-3)
-    assert mc.prandtl_nq(40.0) == pytest.approx(64.195, abs=1e-3)
-    assert mc.prandtl_nq(35.8) > mc.prandtl_nq(22.4)
+    assert measures.prandtl_nq(0.0) == pytest.approx(1.0)
+    assert measures.prandtl_nq(30.0) == pytest.approx(18.401, abs=1e-3)
+    assert measures.prandtl_nq(40.0) == pytest.approx(64.195, abs=1e-3)
+    assert measures.prandtl_nq(35.8) > measures.prandtl_nq(22.4)
 
 
 def test_band_angles() -> None:
     """Coulomb, Roscoe and Arthur for φ = 30°, ψ = 10°; Arthur is their mean."""
-    a = mc.band_angles(30.0, 10.0)
+    a = measures.band_angles(30.0, 10.0)
     assert a == {"coulomb": 60.0, "roscoe": 50.0, "arthur": 55.0}
 
 
@@ -59,13 +60,13 @@ def _points(gamma_by_step: list[list[float]]) -> pd.DataFrame:
 def test_localisation_series_and_onset() -> None:
     """A uniform field stays at γmax/γmean = 1 (never localised); one point running away
     reaches the threshold at the step it first does."""
-    uniform = mc.localisation_series(_points([[0, 0, 0, 0], [1, 1, 1, 1], [2, 2, 2, 2]]))
+    uniform = measures.localisation_series(_points([[0, 0, 0, 0], [1, 1, 1, 1], [2, 2, 2, 2]]))
     np.testing.assert_allclose(uniform["ratio"], 1.0)
-    assert mc.onset_strain(uniform) is None
-    growing = mc.localisation_series(_points([[0, 0, 0, 0], [1, 1, 1, 1.5], [1, 1, 1, 5]]))
+    assert measures.onset_strain(uniform) is None
+    growing = measures.localisation_series(_points([[0, 0, 0, 0], [1, 1, 1, 1.5], [1, 1, 1, 5]]))
     np.testing.assert_allclose(growing["ratio"], [1.0, 1.5 / 1.125, 5 / 2])
-    assert mc.onset_strain(growing) == pytest.approx(0.02)
-    assert mc.onset_strain(growing, threshold=1.3) == pytest.approx(0.01)
+    assert measures.onset_strain(growing) == pytest.approx(0.02)
+    assert measures.onset_strain(growing, threshold=1.3) == pytest.approx(0.01)
 
 
 def test_quadrant_angles_of_an_x() -> None:
@@ -77,7 +78,7 @@ def test_quadrant_angles_of_an_x() -> None:
     d = np.minimum(np.abs(y - t * x), np.abs(y + t * x)) / math.hypot(1, t)
     points = pd.DataFrame({"step": 3, "axial_strain": 0.05, "x": x, "y": y,
                            "shear_strain": np.exp(-(d / 0.05) ** 2)})
-    angles = mc.quadrant_angles(points, 3, fraction=0.1)
+    angles = measures.quadrant_angles(points, 3, fraction=0.1)
     assert len(angles) == 4
     np.testing.assert_allclose(angles, 60.0, atol=2.0)
 
@@ -86,7 +87,7 @@ def test_bearing_curve() -> None:
     """Bearing pressure −F_y/B [Pa] of the half footing; the settlement as written."""
     steps = pd.DataFrame({"footing_settlement": [0.0, 1e-3],
                           "footing_force_y": [-1000.0, -5000.0]})
-    c = mc.bearing_curve(steps, 0.05)
+    c = measures.bearing_curve(steps, 0.05)
     np.testing.assert_allclose(c["pressure"], [20e3, 100e3])
     np.testing.assert_allclose(c["settlement"], [0.0, 1e-3])
 
