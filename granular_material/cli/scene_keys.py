@@ -18,7 +18,7 @@ __all__ = ["command_parsers", "convert", "help_of", "kind_of", "scene_keys", "su
 
 def command_parsers() -> dict[str, CommandParser]:
     """The sub-command parsers of ``granular-material`` (plugins included), by name."""
-    from granular_material.cli import build_parser
+    from granular_material.cli.commands import build_parser
 
     parsers = build_parser().commands
     if not parsers:

@@ -69,7 +69,7 @@ def print_stored(command: str, option: str) -> bool:
 
 def generate() -> dict[str, Any]:
     """The help of every command as its parser prints it, wrapped to :data:`COLUMNS`."""
-    from granular_material.cli import build_parser
+    from granular_material.cli.commands import build_parser
 
     saved = os.environ.get("COLUMNS")
     os.environ["COLUMNS"] = str(COLUMNS)
