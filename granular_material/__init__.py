@@ -1,10 +1,13 @@
 """granular-material: multiscale FEM x DEM simulation of granular geomaterials.
 
-Floors, bottom up, each importing only from those below it:
-:mod:`granular_material.dem` (batched periodic DEM on warp, homogenisation),
+Layers, bottom up, each importing only from those below it (docs/design.md#layout):
+:mod:`granular_material.dem` (batched periodic DEM on warp, homogenisation) beside
+:mod:`granular_material.fem` (materials, boundary-value problems, the Newton solver),
 :mod:`granular_material.procedures` (strain paths, servo, packings, element tests),
-:mod:`granular_material.fem` (material protocol, Newton driver, problems, runner),
+:mod:`granular_material.multiscale` (the DEM material),
 :mod:`granular_material.results` (tables, writers, plots, localisation, summaries),
+:mod:`granular_material.runs` (run specifications and ``run``),
+:mod:`granular_material.studies` (the trade study) and
 :mod:`granular_material.cli` (the ``granular-material`` command line).
 
 warp is silent in the library: its start-up banner ("Warp 1.x initialized ...") and its
@@ -134,3 +137,7 @@ if "warp" in sys.modules:
     _configure_warp(sys.modules["warp"])
 elif not any(isinstance(f, _WarpImportHook) for f in sys.meta_path):
     sys.meta_path.insert(0, _WarpImportHook())
+
+from granular_material.moved_modules import install as _install_moved_modules  # noqa: E402
+
+_install_moved_modules()
