@@ -1,11 +1,12 @@
 """The ``granular-material`` command line: the core commands plus plugin commands.
 
-The core commands are registered by :mod:`granular_material.cli.commands`: ``prepare``, ``biaxial-dem`` and
-``dem-drive`` (:mod:`granular_material.cli.dem`), ``single-element`` and ``biaxial``
-(:mod:`granular_material.cli.fem`), ``run`` (:mod:`granular_material.cli.scene`: one of
-them described by a TOML scene file), ``trade-study`` (:mod:`granular_material.cli.study`)
-and ``calibrate`` (:mod:`granular_material.cli.calibrate`); their shared options are defined once in
-:mod:`granular_material.cli.options`, the stop signals in :mod:`granular_material.cli.signals`.
+The core commands are registered by :mod:`granular_material.cli.commands`: ``prepare``,
+``biaxial-dem`` and ``dem-drive`` (:mod:`granular_material.cli.dem`), ``single-element`` and
+``biaxial`` (:mod:`granular_material.cli.fem`), ``run`` (:mod:`granular_material.cli.scene`:
+one of them described by a TOML scene file), ``trade-study``
+(:mod:`granular_material.cli.study`) and ``calibrate`` (:mod:`granular_material.cli.calibrate`);
+their shared options are defined once in :mod:`granular_material.cli.options`, the stop
+signals in :mod:`granular_material.cli.signals`.
 Plugins add sub-commands through the ``granular_material.commands`` entry-point group; each
 entry point is a ``register(subparsers)`` callable that adds its parsers and sets ``func`` (a
 callable taking the parsed arguments and returning the exit code). warp prints nothing on
