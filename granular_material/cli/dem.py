@@ -54,7 +54,7 @@ from granular_material.runs.dem import (
 )
 from granular_material.runs.dem.spec import DRIVE_INCREMENTS, field_names
 
-__all__ = ["register"]
+__all__ = ["check_args", "register", "spec_from_args"]
 
 #: the spec fields named otherwise by today's options (spec field -> the option's dest): the
 #: one place where the command line's names of the RVE material meet the spec's
@@ -141,6 +141,27 @@ def _finish(args: argparse.Namespace, report: dict[str, Any], error: str | None,
         print(f"granular-material {args.command}: failed: {error}", file=sys.stderr)
         return 1
     return 0
+
+
+#: the spec of each command
+_KINDS = {"prepare": PrepareSpec, "biaxial-dem": BiaxialDemSpec, "dem-drive": DriveSpec}
+
+
+def spec_from_args(args: argparse.Namespace) -> DemSpec:
+    """The DEM run specification of a DEM command's options (a UsageError naming the option
+    where a value cannot run)."""
+    return _spec(args, _KINDS[args.command])
+
+
+def check_args(args: argparse.Namespace) -> None:
+    """Every check the command makes before any work (:func:`granular_material.runs.check`),
+    a refusal a UsageError naming the option; nothing is run or written."""
+    from granular_material.runs import check
+
+    try:
+        check(spec_from_args(args))
+    except ParameterError as exc:
+        raise _usage(exc) from None
 
 
 def _command(args: argparse.Namespace, kind: type) -> int:

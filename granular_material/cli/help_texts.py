@@ -781,10 +781,11 @@ HELP_TEXTS = {
                 '  -h, --help  show this help message and exit\n'
                 "  --out DIR   the run folder (overrides the scene's out)\n"
                 '  --resume    continue the stopped or killed run in the run folder from its\n'
-                '              last checkpoint (single-element, biaxial)\n'
-                '  --check     check the scene as the run would (for single-element and\n'
-                '              biaxial: its whole run specification) and print the same run as\n'
-                '              a command line; run nothing, write nothing\n'
+                '              last checkpoint (single-element, biaxial, biaxial-dem, dem-\n'
+                '              drive)\n'
+                '  --check     check the scene as the run would (for single-element, biaxial\n'
+                '              and the DEM tests: its whole run specification) and print the\n'
+                '              same run as a command line; run nothing, write nothing\n'
             ),
         },
         'rve-size-study': {
