@@ -6,6 +6,10 @@ writes."""
 from __future__ import annotations
 
 import json
+import os
+import subprocess
+import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -224,3 +228,44 @@ def test_run_takes_no_observer_for_a_dem_spec(rve64):
     with pytest.raises(ParameterError) as caught:
         run(BiaxialDemSpec(rve=rve64), observer=object())
     assert caught.value.field == "observer"
+
+
+def test_a_damaged_checkpoint_is_refused_and_left_as_it_was(rve64, tmp_path, monkeypatch,
+                                                            capsys):
+    spec = BiaxialDemSpec(rve=rve64, axial_strain=0.005, record_every=50,
+                          out=tmp_path / "c.csv", device="cpu")
+    with monkeypatch.context() as patch:
+        _interrupt_on_call(patch, element_tests, "servo_steps", 3)
+        run(spec)
+    state = checkpoint_folder(spec.out) / "state.npz"
+    state.write_bytes(state.read_bytes()[:100])
+    before = {p.name: p.read_bytes() for p in checkpoint_folder(spec.out).iterdir()}
+    with pytest.raises(ParameterError) as caught:
+        run(spec, resume=True)
+    assert caught.value.field == "resume" and "state.npz" in caught.value.message
+    assert {p.name: p.read_bytes() for p in checkpoint_folder(spec.out).iterdir()} == before
+
+
+@pytest.mark.skipif(os.name != "posix", reason="POSIX signals")
+def test_a_killed_biaxial_dem_resumes_to_the_same_curve(rve64, tmp_path, capsys):
+    """kill -9 once a record is saved: --resume ends with the uninterrupted curve."""
+    argv = ["biaxial-dem", str(rve64), "--axial-strain", "0.01", "--strain-per-step", "1e-6",
+            "--record-every", "100", "--device", "cpu", "--no-progress", "--json"]
+    csv = tmp_path / "curve.csv"
+    process = subprocess.Popen([sys.executable, "-m", "granular_material.cli", *argv,
+                                "--out", str(csv)],
+                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    state = checkpoint_folder(csv) / "state.npz"
+    deadline = time.monotonic() + 120
+    while not state.is_file() and process.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.01)
+    process.kill()
+    process.wait()
+    if not state.is_file():
+        pytest.skip("the run ended before its first save")
+    assert main([*argv, "--out", str(csv)]) == 2  # a stopped run: refused
+    assert main([*argv, "--out", str(csv), "--resume"]) == 0
+    assert main([*argv, "--out", str(tmp_path / "whole.csv")]) == 0
+    capsys.readouterr()
+    assert csv.read_bytes() == (tmp_path / "whole.csv").read_bytes()
+    assert not checkpoint_folder(csv).exists()
