@@ -155,6 +155,7 @@ def test_a_stopped_biaxial_dem_resumes_to_the_same_curve(rve64, tmp_path, monkey
 
     code, report, _ = _cli(capsys, *common, "--out", str(csv), "--resume")
     assert code == 0 and report["error"] is None and report["steps"] == 1006
+    assert 0 < report["resumed_from_step"] <= 150
     assert csv.read_bytes() == whole.read_bytes()
     assert not checkpoint_folder(csv).exists()
 
@@ -188,6 +189,7 @@ def test_a_stopped_path_resumes_from_python_to_the_same_table(rve64, tmp_path,
     assert caught.value.field == "resume" and "`increments` 6" in str(caught.value.message)
     resumed = run(spec, resume=True)
     assert resumed.error is None and resumed.resumed_from is not None
+    assert resumed.report["resumed_from_increment"] == resumed.resumed_from
     whole = run(spec.replace(out=tmp_path / "whole.csv"))
     assert resumed.report["steps"] == whole.report["steps"]
     assert (tmp_path / "path.csv").read_bytes() == (tmp_path / "whole.csv").read_bytes()

@@ -396,6 +396,8 @@ def _biaxial(spec: BiaxialDemSpec, checkpoint: DemCheckpoint | None,
     report["warnings"] = outcome.warnings
     if spec.out:
         report["out"] = str(spec.out)
+    if saved is not None:  # only a resumed run says so: a fresh one's report is as it was
+        report["resumed_from_step"] = saved.counter
     if interrupt is not None:
         outcome.error = (f"{interrupt}: the curve to axial strain "
                          f"{curve['axial_strain'].max():.4g} is kept")
@@ -442,6 +444,8 @@ def _drive(plan: DemPlan, spec: DriveSpec, checkpoint: DemCheckpoint | None,
         outcome.error = (f"interrupted after increment {finished} of {spec.increments}: the "
                          "path to it is kept")
     report["increments_completed"] = finished
+    if saved is not None:  # only a resumed run says so: a fresh one's report is as it was
+        report["resumed_from_increment"] = saved.counter
     return outcome
 
 
