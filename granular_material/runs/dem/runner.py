@@ -124,8 +124,12 @@ def check(spec: DemSpec) -> DemPlan:
             packing = checks.packing_parameters(values, spec.particles, spec.pressure)
         except ParameterError as exc:
             raise _renamed(exc) from None
-        checks.check_memory(float(spec.batch) * spec.particles * checks.DISC_BYTES,
-                            f"--batch {spec.batch} RVEs of --particles {spec.particles} discs")
+        try:
+            checks.check_memory(float(spec.batch) * spec.particles * checks.DISC_BYTES,
+                                f"`batch` {spec.batch} RVEs of `particles` {spec.particles} "
+                                "discs")
+        except ValueError as exc:
+            raise checks.WordedError("batch", str(exc)) from None
         return DemPlan(spec=spec, packing=packing)
     if isinstance(spec, BiaxialDemSpec):
         from granular_material.procedures.element_tests import check_biaxial
