@@ -82,9 +82,14 @@ def test_the_specs_round_trip_through_dict_json_and_toml(rve64, tmp_path, suffix
     (lambda rve: BiaxialDemSpec(rve=rve, confining=0.0), "confining"),
     (lambda rve: BiaxialDemSpec(rve=rve, dtype="float16"), "dtype"),
     (lambda rve: DriveSpec(rve=rve, grad_u=(0.0, 1.0, 0.0)), "grad_u"),
-    (lambda rve: from_dict({"test": "biaxial-dem", "rve": str(rve), "steps": 3}), "steps"),
-    (lambda rve: from_dict({"test": "dem-drive", "rve": str(rve)}), "grad_u"),
-    (lambda rve: from_dict({"test": "biaxial"}), "test"),
+    (lambda rve: from_dict({"problem": {"test": "biaxial-dem", "rve": str(rve), "steps": 3}}),
+     "steps"),
+    (lambda rve: from_dict({"problem": {"test": "dem-drive", "rve": str(rve)}}), "grad_u"),
+    (lambda rve: from_dict({"problem": {"test": "biaxial"}}), "test"),
+    (lambda rve: from_dict({"problem": {"test": "prepare", "out": "r.npz"}}), "out"),
+    (lambda rve: from_dict({"problem": {"test": "biaxial-dem", "rve": str(rve)},
+                            "material": {"kn": 1.0}}), "material"),
+    (lambda rve: from_dict({"problem": {"test": "prepare"}, "output": 3}), "output"),
 ])
 def test_a_refused_spec_names_its_field(rve64, make, field):
     with pytest.raises(SpecError) as caught:
@@ -271,3 +276,22 @@ def test_a_killed_biaxial_dem_resumes_to_the_same_curve(rve64, tmp_path, capsys)
     capsys.readouterr()
     assert csv.read_bytes() == (tmp_path / "whole.csv").read_bytes()
     assert not checkpoint_folder(csv).exists()
+
+
+def test_run_takes_a_dem_spec_file(rve64, tmp_path, capsys, monkeypatch):
+    """``granular-material run SPEC.toml`` of a saved DEM spec: checked whole (a refused
+    field named with its line), shown as the command line with --check, and run."""
+    monkeypatch.chdir(tmp_path)
+    path = tmp_path / "drive.toml"
+    save(DriveSpec(rve=rve64, grad_u=(0.0, 1e-3, 0.0, 0.0), increments=2, device="cpu"),
+         path)
+    assert main(["run", str(path), "--check"]) == 0
+    shown = capsys.readouterr().out
+    assert "dem-drive" in shown and "--grad-u=0.0,0.001,0.0,0.0" in shown
+    assert main(["run", str(path), "--out", str(tmp_path / "d")]) == 0
+    capsys.readouterr()
+    assert (tmp_path / "d" / "path.csv").is_file()
+    path.write_text(path.read_text().replace("increments = 2", "increments = 0"))
+    assert main(["run", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert "line" in err and "increments must be >= 1" in err

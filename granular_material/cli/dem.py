@@ -5,7 +5,10 @@ the run itself is :func:`granular_material.runs.run`."""
 from __future__ import annotations
 
 import argparse
+import shlex
 import sys
+from collections.abc import Callable
+from dataclasses import fields
 from pathlib import Path
 from typing import Any
 
@@ -23,6 +26,7 @@ from granular_material.cli.options import (
     add_rve_material_options,
     as_flags,
     emit,
+    flag_of,
     positive,
     positive_int,
     progress_enabled,
@@ -54,7 +58,7 @@ from granular_material.runs.dem import (
 )
 from granular_material.runs.dem.spec import DRIVE_INCREMENTS, field_names
 
-__all__ = ["check_args", "register", "spec_from_args"]
+__all__ = ["check_args", "command_line", "register", "run_spec_file", "spec_from_args"]
 
 #: the spec fields named otherwise by today's options (spec field -> the option's dest): the
 #: one place where the command line's names of the RVE material meet the spec's
@@ -176,6 +180,82 @@ def _command(args: argparse.Namespace, kind: type) -> int:
     report["warnings"] = [warn(args, _text(w)) for w in outcome.warnings]
     error = None if outcome.error is None else _text(outcome.error)
     return _finish(args, report, error, outcome.interrupt)
+
+
+#: the file each command writes into a run folder (``run SPEC --out DIR``)
+_FILES = {"prepare": "rve.npz", "biaxial-dem": "curve.csv", "dem-drive": "path.csv"}
+
+
+def command_line(spec: DemSpec) -> str:
+    """The command line of ``spec``: its command and an option for every field not at its
+    default (:data:`_OPTION_NAMES` where the option is named otherwise)."""
+    words = ["granular-material", spec.test]
+    if hasattr(spec, "rve"):
+        words.append(str(spec.rve))
+    defaults = {f.name: f.default for f in fields(spec)}
+    for f in fields(spec):
+        value = getattr(spec, f.name)
+        if f.name in ("rve", "progress") or value == defaults[f.name] or value is None:
+            continue
+        flag = flag_of(_OPTION_NAMES.get(f.name, f.name))
+        if f.name == "grad_u":
+            words.append(f"{flag}={','.join(repr(v) for v in value)}")
+        else:
+            words += [flag, str(value)]
+    return shlex.join(words)
+
+
+def run_spec_file(path: Path, text: str, data: dict[str, Any], args: argparse.Namespace,
+                  refusal: Callable[[Path, str, ValueError], UsageError]) -> int:
+    """``run SPEC.toml`` of a DEM run's spec (the nested form that
+    :func:`granular_material.runs.dem.save` writes): checked whole (a refusal as ``refusal``
+    words it, with the field's line), then run (``--check``: only checked, and shown as a
+    command line). ``--out DIR`` puts the output file (and figure) into ``DIR``; a spec that
+    names no output writes into a folder named after the file."""
+    from granular_material.runs import check
+    from granular_material.runs.dem import from_dict
+
+    try:
+        spec = from_dict(data)
+    except ValueError as exc:
+        raise refusal(path, text, exc) from exc
+    name = _FILES[spec.test]
+    changes: dict[str, Any] = {}
+    if args.out is not None:
+        changes["out"] = Path(args.out) / name
+        if getattr(spec, "plot", None) is not None:
+            changes["plot"] = Path(args.out) / Path(spec.plot).name
+    elif spec.out is None:
+        if not path.is_file():
+            raise UsageError(f"{path} names no output (output.out) and is no file to name "
+                             "one after (a pipe?): give --out DIR")
+        changes["out"] = Path(path.stem) / name
+    try:
+        spec = spec.replace(**changes)
+        check(spec)
+    except (ValueError, FileNotFoundError) as exc:
+        raise refusal(path, text, exc) from exc
+    if args.check:
+        print(command_line(spec))
+        return 0
+    if args.out is None and "out" in changes:
+        print(f"granular-material run: {path} names no output (output.out); the run writes "
+              f"{spec.out}", file=sys.stderr)
+    report_args = argparse.Namespace(json=False, command=spec.test)
+    try:
+        outcome = run(spec, resume=bool(args.resume), fresh=False)
+    except ParameterError as exc:
+        raise _usage(exc) from None
+    report = outcome.report
+    report["warnings"] = [warn(report_args, _text(w)) for w in outcome.warnings]
+    error = None if outcome.error is None else _text(outcome.error)
+    code = _finish(report_args, report, error, outcome.interrupt)
+    if outcome.interrupt is not None:
+        again = shlex.join(["granular-material", "run", str(path),
+                            *(["--out", str(args.out)] if args.out is not None else []),
+                            "--resume"])
+        print(f"continue it with `{again}`", file=sys.stderr)
+    return code
 
 
 def _run_prepare(args: argparse.Namespace) -> int:

@@ -766,7 +766,9 @@ HELP_TEXTS = {
                 "that granular_material.runs.save writes and a run's checkpoint keeps): its\n"
                 '[problem], [material] (name, [material.parameters]), [newton] and [output]\n'
                 "tables hold the spec's fields by their Python names; it is checked whole and run\n"
-                'as it is (--out overrides its output.out).\n'
+                "as it is (--out overrides its output.out). So is a DEM run's spec, whose\n"
+                '[problem] has test = "prepare", "biaxial-dem" or "dem-drive" (what\n'
+                'granular_material.runs.dem.save writes).\n'
                 '\n'
                 'A scene with test = "boundary-value" is a boundary-value problem: a mesh (a\n'
                 'file or a generated rectangle), named boundaries, conditions on them\n'

@@ -178,7 +178,12 @@ def _run_spec_file(path: Path, text: str, data: dict[str, Any],
 
     from granular_material.cli.fem import command_line, report
     from granular_material.runs import check, from_dict, run
+    from granular_material.runs.dem import is_dem
 
+    if is_dem(data):  # a DEM run's spec ([problem] test = "prepare", ...)
+        from granular_material.cli.dem import run_spec_file
+
+        return run_spec_file(path, text, data, args, _spec_error)
     try:
         spec = from_dict(data)
     except ValueError as exc:
@@ -250,7 +255,9 @@ A file with a [problem] table is a run specification instead (the nested form
 that granular_material.runs.save writes and a run's checkpoint keeps): its
 [problem], [material] (name, [material.parameters]), [newton] and [output]
 tables hold the spec's fields by their Python names; it is checked whole and run
-as it is (--out overrides its output.out).
+as it is (--out overrides its output.out). So is a DEM run's spec, whose
+[problem] has test = "prepare", "biaxial-dem" or "dem-drive" (what
+granular_material.runs.dem.save writes).
 
 A scene with test = "boundary-value" is a boundary-value problem: a mesh (a
 file or a generated rectangle), named boundaries, conditions on them

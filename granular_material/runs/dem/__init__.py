@@ -25,7 +25,15 @@ from granular_material.runs.dem.runner import (
     check,
     run_dem,
 )
-from granular_material.runs.dem.serial import from_dict, is_dem, load, save, to_dict, to_toml
+from granular_material.runs.dem.serial import (
+    from_dict,
+    is_dem,
+    load,
+    save,
+    to_dict,
+    to_flat,
+    to_toml,
+)
 from granular_material.runs.dem.spec import (
     DEM_TESTS,
     RENAMED_MATERIAL_FIELDS,
@@ -38,4 +46,4 @@ from granular_material.runs.dem.spec import (
 __all__ = ["DEM_TESTS", "RENAMED_MATERIAL_FIELDS", "RESUME_FREE", "SERVO_FAIL", "SERVO_WARN",
            "BiaxialDemSpec", "DemCheckpoint", "DemOutcome", "DemPlan", "DemSpec", "DriveSpec",
            "PrepareSpec", "SavedRecord", "check", "checkpoint_folder", "from_dict", "is_dem",
-           "load", "run_dem", "save", "to_dict", "to_toml"]
+           "load", "run_dem", "save", "to_dict", "to_flat", "to_toml"]

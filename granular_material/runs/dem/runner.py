@@ -25,7 +25,7 @@ from granular_material.errors import ParameterError
 from granular_material.results.lock import FolderLock
 from granular_material.runs.checkpoint_files import CheckpointError, file_sha256
 from granular_material.runs.dem.checkpoint import DemCheckpoint, checkpoint_folder
-from granular_material.runs.dem.serial import from_dict, to_dict
+from granular_material.runs.dem.serial import from_dict, to_dict, to_flat
 from granular_material.runs.dem.spec import (
     RENAMED_MATERIAL_FIELDS,
     BiaxialDemSpec,
@@ -185,7 +185,7 @@ def _locked(out: Path | None) -> Iterator[None]:
 def _differences(spec: DemSpec, saved: DemSpec) -> list[str]:
     """The fields of ``spec`` that differ from ``saved``, each named in backquotes, but for
     those a resume may change (:data:`RESUME_FREE`)."""
-    now, then = to_dict(spec), to_dict(saved)
+    now, then = to_flat(spec), to_flat(saved)
     return [f"`{name}` {now.get(name)!r} (the run had {then.get(name)!r})"
             for name in now if name not in RESUME_FREE and now.get(name) != then.get(name)]
 
