@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any, ClassVar
 
 from granular_material.checks import RVE_MATERIAL_DEFAULTS
+from granular_material.dem.kernels.sets import DTYPES
 from granular_material.procedures.element_tests import DEFAULT_AXIAL_STRAIN, DEFAULT_RECORD_EVERY
 from granular_material.procedures.packing import DEFAULT_DISCS, DEFAULT_PRESSURE
 from granular_material.procedures.strain_path import (
@@ -32,8 +33,6 @@ __all__ = ["DEM_TESTS", "DRIVE_INCREMENTS", "DTYPES", "LAWS", "RENAMED_MATERIAL_
 
 #: the DEM problems, by the command that runs each
 DEM_TESTS = ("prepare", "biaxial-dem", "dem-drive")
-#: the float types of the DEM (those of its kernels)
-DTYPES = ("float64", "float32")
 #: the contact stiffness laws of prepared RVEs
 LAWS = ("constant", "frictmat")
 #: the increments of dem-drive by default
