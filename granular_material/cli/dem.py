@@ -1,16 +1,21 @@
-"""The DEM commands: ``prepare``, ``biaxial-dem`` and ``dem-drive``."""
+"""The DEM commands ``prepare``, ``biaxial-dem`` and ``dem-drive``: their options, the
+DEM run specification they make of them (:mod:`granular_material.runs.dem`) and its report;
+the run itself is :func:`granular_material.runs.run`."""
 
 from __future__ import annotations
 
 import argparse
+import shlex
 import sys
+from collections.abc import Callable
+from dataclasses import fields
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
+from granular_material.checks import WordedError
 from granular_material.cli.options import (
-    DISC_BYTES,
     UsageError,
     add_device,
     add_dtype,
@@ -19,19 +24,16 @@ from granular_material.cli.options import (
     add_out,
     add_progress,
     add_rve_material_options,
-    check_figure_file,
-    check_memory,
-    check_output_file,
+    as_flags,
     emit,
-    make_parents,
-    packing_parameters,
+    flag_of,
     positive,
     positive_int,
     progress_enabled,
-    scalar_or_list,
     warn,
 )
 from granular_material.cli.signals import interrupt_exit_code
+from granular_material.errors import ParameterError
 from granular_material.procedures.element_tests import (
     DEFAULT_AXIAL_STRAIN,
     DEFAULT_RECORD_EVERY,
@@ -45,16 +47,22 @@ from granular_material.procedures.packing import (
     min_discs,
 )
 from granular_material.procedures.strain_path import DEFAULT_STRAIN_PER_STEP
+from granular_material.runs import run
+from granular_material.runs.dem import (
+    SERVO_FAIL,
+    SERVO_WARN,
+    BiaxialDemSpec,
+    DemSpec,
+    DriveSpec,
+    PrepareSpec,
+)
+from granular_material.runs.dem.spec import DRIVE_INCREMENTS, field_names
 
-if TYPE_CHECKING:
-    from granular_material.dem import DEMBatch as DEMBatchType
+__all__ = ["check_args", "command_line", "register", "run_spec_file", "spec_from_args"]
 
-__all__ = ["register"]
-
-#: |σxx/(−confining) − 1| of biaxial-dem: above SERVO_WARN at some record a warning; above
-#: SERVO_FAIL over half the records (the median) the servo did not hold it: exit 1
-SERVO_WARN = 0.02
-SERVO_FAIL = 0.05
+#: the spec fields named otherwise by today's options (spec field -> the option's dest): the
+#: one place where the command line's names of the RVE material meet the spec's
+_OPTION_NAMES = {"contact_friction_angle": "friction_angle", "contact_young": "young"}
 
 
 def _grad_u(text: str) -> np.ndarray:
@@ -81,18 +89,44 @@ def _add_run_options(parser: argparse.ArgumentParser) -> None:
     add_json(parser)
 
 
-def _device(args: argparse.Namespace) -> str:
-    """The command's DEM device, chosen here once: ``--device``, else CUDA when present."""
-    from granular_material.dem import resolve_device
+def _add_resume_options(parser: argparse.ArgumentParser) -> None:
+    """``--resume`` and ``--fresh``: a run stopped part-way keeps its checkpoint beside
+    ``--out`` (OUT.checkpoint/)."""
+    parser.add_argument("--resume", action="store_true",
+                        help="continue the run stopped part-way (Ctrl-C, SIGTERM, killed) from "
+                             "the checkpoint kept beside --out (OUT.checkpoint/), given the "
+                             "options it was started with; the table is the one an "
+                             "uninterrupted run writes")
+    parser.add_argument("--fresh", action="store_true",
+                        help="start afresh over the checkpoint of a run stopped part-way "
+                             "beside --out (thrown away); without it such a run is refused")
 
-    return resolve_device(args.device)
+
+def _text(text: str) -> str:
+    """A library message (fields in backquotes) as the command line says it: each field as
+    its option (:data:`_OPTION_NAMES` where the option is named otherwise)."""
+    for field, dest in _OPTION_NAMES.items():
+        text = text.replace(f"`{field}`", f"`{dest}`")
+    return as_flags(text)
 
 
-def _load_batch(args: argparse.Namespace) -> DEMBatchType:
-    from granular_material.dem import DEMBatch, load_rve
+def _usage(exc: ParameterError) -> UsageError:
+    """A refusal of the spec or its run as the command line's, naming the options."""
+    text = exc.message if isinstance(exc, WordedError) else f"`{exc.field}` {exc.message}"
+    return UsageError(_text(text))
 
-    data = load_rve(args.rve)
-    return DEMBatch(data, device=_device(args), dtype=args.dtype)
+
+def _spec(args: argparse.Namespace, kind: type) -> DemSpec:
+    """The spec ``kind`` of the command's options (a UsageError naming the option where a
+    value cannot run)."""
+    values = {name: getattr(args, _OPTION_NAMES.get(name, name)) for name in field_names(kind)
+              if name != "progress"}
+    if "grad_u" in values:
+        values["grad_u"] = tuple(np.asarray(values["grad_u"], dtype=float).ravel())
+    try:
+        return kind(**values, progress=progress_enabled(args))
+    except ParameterError as exc:
+        raise _usage(exc) from None
 
 
 def _finish(args: argparse.Namespace, report: dict[str, Any], error: str | None,
@@ -103,6 +137,9 @@ def _finish(args: argparse.Namespace, report: dict[str, Any], error: str | None,
     emit(args, report)
     if interrupt is not None:
         print(f"granular-material {args.command}: {error}", file=sys.stderr)
+        if getattr(args, "out", None) is not None and hasattr(args, "resume"):
+            print(f"granular-material {args.command}: continue it with --resume and the same "
+                  "options", file=sys.stderr)
         return interrupt_exit_code(interrupt)
     if error is not None:
         print(f"granular-material {args.command}: failed: {error}", file=sys.stderr)
@@ -110,170 +147,127 @@ def _finish(args: argparse.Namespace, report: dict[str, Any], error: str | None,
     return 0
 
 
-def _rve_list(indices: np.ndarray, values: np.ndarray, fmt: str) -> str:
-    """``RVE 0: …, RVE 3: …`` of the first five ``indices`` with their ``values``."""
-    shown = ", ".join(f"RVE {i}: {format(values[i], fmt)}" for i in indices[:5])
-    return shown + (f" and {len(indices) - 5} more" if len(indices) > 5 else "")
+#: the spec of each command
+_KINDS = {"prepare": PrepareSpec, "biaxial-dem": BiaxialDemSpec, "dem-drive": DriveSpec}
 
 
-# -- prepare -------------------------------------------------------------------------------
-def _run_prepare(args: argparse.Namespace) -> int:
-    from granular_material.dem import save_rve
-    from granular_material.procedures import prepare_packing
-    check_output_file(args.out)
-    packing = packing_parameters(args, args.particles, args.pressure)
-    check_memory(float(args.batch) * args.particles * DISC_BYTES,
-                 f"--batch {args.batch} RVEs of --particles {args.particles} discs")
-    batch = prepare_packing(
-        n_disc=args.particles, n_rve=args.batch, seed=args.seed, pressure=args.pressure,
-        meta=packing.meta, target_void_ratio=packing.target_void_ratio,
-        radius_range=packing.radius_range, device=_device(args), dtype=args.dtype,
-        progress=progress_enabled(args),
-    )
-    h = batch.homogenize()
-    report: dict[str, Any] = batch.summary(h)
-    warnings: list[str] = []
-    error = None
-    target = args.target_void_ratio
-    if target is not None and (h.void_ratio > target).any():
-        missed = np.flatnonzero(h.void_ratio > target)
-        reached = _rve_list(missed, h.void_ratio, ".4g")
-        text = (f"--target-void-ratio {target:g} not reached under --pressure "
-                f"{args.pressure:g} Pa: void ratio of {reached} (frictionless compaction "
-                "reached the pressure first; a denser packing "
-                "needs a higher --pressure)")
-        if (h.void_ratio > target + VOID_RATIO_TOLERANCE).any():
-            error = text + "; no RVE file written"
+def spec_from_args(args: argparse.Namespace) -> DemSpec:
+    """The DEM run specification of a DEM command's options (a UsageError naming the option
+    where a value cannot run)."""
+    return _spec(args, _KINDS[args.command])
+
+
+def check_args(args: argparse.Namespace) -> None:
+    """Every check the command makes before any work (:func:`granular_material.runs.check`),
+    a refusal a UsageError naming the option; nothing is run or written."""
+    from granular_material.runs import check
+
+    try:
+        check(spec_from_args(args))
+    except ParameterError as exc:
+        raise _usage(exc) from None
+
+
+def _command(args: argparse.Namespace, kind: type) -> int:
+    """Run the command's spec (:func:`granular_material.runs.run`) and report it."""
+    spec = _spec(args, kind)
+    try:
+        outcome = run(spec, resume=bool(getattr(args, "resume", False)),
+                      fresh=bool(getattr(args, "fresh", False)))
+    except ParameterError as exc:
+        raise _usage(exc) from None
+    report = outcome.report
+    report["warnings"] = [warn(args, _text(w)) for w in outcome.warnings]
+    error = None if outcome.error is None else _text(outcome.error)
+    return _finish(args, report, error, outcome.interrupt)
+
+
+#: the file each command writes into a run folder (``run SPEC --out DIR``)
+_FILES = {"prepare": "rve.npz", "biaxial-dem": "curve.csv", "dem-drive": "path.csv"}
+
+
+def command_line(spec: DemSpec) -> str:
+    """The command line of ``spec``: its command and an option for every field not at its
+    default (:data:`_OPTION_NAMES` where the option is named otherwise)."""
+    words = ["granular-material", spec.test]
+    if hasattr(spec, "rve"):
+        words.append(str(spec.rve))
+    defaults = {f.name: f.default for f in fields(spec)}
+    for f in fields(spec):
+        value = getattr(spec, f.name)
+        if f.name in ("rve", "progress") or value == defaults[f.name] or value is None:
+            continue
+        flag = flag_of(_OPTION_NAMES.get(f.name, f.name))
+        if f.name == "grad_u":
+            words.append(f"{flag}={','.join(repr(v) for v in value)}")
         else:
-            warnings.append(warn(args, text))
-    report["warnings"] = warnings
-    if error is None:
-        make_parents(args.out)
-        save_rve(args.out, batch.to_data())
-        report["out"] = str(args.out)
-    return _finish(args, report, error)
+            words += [flag, str(value)]
+    return shlex.join(words)
 
 
-# -- biaxial-dem ---------------------------------------------------------------------------
-#: how the checks of biaxial_test name its values: by the command's options
-_BIAXIAL_OPTIONS = {"axial_strain": "--axial-strain", "confining": "--confining",
-                    "strain_per_step": "--strain-per-step", "max_steps": "--max-dem-steps"}
+def run_spec_file(path: Path, text: str, data: dict[str, Any], args: argparse.Namespace,
+                  refusal: Callable[[Path, str, ValueError], UsageError]) -> int:
+    """``run SPEC.toml`` of a DEM run's spec (the nested form that
+    :func:`granular_material.runs.dem.save` writes): checked whole (a refusal as ``refusal``
+    words it, with the field's line), then run (``--check``: only checked, and shown as a
+    command line). ``--out DIR`` puts the output file (and figure) into ``DIR``; a spec that
+    names no output writes into a folder named after the file."""
+    from granular_material.runs import check
+    from granular_material.runs.dem import from_dict
+
+    try:
+        spec = from_dict(data)
+    except ValueError as exc:
+        raise refusal(path, text, exc) from exc
+    name = _FILES[spec.test]
+    changes: dict[str, Any] = {}
+    if args.out is not None:
+        changes["out"] = Path(args.out) / name
+        if getattr(spec, "plot", None) is not None:
+            changes["plot"] = Path(args.out) / Path(spec.plot).name
+    elif spec.out is None:
+        if not path.is_file():
+            raise UsageError(f"{path} names no output (output.out) and is no file to name "
+                             "one after (a pipe?): give --out DIR")
+        changes["out"] = Path(path.stem) / name
+    try:
+        spec = spec.replace(**changes)
+        check(spec)
+    except (ValueError, FileNotFoundError) as exc:
+        raise refusal(path, text, exc) from exc
+    if args.check:
+        print(command_line(spec))
+        return 0
+    if args.out is None and "out" in changes:
+        print(f"granular-material run: {path} names no output (output.out); the run writes "
+              f"{spec.out}", file=sys.stderr)
+    report_args = argparse.Namespace(json=False, command=spec.test)
+    try:
+        outcome = run(spec, resume=bool(args.resume), fresh=False)
+    except ParameterError as exc:
+        raise _usage(exc) from None
+    report = outcome.report
+    report["warnings"] = [warn(report_args, _text(w)) for w in outcome.warnings]
+    error = None if outcome.error is None else _text(outcome.error)
+    code = _finish(report_args, report, error, outcome.interrupt)
+    if outcome.interrupt is not None:
+        again = shlex.join(["granular-material", "run", str(path),
+                            *(["--out", str(args.out)] if args.out is not None else []),
+                            "--resume"])
+        print(f"continue it with `{again}`", file=sys.stderr)
+    return code
+
+
+def _run_prepare(args: argparse.Namespace) -> int:
+    return _command(args, PrepareSpec)
 
 
 def _run_biaxial(args: argparse.Namespace) -> int:
-    from granular_material.procedures import biaxial_test
-    from granular_material.procedures.element_tests import (
-        BiaxialInterrupted,
-        check_biaxial,
-        lateral_stress_error,
-    )
-    from granular_material.results import plot_biaxial_curves, summarize_biaxial, write_csv
-
-    check_output_file(args.out)
-    check_figure_file(args.plot, "--plot", {"--out": args.out})
-    try:
-        check_biaxial(args.axial_strain, args.confining, args.strain_per_step,
-                      args.max_dem_steps, names=_BIAXIAL_OPTIONS)
-    except ValueError as exc:
-        raise UsageError(str(exc)) from None
-    batch = _load_batch(args)
-    interrupt = None
-    try:
-        curve = biaxial_test(batch, axial_strain=args.axial_strain, confining=args.confining,
-                             strain_per_step=args.strain_per_step,
-                             record_every=args.record_every, progress=progress_enabled(args),
-                             max_steps=args.max_dem_steps)
-    except BiaxialInterrupted as exc:  # keep and write the records made before it
-        curve, interrupt = exc.curve, exc
-    summaries = [summarize_biaxial(g) for _, g in curve.groupby("rve")]
-    if args.out:
-        make_parents(args.out)
-        write_csv(curve, args.out)
-    if args.plot:
-        make_parents(args.plot)
-        plot_biaxial_curves(curve, args.plot)
-    keys = ("peak_stress_ratio", "axial_strain_at_peak", "max_contraction", "final_void_ratio")
-    report: dict[str, Any] = {key: scalar_or_list(np.array([getattr(s, key) for s in summaries]))
-                              for key in keys}
-    held = lateral_stress_error(curve, args.confining)
-    report |= {"steps": int(curve["step"].max()),
-               "final_sxx": scalar_or_list(held["final_sxx"].to_numpy()),
-               "max_confining_error": scalar_or_list(held["max_error"].to_numpy())}
-    warnings: list[str] = []
-    error = None
-    lost = np.flatnonzero(held["median_error"].to_numpy() > SERVO_FAIL)
-    loose = np.flatnonzero(held["max_error"].to_numpy() > SERVO_WARN)
-    final = held["final_sxx"].to_numpy()
-    if lost.size:
-        error = (f"the servo did not hold σxx at −{args.confining:g} Pa (--confining), off "
-                 f"by more than {SERVO_FAIL:.0%} in most records: final σxx [Pa] of "
-                 f"{_rve_list(lost, final, '.4g')}; not a drained test at this confining "
-                 "pressure (a smaller --strain-per-step, or a packing prepared near "
-                 "--confining, lets the servo follow)")
-    elif loose.size:
-        worst = held["max_error"].to_numpy()
-        warnings.append(warn(args, (
-            f"σxx strayed from −{args.confining:g} Pa (--confining) by more than "
-            f"{SERVO_WARN:.0%} in some records: largest error [%] of "
-            f"{_rve_list(loose, 100 * worst, '.3g')}")))
-    report["warnings"] = warnings
-    if args.out:
-        report["out"] = str(args.out)
-    if interrupt is not None:
-        error = (f"{interrupt}: the curve to axial strain "
-                 f"{curve['axial_strain'].max():.4g} is kept")
-    return _finish(args, report, error, interrupt)
-
-
-# -- dem-drive -----------------------------------------------------------------------------
-#: how the checks of a path name its values: by the command's options
-_PATH_OPTIONS = {"grad_u": "--grad-u", "increments": "--increments",
-                 "max_strain_per_step": "--max-strain-per-step", "max_steps": "--max-dem-steps"}
-#: the increments of dem-drive by default
-_INCREMENTS = 10
-
-
-def _drive_plan(args: argparse.Namespace) -> list[int]:
-    """DEM steps of each increment of ``dem-drive``, checked against --max-dem-steps before
-    any work (UsageError naming the options)."""
-    from granular_material.procedures import plan_path
-
-    try:
-        return plan_path(args.grad_u, args.increments, args.max_strain_per_step,
-                         args.max_dem_steps, names=_PATH_OPTIONS)
-    except ValueError as exc:
-        raise UsageError(str(exc)) from None
+    return _command(args, BiaxialDemSpec)
 
 
 def _run_drive(args: argparse.Namespace) -> int:
-    from granular_material.procedures import drive_path, progress_bar
-    from granular_material.results import write_csv
-
-    check_output_file(args.out)
-    plan = _drive_plan(args)
-    batch = _load_batch(args)
-    # the bar counts DEM steps (what takes the time), moved at the end of each increment
-    with progress_bar(sum(plan), "dem-drive", progress_enabled(args)) as bar:
-        def advance(increment: int, steps: int) -> None:
-            bar.update(steps)
-            bar.set_postfix(increment=f"{increment}/{args.increments}")
-
-        path = drive_path(batch, args.grad_u, args.increments,
-                          max_strain_per_step=args.max_strain_per_step,
-                          max_steps=args.max_dem_steps, after_increment=advance)
-    if args.out:
-        make_parents(args.out)
-        write_csv(path.table, args.out)
-    report: dict[str, Any] = {**path.summary(), "warnings": []}
-    if args.out:
-        report["out"] = str(args.out)
-    error = path.failure_message(args.increments)
-    finished, interrupt = path.finished, path.interrupt
-    if interrupt is not None:
-        error = (f"interrupted after increment {finished} of {args.increments}: the path to "
-                 "it is kept")
-    report["increments_completed"] = finished
-    return _finish(args, report, error, interrupt)
+    return _command(args, DriveSpec)
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -323,6 +317,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     add_max_dem_steps(p, "the test")
     add_out(p, "CSV of the curve(s)")
     p.add_argument("--plot", type=Path, default=None, help="PNG of σ1/σ3 and εv vs εa")
+    _add_resume_options(p)
     _add_run_options(p)
     p.set_defaults(func=_run_biaxial)
 
@@ -336,11 +331,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("rve", type=Path, help="RVE file (.npz)")
     p.add_argument("--grad-u", type=_grad_u, required=True, metavar="Gxx,Gxy,Gyx,Gyy",
                    help="total displacement gradient ∂u_i/∂x_j")
-    p.add_argument("--increments", type=positive_int, default=_INCREMENTS,
-                   help=f"K ({_INCREMENTS})")
+    p.add_argument("--increments", type=positive_int, default=DRIVE_INCREMENTS,
+                   help=f"K ({DRIVE_INCREMENTS})")
     p.add_argument("--max-strain-per-step", type=positive, default=DEFAULT_STRAIN_PER_STEP,
                    help=f"({DEFAULT_STRAIN_PER_STEP:g})")
     add_max_dem_steps(p, "the whole path (all increments)")
     add_out(p, "CSV of the path")
+    _add_resume_options(p)
     _add_run_options(p)
     p.set_defaults(func=_run_drive)

@@ -128,15 +128,21 @@ _SPEC_TESTS = frozenset({"single-element", "biaxial"})
 
 def check_scene(scene: Scene) -> None:
     """What ``run`` checks before any work, without running: the scene's keys (done by
-    :func:`load_scene`) and, for a FEM test, its run specification as the run makes it
-    (:func:`granular_material.runs.check`: the material's inputs, memory, output folder).
+    :func:`load_scene`) and, for a FEM or DEM test, its run specification as the run makes
+    it (:func:`granular_material.runs.check`: the material's inputs, memory, output folder).
     A refusal is a UsageError naming the scene's line where it can."""
-    if scene.test not in _SPEC_TESTS:
-        return
-    from granular_material.cli.fem import spec_from_args
-    from granular_material.runs import check
+    from granular_material.cli.dem import check_args
+    from granular_material.runs.dem import DEM_TESTS
 
     try:
+        if scene.test in DEM_TESTS:  # a DEM run's spec, checked as the command checks it
+            check_args(scene.namespace)
+            return
+        if scene.test not in _SPEC_TESTS:
+            return
+        from granular_material.cli.fem import spec_from_args
+        from granular_material.runs import check
+
         check(spec_from_args(scene.namespace))
     except ValueError as exc:
         raise UsageError(_located(scene, message_of(exc))) from exc
@@ -172,7 +178,12 @@ def _run_spec_file(path: Path, text: str, data: dict[str, Any],
 
     from granular_material.cli.fem import command_line, report
     from granular_material.runs import check, from_dict, run
+    from granular_material.runs.dem import is_dem
 
+    if is_dem(data):  # a DEM run's spec ([problem] test = "prepare", ...)
+        from granular_material.cli.dem import run_spec_file
+
+        return run_spec_file(path, text, data, args, _spec_error)
     try:
         spec = from_dict(data)
     except ValueError as exc:
@@ -244,7 +255,9 @@ A file with a [problem] table is a run specification instead (the nested form
 that granular_material.runs.save writes and a run's checkpoint keeps): its
 [problem], [material] (name, [material.parameters]), [newton] and [output]
 tables hold the spec's fields by their Python names; it is checked whole and run
-as it is (--out overrides its output.out).
+as it is (--out overrides its output.out). So is a DEM run's spec, whose
+[problem] has test = "prepare", "biaxial-dem" or "dem-drive" (what
+granular_material.runs.dem.save writes).
 
 A scene with test = "boundary-value" is a boundary-value problem: a mesh (a
 file or a generated rectangle), named boundaries, conditions on them
@@ -257,9 +270,9 @@ examples/scenes/footing-*.toml and docs/guide/boundary-value.md.""",
                    help="the run folder (overrides the scene's out)")
     p.add_argument("--resume", action="store_true",
                    help="continue the stopped or killed run in the run folder from its last "
-                        "checkpoint (single-element, biaxial)")
+                        "checkpoint (single-element, biaxial, biaxial-dem, dem-drive)")
     p.add_argument("--check", action="store_true",
-                   help="check the scene as the run would (for single-element and biaxial: "
-                        "its whole run specification) and print the same run as a command "
-                        "line; run nothing, write nothing")
+                   help="check the scene as the run would (for single-element, biaxial and "
+                        "the DEM tests: its whole run specification) and print the same run "
+                        "as a command line; run nothing, write nothing")
     p.set_defaults(func=lambda args: _run_command(subparsers.choices, args))

@@ -68,16 +68,25 @@ class DrivenPath:
 def drive_path(batch: DEMBatch, grad_u: np.ndarray, increments: int,
                max_strain_per_step: float = DEFAULT_STRAIN_PER_STEP,
                max_steps: int = DEFAULT_MAX_DEM_STEPS,
-               after_increment: Callable[[int, int], None] | None = None) -> DrivenPath:
+               after_increment: Callable[[int, int], None] | None = None, *,
+               start: DrivenPath | None = None,
+               after_record: Callable[[int, list[pd.DataFrame], int], None] | None = None,
+               ) -> DrivenPath:
     """Apply ∇u (2, 2) [-] to every RVE of ``batch`` in ``increments`` equal increments
     (:func:`~granular_material.procedures.path_increment`, each over the steps
     :func:`~granular_material.procedures.drive_grad_u` takes), recording each RVE after every
     one. ``after_increment(increment, steps)`` is called after each. A blow-up or a collapse
     (not a refused input, which is raised) and an interrupt end the path with the
-    increments before them kept."""
+    increments before them kept.
+
+    ``start`` continues a path stopped after increment ``start.finished`` (its table so far
+    and DEM steps; the batch in that increment's state) instead of starting one;
+    ``after_record(increment, rows, steps)`` is called after each increment's record with
+    the rows so far (frames, in order) and the DEM steps: where a run saves its
+    checkpoint."""
     grad = np.asarray(grad_u, dtype=np.float64).reshape(2, 2)
     rows: list[pd.DataFrame] = []
-    done = DrivenPath(table=pd.DataFrame(), steps=0)
+    done = DrivenPath(table=pd.DataFrame(), steps=0 if start is None else int(start.steps))
 
     def record(increment: int) -> None:
         h = batch.homogenize()
@@ -92,14 +101,21 @@ def drive_path(batch: DEMBatch, grad_u: np.ndarray, increments: int,
             "steps": done.steps,
         }))
 
-    record(0)
+    if start is None:
+        record(0)
+        first = 1
+    else:
+        rows.append(start.table)
+        first = start.finished + 1
     try:
-        for increment in range(1, increments + 1):
+        for increment in range(first, increments + 1):
             steps = drive_grad_u(batch, path_increment(grad, increment, increments),
                                  max_strain_per_step=max_strain_per_step,
                                  max_steps=max_steps)
             done.steps += steps
             record(increment)
+            if after_record is not None:
+                after_record(increment, rows, done.steps)
             if after_increment is not None:
                 after_increment(increment, steps)
     except KeyboardInterrupt as exc:

@@ -4,6 +4,8 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
@@ -15,7 +17,7 @@ from granular_material.procedures.strain_path import DEFAULT_STRAIN_PER_STEP, ST
 from granular_material.progress import progress_bar
 
 __all__ = ["BIAXIAL_NAMES", "DEFAULT_AXIAL_STRAIN", "DEFAULT_RECORD_EVERY", "MAX_AXIAL_STRAIN",
-           "BiaxialInterrupted", "biaxial_steps", "biaxial_test", "check_biaxial",
+           "BiaxialInterrupted", "BiaxialStart", "biaxial_steps", "biaxial_test", "check_biaxial",
            "lateral_stress_error"]
 
 #: final axial strain of a drained biaxial test [-], engineering, compression positive (Wu et
@@ -41,6 +43,17 @@ class BiaxialInterrupted(KeyboardInterrupt):
         self.curve = curve
         self.steps_done = steps_done
         self.steps_total = steps_total
+
+
+@dataclass(frozen=True)
+class BiaxialStart:
+    """Where a resumed :func:`biaxial_test` starts: ``curve``, its rows recorded up to DEM
+    step ``done`` (the batch being in the state of that step), and ``cell0`` (B, 2, 2) [m],
+    the cells the test started from (its strains are measured from them)."""
+
+    curve: pd.DataFrame
+    done: int
+    cell0: np.ndarray
 
 
 def biaxial_steps(axial_strain: float, strain_per_step: float) -> int:
@@ -108,6 +121,9 @@ def biaxial_test(
     gain: float = 0.5,
     progress: bool = False,
     max_steps: int | None = None,
+    *,
+    start: BiaxialStart | None = None,
+    after_record: Callable[[int, list[pd.DataFrame], np.ndarray], None] | None = None,
 ) -> pd.DataFrame:
     """Drained biaxial test: σxx held at −``confining`` while εyy is driven in compression.
 
@@ -121,6 +137,11 @@ def biaxial_test(
             :func:`lateral_stress_error`).
         max_steps: ``ValueError`` before any step when the test needs more DEM steps
             (:func:`biaxial_steps`); None: no cap.
+        start: continue a test stopped after a record (the batch in that record's state)
+            instead of starting one; None: record step 0 and start.
+        after_record: called after every record but the first with the DEM steps done, the
+            rows so far (frames, in order) and the starting cells: where a run saves its
+            checkpoint.
 
     Raises:
         BiaxialInterrupted: on Ctrl-C after the first record, with the rows recorded so far.
@@ -134,7 +155,7 @@ def biaxial_test(
     # n equal logarithmic steps ending exactly at the requested engineering strain
     total = check_biaxial(axial_strain, confining, strain_per_step, max_steps)
     b = batch.n_rve
-    cell0 = batch.cell()
+    cell0 = batch.cell() if start is None else np.array(start.cell0, dtype=np.float64)
     area0 = np.linalg.det(cell0)
     step_strain = (1.0 - axial_strain) ** (1.0 / total) - 1.0
     rows: list[pd.DataFrame] = []
@@ -156,11 +177,17 @@ def biaxial_test(
             "coordination": h.coordination,
         }))
 
-    record(0)
+    if start is None:
+        record(0)
+        done = 0
+    else:
+        rows.append(start.curve)
+        done = int(start.done)
     target = np.tile([-float(confining), step_strain], (b, 1))
     control = np.tile([CONTROL_STRESS, CONTROL_STRAIN], (b, 1))
     bar = progress_bar(total, "biaxial", progress)
-    done = 0
+    if done:
+        bar.update(done)
     try:
         while done < total:
             chunk = min(record_every, total - done)
@@ -168,11 +195,13 @@ def biaxial_test(
                         max_strain=4.0 * strain_per_step, check_every=chunk)
             done += chunk
             record(done)
+            if after_record is not None:
+                after_record(done, rows, cell0)
             bar.update(chunk)
             last = rows[-1]
             bar.set_postfix(q=f"{last['stress_ratio'].mean():.3f}")
     except KeyboardInterrupt as exc:
-        recorded = int(rows[-1]["step"].iloc[0])
+        recorded = int(rows[-1]["step"].iloc[-1])
         raise BiaxialInterrupted(pd.concat(rows, ignore_index=True), recorded, total) from exc
     finally:
         bar.close()

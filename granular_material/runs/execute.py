@@ -1,5 +1,7 @@
 """Run a :class:`~granular_material.runs.spec.RunSpec`: the library's one entry point for a
-FEM run, which the command line, scenes, studies and the reproduction all call.
+FEM run, which the command line, scenes, studies and the reproduction all call; a DEM run's
+spec (:mod:`granular_material.runs.dem`) is handed to
+:func:`~granular_material.runs.dem.run_dem`.
 
 :func:`check` makes every check a run makes before any work (nothing is allocated, written
 or locked) and returns the :class:`RunPlan`; :func:`run` checks, then runs into the output
@@ -38,6 +40,8 @@ from granular_material.results import (
 )
 from granular_material.results.lock import FolderLock
 from granular_material.runs.checkpoint import RunCheckpoint
+from granular_material.runs.dem import DemOutcome, DemPlan, DemSpec, is_dem, run_dem
+from granular_material.runs.dem import check as check_dem
 from granular_material.runs.resume import StoppedRunError, open_checkpoint, start_checkpoint
 from granular_material.runs.runner import RunObserver, run_biaxial
 from granular_material.runs.spec import (
@@ -132,9 +136,12 @@ def _check_size(spec: RunSpec, setup: BiaxialSetup, discs: int) -> None:
                          f"Gauss points{held}) over {steps} load steps")
 
 
-def check(spec: RunSpec) -> RunPlan:
+def check(spec: RunSpec | DemSpec) -> RunPlan | DemPlan:
     """Every check of the run before any work (its output folder, memory, the material's
-    inputs, tracked points); nothing is allocated or written. The plan of the run."""
+    inputs, tracked points); nothing is allocated or written. The plan of the run (a DEM
+    run's: :func:`granular_material.runs.dem.check`)."""
+    if is_dem(spec):
+        return check_dem(spec)
     check_output_dir(spec.output.out)
     device = _device(spec)
     elements, scale_discs = spec.problem.mesh(device)
@@ -187,9 +194,9 @@ def _locked(out: Path | None) -> Iterator[None]:
         lock.release()
 
 
-def run(spec: RunSpec, observer: RunObserver | None = None, *,
+def run(spec: RunSpec | DemSpec, observer: RunObserver | None = None, *,
         resume: bool = False, fresh: bool = False,
-        keep_stopped: bool | None = None) -> RunOutcome:
+        keep_stopped: bool | None = None) -> RunOutcome | DemOutcome:
     """Run ``spec``: check it (:func:`check`), lock and write its output folder as it goes
     (tables, fields, figures, ``summary.json``; checkpoints of the committed state, see
     :class:`~granular_material.runs.checkpoint.RunCheckpoint`), and return the outcome.
@@ -208,7 +215,19 @@ def run(spec: RunSpec, observer: RunObserver | None = None, *,
     ends the run early with the steps so far (``outcome.result.error``,
     ``outcome.interrupt``), its committed steps kept in the folder's checkpoint; bad input
     is a ``ValueError`` (a :class:`~granular_material.runs.spec.SpecError` naming the field
-    where it is one) before any work."""
+    where it is one) before any work.
+
+    A DEM run's spec (``prepare``, ``biaxial-dem``, ``dem-drive``:
+    :mod:`granular_material.runs.dem`) runs as
+    :func:`~granular_material.runs.dem.run_dem` does, with the same ``resume`` and ``fresh``,
+    and returns its :class:`~granular_material.runs.dem.DemOutcome` (no observer)."""
+    if is_dem(spec):
+        if observer is not None:
+            raise ParameterError("observer", "follows the load steps of a FEM run; a DEM "
+                                             "run has none")
+        if keep_stopped is not None:
+            fresh = fresh or not keep_stopped
+        return run_dem(spec, resume=resume, fresh=fresh)
     started = time.perf_counter()
     if not isinstance(spec, RunSpec):
         raise ParameterError("spec", f"run() takes a RunSpec, got {type(spec).__name__}")
