@@ -63,6 +63,8 @@ MOVED: dict[str, str] = {
     "runs.bvp_resume": "runs.boundary_value.resume",
     "runs.bvp_runner": "runs.boundary_value.runner",
     "runs.bvp_spec": "runs.boundary_value.spec",
+    # RunContext moved beside the Material protocol before 0.1.0; its old module went now
+    "runs.context": "fem.materials.run_context",
 }
 
 

@@ -19,8 +19,6 @@ LAYERS = {"dem": 1, "fem": 1, "procedures": 2, "multiscale": 3, "results": 4, "r
 #: top-level modules that every layer may import (the input checks import the DEM core and
 #: the packing procedure's defaults themselves)
 EVERYWHERE = {"checks", "filesafe"}
-#: entries (modules and sub-packages) a package may hold beyond the 13 of the rule
-BUDGET = {"runs": 14}
 #: within fem/: the materials and the boundary-value problems import neither each other nor
 #: the solver, which imports both
 FORBIDDEN = {("fem.materials", "fem.boundary_value"), ("fem.boundary_value", "fem.materials"),
@@ -159,4 +157,4 @@ def test_no_package_is_a_crowd() -> None:
         entries = [p for p in (ROOT / package).iterdir()
                    if (p.suffix == ".py" and p.stem != "__init__")
                    or (p.is_dir() and (p / "__init__.py").exists())]
-        assert len(entries) <= BUDGET.get(package, 13), (package, sorted(p.name for p in entries))
+        assert len(entries) <= 13, (package, sorted(p.name for p in entries))

@@ -202,7 +202,7 @@ class LinearElastic(ScikitFemInterface):
     @staticmethod
     def for_run(parameters: LinearElasticRunParameters, context: Any) -> LinearElastic:
         """The material of a run: isotropic at the run's confining pressure (a
-        :class:`~granular_material.runs.context.RunContext`), not yet allocated."""
+        :class:`~granular_material.fem.materials.run_context.RunContext`), not yet allocated."""
         return LinearElastic(young=parameters.E, poisson=parameters.nu,
                              initial_stress=-context.confining)
 

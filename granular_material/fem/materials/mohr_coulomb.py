@@ -147,7 +147,7 @@ class MohrCoulomb(ScikitFemInterface):
     @staticmethod
     def for_run(parameters: MohrCoulombRunParameters, context: Any) -> MohrCoulomb:
         """The material of a run: isotropic at the run's confining pressure (a
-        :class:`~granular_material.runs.context.RunContext`), not yet allocated."""
+        :class:`~granular_material.fem.materials.run_context.RunContext`), not yet allocated."""
         return MohrCoulomb(young=parameters.E, poisson=parameters.nu,
                            friction_angle=parameters.phi, dilation_angle=parameters.psi,
                            cohesion=parameters.cohesion,

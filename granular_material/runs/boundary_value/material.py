@@ -3,7 +3,8 @@ with the initial stress of every Gauss point, and the unit weight of its soil.
 
 A material class offers ``for_problem(parameters, context, initial_stress) -> Material``
 (``initial_stress`` [Pa] (n, 2, 2), tension positive, one tensor per Gauss point; ``context``
-a :class:`~granular_material.runs.context.RunContext` with ``test = "boundary-value"`` and
+a :class:`~granular_material.fem.materials.run_context.RunContext` with
+``test = "boundary-value"`` and
 the problem's representative pressure as ``confining``). The shipped materials have it;
 another is refused with a message that says so.
 """
@@ -14,8 +15,8 @@ from typing import Any
 
 import numpy as np
 
+from granular_material.fem.materials.run_context import RunContext
 from granular_material.runs.boundary_value.spec import BoundaryValueSpec
-from granular_material.runs.context import RunContext
 from granular_material.runs.spec import SpecError
 
 __all__ = ["GRAVITY", "material_for_problem", "problem_context", "unit_weight_of"]
