@@ -200,12 +200,13 @@ def stage_specimen(out: Path, scale: Scale, repeats: int, force: bool, costs: di
 
 def footing_variants(parameters: dict[str, float]) -> dict[str, dict[str, float]]:
     """The footing's Mohr–Coulomb materials: as calibrated, perfectly plastic at φ, at φcs."""
-    base = {k: parameters[k] for k in ("E", "nu", "phi", "psi", "cohesion")}
+    phi, phi_cs = "friction_angle", "critical_friction_angle"
+    base = {k: parameters[k] for k in ("young", "poisson", phi, "dilation_angle", "cohesion")}
     variants = {"mc": dict(parameters)}
     variants["mc-peak"] = base
-    variants["mc-cs"] = base | {"phi": parameters.get("phi_cs", parameters["phi"]),
-                                "psi": min(parameters["psi"],
-                                           parameters.get("phi_cs", parameters["phi"]))}
+    variants["mc-cs"] = base | {phi: parameters.get(phi_cs, parameters[phi]),
+                                "dilation_angle": min(parameters["dilation_angle"],
+                                                      parameters.get(phi_cs, parameters[phi]))}
     return variants
 
 

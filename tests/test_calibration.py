@@ -55,11 +55,11 @@ def test_point_driver_holds_the_confining_stress_on_an_elastic_solid():
 def test_read_parameters_gives_back_the_parameters_of_a_mohr_coulomb_curve(synthetic):
     cal = read_parameters(synthetic, P)
     p = cal.parameters
-    assert p["E"] == pytest.approx(TRUE["young"], rel=0.01)
+    assert p["young"] == pytest.approx(TRUE["young"], rel=0.01)
     assert p["nu"] == pytest.approx(TRUE["poisson"], rel=0.01)
     assert p["phi"] == pytest.approx(TRUE["friction_angle"], abs=0.5)
     assert p["psi"] == pytest.approx(TRUE["dilation_angle"], abs=0.5)
-    assert p["phi_cs"] == pytest.approx(TRUE["critical_friction_angle"], abs=0.5)
+    assert p["critical_friction_angle"] == pytest.approx(TRUE["critical_friction_angle"], abs=0.5)
     assert p["softening_strain"] == pytest.approx(TRUE["softening_strain"], rel=0.05)
     assert p["cohesion"] == 0.0
     # the peak of a Mohr–Coulomb curve with c = 0 is (1 + sin φ)/(1 − sin φ)
@@ -75,7 +75,7 @@ def test_read_parameters_reads_the_scatter_of_several_curves(synthetic):
     stiffer = drained_point_curve(MohrCoulomb(**{**TRUE, "young": 60e6}, initial_stress=-P),
                                   P, 0.08)
     both = pd.concat([synthetic, stiffer.assign(rve=1)], ignore_index=True)
-    e = read_parameters(both, P).readings["E"]
+    e = read_parameters(both, P).readings["young"]
     assert e.value == pytest.approx(50e6, rel=0.01)
     assert (e.min, e.max) == pytest.approx((40e6, 60e6), rel=0.01)
     assert e.std == pytest.approx(10e6, rel=0.01)
@@ -107,14 +107,15 @@ def test_calibrate_end_to_end_on_the_64_disc_rve(tmp_path):
         assert (out / name).stat().st_size > 0, name
     params = tomllib.loads((out / "mohr-coulomb.toml").read_text(encoding="utf-8"))
     # the DEM peak of this RVE: σ1/σ3 ≈ 3.3 (principal) → φ ≈ 32.5°
-    assert 27.0 < params["phi"] < 37.0
-    assert 0.0 <= params["psi"] <= params["phi"]
-    assert 5e6 < params["E"] < 1e8 and 0.0 < params["nu"] < 0.5
+    assert 27.0 < params["friction_angle"] < 37.0
+    assert 0.0 <= params["dilation_angle"] <= params["friction_angle"]
+    assert 5e6 < params["young"] < 1e8 and 0.0 < params["poisson"] < 0.5
     # the material file loads back: the run parameters, then the material itself
     run = MohrCoulomb.Parameters(**params)
-    material = MohrCoulomb(E=run.E, nu=run.nu, friction_angle=run.phi,
-                           dilation_angle=run.psi, cohesion=run.cohesion,
-                           critical_friction_angle=run.phi_cs,
+    material = MohrCoulomb(young=run.young, poisson=run.poisson,
+                           friction_angle=run.friction_angle,
+                           dilation_angle=run.dilation_angle, cohesion=run.cohesion,
+                           critical_friction_angle=run.critical_friction_angle,
                            softening_strain=run.softening_strain, initial_stress=-P)
     material.allocate(1)
     assert material.evaluate(np.zeros((1, 2, 2))).ok

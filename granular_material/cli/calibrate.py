@@ -39,8 +39,9 @@ DEFAULT_OUT = Path("calibration")
 
 def calibration_toml(calibration: Calibration) -> str:
     """The parameters as a material file: the Mohr–Coulomb run parameters as top-level keys
-    (``E`` [Pa], ``nu``, ``phi``, ``psi`` [deg], ``cohesion`` [Pa], ``phi_cs`` [deg],
-    ``softening_strain``), each with how it was read in the comments above it."""
+    (``young`` [Pa], ``poisson`` [-], ``friction_angle``, ``dilation_angle`` [deg],
+    ``cohesion`` [Pa], ``critical_friction_angle`` [deg], ``softening_strain`` [-]), each
+    with how it was read in the comments above it."""
     from granular_material.procedures.calibration import PARAMETER_UNITS
 
     c = calibration
@@ -61,8 +62,9 @@ def calibration_toml(calibration: Calibration) -> str:
                                      initial_indent="# ", subsequent_indent="#   "),
                   f"#   read {r.value:.6g} ± {r.std:.3g} [{r.min:.6g}, {r.max:.6g}] over "
                   f"{len(r.per_rve)} RVE(s), axial strain {lo:.4g} to {hi:.4g}"]
-        if name == "phi_cs" and c.material_keywords()["critical_friction_angle"] is None:
-            lines.append("# phi_cs left out: no softening read (φcs = φ)")
+        if name == "critical_friction_angle" \
+                and c.material_keywords()["critical_friction_angle"] is None:
+            lines.append("# critical_friction_angle left out: no softening read (φcs = φ)")
         else:
             lines.append(f"{name} = {float(c.parameters[name])!r}")
     return "\n".join(lines) + "\n"
