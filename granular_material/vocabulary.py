@@ -55,7 +55,7 @@ _NU = Rename("nu", "poisson", "-", "Poisson's ratio of the continuum")
 RENAMED: dict[str, tuple[Rename, ...]] = {
     "dem": (
         Rename("friction_angle", "contact_friction_angle", "rad",
-               "the contacts' friction angle of the RVEs' discs (μ = tan of it)"),
+               "the contacts' friction angle of the RVEs' discs, μ = tan of it"),
         Rename("young", "contact_young", "Pa",
                "law frictmat: the discs' Young's modulus that sets the contact stiffness "
                "kn = 2E·r1·r2/(r1 + r2) (not a continuum's modulus)"),

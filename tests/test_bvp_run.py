@@ -24,7 +24,7 @@ size = [0.6, 0.4]
 elements = {elements}
 element = "tri6"
 grading = [4.0, 0.25]
-align-x = [0.05]
+align_x = [0.05]
 [boundaries]
 footing = "y = top and x <= 0.05"
 surface = "y = top and x >= 0.05"

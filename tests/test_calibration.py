@@ -56,9 +56,9 @@ def test_read_parameters_gives_back_the_parameters_of_a_mohr_coulomb_curve(synth
     cal = read_parameters(synthetic, P)
     p = cal.parameters
     assert p["young"] == pytest.approx(TRUE["young"], rel=0.01)
-    assert p["nu"] == pytest.approx(TRUE["poisson"], rel=0.01)
-    assert p["phi"] == pytest.approx(TRUE["friction_angle"], abs=0.5)
-    assert p["psi"] == pytest.approx(TRUE["dilation_angle"], abs=0.5)
+    assert p["poisson"] == pytest.approx(TRUE["poisson"], rel=0.01)
+    assert p["friction_angle"] == pytest.approx(TRUE["friction_angle"], abs=0.5)
+    assert p["dilation_angle"] == pytest.approx(TRUE["dilation_angle"], abs=0.5)
     assert p["critical_friction_angle"] == pytest.approx(TRUE["critical_friction_angle"], abs=0.5)
     assert p["softening_strain"] == pytest.approx(TRUE["softening_strain"], rel=0.05)
     assert p["cohesion"] == 0.0
@@ -120,7 +120,7 @@ def test_calibrate_end_to_end_on_the_64_disc_rve(tmp_path):
     material.allocate(1)
     assert material.evaluate(np.zeros((1, 2, 2))).ok
     report = json.loads((out / "calibration.json").read_text(encoding="utf-8"))
-    assert report["readings"]["phi"]["value"] == pytest.approx(params["phi"])
+    assert report["readings"]["friction_angle"]["value"] == pytest.approx(params["friction_angle"])
     assert report["pressure"] == P and report["settings"]["rves"] == 1
     curve = pd.read_csv(out / "calibration.csv")
     assert curve["axial_strain"].max() == pytest.approx(0.03, rel=1e-6)

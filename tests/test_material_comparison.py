@@ -119,7 +119,7 @@ def test_footing_variants() -> None:
     assert v["mc"] == p
     assert "critical_friction_angle" not in v["mc-peak"]
     assert v["mc-peak"]["friction_angle"] == 35.8
-    assert v["mc-cs"]["phi"] == 12.0 and v["mc-cs"]["psi"] == 12.0
+    assert v["mc-cs"]["friction_angle"] == 12.0 and v["mc-cs"]["dilation_angle"] == 12.0
     assert "softening_strain" not in v["mc-cs"]
 
 

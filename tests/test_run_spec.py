@@ -222,7 +222,7 @@ def test_a_checkpoint_of_the_options_era_resumes(tmp_path, capsys):
 # -- scenes: run --check refuses what run refuses --------------------------------------------
 _BAD_SCENES = {
     "contact-young-with-linear-elastic": 'material = "linear-elastic"\ncontact_young = 6e8\n',
-    "reuse-with-displacement-test": "reuse-tol = 1e-4\n",
+    "reuse-with-displacement-test": "reuse_tol = 1e-4\n",
     "too-few-discs": "particles = 5\n",
     "track-missing-point": "track = [\"7\"]\n",
     "kn-with-an-rve-file": 'rve = "rve64.npz"\nkn = 1e6\n',
@@ -234,7 +234,7 @@ _BAD_SCENES = {
 def test_check_and_run_refuse_the_same_bad_scene(name, tmp_path, capsys):
     shutil.copy(EXAMPLES / "rve64.npz", tmp_path / "rve64.npz")
     scene = tmp_path / f"{name}.toml"
-    scene.write_text('test = "single-element"\nsteps = 2\naxial-strain = 0.002\n'
+    scene.write_text('test = "single-element"\nsteps = 2\naxial_strain = 0.002\n'
                      'device = "cpu"\n' + _BAD_SCENES[name])
     assert main(["run", str(scene), "--check"]) == 2
     checked = capsys.readouterr().err
