@@ -153,7 +153,7 @@ def stage_calibrate(out: Path, scale: Scale, force: bool, costs: dict) -> None:
                out / f"prepare-{tag}.log")
         cal = out / f"calibration-{tag}"
         if force or not (cal / "mohr-coulomb.toml").is_file():
-            wall = gm(["calibrate", rve, "--pressure", p, "--axial-strain", scale.axial_strain,
+            wall = gm(["calibrate", rve, "--confining", p, "--axial-strain", scale.axial_strain,
                        "--device", "cpu", "--no-progress", "--out", cal],
                       out / f"calibrate-{tag}.log")
             costs[f"calibrate-{tag}"] = {"process_s": [wall], "process_median_s": wall}

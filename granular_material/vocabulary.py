@@ -68,7 +68,15 @@ RENAMED: dict[str, tuple[Rename, ...]] = {
                "critical-state friction angle φcs that φ softens to"),
     ),
     "linear-elastic": (_E, _NU),
+    # a Python keyword of DEMMaterial (the run specification's and the commands' name)
+    "DEMMaterial": (Rename("pressure", "confining", "Pa",
+                           "isotropic pressure the prepared RVEs are consolidated at"),),
+    # granular-material calibrate and calibrate_mohr_coulomb
+    "calibrate": (Rename("pressure", "confining", "Pa",
+                         "confining pressure P of the drained biaxial tests"),),
 }
+#: how a warning names whose an old name is, by context (default: the material's)
+_WHOSE = {"DEMMaterial": "DEMMaterial's", "calibrate": "calibrate's"}
 
 
 def renames(context: str) -> dict[str, Rename]:
@@ -126,9 +134,9 @@ def renamed(values: Mapping[str, Any], context: str, *, warn: bool = True,
             continue
         if rename.new in out and counts(out[rename.new]):
             raise ParameterError(rename.new, f"is given twice: as {rename.new!r} and under its "
-                                             f"old name {old!r}; give {rename.new!r} only")
+                                             f"old name {old!r}; give {rename.new!r}, not both")
         if warn:
-            warn_renamed(old, rename.new, f"the {context} material's",
+            warn_renamed(old, rename.new, _WHOSE.get(context, f"the {context} material's"),
                          f"[{rename.unit}], {rename.meaning}")
         out[rename.new] = value
     return out

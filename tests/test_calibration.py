@@ -99,7 +99,7 @@ def test_read_parameters_refuses_what_it_cannot_read(synthetic):
 
 def test_calibrate_end_to_end_on_the_64_disc_rve(tmp_path):
     out = tmp_path / "cal"
-    code = main(["calibrate", str(RVE64), "--pressure", "100e3", "--axial-strain", "0.03",
+    code = main(["calibrate", str(RVE64), "--confining", "100e3", "--axial-strain", "0.03",
                  "--out", str(out), "--device", "cpu", "--no-progress", "--json"])
     assert code == 0
     for name in ("mohr-coulomb.toml", "calibration.json", "calibration.csv",
@@ -135,8 +135,8 @@ def test_calibrate_reconsolidates_an_rve_at_another_pressure():
 
 
 @pytest.mark.parametrize("argv, words", [
-    (["--pressure", "0"], "--pressure"),
-    (["--pressure", "-5e3"], "--pressure"),
+    (["--confining", "0"], "--confining"),
+    (["--confining", "-5e3"], "--confining"),
 ])
 def test_calibrate_refuses_a_pressure_that_is_not_positive(tmp_path, capsys, argv, words):
     out = tmp_path / "cal"
@@ -149,7 +149,7 @@ def test_calibrate_refuses_a_pressure_that_is_not_positive(tmp_path, capsys, arg
 
 def test_calibrate_refuses_a_missing_file_and_writes_nothing(tmp_path, capsys):
     out = tmp_path / "cal"
-    code = main(["calibrate", str(tmp_path / "none.npz"), "--pressure", "1e5",
+    code = main(["calibrate", str(tmp_path / "none.npz"), "--confining", "1e5",
                  "--out", str(out)])
     assert code == 2
     assert "none.npz does not exist" in capsys.readouterr().err
@@ -165,14 +165,15 @@ def test_calibrate_refuses_an_rve_file_of_no_rves_and_bad_settings(tmp_path, cap
     path = tmp_path / "empty.npz"
     np.savez(path, **empty)
     out = tmp_path / "cal"
-    assert main(["calibrate", str(path), "--pressure", "1e5", "--out", str(out)]) == 2
+    assert main(["calibrate", str(path), "--confining", "1e5", "--out", str(out)]) == 2
     assert "B=0" in capsys.readouterr().err and not out.exists()
-    assert main(["calibrate", str(RVE64), "--pressure", "1e5", "--rves", "2",
+    assert main(["calibrate", str(RVE64), "--confining", "1e5", "--rves", "2",
                  "--out", str(out)]) == 2
     assert "--rves 2" in capsys.readouterr().err and not out.exists()
-    for kwargs, field in (({"pressure": -1.0}, "pressure"), ({"pressure": math.nan}, "pressure"),
-                          ({"pressure": P, "axial_strain": 0.95}, "axial_strain"),
-                          ({"pressure": P, "rves": 0}, "rves")):
+    for kwargs, field in (({"confining": -1.0}, "confining"),
+                          ({"confining": math.nan}, "confining"),
+                          ({"confining": P, "axial_strain": 0.95}, "axial_strain"),
+                          ({"confining": P, "rves": 0}, "rves")):
         with pytest.raises(ParameterError) as err:
             calibrate_mohr_coulomb(RVE64, **kwargs)
         assert err.value.field == field

@@ -54,18 +54,18 @@ def add_material_arguments(parser: argparse.ArgumentParser, default: str) -> Non
     g = parser.add_argument_group(
         "continuum materials", "linear-elastic and mohr-coulomb: moduli; mohr-coulomb: "
         "strength (angles in degrees; the RVEs' --contact-friction-angle is in rad)")
-    g.add_argument("--young", type=float, default=None,
+    g.add_argument("--young", type=float, default=None, metavar="PA",
                    help=f"Young's modulus [Pa] (default {_ELASTIC.young:g})")
-    g.add_argument("--poisson", type=float, default=None,
+    g.add_argument("--poisson", type=float, default=None, metavar="NU",
                    help=f"Poisson's ratio [-] (default {_ELASTIC.poisson:g})")
-    g.add_argument("--friction-angle", type=float, default=None,
+    g.add_argument("--friction-angle", type=float, default=None, metavar="DEG",
                    help="mohr-coulomb: peak friction angle [deg] (default "
                         f"{_MC.friction_angle:g})")
-    g.add_argument("--dilation-angle", type=float, default=None,
+    g.add_argument("--dilation-angle", type=float, default=None, metavar="DEG",
                    help=f"mohr-coulomb: dilation angle [deg] (default {_MC.dilation_angle:g})")
-    g.add_argument("--cohesion", type=float, default=None,
+    g.add_argument("--cohesion", type=float, default=None, metavar="PA",
                    help=f"mohr-coulomb: cohesion [Pa] (default {_MC.cohesion:g})")
-    g.add_argument("--critical-friction-angle", type=float, default=None,
+    g.add_argument("--critical-friction-angle", type=float, default=None, metavar="DEG",
                    help="mohr-coulomb: critical-state friction angle [deg] that "
                         "--friction-angle softens to (default: no softening)")
     g.add_argument("--softening-strain", type=float, default=None,

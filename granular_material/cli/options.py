@@ -323,12 +323,13 @@ def add_rve_material_options(parser: argparse.ArgumentParser | argparse._Argumen
     parser.add_argument("--kt", type=positive, default=default("kt"),
                         help=f"tangential stiffness [N/m] ({d['kt']:g})")
     parser.add_argument("--contact-young", type=positive, default=default("contact_young"),
+                        metavar="PA",
                         help="--law frictmat: the discs' Young's modulus [Pa], which sets the "
                              "contact stiffness kn = 2E r1 r2/(r1 + r2) "
                              f"({d['contact_young']:g}; not a continuum's --young)")
     parser.add_argument("--kt-over-kn", type=positive, default=default("kt_over_kn"),
                         help=f"FrictMat kt/kn ({d['kt_over_kn']:g})")
-    parser.add_argument("--contact-friction-angle", type=float,
+    parser.add_argument("--contact-friction-angle", type=float, metavar="RAD",
                         default=default("contact_friction_angle"),
                         help="the contacts' friction angle [rad] "
                              f"({d['contact_friction_angle']:g})")
