@@ -65,7 +65,7 @@ from granular_material.runs.spec import MaterialSpec, NewtonSpec, SpecError
 from granular_material.typed_fields import conform, conform_fields
 from granular_material.vocabulary import RenamedWarning, key_of, user_stacklevel
 
-__all__ = ["CONDITION_TYPES", "INITIAL_STATES", "BoundaryValueSpec", "ConditionSpec",
+__all__ = ["CONDITION_TYPES", "INITIAL_STATES", "SCENE_KEYS", "BoundaryValueSpec", "ConditionSpec",
            "InitialStateSpec", "MeshSpec", "bvp_from_dict"]
 
 #: the conditions a boundary may carry
@@ -330,8 +330,7 @@ _GENERATED_SIDES = frozenset({"left", "right", "bottom", "top"})
 
 def _condition(entry: Any, index: int) -> ConditionSpec:
     entry = _table(f"conditions[{index}]", entry)
-    _unknown("conditions", entry, {"type", "boundary", "component", "value", "end",
-                                   "displacement", "rough"})
+    _unknown("conditions", entry, SCENE_KEYS["conditions"])
     component = entry.get("component")
     if component is not None:
         if isinstance(component, bool) or not isinstance(component, str | int) \
@@ -347,8 +346,7 @@ def _condition(entry: Any, index: int) -> ConditionSpec:
 
 def _mesh(table: dict[str, Any], folder: Path) -> MeshSpec:
     table = _snake_case("mesh", table)
-    _unknown("mesh", table, {"file", "size", "elements", "element", "grading", "quadrature",
-                             "align_x", "align_y"})
+    _unknown("mesh", table, SCENE_KEYS["mesh"])
     values = dict(table)
     file = values.get("file")
     if isinstance(file, str) and file:
@@ -378,13 +376,26 @@ def _snake_case(section: str, table: dict[str, Any]) -> dict[str, Any]:
 
 
 def _initial(table: dict[str, Any]) -> InitialStateSpec:
-    _unknown("initial", table, {"state", "pressure", "k0", "surcharge", "surface"})
+    _unknown("initial", table, SCENE_KEYS["initial"])
     return _within("initial", lambda: InitialStateSpec(**table))
 
 
-_SCENE_KEYS = {"test", "steps", "name", "out", "mesh", "boundaries", "conditions", "gravity",
-               "initial", "material", "newton", "output"}
-_OUTPUT_KEYS = {"out", "device", "shards", "progress", "fields"}
+#: the keys of a boundary-value scene, by table ("": the top level; [newton] takes
+#: NewtonSpec's fields, [material.parameters] the material's own, [boundaries] free names)
+SCENE_KEYS: dict[str, frozenset[str]] = {
+    "": frozenset({"test", "steps", "name", "out", "mesh", "boundaries", "conditions",
+                   "gravity", "initial", "material", "newton", "output"}),
+    "mesh": frozenset({"file", "size", "elements", "element", "grading", "quadrature",
+                       "align_x", "align_y"}),
+    "conditions": frozenset({"type", "boundary", "component", "value", "end", "displacement",
+                             "rough"}),
+    "gravity": frozenset({"unit_weight", "factor"}),
+    "initial": frozenset({"state", "pressure", "k0", "surcharge", "surface"}),
+    "material": frozenset({"name", "parameters"}),
+    "output": frozenset({"out", "device", "shards", "progress", "fields"}),
+}
+_SCENE_KEYS = SCENE_KEYS[""]
+_OUTPUT_KEYS = SCENE_KEYS["output"]
 
 
 def bvp_from_dict(data: Mapping[str, Any], folder: Path | str = ".") -> BoundaryValueSpec:
@@ -404,9 +415,9 @@ def bvp_from_dict(data: Mapping[str, Any], folder: Path | str = ".") -> Boundary
     if not isinstance(conditions, list):
         raise SpecError("conditions", "must be an array of tables ([[conditions]])")
     gravity = _table("gravity", data.get("gravity"))
-    _unknown("gravity", gravity, {"unit_weight", "factor"})
+    _unknown("gravity", gravity, SCENE_KEYS["gravity"])
     material = _table("material", data.get("material"))
-    _unknown("material", material, {"name", "parameters"})
+    _unknown("material", material, SCENE_KEYS["material"])
     newton = _table("newton", data.get("newton"))
     output = _table("output", data.get("output"))
     _unknown("output", output, _OUTPUT_KEYS)
