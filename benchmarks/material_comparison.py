@@ -48,8 +48,9 @@ else:  # Python 3.10
 ROOT = Path(__file__).resolve().parents[1]
 FOOTING_SCENE = ROOT / "examples" / "scenes" / "footing-gz2016-cpu.toml"
 #: Guo & Zhao's RVE material (the footing scene's), as ``prepare`` options
-GZ_MATERIAL = ("--law", "frictmat", "--young", "6e8", "--kt-over-kn", "0.8", "--radius-min",
-               "3e-3", "--radius-max", "7e-3", "--friction-angle", "0.5", "--damping", "0.1")
+GZ_MATERIAL = ("--law", "frictmat", "--contact-young", "6e8", "--kt-over-kn", "0.8",
+               "--radius-min", "3e-3", "--radius-max", "7e-3", "--contact-friction-angle", "0.5",
+               "--damping", "0.1")
 
 
 @dataclass(frozen=True)
