@@ -279,3 +279,36 @@ def test_a_material_file_of_old_names_is_read_as_the_new_ones(tmp_path, capsys):
     assert values == {"young": 2e7, "poisson": 0.25, "friction_angle": 33.0,
                       "dilation_angle": 3.0}
     assert json.dumps(values)  # plain values
+
+
+@pytest.mark.parametrize(("argv", "old_names"), [
+    (["--material", "mohr-coulomb", "--friction-angle", "33", "--young", "2e7"],
+     {"friction_angle": "phi", "young": "E", "poisson": "nu", "dilation_angle": "psi",
+      "critical_friction_angle": "phi_cs"}),
+    (["--material", "dem", "--particles", "24", "--contact-friction-angle", "0.3"],
+     {"contact_friction_angle": "friction_angle", "contact_young": "young"}),
+])
+def test_a_run_saved_under_the_old_names_resumes(argv, old_names, tmp_path, capsys):
+    """A run whose checkpoint keeps its spec under the old field names (started by an older
+    version, killed before it saved a step) resumes with the same options given in the new
+    names, quietly; other values are still refused."""
+    from granular_material.runs import RunCheckpoint
+
+    out = tmp_path / "run"
+    common = ["single-element", "--steps", "1", "--axial-strain", "0.001", "--device", "cpu",
+              "--no-progress", *argv]
+    assert main([*common, "--out", str(out)]) == 0
+    checkpoint = RunCheckpoint(out / "checkpoint")
+    record = checkpoint.read_options()
+    parameters = record["spec"]["material"]["parameters"]
+    record["spec"]["material"]["parameters"] = {old_names.get(k, k): v
+                                                for k, v in parameters.items()}
+    (out / "checkpoint" / "state.npz").unlink(missing_ok=True)
+    checkpoint.write_options(record)
+    capsys.readouterr()
+    assert main([*common, "--resume", str(out)]) == 0
+    assert "warning" not in capsys.readouterr().err
+    (out / "checkpoint" / "state.npz").unlink(missing_ok=True)
+    checkpoint.write_options(record)
+    changed = [*common[:-1], "34" if argv[-1] == "2e7" else "0.35"]
+    assert main([*changed, "--resume", str(out)]) == 2
