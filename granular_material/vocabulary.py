@@ -9,9 +9,11 @@ its run specification's fields, its command-line options and scene keys, its mat
 file), never read in another, so that no radian value is ever read as degrees.
 
 Scene keys are snake_case (``axial_strain``), as the Python names and the run
-specification's; command-line options are the same names in kebab-case
-(``--axial-strain``), mapped mechanically (:func:`key_of`, :func:`flag_of`). A scene key
-written in kebab-case is the deprecated spelling of its snake_case key.
+specification's; command-line options are the same names in kebab-case, mapped mechanically
+(:func:`key_of`; the other way is the command line's own,
+:func:`granular_material.cli.options.flag_of`). A scene key written in kebab-case is the
+deprecated spelling of its snake_case key. A warning names the fields in backquotes, which
+the command line shows as its options.
 """
 
 from __future__ import annotations
@@ -26,8 +28,8 @@ from typing import Any, TypeVar
 
 from granular_material.errors import ParameterError
 
-__all__ = ["RENAMED", "Rename", "RenamedWarning", "accept_old_keywords", "flag_of", "key_of",
-           "renamed", "renames", "user_stacklevel", "warn_renamed"]
+__all__ = ["RENAMED", "Rename", "RenamedWarning", "accept_old_keywords", "key_of", "renamed",
+           "renames", "user_stacklevel", "warn_renamed"]
 
 
 class RenamedWarning(DeprecationWarning):
@@ -90,12 +92,6 @@ def key_of(name: str) -> str:
     return name.removeprefix("--").replace("-", "_")
 
 
-def flag_of(name: str) -> str:
-    """The command-line option of a name: ``contact_friction_angle`` →
-    ``--contact-friction-angle``."""
-    return "--" + name.replace("_", "-")
-
-
 def user_stacklevel() -> int:
     """The ``stacklevel`` of a warning issued by the caller of this function that points at
     the first frame outside granular_material (the user's line)."""
@@ -111,9 +107,8 @@ def warn_renamed(old: str, new: str, what: str = "", note: str = "") -> None:
     is, e.g. "the dem material's"; ``note``: the unit and meaning)."""
     whose = f"{what} " if what else ""
     said = f" ({note})" if note else ""
-    warnings.warn(f"{whose}'{old}' ({flag_of(old)}) is deprecated: it is now '{new}' "
-                  f"({flag_of(new)}){said}; the old name is read until the next release",
-                  RenamedWarning, stacklevel=user_stacklevel())
+    warnings.warn(f"{whose}`{old}` is deprecated: it is now `{new}`{said}; the old name is "
+                  "read until the next release", RenamedWarning, stacklevel=user_stacklevel())
 
 
 def renamed(values: Mapping[str, Any], context: str, *, warn: bool = True,
@@ -133,8 +128,8 @@ def renamed(values: Mapping[str, Any], context: str, *, warn: bool = True,
         if not counts(value):
             continue
         if rename.new in out and counts(out[rename.new]):
-            raise ParameterError(rename.new, f"is given twice: as {rename.new!r} and under its "
-                                             f"old name {old!r}; give {rename.new!r}, not both")
+            raise ParameterError(rename.new, f"is given twice: also under its old name "
+                                             f"`{old}`; give `{rename.new}`, not both")
         if warn:
             warn_renamed(old, rename.new, _WHOSE.get(context, f"the {context} material's"),
                          f"[{rename.unit}], {rename.meaning}")

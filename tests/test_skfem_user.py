@@ -105,7 +105,7 @@ def test_linear_elastic_checkpoint_keeps_the_committed_total(tmp_path):
 def test_linear_elastic_takes_the_old_names_with_a_warning():
     from granular_material.vocabulary import RenamedWarning
 
-    with pytest.warns(RenamedWarning, match="'nu'.*'poisson'"):
+    with pytest.warns(RenamedWarning, match="`nu`.*`poisson`"):
         old = LinearElastic(E=1e7, nu=0.2)
     assert old.parameters == LinearElastic(young=1e7, poisson=0.2).parameters
 

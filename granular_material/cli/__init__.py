@@ -75,8 +75,11 @@ def _renamed_as_warnings(command: str) -> Iterator[None]:
         shown = warnings.showwarning
 
         def show(message: Any, category: type[Warning], *rest: Any, **kw: Any) -> None:
-            if issubclass(category, RenamedWarning):
-                print(f"granular-material {command}: warning: {message}", file=sys.stderr)
+            if issubclass(category, RenamedWarning):  # its fields named as options
+                from granular_material.cli.options import as_flags
+
+                print(f"granular-material {command}: warning: {as_flags(str(message))}",
+                      file=sys.stderr)
             else:
                 shown(message, category, *rest, **kw)
 
