@@ -27,7 +27,8 @@ def test_single_element_mohr_coulomb_peaks_at_the_closed_form(tmp_path, capsys):
 
 def test_material_file_sets_the_parameters_and_options_beside_it_win(tmp_path, capsys):
     path = tmp_path / "mc.toml"
-    path.write_text("E = 40e6\nnu = 0.25\nphi = 35.0\npsi = 5.0\ncohesion = 0.0\n")
+    path.write_text("young = 40e6\npoisson = 0.25\nfriction_angle = 35.0\ndilation_angle = 5.0\n"
+                    "cohesion = 0.0\n")
     code, summary = _run(["single-element", "--material", "mohr-coulomb", "--material-file",
                           str(path), "--axial-strain", "0.01", "--steps", "10",
                           "--formulation", "small-strain", "--out", str(tmp_path / "a")],

@@ -212,7 +212,9 @@ def test_old_options_warn_on_stderr_naming_the_new_ones(tmp_path, capsys):
     from granular_material.cli.fem import spec_from_args
 
     args = build_parser("biaxial").parse_args(["biaxial", "--friction-angle", "0.3"])
-    spec = spec_from_args(args)
+    with pytest.warns(RenamedWarning, match="`friction_angle` is deprecated: it is now "
+                                            "`contact_friction_angle`"):
+        spec = spec_from_args(args)
     assert spec.material.parameters.contact_friction_angle == 0.3
     args = build_parser("biaxial").parse_args(
         ["biaxial", "--material", "mohr-coulomb", "--phi", "33", "--friction-angle", "0.3"])
@@ -220,8 +222,10 @@ def test_old_options_warn_on_stderr_naming_the_new_ones(tmp_path, capsys):
         spec_from_args(args)
     args = build_parser("biaxial").parse_args(
         ["biaxial", "--material", "mohr-coulomb", "--phi", "33", "--E", "2e7"])
-    assert (spec_from_args(args).material.parameters.friction_angle,
-            spec_from_args(args).material.parameters.young) == (33.0, 2e7)
+    with pytest.warns(RenamedWarning) as caught:
+        parameters = spec_from_args(args).material.parameters
+    assert (parameters.friction_angle, parameters.young) == (33.0, 2e7)
+    assert sorted(str(w.message).split("`")[1] for w in caught) == ["E", "phi"]
     out = tmp_path / "rve.npz"
     assert main(["prepare", "--particles", "16", "--device", "cpu", "--friction-angle", "0.3",
                  "--out", str(out), "--json"]) == 0
@@ -273,8 +277,9 @@ def test_a_material_file_of_old_names_is_read_as_the_new_ones(tmp_path, capsys):
     path.write_text("E = 2e7\nnu = 0.25\nphi = 33.0\npsi = 3.0\n")
     from granular_material.cli.material_options import material_file_values
 
-    with pytest.warns(RenamedWarning, match="`psi`"):
+    with pytest.warns(RenamedWarning) as caught:
         values = material_file_values(path, "mohr-coulomb")
+    assert sorted(str(w.message).split("`")[1] for w in caught) == ["E", "nu", "phi", "psi"]
     assert values == {"young": 2e7, "poisson": 0.25, "friction_angle": 33.0,
                       "dilation_angle": 3.0}
     assert json.dumps(values)  # plain values
