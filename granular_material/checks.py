@@ -36,6 +36,7 @@ from granular_material.procedures.packing import (
     check_radius_range,
     min_discs,
 )
+from granular_material.vocabulary import renames
 
 __all__ = ["DISC_BYTES", "MEMORY_LIMIT", "RVE_MATERIAL_DEFAULTS", "WordedError",
            "available_memory", "check_memory", "check_output_dir", "check_output_file",
@@ -170,8 +171,9 @@ def _rve_file_shape(path: str, mtime_ns: int, size: int) -> tuple[int, int]:
 
 
 #: the RVE file's meta keys (docs/design.md#rve-file) whose option and field names say they
-#: are the contacts' (granular_material.vocabulary): friction [rad] and FrictMat's modulus
-_META_FIELDS = {"friction_angle": "contact_friction_angle", "young": "contact_young"}
+#: are the contacts': friction [rad] and FrictMat's modulus, the DEM material's old names
+#: (:data:`granular_material.vocabulary.RENAMED`)
+_META_FIELDS = {old: rename.new for old, rename in renames("dem").items()}
 
 
 def _rve_material_defaults() -> dict[str, Any]:

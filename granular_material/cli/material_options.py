@@ -28,7 +28,7 @@ from granular_material.cli.options import UsageError
 from granular_material.fem import available_materials, load_material
 from granular_material.fem.materials.linear_elastic import LinearElasticRunParameters
 from granular_material.fem.materials.mohr_coulomb import MohrCoulombRunParameters
-from granular_material.vocabulary import renamed
+from granular_material.vocabulary import renamed, renames
 
 __all__ = ["MATERIAL_OPTIONS", "OLD_MATERIAL_OPTIONS", "add_material_arguments",
            "check_material_options", "material_file_values"]
@@ -38,8 +38,10 @@ _MC = MohrCoulombRunParameters()
 #: the continuum materials' options (their destinations: the run parameters' names)
 MATERIAL_OPTIONS = ("young", "poisson", "friction_angle", "dilation_angle", "cohesion",
                     "critical_friction_angle", "softening_strain")
-#: their old names (hidden options, read as the new ones with a warning)
-OLD_MATERIAL_OPTIONS = ("E", "nu", "phi", "psi", "phi_cs")
+#: their old names (hidden options, read as the new ones with a warning): the continuum
+#: materials' renames of :data:`granular_material.vocabulary.RENAMED`
+OLD_MATERIAL_OPTIONS = tuple(dict.fromkeys(
+    [*renames("mohr-coulomb"), *renames("linear-elastic")]))
 #: the tables of a material file that describe how it was made (not parameters)
 _RECORD_TABLES = frozenset({"calibration"})
 
