@@ -257,7 +257,7 @@ def test_an_old_scene_warns_and_runs_as_the_new_one(tmp_path, capsys):
     warned = capsys.readouterr().err
     for key in ("axial-strain", "friction-angle", "radius-min"):
         assert f"scene key '{key}' is deprecated" in warned
-    assert "it is now --contact-friction-angle ([rad]" in warned
+    assert "'friction_angle' is deprecated: it is now 'contact_friction_angle' ([rad]" in warned
     with pytest.warns(RenamedWarning):
         was = spec_from_args(load_scene(old, out=tmp_path / "run").namespace)
     now = spec_from_args(load_scene(new, out=tmp_path / "run").namespace)

@@ -67,19 +67,23 @@ def _usage_error() -> type[Exception]:
 def _renamed_as_warnings(command: str) -> Iterator[None]:
     """While the command runs, an old name it reads (a
     :class:`~granular_material.vocabulary.RenamedWarning`: an option, scene key or spec field
-    renamed) is said once on stderr as ``granular-material COMMAND: warning: ...``; other
-    warnings are shown as Python shows them."""
+    renamed) is said once on stderr as ``granular-material COMMAND: warning: ...``, naming
+    options (``run``: the keys of its file); other warnings are shown as Python shows
+    them."""
     from granular_material.vocabulary import RenamedWarning
 
     with warnings.catch_warnings():
         shown = warnings.showwarning
 
         def show(message: Any, category: type[Warning], *rest: Any, **kw: Any) -> None:
-            if issubclass(category, RenamedWarning):  # its fields named as options
+            if issubclass(category, RenamedWarning):
                 from granular_material.cli.options import as_flags
 
-                print(f"granular-material {command}: warning: {as_flags(str(message))}",
-                      file=sys.stderr)
+                # its fields named as options, or, read from a file (a scene or a spec,
+                # whose keys are the fields' names), as keys
+                text = (str(message).replace("`", "'") if command == "run"
+                        else as_flags(str(message)))
+                print(f"granular-material {command}: warning: {text}", file=sys.stderr)
             else:
                 shown(message, category, *rest, **kw)
 
