@@ -48,8 +48,9 @@ else:  # Python 3.10
 ROOT = Path(__file__).resolve().parents[1]
 FOOTING_SCENE = ROOT / "examples" / "scenes" / "footing-gz2016-cpu.toml"
 #: Guo & Zhao's RVE material (the footing scene's), as ``prepare`` options
-GZ_MATERIAL = ("--law", "frictmat", "--young", "6e8", "--kt-over-kn", "0.8", "--radius-min",
-               "3e-3", "--radius-max", "7e-3", "--friction-angle", "0.5", "--damping", "0.1")
+GZ_MATERIAL = ("--law", "frictmat", "--contact-young", "6e8", "--kt-over-kn", "0.8",
+               "--radius-min", "3e-3", "--radius-max", "7e-3", "--contact-friction-angle", "0.5",
+               "--damping", "0.1")
 
 
 @dataclass(frozen=True)
@@ -153,7 +154,7 @@ def stage_calibrate(out: Path, scale: Scale, force: bool, costs: dict) -> None:
                out / f"prepare-{tag}.log")
         cal = out / f"calibration-{tag}"
         if force or not (cal / "mohr-coulomb.toml").is_file():
-            wall = gm(["calibrate", rve, "--pressure", p, "--axial-strain", scale.axial_strain,
+            wall = gm(["calibrate", rve, "--confining", p, "--axial-strain", scale.axial_strain,
                        "--device", "cpu", "--no-progress", "--out", cal],
                       out / f"calibrate-{tag}.log")
             costs[f"calibrate-{tag}"] = {"process_s": [wall], "process_median_s": wall}
@@ -200,12 +201,13 @@ def stage_specimen(out: Path, scale: Scale, repeats: int, force: bool, costs: di
 
 def footing_variants(parameters: dict[str, float]) -> dict[str, dict[str, float]]:
     """The footing's Mohr–Coulomb materials: as calibrated, perfectly plastic at φ, at φcs."""
-    base = {k: parameters[k] for k in ("E", "nu", "phi", "psi", "cohesion")}
+    phi, phi_cs = "friction_angle", "critical_friction_angle"
+    base = {k: parameters[k] for k in ("young", "poisson", phi, "dilation_angle", "cohesion")}
     variants = {"mc": dict(parameters)}
     variants["mc-peak"] = base
-    variants["mc-cs"] = base | {"phi": parameters.get("phi_cs", parameters["phi"]),
-                                "psi": min(parameters["psi"],
-                                           parameters.get("phi_cs", parameters["phi"]))}
+    variants["mc-cs"] = base | {phi: parameters.get(phi_cs, parameters[phi]),
+                                "dilation_angle": min(parameters["dilation_angle"],
+                                                      parameters.get(phi_cs, parameters[phi]))}
     return variants
 
 

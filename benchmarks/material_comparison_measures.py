@@ -79,5 +79,8 @@ def bearing_curve(steps: pd.DataFrame, half_width: float) -> pd.DataFrame:
 
 
 def material_file(path: Path) -> dict[str, float]:
-    """The parameters of a material file ``calibrate`` writes."""
-    return tomllib.loads(path.read_text(encoding="utf-8"))
+    """The parameters of a material file ``calibrate`` writes (one of an older version, with
+    the old names, read under the new ones)."""
+    from granular_material.vocabulary import renamed
+
+    return renamed(tomllib.loads(path.read_text(encoding="utf-8")), "mohr-coulomb", warn=False)

@@ -180,9 +180,10 @@ def specimen_results(out: Path, phi: float, psi: float) -> dict[str, Any]:
 
 def footing_results(out: Path, parameters: dict[str, float]) -> dict[str, Any]:
     """Bearing curves, Prandtl's q·N_q and the mechanisms; ``footing.png``."""
-    res: dict[str, Any] = {"prandtl_kpa": {
-        "phi": SURCHARGE * prandtl_nq(parameters["phi"]) / 1e3,
-        "phi_cs": SURCHARGE * prandtl_nq(parameters.get("phi_cs", parameters["phi"])) / 1e3}}
+    phi = parameters["friction_angle"]
+    phi_cs = parameters.get("critical_friction_angle", phi)
+    res: dict[str, Any] = {"prandtl_kpa": {"phi": SURCHARGE * prandtl_nq(phi) / 1e3,
+                                           "phi_cs": SURCHARGE * prandtl_nq(phi_cs) / 1e3}}
     fig, ax = plt.subplots(figsize=(7, 4.5))
     runs = {"dem": ("DEM (64-disc RVEs)", "C0-")}
     runs |= {"mc": ("MC as calibrated (softening)", "k--"),
@@ -287,7 +288,8 @@ def write_report(out: Path, scale: dict[str, Any], costs: dict[str, Any]) -> dic
                                                    for n, r in v["readings"].items()}
                                                for k, v in cal.items()},
                "element": element_results(out, int(scale["rves"])),
-               "specimen": specimen_results(out, p100["phi"], p100["psi"]),
+               "specimen": specimen_results(out, p100["friction_angle"],
+                                                        p100["dilation_angle"]),
                "footing": footing_results(out, p20), "costs": costs}
     (out / "results.json").write_text(json.dumps(results, indent=1, default=float) + "\n")
     (out / "report.md").write_text(_markdown(results), encoding="utf-8")
@@ -306,8 +308,9 @@ def _markdown(r: dict[str, Any]) -> str:
             x = c[n]
             return (f"{x['value'] * k:.3g} ± {x['std'] * k:.2g} "
                     f"[{x['min'] * k:.3g}, {x['max'] * k:.3g}]")
-        lines.append(f"| {tag} | {cell('E', 1e-6)} | {cell('nu')} | {cell('phi')} | "
-                     f"{cell('psi')} | {cell('phi_cs')} | {cell('softening_strain')} |")
+        lines.append(f"| {tag} | {cell('young', 1e-6)} | {cell('poisson')} | "
+                     f"{cell('friction_angle')} | {cell('dilation_angle')} | "
+                     f"{cell('critical_friction_angle')} | {cell('softening_strain')} |")
     e = r["element"]
     lines += ["", "## Single element (100 kPa)", "",
               "| run | peak σyy/σxx | ε1 at peak | σyy/σxx at the end | εv at the end | "

@@ -56,7 +56,8 @@ Q, GAMMA, K0 = 20e3, 16e3, 0.5  # surcharge [Pa], unit weight [N/m³], σh/σv [
 def soil(name: str, sigma0: np.ndarray) -> dict:
     """The material's keywords, every point starting at ``sigma0`` [Pa] (n, 2, 2)."""
     return {
-        "mohr-coulomb": {"E": 20e6, "nu": 0.3, "friction_angle": 40.0, "dilation_angle": 10.0,
+        "mohr-coulomb": {"young": 20e6, "poisson": 0.3, "friction_angle": 40.0,
+                         "dilation_angle": 10.0,
                          "critical_friction_angle": 25.0, "softening_strain": 0.05,
                          "initial_stress": sigma0},
         "dem": {"particles": 64, "seed": 1, "initial_stress": sigma0, "share_tolerance": 0.02,

@@ -74,8 +74,9 @@ def parameters(name: str, sigma0: np.ndarray) -> dict:
     """The material's keywords; every one starts at the same stress ``sigma0`` [Pa]
     (n, 2, 2), tension positive."""
     return {
-        "linear-elastic": {"E": 20e6, "nu": 0.3, "initial_stress": sigma0},
-        "mohr-coulomb": {"E": 20e6, "nu": 0.3, "friction_angle": PHI, "dilation_angle": PSI,
+        "linear-elastic": {"young": 20e6, "poisson": 0.3, "initial_stress": sigma0},
+        "mohr-coulomb": {"young": 20e6, "poisson": 0.3, "friction_angle": PHI,
+                         "dilation_angle": PSI,
                          "initial_stress": sigma0},
         "dem": {"particles": 64, "seed": 1, "initial_stress": sigma0, "share_tolerance": 0.02,
                 "tangent": "condensed-sticking", "device": "cpu"},

@@ -51,10 +51,10 @@ ELEMENT = "quad1"  # "quad1" (MeshQuad, Q1) or "tri2" (MeshTri, P2)
 
 P = 100e3  # lateral confinement [Pa], compression
 PARAMETERS = {
-    "linear-elastic": {"E": 60e6, "nu": 0.3, "initial_stress": -P},
+    "linear-elastic": {"young": 60e6, "poisson": 0.3, "initial_stress": -P},
     # φ, ψ in degrees; with ψ = 0 (no dilation) plastic flow is isochoric and the P2 mesh's
     # stiffness turns singular once every point yields, so a little dilation
-    "mohr-coulomb": {"E": 60e6, "nu": 0.3, "friction_angle": 30.0, "dilation_angle": 10.0,
+    "mohr-coulomb": {"young": 60e6, "poisson": 0.3, "friction_angle": 30.0, "dilation_angle": 10.0,
                      "initial_stress": -P},
     "dem": {"particles": 64, "seed": 1, "confining": P, "device": "cpu"},
 }

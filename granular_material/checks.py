@@ -3,10 +3,11 @@ specification, a library caller): output folders and files that can be written, 
 that a run will need, RVE files that exist, the material and packing of RVEs to prepare.
 
 Each refusal of a value is a :class:`~granular_material.errors.ParameterError` naming the
-field that set it (``field``: ``out``, ``rve``, ``friction_angle``; another field the message
-names is written in backquotes, ```particles```), which the command line shows as its option
-(:func:`granular_material.cli.options.flag_of`); a refusal that no one value makes (the
-memory a run needs) is a plain ``ValueError``. No message here names a command-line flag.
+field that set it (``field``: ``out``, ``rve``, ``contact_friction_angle``; another field
+the message names is written in backquotes, ```particles```), which the command line shows
+as its option (:func:`granular_material.cli.options.flag_of`); a refusal that no one value
+makes (the memory a run needs) is a plain ``ValueError``. No message here names a
+command-line flag.
 """
 
 from __future__ import annotations
@@ -35,6 +36,7 @@ from granular_material.procedures.packing import (
     check_radius_range,
     min_discs,
 )
+from granular_material.vocabulary import renames
 
 __all__ = ["DISC_BYTES", "MEMORY_LIMIT", "RVE_MATERIAL_DEFAULTS", "WordedError",
            "available_memory", "check_memory", "check_output_dir", "check_output_file",
@@ -168,6 +170,12 @@ def _rve_file_shape(path: str, mtime_ns: int, size: int) -> tuple[int, int]:
     return data.n_rve, data.n_disc
 
 
+#: the RVE file's meta keys (docs/design.md#rve-file) whose option and field names say they
+#: are the contacts': friction [rad] and FrictMat's modulus, the DEM material's old names
+#: (:data:`granular_material.vocabulary.RENAMED`)
+_META_FIELDS = {old: rename.new for old, rename in renames("dem").items()}
+
+
 def _rve_material_defaults() -> dict[str, Any]:
     """The RVE material fields (the options of
     :func:`~granular_material.cli.options.add_rve_material_options`) with their defaults:
@@ -175,9 +183,9 @@ def _rve_material_defaults() -> dict[str, Any]:
     (Wu et al. 2025, Table 1)."""
     meta = RVEMeta()
     r_min, r_max = DEFAULT_RADIUS_RANGE
-    frictmat = {k: v for k, v in FRICTMAT_STIFFNESS.items() if k != "law"}
+    frictmat = {_META_FIELDS.get(k, k): v for k, v in FRICTMAT_STIFFNESS.items() if k != "law"}
     return {"target_void_ratio": None, "radius_min": r_min, "radius_max": r_max,
-            **meta.stiffness, **frictmat, "friction_angle": meta.friction_angle,
+            **meta.stiffness, **frictmat, "contact_friction_angle": meta.friction_angle,
             "damping": meta.damping, "density": meta.density, "thickness": meta.thickness}
 
 
@@ -218,7 +226,7 @@ _PACKING_FIELDS = {"radius_range": ("radius_min", "radius_max"), "n_disc": "part
                    "stiffness": "kn"}
 
 #: a message of :meth:`~granular_material.dem.RVEMeta.validate` names its key
-#: (``meta.friction_angle``, ``meta.stiffness.kn``): the field of the same name sets it
+#: (``meta.friction_angle``, ``meta.stiffness.kn``): the field that sets it (:data:`_META_FIELDS`)
 _META_KEY = re.compile(r"meta\.(?:stiffness\.)?([a-z_]+)")
 
 
@@ -247,7 +255,8 @@ def packing_parameters(args: Any, particles: int, pressure: float,
     packing."""
     radius_range = (args.radius_min, args.radius_max)
     names = {"radius_range": tuple(_named(f) for f in _PACKING_FIELDS["radius_range"]),
-             "n_disc": _named("particles"), "stiffness": f"{_named('kn')} / {_named('young')}",
+             "n_disc": _named("particles"),
+             "stiffness": f"{_named('kn')} / {_named('contact_young')}",
              "pressure": _named(pressure_field)}
     try:
         check_radius_range(radius_range, names["radius_range"])
@@ -256,16 +265,18 @@ def packing_parameters(args: Any, particles: int, pressure: float,
     if args.law == "constant":
         stiffness = {"law": "constant", "kn": args.kn, "kt": args.kt}
     else:
-        stiffness = {"law": "frictmat", "young": args.young, "kt_over_kn": args.kt_over_kn}
+        stiffness = {"law": "frictmat", "young": args.contact_young,
+                     "kt_over_kn": args.kt_over_kn}
     meta = RVEMeta(thickness=args.thickness, density=args.density,
-                   friction_angle=args.friction_angle, damping=args.damping,
+                   friction_angle=args.contact_friction_angle, damping=args.damping,
                    stiffness=stiffness, seed=getattr(args, "seed", None))
     try:
         meta.validate()
     except ValueError as exc:
         key = _META_KEY.search(str(exc))
-        raise WordedError(key.group(1) if key else "law",
-                            _META_KEY.sub(lambda m: _named(m.group(1)), str(exc))) from None
+        field = _META_FIELDS.get(key.group(1), key.group(1)) if key else "law"
+        raise WordedError(field, _META_KEY.sub(
+            lambda m: _named(_META_FIELDS.get(m.group(1), m.group(1))), str(exc))) from None
     try:
         check_packing(particles, pressure, meta, radius_range, names=names)
     except ValueError as exc:

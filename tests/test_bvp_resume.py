@@ -23,8 +23,9 @@ if sys.version_info >= (3, 11):
 else:  # Python 3.10
     import tomli as tomllib
 
-MOHR_COULOMB = ('[material]\nname = "mohr-coulomb"\n[material.parameters]\nE = 19e6\n'
-                'nu = 0.25\nphi = 35.0\npsi = 15.0\nphi_cs = 25.0\nsoftening_strain = 0.05\n'
+MOHR_COULOMB = ('[material]\nname = "mohr-coulomb"\n[material.parameters]\nyoung = 19e6\n'
+                'poisson = 0.25\nfriction_angle = 35.0\ndilation_angle = 15.0\n'
+                'critical_friction_angle = 25.0\nsoftening_strain = 0.05\n'
                 '[newton]\nformulation = "small-strain"\n')
 DEM = ('[material]\nname = "dem"\n[material.parameters]\nparticles = 16\nseed = 1\n'
        'tangent = "kruyt-rothenburg"\n[output]\ndevice = "cpu"\n')

@@ -24,7 +24,7 @@ size = [0.6, 0.4]
 elements = {elements}
 element = "tri6"
 grading = [4.0, 0.25]
-align-x = [0.05]
+align_x = [0.05]
 [boundaries]
 footing = "y = top and x <= 0.05"
 surface = "y = top and x >= 0.05"
@@ -52,7 +52,8 @@ state = "uniform"
 pressure = 20e3
 {material}
 """
-ELASTIC = '[material]\nname = "linear-elastic"\n[material.parameters]\nE = 60e6\nnu = 0.3\n'
+ELASTIC = ('[material]\nname = "linear-elastic"\n[material.parameters]\nyoung = 60e6\n'
+           'poisson = 0.3\n')
 
 
 def _scene(tmp_path: Path, text: str, name: str = "scene.toml") -> Path:
@@ -87,8 +88,9 @@ def test_linear_elastic_footing_runs_into_its_folder(tmp_path, capsys):
 
 
 def test_mohr_coulomb_footing_levels_off_near_prandtl(tmp_path):
-    material = ('[material]\nname = "mohr-coulomb"\n[material.parameters]\nE = 60e6\n'
-                'nu = 0.3\nphi = 30.0\npsi = 30.0\n[newton]\nformulation = "small-strain"\n')
+    material = ('[material]\nname = "mohr-coulomb"\n[material.parameters]\nyoung = 60e6\n'
+                'poisson = 0.3\nfriction_angle = 30.0\ndilation_angle = 30.0\n[newton]\n'
+                'formulation = "small-strain"\n')
     spec = bvp_from_dict(__import__("tomllib").loads(FOOTING.format(
         steps=16, elements="[12, 8]", settlement=-0.004, material=material)))
     outcome = run_boundary_value(spec)
@@ -133,8 +135,8 @@ surcharge = 10e3
 [material]
 name = "linear-elastic"
 [material.parameters]
-E = 50e6
-nu = 0.3
+young = 50e6
+poisson = 0.3
 """
     spec = bvp_from_dict(__import__("tomllib").loads(text))
     outcome = run_boundary_value(spec)

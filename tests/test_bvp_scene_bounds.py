@@ -38,16 +38,16 @@ def test_a_component_of_another_type_is_named(tmp_path, component):
 
 
 def test_an_alignment_outside_the_mesh_is_refused_not_a_moved_edge(tmp_path):
-    spec = scene(tmp_path, mesh={"size": [1.0, 1.0], "elements": [2, 2], "align-x": [5.0]})
-    with pytest.raises(SpecError, match=r"mesh.align-x 5 m lies outside the mesh \(0 to 1 m\)"):
+    spec = scene(tmp_path, mesh={"size": [1.0, 1.0], "elements": [2, 2], "align_x": [5.0]})
+    with pytest.raises(SpecError, match=r"mesh.align_x 5 m lies outside the mesh \(0 to 1 m\)"):
         run_boundary_value(spec, None)  # it moved the right edge to x = 5 m before
 
 
 def test_more_alignments_than_grid_lines_are_refused(tmp_path):
     start = time.perf_counter()
-    with pytest.raises(SpecError, match=r"mesh.align-x moves 100000 grid lines; 2 elements"):
+    with pytest.raises(SpecError, match=r"mesh.align_x moves 100000 grid lines; 2 elements"):
         scene(tmp_path, mesh={"size": [1.0, 1.0], "elements": [2, 2],
-                              "align-x": [0.5] * 10**5})
+                              "align_x": [0.5] * 10**5})
     assert time.perf_counter() - start < 5.0  # 10**6 took 35 s of work before
 
 

@@ -55,11 +55,11 @@ def test_point_driver_holds_the_confining_stress_on_an_elastic_solid():
 def test_read_parameters_gives_back_the_parameters_of_a_mohr_coulomb_curve(synthetic):
     cal = read_parameters(synthetic, P)
     p = cal.parameters
-    assert p["E"] == pytest.approx(TRUE["young"], rel=0.01)
-    assert p["nu"] == pytest.approx(TRUE["poisson"], rel=0.01)
-    assert p["phi"] == pytest.approx(TRUE["friction_angle"], abs=0.5)
-    assert p["psi"] == pytest.approx(TRUE["dilation_angle"], abs=0.5)
-    assert p["phi_cs"] == pytest.approx(TRUE["critical_friction_angle"], abs=0.5)
+    assert p["young"] == pytest.approx(TRUE["young"], rel=0.01)
+    assert p["poisson"] == pytest.approx(TRUE["poisson"], rel=0.01)
+    assert p["friction_angle"] == pytest.approx(TRUE["friction_angle"], abs=0.5)
+    assert p["dilation_angle"] == pytest.approx(TRUE["dilation_angle"], abs=0.5)
+    assert p["critical_friction_angle"] == pytest.approx(TRUE["critical_friction_angle"], abs=0.5)
     assert p["softening_strain"] == pytest.approx(TRUE["softening_strain"], rel=0.05)
     assert p["cohesion"] == 0.0
     # the peak of a Mohr–Coulomb curve with c = 0 is (1 + sin φ)/(1 − sin φ)
@@ -75,7 +75,7 @@ def test_read_parameters_reads_the_scatter_of_several_curves(synthetic):
     stiffer = drained_point_curve(MohrCoulomb(**{**TRUE, "young": 60e6}, initial_stress=-P),
                                   P, 0.08)
     both = pd.concat([synthetic, stiffer.assign(rve=1)], ignore_index=True)
-    e = read_parameters(both, P).readings["E"]
+    e = read_parameters(both, P).readings["young"]
     assert e.value == pytest.approx(50e6, rel=0.01)
     assert (e.min, e.max) == pytest.approx((40e6, 60e6), rel=0.01)
     assert e.std == pytest.approx(10e6, rel=0.01)
@@ -99,7 +99,7 @@ def test_read_parameters_refuses_what_it_cannot_read(synthetic):
 
 def test_calibrate_end_to_end_on_the_64_disc_rve(tmp_path):
     out = tmp_path / "cal"
-    code = main(["calibrate", str(RVE64), "--pressure", "100e3", "--axial-strain", "0.03",
+    code = main(["calibrate", str(RVE64), "--confining", "100e3", "--axial-strain", "0.03",
                  "--out", str(out), "--device", "cpu", "--no-progress", "--json"])
     assert code == 0
     for name in ("mohr-coulomb.toml", "calibration.json", "calibration.csv",
@@ -107,19 +107,20 @@ def test_calibrate_end_to_end_on_the_64_disc_rve(tmp_path):
         assert (out / name).stat().st_size > 0, name
     params = tomllib.loads((out / "mohr-coulomb.toml").read_text(encoding="utf-8"))
     # the DEM peak of this RVE: σ1/σ3 ≈ 3.3 (principal) → φ ≈ 32.5°
-    assert 27.0 < params["phi"] < 37.0
-    assert 0.0 <= params["psi"] <= params["phi"]
-    assert 5e6 < params["E"] < 1e8 and 0.0 < params["nu"] < 0.5
+    assert 27.0 < params["friction_angle"] < 37.0
+    assert 0.0 <= params["dilation_angle"] <= params["friction_angle"]
+    assert 5e6 < params["young"] < 1e8 and 0.0 < params["poisson"] < 0.5
     # the material file loads back: the run parameters, then the material itself
     run = MohrCoulomb.Parameters(**params)
-    material = MohrCoulomb(E=run.E, nu=run.nu, friction_angle=run.phi,
-                           dilation_angle=run.psi, cohesion=run.cohesion,
-                           critical_friction_angle=run.phi_cs,
+    material = MohrCoulomb(young=run.young, poisson=run.poisson,
+                           friction_angle=run.friction_angle,
+                           dilation_angle=run.dilation_angle, cohesion=run.cohesion,
+                           critical_friction_angle=run.critical_friction_angle,
                            softening_strain=run.softening_strain, initial_stress=-P)
     material.allocate(1)
     assert material.evaluate(np.zeros((1, 2, 2))).ok
     report = json.loads((out / "calibration.json").read_text(encoding="utf-8"))
-    assert report["readings"]["phi"]["value"] == pytest.approx(params["phi"])
+    assert report["readings"]["friction_angle"]["value"] == pytest.approx(params["friction_angle"])
     assert report["pressure"] == P and report["settings"]["rves"] == 1
     curve = pd.read_csv(out / "calibration.csv")
     assert curve["axial_strain"].max() == pytest.approx(0.03, rel=1e-6)
@@ -134,8 +135,8 @@ def test_calibrate_reconsolidates_an_rve_at_another_pressure():
 
 
 @pytest.mark.parametrize("argv, words", [
-    (["--pressure", "0"], "--pressure"),
-    (["--pressure", "-5e3"], "--pressure"),
+    (["--confining", "0"], "--confining"),
+    (["--confining", "-5e3"], "--confining"),
 ])
 def test_calibrate_refuses_a_pressure_that_is_not_positive(tmp_path, capsys, argv, words):
     out = tmp_path / "cal"
@@ -148,7 +149,7 @@ def test_calibrate_refuses_a_pressure_that_is_not_positive(tmp_path, capsys, arg
 
 def test_calibrate_refuses_a_missing_file_and_writes_nothing(tmp_path, capsys):
     out = tmp_path / "cal"
-    code = main(["calibrate", str(tmp_path / "none.npz"), "--pressure", "1e5",
+    code = main(["calibrate", str(tmp_path / "none.npz"), "--confining", "1e5",
                  "--out", str(out)])
     assert code == 2
     assert "none.npz does not exist" in capsys.readouterr().err
@@ -164,14 +165,15 @@ def test_calibrate_refuses_an_rve_file_of_no_rves_and_bad_settings(tmp_path, cap
     path = tmp_path / "empty.npz"
     np.savez(path, **empty)
     out = tmp_path / "cal"
-    assert main(["calibrate", str(path), "--pressure", "1e5", "--out", str(out)]) == 2
+    assert main(["calibrate", str(path), "--confining", "1e5", "--out", str(out)]) == 2
     assert "B=0" in capsys.readouterr().err and not out.exists()
-    assert main(["calibrate", str(RVE64), "--pressure", "1e5", "--rves", "2",
+    assert main(["calibrate", str(RVE64), "--confining", "1e5", "--rves", "2",
                  "--out", str(out)]) == 2
     assert "--rves 2" in capsys.readouterr().err and not out.exists()
-    for kwargs, field in (({"pressure": -1.0}, "pressure"), ({"pressure": math.nan}, "pressure"),
-                          ({"pressure": P, "axial_strain": 0.95}, "axial_strain"),
-                          ({"pressure": P, "rves": 0}, "rves")):
+    for kwargs, field in (({"confining": -1.0}, "confining"),
+                          ({"confining": math.nan}, "confining"),
+                          ({"confining": P, "axial_strain": 0.95}, "axial_strain"),
+                          ({"confining": P, "rves": 0}, "rves")):
         with pytest.raises(ParameterError) as err:
             calibrate_mohr_coulomb(RVE64, **kwargs)
         assert err.value.field == field

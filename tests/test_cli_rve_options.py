@@ -22,10 +22,10 @@ def _spec(*argv: str):
 @pytest.mark.parametrize("material", ["mohr-coulomb", "linear-elastic"])
 @pytest.mark.parametrize("command", ["single-element", "biaxial"])
 def test_an_rve_option_at_its_default_is_refused_beside_a_continuum(command, material):
-    default = RVE_MATERIAL_DEFAULTS["friction_angle"]
-    with pytest.raises(UsageError, match=rf"^--friction-angle sets the material of the RVEs "
-                                         rf"a run prepares, but --material {material} "):
-        _spec(command, "--material", material, "--friction-angle", str(default))
+    default = RVE_MATERIAL_DEFAULTS["contact_friction_angle"]
+    with pytest.raises(UsageError, match=rf"^--contact-friction-angle sets the material of the "
+                                         rf"RVEs a run prepares, but --material {material} "):
+        _spec(command, "--material", material, "--contact-friction-angle", str(default))
 
 
 def test_an_rve_option_at_its_default_is_refused_beside_an_rve_file(small_rve_path):
@@ -40,5 +40,5 @@ def test_a_dem_run_without_rve_options_gets_the_materials_defaults():
     assert isinstance(parameters, DEMParameters)
     for name, default in RVE_MATERIAL_DEFAULTS.items():
         assert getattr(parameters, name) == default, name
-    given = _spec("single-element", "--friction-angle", "0.3").material.parameters
-    assert given.friction_angle == 0.3 and given.kn == RVE_MATERIAL_DEFAULTS["kn"]
+    given = _spec("single-element", "--contact-friction-angle", "0.3").material.parameters
+    assert given.contact_friction_angle == 0.3 and given.kn == RVE_MATERIAL_DEFAULTS["kn"]

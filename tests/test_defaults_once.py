@@ -42,9 +42,10 @@ def test_rve_material_defaults_are_the_meta_and_packing_ones() -> None:
     d = RVE_MATERIAL_DEFAULTS
     assert (d["radius_min"], d["radius_max"]) == DEFAULT_RADIUS_RANGE
     assert {"law": d["law"], "kn": d["kn"], "kt": d["kt"]} == meta.stiffness
-    assert {"law": "frictmat", "young": d["young"],
+    assert {"law": "frictmat", "young": d["contact_young"],
             "kt_over_kn": d["kt_over_kn"]} == FRICTMAT_STIFFNESS
-    for name in ("friction_angle", "damping", "density", "thickness"):
+    assert d["contact_friction_angle"] == meta.friction_angle
+    for name in ("damping", "density", "thickness"):
         assert d[name] == getattr(meta, name)
 
 

@@ -26,7 +26,7 @@ def test_single_element_finite_strain_linear_elastic(capsys):
     """The default (updated-Lagrangian) formulation: σxx held at −p on the current sides;
     each step strains the element by its platen displacement over the current height, so
     σyy = −p − E/(1−ν²) Σ_k h/(H − k·h) for the hypoelastic linear law."""
-    code = main(["single-element", "--material", "linear-elastic", "--E", "50e6", "--nu",
+    code = main(["single-element", "--material", "linear-elastic", "--young", "50e6", "--poisson",
                  "0.25", "--axial-strain", "0.01", "--steps", "4", "--confining", "100e3",
                  "--json", "--no-progress"])
     assert code == 0
@@ -40,7 +40,7 @@ def test_single_element_finite_strain_linear_elastic(capsys):
 
 
 def test_single_element_linear_elastic_json(tmp_path, capsys):
-    code = main(["single-element", "--material", "linear-elastic", "--E", "50e6", "--nu",
+    code = main(["single-element", "--material", "linear-elastic", "--young", "50e6", "--poisson",
                  "0.25", "--axial-strain", "0.01", "--steps", "4", "--confining", "100e3",
                  "--formulation", "small-strain",
                  "--out", str(tmp_path), "--json", "--no-progress"])
@@ -67,7 +67,7 @@ def test_bad_input_is_a_value_error(capsys):
     assert main(["single-element", "--material", "linear-elastic", "--steps", "0",
                  "--no-progress"]) == 2
     assert "--steps" in capsys.readouterr().err
-    assert main(["single-element", "--material", "linear-elastic", "--nu", "0.7",
+    assert main(["single-element", "--material", "linear-elastic", "--poisson", "0.7",
                  "--no-progress"]) == 2
 
 

@@ -446,10 +446,10 @@ def test_quad8_dem_run_resumes_to_the_same_result(tmp_path):
 def test_scene_with_quad8_runs(tmp_path, capsys):
     path = tmp_path / "q8.toml"
     path.write_text('test = "single-element"\nmaterial = "linear-elastic"\nsteps = 2\n'
-                    'axial-strain = 0.01\nelement = "quad8"\nquadrature = 3\n'
+                    'axial_strain = 0.01\nelement = "quad8"\nquadrature = 3\n'
                     'convergence = "displacement"\nrtol = 1e-2\ndevice = "cpu"\n'
                     'json = true\n'
-                    'map-strain = [0.01]\nout = "q8"\n')
+                    'map_strain = [0.01]\nout = "q8"\n')
     assert main(["run", str(path)]) == 0
     report = json.loads(capsys.readouterr().out)
     assert report["error"] is None and report["steps_completed"] == 2

@@ -52,7 +52,7 @@ def test_run_of_no_spec_is_a_value_error():
 
 
 @pytest.mark.parametrize(("keywords", "field"), [
-    ({"pressure": 1e300}, "pressure"), ({"device": 3}, "device"),
+    ({"confining": 1e300}, "confining"), ({"device": 3}, "device"),
     ({"elastic_window": "x"}, "elastic_window"), ({"frob": 0.1}, "frob"),
     ({"dtype": "float16"}, "dtype")])
 def test_a_calibration_is_refused_before_its_dem_tests(tmp_path, keywords, field, monkeypatch):
@@ -70,7 +70,7 @@ def test_a_calibration_is_refused_before_its_dem_tests(tmp_path, keywords, field
         raise AssertionError("a DEM batch was built")
 
     monkeypatch.setattr("granular_material.dem.DEMBatch", no_dem)
-    arguments = {"pressure": 100e3, **keywords}
+    arguments = {"confining": 100e3, **keywords}
     with pytest.raises(ParameterError) as refused:
         calibration.calibrate_mohr_coulomb(data, **arguments)
     assert refused.value.field == field

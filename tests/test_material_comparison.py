@@ -96,7 +96,8 @@ def test_scene_with_swaps_the_material_only() -> None:
     """The footing scene with its material replaced: every other table kept, the new
     material's parameters as written, overrides on their lines; an unknown key refused."""
     text = mc.FOOTING_SCENE.read_text(encoding="utf-8")
-    params = {"E": 19e6, "nu": 0.25, "phi": 35.8, "psi": 16.8, "cohesion": 0.0}
+    params = {"young": 19e6, "poisson": 0.25, "friction_angle": 35.8, "dilation_angle": 16.8,
+              "cohesion": 0.0}
     out = tomllib.loads(mc.scene_with(text, "mohr-coulomb", params,
                                       {"steps": "3", "elements": "[4, 3]"}))
     base = tomllib.loads(text)
@@ -111,12 +112,14 @@ def test_scene_with_swaps_the_material_only() -> None:
 
 def test_footing_variants() -> None:
     """As calibrated (softening kept), perfectly plastic at φ, and at φcs with ψ ≤ φcs."""
-    p = {"E": 19e6, "nu": 0.25, "phi": 35.8, "psi": 16.8, "cohesion": 0.0, "phi_cs": 12.0,
+    p = {"young": 19e6, "poisson": 0.25, "friction_angle": 35.8, "dilation_angle": 16.8,
+         "cohesion": 0.0, "critical_friction_angle": 12.0,
          "softening_strain": 0.04}
     v = mc.footing_variants(p)
     assert v["mc"] == p
-    assert "phi_cs" not in v["mc-peak"] and v["mc-peak"]["phi"] == 35.8
-    assert v["mc-cs"]["phi"] == 12.0 and v["mc-cs"]["psi"] == 12.0
+    assert "critical_friction_angle" not in v["mc-peak"]
+    assert v["mc-peak"]["friction_angle"] == 35.8
+    assert v["mc-cs"]["friction_angle"] == 12.0 and v["mc-cs"]["dilation_angle"] == 12.0
     assert "softening_strain" not in v["mc-cs"]
 
 
@@ -127,7 +130,7 @@ def test_calibrate_and_element_stages_smoke(tmp_path: Path) -> None:
                        "--stages", "calibrate", "element", "report"])
     material = tomllib.loads((tmp_path / "calibration-100k" / "mohr-coulomb.toml")
                              .read_text(encoding="utf-8"))
-    assert 0 < material["phi"] < 60 and material["E"] > 0
+    assert 0 < material["friction_angle"] < 60 and material["young"] > 0
     element = results["element"]
     assert len(element["dem"]) == 2
     # the calibrated element (c = 0, σyy/σxx on the axes) peaks between the closed forms
@@ -136,8 +139,9 @@ def test_calibrate_and_element_stages_smoke(tmp_path: Path) -> None:
         s = math.sin(math.radians(phi))
         return (1 + s) / (1 - s)
 
-    low = ratio(material.get("phi_cs", material["phi"]))
-    assert low * (1 - 1e-6) <= element["mc"]["peak_ratio"] <= ratio(material["phi"]) * (1 + 1e-6)
+    low = ratio(material.get("critical_friction_angle", material["friction_angle"]))
+    high = ratio(material["friction_angle"])
+    assert low * (1 - 1e-6) <= element["mc"]["peak_ratio"] <= high * (1 + 1e-6)
     assert all(d["peak_ratio"] > 1.2 and d["iterations"] >= 1 for d in element["dem"])
     costs = json.loads((tmp_path / "costs.json").read_text())
     assert costs["element-mc"]["run_median_s"] > 0

@@ -18,7 +18,7 @@ def _run(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, dict
 
 
 def test_single_element_mohr_coulomb_peaks_at_the_closed_form(tmp_path, capsys):
-    code, summary = _run(["single-element", "--material", "mohr-coulomb", "--phi", "30",
+    code, summary = _run(["single-element", "--material", "mohr-coulomb", "--friction-angle", "30",
                           "--axial-strain", "0.01", "--steps", "10", "--formulation",
                           "small-strain", "--out", str(tmp_path / "se")], capsys)
     assert code == 0
@@ -27,7 +27,8 @@ def test_single_element_mohr_coulomb_peaks_at_the_closed_form(tmp_path, capsys):
 
 def test_material_file_sets_the_parameters_and_options_beside_it_win(tmp_path, capsys):
     path = tmp_path / "mc.toml"
-    path.write_text("E = 40e6\nnu = 0.25\nphi = 35.0\npsi = 5.0\ncohesion = 0.0\n")
+    path.write_text("young = 40e6\npoisson = 0.25\nfriction_angle = 35.0\ndilation_angle = 5.0\n"
+                    "cohesion = 0.0\n")
     code, summary = _run(["single-element", "--material", "mohr-coulomb", "--material-file",
                           str(path), "--axial-strain", "0.01", "--steps", "10",
                           "--formulation", "small-strain", "--out", str(tmp_path / "a")],
@@ -36,7 +37,8 @@ def test_material_file_sets_the_parameters_and_options_beside_it_win(tmp_path, c
     s = math.sin(math.radians(35.0))
     assert summary["peak_stress_ratio"] == pytest.approx((1 + s) / (1 - s), rel=1e-6)
     code, summary = _run(["single-element", "--material", "mohr-coulomb", "--material-file",
-                          str(path), "--phi", "30", "--axial-strain", "0.01", "--steps", "10",
+                          str(path), "--friction-angle", "30", "--axial-strain", "0.01",
+                          "--steps", "10",
                           "--formulation", "small-strain", "--out", str(tmp_path / "b")],
                          capsys)
     assert summary["peak_stress_ratio"] == pytest.approx(3.0, rel=1e-6)
@@ -51,6 +53,8 @@ def test_biaxial_takes_the_mohr_coulomb_material(tmp_path, capsys):
 
 
 @pytest.mark.parametrize("argv, message", [
+    (["--material", "dem", "--dilation-angle", "3"],
+     "--dilation-angle is no option of --material dem"),
     (["--material", "dem", "--phi", "30"], "--phi is no option of --material dem"),
     (["--material", "linear-elastic", "--cohesion", "5e3"], "--cohesion is no option"),
 ])
@@ -63,9 +67,9 @@ def test_another_materials_option_is_refused(tmp_path, capsys, argv, message):
 
 def test_a_material_file_with_an_unknown_key_is_refused(tmp_path, capsys):
     path = tmp_path / "mc.toml"
-    path.write_text("friction_angle = 30.0\n")
+    path.write_text("friction_angel = 30.0\n")
     code = main(["single-element", "--material", "mohr-coulomb", "--material-file", str(path),
                  "--out", str(tmp_path / "x")])
     assert code == 2
-    assert "'friction_angle' is no parameter of --material mohr-coulomb" in \
+    assert "'friction_angel' is no parameter of --material mohr-coulomb" in \
         capsys.readouterr().err

@@ -32,6 +32,7 @@ from granular_material.fem.materials.mohr_coulomb_return import (
 )
 from granular_material.fem.materials.protocol import FailureReason, Material, PointStatus
 from granular_material.fem.solver.newton import NewtonSettings, NewtonSolver
+from granular_material.vocabulary import RenamedWarning
 
 P = 100e3  # confining pressure [Pa], compression positive
 
@@ -401,11 +402,18 @@ def test_refused_parameters_name_their_field(field, kwargs):
 
 
 def test_aliases_and_run_parameters():
-    material = MohrCoulomb(E=10e6, nu=0.2)
+    with pytest.warns(RenamedWarning) as caught:
+        material = MohrCoulomb(E=10e6, nu=0.2)
+    assert "`E` is deprecated: it is now `young`" in str(caught[0].message)
     assert material.parameters == MohrCoulombParameters(young=10e6, poisson=0.2)
     assert MohrCoulomb.Parameters is MohrCoulombRunParameters
-    run = MohrCoulombRunParameters(E=20e6, nu=0.25, phi=35.0, psi=5.0, cohesion=1e3,
-                                   phi_cs=30.0, softening_strain=0.05)
+    run = MohrCoulombRunParameters(young=20e6, poisson=0.25, friction_angle=35.0,
+                                   dilation_angle=5.0, cohesion=1e3,
+                                   critical_friction_angle=30.0, softening_strain=0.05)
+    with pytest.warns(RenamedWarning) as caught:
+        old = MohrCoulombRunParameters(E=20e6, nu=0.25, phi=35.0, psi=5.0, cohesion=1e3,
+                                       phi_cs=30.0, softening_strain=0.05)
+    assert old == run and len(caught) == 5  # E, nu, phi, psi, phi_cs: each named
     made = MohrCoulomb.for_run(run, SimpleNamespace(confining=50e3))
     assert made.parameters == MohrCoulombParameters(20e6, 0.25, 35.0, 5.0, 1e3, 30.0, 0.05)
     made.allocate(1)

@@ -218,7 +218,7 @@ def test_prepared_rves_of_a_material_on_two_ranks_are_the_in_process_ones(tmp_pa
     tables as in process, and the checkpoint's RVEs carry the friction and damping given."""
     argv = ["single-element", "--particles", "24", "--independent", "--steps", "1",
             "--axial-strain", "0.001", "--device", "cpu", "--no-progress", "--json",
-            "--friction-angle", "0.3", "--damping", "0.2", "--radius-min", "4e-3"]
+            "--contact-friction-angle", "0.3", "--damping", "0.2", "--radius-min", "4e-3"]
     runs = {}
     for ranks in (None, 2):
         out = tmp_path / f"ranks{ranks}"

@@ -34,7 +34,7 @@ from granular_material.runs import (
 
 def _elastic(out: Path | None, steps: int = 6) -> RunSpec:
     return RunSpec(problem=ProblemSpec(test="single-element", steps=steps, axial_strain=0.006),
-                   material=MaterialSpec(name="linear-elastic", parameters={"E": 50e6}),
+                   material=MaterialSpec(name="linear-elastic", parameters={"young": 50e6}),
                    output=OutputSpec(out=out, checkpoint_every=1), device="cpu")
 
 

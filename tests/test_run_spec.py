@@ -42,7 +42,7 @@ EXAMPLES = Path(__file__).parents[1] / "examples" / "scenes"
 
 def _elastic(**problem) -> RunSpec:
     return RunSpec(problem=ProblemSpec(test="single-element", **problem),
-                   material=MaterialSpec(name="linear-elastic", parameters={"E": 50e6}))
+                   material=MaterialSpec(name="linear-elastic", parameters={"young": 50e6}))
 
 
 # -- fields and their checks -----------------------------------------------------------------
@@ -63,6 +63,7 @@ def _elastic(**problem) -> RunSpec:
     (lambda: OutputSpec(every=0), "every"),
     (lambda: MaterialSpec(name="dem", parameters={"tangent": "secant"}), "tangent"),
     (lambda: MaterialSpec(name="dem", parameters={"E": 1e6}), "E"),
+    (lambda: MaterialSpec(name="dem", parameters={"poisson": 0.3}), "poisson"),
     (lambda: MaterialSpec(name="granite"), "material"),
     (lambda: RunSpec(problem=ProblemSpec(test="biaxial"), material=MaterialSpec(name="dem"),
                      backend="threads"), "backend"),
@@ -132,7 +133,7 @@ def test_library_run_gives_the_command_s_tables(tmp_path, capsys):
     spec = spec.replace(output=OutputSpec(out=tmp_path / "library"))
     outcome = run(spec)
     assert outcome.result.error is None and len(outcome.result.steps) == 4
-    code = main(["single-element", "--material", "linear-elastic", "--E", "50e6", "--steps",
+    code = main(["single-element", "--material", "linear-elastic", "--young", "50e6", "--steps",
                  "3", "--axial-strain", "0.01", "--out", str(tmp_path / "cli"),
                  "--no-progress"])
     assert code == 0
@@ -152,9 +153,9 @@ def test_resume_compares_the_saved_spec_field_by_field(tmp_path, capsys):
     saved = json.loads((out / "checkpoint" / "options.json").read_text())
     assert from_dict(saved["spec"]).problem.steps == 3
     capsys.readouterr()
-    assert main([*argv[:-1], "--E", "70e6", "--resume", str(out)]) == 2
+    assert main([*argv[:-1], "--young", "70e6", "--resume", str(out)]) == 2
     err = capsys.readouterr().err
-    assert "--E 70000000.0 (the run had 60000000.0)" in err
+    assert "--young 70000000.0 (the run had 60000000.0)" in err
     # Newton's options are compared as the run resolved them (its record keeps them)
     assert main([*argv, "--relaxation", "aitken", "--resume", str(out)]) == 2
     err = capsys.readouterr().err
@@ -220,8 +221,8 @@ def test_a_checkpoint_of_the_options_era_resumes(tmp_path, capsys):
 
 # -- scenes: run --check refuses what run refuses --------------------------------------------
 _BAD_SCENES = {
-    "young-with-linear-elastic": 'material = "linear-elastic"\nyoung = 60e6\n',
-    "reuse-with-displacement-test": "reuse-tol = 1e-4\n",
+    "contact-young-with-linear-elastic": 'material = "linear-elastic"\ncontact_young = 6e8\n',
+    "reuse-with-displacement-test": "reuse_tol = 1e-4\n",
     "too-few-discs": "particles = 5\n",
     "track-missing-point": "track = [\"7\"]\n",
     "kn-with-an-rve-file": 'rve = "rve64.npz"\nkn = 1e6\n',
@@ -233,7 +234,7 @@ _BAD_SCENES = {
 def test_check_and_run_refuse_the_same_bad_scene(name, tmp_path, capsys):
     shutil.copy(EXAMPLES / "rve64.npz", tmp_path / "rve64.npz")
     scene = tmp_path / f"{name}.toml"
-    scene.write_text('test = "single-element"\nsteps = 2\naxial-strain = 0.002\n'
+    scene.write_text('test = "single-element"\nsteps = 2\naxial_strain = 0.002\n'
                      'device = "cpu"\n' + _BAD_SCENES[name])
     assert main(["run", str(scene), "--check"]) == 2
     checked = capsys.readouterr().err

@@ -35,7 +35,7 @@ def basis():
 
 
 def _elastic(n):
-    m = LinearElastic(E=60e6, nu=0.3, initial_stress=-100e3)
+    m = LinearElastic(young=60e6, poisson=0.3, initial_stress=-100e3)
     m.allocate(n)
     return m
 
@@ -102,8 +102,13 @@ def test_linear_elastic_checkpoint_keeps_the_committed_total(tmp_path):
     np.testing.assert_array_equal(back.committed_grad_u, g)
 
 
-def test_linear_elastic_takes_the_spec_names():
-    assert LinearElastic(E=1e7, nu=0.2).parameters == LinearElastic(1e7, 0.2).parameters
+def test_linear_elastic_takes_the_old_names_with_a_warning():
+    from granular_material.vocabulary import RenamedWarning
+
+    with pytest.warns(RenamedWarning) as caught:
+        old = LinearElastic(E=1e7, nu=0.2)
+    assert "`nu` is deprecated: it is now `poisson`" in str(caught[1].message)
+    assert old.parameters == LinearElastic(young=1e7, poisson=0.2).parameters
 
 
 def test_dem_material_total_form_checkpoint_and_committed_stress_on_failure(

@@ -25,7 +25,8 @@ from granular_material.runs.boundary_value.spec import bvp_from_dict
 
 SCENE = Path(__file__).resolve().parents[1] / "examples" / "scenes" / "footing-gz2016-cpu.toml"
 #: the twin calibrated from the footing's RVE (docs/validation/mohr-coulomb, "gz20k")
-TWIN = {"E": 19.04e6, "nu": 0.2543, "phi": 35.81, "psi": 16.78, "phi_cs": 22.35,
+TWIN = {"young": 19.04e6, "poisson": 0.2543, "friction_angle": 35.81, "dilation_angle": 16.78,
+        "critical_friction_angle": 22.35,
         "softening_strain": 0.04347}
 STEPS = 24  # 6 mm of the scene's 0.25 mm steps
 

@@ -181,7 +181,7 @@ def _condensed(scene: dict[str, Any]) -> dict[str, Any]:
 def _mohr_coulomb(scene: dict[str, Any], phi: float, psi: float) -> dict[str, Any]:
     scene = dict(scene)
     scene["material"] = {"name": "mohr-coulomb", "parameters": {
-        "E": 60e6, "nu": 0.3, "phi": phi, "psi": psi}}
+        "young": 60e6, "poisson": 0.3, "friction_angle": phi, "dilation_angle": psi}}
     scene["newton"] = {"formulation": "small-strain"}
     scene["output"] = {"progress": False}
     return scene

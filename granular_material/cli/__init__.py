@@ -4,20 +4,24 @@ The core commands are registered by :mod:`granular_material.cli.commands`: ``pre
 ``biaxial-dem`` and ``dem-drive`` (:mod:`granular_material.cli.dem`), ``single-element`` and
 ``biaxial`` (:mod:`granular_material.cli.fem`), ``run`` (:mod:`granular_material.cli.scene`:
 one of them described by a TOML scene file), ``trade-study``
-(:mod:`granular_material.cli.study`) and ``calibrate`` (:mod:`granular_material.cli.calibrate`);
-their shared options are defined once in :mod:`granular_material.cli.options`, the stop
-signals in :mod:`granular_material.cli.signals`.
-Plugins add sub-commands through the ``granular_material.commands`` entry-point group; each
-entry point is a ``register(subparsers)`` callable that adds its parsers and sets ``func`` (a
-callable taking the parsed arguments and returning the exit code). warp prints nothing on
-stdout (which ``--json`` keeps for the report): the package keeps it quiet
+(:mod:`granular_material.cli.study`) and ``calibrate``
+(:mod:`granular_material.cli.calibrate`); their shared options are defined once in
+:mod:`granular_material.cli.options`, the stop signals in
+:mod:`granular_material.cli.signals`. Plugins add sub-commands through the
+``granular_material.commands`` entry-point group; each entry point is a
+``register(subparsers)`` callable that adds its parsers and sets ``func`` (a callable taking
+the parsed arguments and returning the exit code). warp prints nothing on stdout (which
+``--json`` keeps for the report): the package keeps it quiet
 (:func:`granular_material.verbose`).
 """
 
 from __future__ import annotations
 
+import contextlib
 import signal
 import sys
+import warnings
+from collections.abc import Iterator
 from typing import Any
 
 from granular_material.cli.commands import (
@@ -59,6 +63,35 @@ def _usage_error() -> type[Exception]:
     return UsageError
 
 
+@contextlib.contextmanager
+def _renamed_as_warnings(command: str) -> Iterator[None]:
+    """While the command runs, an old name it reads (a
+    :class:`~granular_material.vocabulary.RenamedWarning`: an option, scene key or spec field
+    renamed) is said once on stderr as ``granular-material COMMAND: warning: ...``, naming
+    options (``run``: the keys of its file); other warnings are shown as Python shows
+    them."""
+    from granular_material.vocabulary import RenamedWarning
+
+    with warnings.catch_warnings():
+        shown = warnings.showwarning
+
+        def show(message: Any, category: type[Warning], *rest: Any, **kw: Any) -> None:
+            if issubclass(category, RenamedWarning):
+                from granular_material.cli.options import as_flags
+
+                # its fields named as options, or, read from a file (a scene or a spec,
+                # whose keys are the fields' names), as keys
+                text = (str(message).replace("`", "'") if command == "run"
+                        else as_flags(str(message)))
+                print(f"granular-material {command}: warning: {text}", file=sys.stderr)
+            else:
+                shown(message, category, *rest, **kw)
+
+        warnings.simplefilter("default", RenamedWarning)
+        warnings.showwarning = show
+        yield
+
+
 def entry() -> None:
     """The process's entry point (console script, ``python -m``): :func:`main`, then exit
     with its code. A command stopped by a signal ignores the stop signals of a storm that
@@ -87,8 +120,8 @@ def main(argv: list[str] | None = None) -> int:
     if option == "--help-all" and not getattr(parser.commands.get(argv[0]), "_advanced", 1):
         argv = ["--help" if a == option else a for a in argv]  # all its options are shown
     args = parser.parse_args(argv)
-    with stop_signals_as_interrupt():  # the reports below too: a later signal is ignored
-        try:
+    with stop_signals_as_interrupt(), _renamed_as_warnings(args.command):
+        try:  # the reports below too: a later signal is ignored
             return int(args.func(args) or 0)
         except KeyboardInterrupt as exc:  # Ctrl-C or SIGTERM that the command did not catch
             code = interrupt_exit_code(exc)

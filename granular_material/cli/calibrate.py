@@ -22,8 +22,11 @@ from granular_material.cli.options import (
     positive_int,
     progress_enabled,
     rve_file_shape,
+    shown,
 )
+from granular_material.errors import ParameterError
 from granular_material.procedures.element_tests import DEFAULT_AXIAL_STRAIN
+from granular_material.vocabulary import renamed
 
 if TYPE_CHECKING:
     from granular_material.procedures.calibration import Calibration
@@ -39,8 +42,9 @@ DEFAULT_OUT = Path("calibration")
 
 def calibration_toml(calibration: Calibration) -> str:
     """The parameters as a material file: the Mohr–Coulomb run parameters as top-level keys
-    (``E`` [Pa], ``nu``, ``phi``, ``psi`` [deg], ``cohesion`` [Pa], ``phi_cs`` [deg],
-    ``softening_strain``), each with how it was read in the comments above it."""
+    (``young`` [Pa], ``poisson`` [-], ``friction_angle``, ``dilation_angle`` [deg],
+    ``cohesion`` [Pa], ``critical_friction_angle`` [deg], ``softening_strain`` [-]), each
+    with how it was read in the comments above it."""
     from granular_material.procedures.calibration import PARAMETER_UNITS
 
     c = calibration
@@ -61,8 +65,9 @@ def calibration_toml(calibration: Calibration) -> str:
                                      initial_indent="# ", subsequent_indent="#   "),
                   f"#   read {r.value:.6g} ± {r.std:.3g} [{r.min:.6g}, {r.max:.6g}] over "
                   f"{len(r.per_rve)} RVE(s), axial strain {lo:.4g} to {hi:.4g}"]
-        if name == "phi_cs" and c.material_keywords()["critical_friction_angle"] is None:
-            lines.append("# phi_cs left out: no softening read (φcs = φ)")
+        if name == "critical_friction_angle" \
+                and c.material_keywords()["critical_friction_angle"] is None:
+            lines.append("# critical_friction_angle left out: no softening read (φcs = φ)")
         else:
             lines.append(f"{name} = {float(c.parameters[name])!r}")
     return "\n".join(lines) + "\n"
@@ -81,13 +86,20 @@ def _run_calibrate(args: argparse.Namespace) -> int:
     from granular_material.results.writers import write_csv
 
     # refusals before any work: nothing is written on a refused run
+    try:  # --pressure, its old name: warned, read as --confining
+        confining = renamed({"confining": args.confining, "pressure": args.pressure},
+                            "calibrate", given=lambda v: v is not None).get("confining")
+    except ParameterError as exc:
+        raise UsageError(shown(exc)) from None
+    if confining is None:
+        raise UsageError("--confining is required: the confining pressure P [Pa] of the tests")
     check_output_dir(args.out)
     n_rve, _ = rve_file_shape(args.rve, "RVE")
     if args.rves is not None and args.rves > n_rve:
         raise UsageError(f"--rves {args.rves} asks for more RVEs than the {n_rve} of "
                          f"{args.rve}")
     calibration = calibrate_mohr_coulomb(
-        args.rve, args.pressure, axial_strain=args.axial_strain,
+        args.rve, confining, axial_strain=args.axial_strain,
         device=resolve_device(args.device),
         progress=progress_enabled(args), rves=args.rves, dtype=args.dtype,
         record_every=args.record_every, elastic_window=args.elastic_window,
@@ -125,7 +137,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         "calibrate", help="Mohr–Coulomb parameters from drained biaxial DEM tests of an RVE file",
         description="Drained biaxial DEM tests of the RVEs of a file at the confining pressure "
-        "--pressure (an RVE whose stress is more than 1%% off −P is first re-consolidated "
+        "--confining (an RVE whose stress is more than 1%% off −P is first re-consolidated "
         "isotropically to P), stepped as the DEM material steps (1e-5 strain a DEM step); "
         "then E and ν (secant over the first --elastic-window of axial strain), φ at the "
         "peak of σ1/σ3 (c = 0), ψ from the plastic dilatancy at the peak, φcs over the last "
@@ -133,8 +145,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "RVEs with its scatter. Writes into --out: " + ", ".join(OUTPUT_FILES) + " (the "
         "material file: mohr-coulomb.toml, in the mohr-coulomb material's run parameters).")
     p.add_argument("rve", type=Path, help="RVE file (.npz)")
-    p.add_argument("--pressure", type=positive, required=True,
-                   help="confining pressure P [Pa] of the tests (compression positive)")
+    p.add_argument("--confining", type=positive, default=None, metavar="PA",
+                   help="confining pressure P [Pa] of the tests (compression positive; "
+                        "required)")
+    p.add_argument("--pressure", type=positive, default=None,  # its old name: hidden
+                   help=argparse.SUPPRESS)
     p.add_argument("--axial-strain", type=positive, default=DEFAULT_AXIAL_STRAIN,
                    help=f"final axial strain of the tests ({DEFAULT_AXIAL_STRAIN:g}); long "
                         "enough to pass the peak and reach a steady ratio")

@@ -287,12 +287,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, default=1, help="random seed; RVE b uses seed + b (1)")
     p.add_argument("--pressure", type=positive, default=DEFAULT_PRESSURE,
                    help=f"isotropic consolidation pressure [Pa] ({DEFAULT_PRESSURE:g}; at most "
-                        f"{MAX_OVERLAP / 2:g}·kn/thickness, or {MAX_OVERLAP / 2:g}·young·"
+                        f"{MAX_OVERLAP / 2:g}·kn/thickness, or {MAX_OVERLAP / 2:g}·contact-young·"
                         "radius-min/thickness for frictmat, so contacts overlap under "
                         f"{MAX_OVERLAP:.0%}% of the radius)")
     p.add_argument("--batch", type=positive_int, default=1, help="number of RVEs B (1)")
     add_out(p, "RVE file (rve.npz)", default=Path("rve.npz"))
-    add_rve_material_options(p)
+    add_rve_material_options(p, old_names=True)
     _add_run_options(p)
     p.set_defaults(func=_run_prepare)
 

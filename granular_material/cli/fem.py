@@ -26,9 +26,11 @@ from granular_material.cli.options import (
 )
 from granular_material.cli.parsers import CommandParser
 from granular_material.cli.signals import interrupt_exit_code
+from granular_material.errors import ParameterError
 from granular_material.fem import load_material
 from granular_material.runs import RunSpec, SpecError, from_flat, run, to_flat
 from granular_material.runs.presets import preset_fields
+from granular_material.vocabulary import renamed
 
 __all__ = ["command_line", "register", "report", "run_biaxial_command", "run_single_element",
            "spec_from_args"]
@@ -81,7 +83,10 @@ def spec_from_args(args: argparse.Namespace) -> RunSpec:
     ``--preset``'s values, then every option given (not at its default); a value that cannot
     run is a UsageError naming its option."""
     material = getattr(args, "material", DEFAULT_MATERIAL)
-    given = _given(args)
+    try:  # the material's old names (--phi, dem's --friction-angle): warned, read as new
+        given = renamed(_given(args), material)
+    except ParameterError as exc:
+        raise UsageError(shown(exc)) from None
     flat: dict[str, Any] = {"test": args.command, "material": material}
     if args.preset is not None:
         if material != DEFAULT_MATERIAL:

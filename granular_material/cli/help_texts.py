@@ -63,18 +63,20 @@ HELP_TEXTS = {
                 '\n'
                 'continuum materials:\n'
                 '  linear-elastic and mohr-coulomb: moduli; mohr-coulomb: strength (angles in\n'
-                "  degrees; the RVEs' --friction-angle is the contacts', in rad)\n"
+                "  degrees; the RVEs' --contact-friction-angle is in rad)\n"
                 '\n'
-                "  --E E                 Young's modulus [Pa] (default 6e+07)\n"
-                "  --nu NU               Poisson's ratio (default 0.3)\n"
-                '  --phi PHI             mohr-coulomb: peak friction angle [deg] (default 30)\n'
-                '  --psi PSI             mohr-coulomb: dilation angle [deg] (default 0)\n'
-                '  --cohesion COHESION   mohr-coulomb: cohesion [Pa] (default 0)\n'
-                '  --phi-cs PHI_CS       mohr-coulomb: critical-state friction angle [deg] that\n'
-                '                        phi softens to (default: no softening)\n'
+                "  --young PA            Young's modulus [Pa] (default 6e+07)\n"
+                "  --poisson NU          Poisson's ratio [-] (default 0.3)\n"
+                '  --friction-angle DEG  mohr-coulomb: peak friction angle [deg] (default 30)\n'
+                '  --dilation-angle DEG  mohr-coulomb: dilation angle [deg] (default 0)\n'
+                '  --cohesion PA         mohr-coulomb: cohesion [Pa] (default 0)\n'
+                '  --critical-friction-angle DEG\n'
+                '                        mohr-coulomb: critical-state friction angle [deg] that\n'
+                '                        --friction-angle softens to (default: no softening)\n'
                 '  --softening-strain SOFTENING_STRAIN\n'
-                '                        mohr-coulomb: plastic shear strain over which phi\n'
-                '                        softens to --phi-cs and psi to 0 (default 0)\n'
+                '                        mohr-coulomb: plastic shear strain [-] over which\n'
+                '                        --friction-angle softens to --critical-friction-angle\n'
+                '                        and --dilation-angle to 0 (default 0)\n'
                 "  --material-file FILE  the material's parameters from a TOML file (what\n"
                 '                        `granular-material calibrate` writes); options given\n'
                 '                        beside it win\n'
@@ -92,8 +94,10 @@ HELP_TEXTS = {
                 '                                 [--seed SEED] [--rve RVE] [--width WIDTH]\n'
                 '                                 [--height HEIGHT]\n'
                 '                                 [--material {dem,linear-elastic,mohr-coulomb}]\n'
-                '                                 [--E E] [--nu NU] [--phi PHI] [--psi PSI]\n'
-                '                                 [--cohesion COHESION] [--phi-cs PHI_CS]\n'
+                '                                 [--young PA] [--poisson NU]\n'
+                '                                 [--friction-angle DEG] [--dilation-angle DEG]\n'
+                '                                 [--cohesion PA]\n'
+                '                                 [--critical-friction-angle DEG]\n'
                 '                                 [--softening-strain SOFTENING_STRAIN]\n'
                 '                                 [--material-file FILE]\n'
                 '                                 [--platens {smooth,rough}]\n'
@@ -134,9 +138,9 @@ HELP_TEXTS = {
                 '                                 [--radius-min RADIUS_MIN]\n'
                 '                                 [--radius-max RADIUS_MAX]\n'
                 '                                 [--law {constant,frictmat}] [--kn KN]\n'
-                '                                 [--kt KT] [--young YOUNG]\n'
+                '                                 [--kt KT] [--contact-young PA]\n'
                 '                                 [--kt-over-kn KT_OVER_KN]\n'
-                '                                 [--friction-angle FRICTION_ANGLE]\n'
+                '                                 [--contact-friction-angle RAD]\n'
                 '                                 [--damping DAMPING] [--density DENSITY]\n'
                 '                                 [--thickness THICKNESS]\n'
                 '\n'
@@ -193,18 +197,20 @@ HELP_TEXTS = {
                 '\n'
                 'continuum materials:\n'
                 '  linear-elastic and mohr-coulomb: moduli; mohr-coulomb: strength (angles in\n'
-                "  degrees; the RVEs' --friction-angle is the contacts', in rad)\n"
+                "  degrees; the RVEs' --contact-friction-angle is in rad)\n"
                 '\n'
-                "  --E E                 Young's modulus [Pa] (default 6e+07)\n"
-                "  --nu NU               Poisson's ratio (default 0.3)\n"
-                '  --phi PHI             mohr-coulomb: peak friction angle [deg] (default 30)\n'
-                '  --psi PSI             mohr-coulomb: dilation angle [deg] (default 0)\n'
-                '  --cohesion COHESION   mohr-coulomb: cohesion [Pa] (default 0)\n'
-                '  --phi-cs PHI_CS       mohr-coulomb: critical-state friction angle [deg] that\n'
-                '                        phi softens to (default: no softening)\n'
+                "  --young PA            Young's modulus [Pa] (default 6e+07)\n"
+                "  --poisson NU          Poisson's ratio [-] (default 0.3)\n"
+                '  --friction-angle DEG  mohr-coulomb: peak friction angle [deg] (default 30)\n'
+                '  --dilation-angle DEG  mohr-coulomb: dilation angle [deg] (default 0)\n'
+                '  --cohesion PA         mohr-coulomb: cohesion [Pa] (default 0)\n'
+                '  --critical-friction-angle DEG\n'
+                '                        mohr-coulomb: critical-state friction angle [deg] that\n'
+                '                        --friction-angle softens to (default: no softening)\n'
                 '  --softening-strain SOFTENING_STRAIN\n'
-                '                        mohr-coulomb: plastic shear strain over which phi\n'
-                '                        softens to --phi-cs and psi to 0 (default 0)\n'
+                '                        mohr-coulomb: plastic shear strain [-] over which\n'
+                '                        --friction-angle softens to --critical-friction-angle\n'
+                '                        and --dilation-angle to 0 (default 0)\n'
                 "  --material-file FILE  the material's parameters from a TOML file (what\n"
                 '                        `granular-material calibrate` writes); options given\n'
                 '                        beside it win\n'
@@ -396,13 +402,13 @@ HELP_TEXTS = {
                 '                        default constant)\n'
                 '  --kn KN               normal stiffness [N/m] (3e+06)\n'
                 '  --kt KT               tangential stiffness [N/m] (2.4e+06)\n'
-                "  --young YOUNG         --law frictmat: the discs' Young's modulus [Pa], which\n"
+                "  --contact-young PA    --law frictmat: the discs' Young's modulus [Pa], which\n"
                 '                        sets the contact stiffness kn = 2E r1 r2/(r1 + r2)\n'
-                '                        (6e+08; not the --E of a linear-elastic material)\n'
+                "                        (6e+08; not a continuum's --young)\n"
                 '  --kt-over-kn KT_OVER_KN\n'
                 '                        FrictMat kt/kn (0.8)\n'
-                '  --friction-angle FRICTION_ANGLE\n'
-                '                        contact friction angle [rad] (0.5)\n'
+                '  --contact-friction-angle RAD\n'
+                "                        the contacts' friction angle [rad] (0.5)\n"
                 '  --damping DAMPING     local damping (0.1)\n'
                 '  --density DENSITY     [kg/m³] (2650)\n'
                 '  --thickness THICKNESS\n'
@@ -465,7 +471,7 @@ HELP_TEXTS = {
         },
         'calibrate': {
             'help': (
-                'usage: granular-material calibrate [-h] --pressure PRESSURE\n'
+                'usage: granular-material calibrate [-h] [--confining PA]\n'
                 '                                   [--axial-strain AXIAL_STRAIN] [--rves N]\n'
                 '                                   [--record-every RECORD_EVERY]\n'
                 '                                   [--elastic-window ELASTIC_WINDOW]\n'
@@ -477,7 +483,7 @@ HELP_TEXTS = {
                 '                                   rve\n'
                 '\n'
                 'Drained biaxial DEM tests of the RVEs of a file at the confining pressure\n'
-                '--pressure (an RVE whose stress is more than 1%% off −P is first re-\n'
+                '--confining (an RVE whose stress is more than 1%% off −P is first re-\n'
                 'consolidated isotropically to P), stepped as the DEM material steps (1e-5\n'
                 'strain a DEM step); then E and ν (secant over the first --elastic-window of\n'
                 'axial strain), φ at the peak of σ1/σ3 (c = 0), ψ from the plastic dilatancy at\n'
@@ -492,8 +498,8 @@ HELP_TEXTS = {
                 '\n'
                 'options:\n'
                 '  -h, --help            show this help message and exit\n'
-                '  --pressure PRESSURE   confining pressure P [Pa] of the tests (compression\n'
-                '                        positive)\n'
+                '  --confining PA        confining pressure P [Pa] of the tests (compression\n'
+                '                        positive; required)\n'
                 '  --axial-strain AXIAL_STRAIN\n'
                 '                        final axial strain of the tests (0.1); long enough to\n'
                 '                        pass the peak and reach a steady ratio\n'
@@ -646,9 +652,9 @@ HELP_TEXTS = {
                 '                                 [--radius-min RADIUS_MIN]\n'
                 '                                 [--radius-max RADIUS_MAX]\n'
                 '                                 [--law {constant,frictmat}] [--kn KN]\n'
-                '                                 [--kt KT] [--young YOUNG]\n'
+                '                                 [--kt KT] [--contact-young PA]\n'
                 '                                 [--kt-over-kn KT_OVER_KN]\n'
-                '                                 [--friction-angle FRICTION_ANGLE]\n'
+                '                                 [--contact-friction-angle RAD]\n'
                 '                                 [--damping DAMPING] [--density DENSITY]\n'
                 '                                 [--thickness THICKNESS] [--device {cpu,cuda}]\n'
                 '                                 [--dtype {float64,float32}]\n'
@@ -666,9 +672,9 @@ HELP_TEXTS = {
                 '                        the cell stays wider than twice the contact cut-off)\n'
                 '  --seed SEED           random seed; RVE b uses seed + b (1)\n'
                 '  --pressure PRESSURE   isotropic consolidation pressure [Pa] (100000; at most\n'
-                '                        0.05·kn/thickness, or 0.05·young·radius-min/thickness\n'
-                '                        for frictmat, so contacts overlap under 10% of the\n'
-                '                        radius)\n'
+                '                        0.05·kn/thickness, or 0.05·contact-young·radius-\n'
+                '                        min/thickness for frictmat, so contacts overlap under\n'
+                '                        10% of the radius)\n'
                 '  --batch BATCH         number of RVEs B (1)\n'
                 '  --out OUT             RVE file (rve.npz)\n'
                 '  --target-void-ratio TARGET_VOID_RATIO\n'
@@ -683,13 +689,13 @@ HELP_TEXTS = {
                 '                        default constant)\n'
                 '  --kn KN               normal stiffness [N/m] (3e+06)\n'
                 '  --kt KT               tangential stiffness [N/m] (2.4e+06)\n'
-                "  --young YOUNG         --law frictmat: the discs' Young's modulus [Pa], which\n"
+                "  --contact-young PA    --law frictmat: the discs' Young's modulus [Pa], which\n"
                 '                        sets the contact stiffness kn = 2E r1 r2/(r1 + r2)\n'
-                '                        (6e+08; not the --E of a linear-elastic material)\n'
+                "                        (6e+08; not a continuum's --young)\n"
                 '  --kt-over-kn KT_OVER_KN\n'
                 '                        FrictMat kt/kn (0.8)\n'
-                '  --friction-angle FRICTION_ANGLE\n'
-                '                        contact friction angle [rad] (0.5)\n'
+                '  --contact-friction-angle RAD\n'
+                "                        the contacts' friction angle [rad] (0.5)\n"
                 '  --damping DAMPING     local damping (0.1)\n'
                 '  --density DENSITY     [kg/m³] (2650)\n'
                 '  --thickness THICKNESS\n'
@@ -890,18 +896,20 @@ HELP_TEXTS = {
                 '\n'
                 'continuum materials:\n'
                 '  linear-elastic and mohr-coulomb: moduli; mohr-coulomb: strength (angles in\n'
-                "  degrees; the RVEs' --friction-angle is the contacts', in rad)\n"
+                "  degrees; the RVEs' --contact-friction-angle is in rad)\n"
                 '\n'
-                "  --E E                 Young's modulus [Pa] (default 6e+07)\n"
-                "  --nu NU               Poisson's ratio (default 0.3)\n"
-                '  --phi PHI             mohr-coulomb: peak friction angle [deg] (default 30)\n'
-                '  --psi PSI             mohr-coulomb: dilation angle [deg] (default 0)\n'
-                '  --cohesion COHESION   mohr-coulomb: cohesion [Pa] (default 0)\n'
-                '  --phi-cs PHI_CS       mohr-coulomb: critical-state friction angle [deg] that\n'
-                '                        phi softens to (default: no softening)\n'
+                "  --young PA            Young's modulus [Pa] (default 6e+07)\n"
+                "  --poisson NU          Poisson's ratio [-] (default 0.3)\n"
+                '  --friction-angle DEG  mohr-coulomb: peak friction angle [deg] (default 30)\n'
+                '  --dilation-angle DEG  mohr-coulomb: dilation angle [deg] (default 0)\n'
+                '  --cohesion PA         mohr-coulomb: cohesion [Pa] (default 0)\n'
+                '  --critical-friction-angle DEG\n'
+                '                        mohr-coulomb: critical-state friction angle [deg] that\n'
+                '                        --friction-angle softens to (default: no softening)\n'
                 '  --softening-strain SOFTENING_STRAIN\n'
-                '                        mohr-coulomb: plastic shear strain over which phi\n'
-                '                        softens to --phi-cs and psi to 0 (default 0)\n'
+                '                        mohr-coulomb: plastic shear strain [-] over which\n'
+                '                        --friction-angle softens to --critical-friction-angle\n'
+                '                        and --dilation-angle to 0 (default 0)\n'
                 "  --material-file FILE  the material's parameters from a TOML file (what\n"
                 '                        `granular-material calibrate` writes); options given\n'
                 '                        beside it win\n'
@@ -916,9 +924,10 @@ HELP_TEXTS = {
             'help_all': (
                 'usage: granular-material single-element [-h]\n'
                 '                                        [--material {dem,linear-elastic,mohr-coulomb}]\n'
-                '                                        [--E E] [--nu NU] [--phi PHI]\n'
-                '                                        [--psi PSI] [--cohesion COHESION]\n'
-                '                                        [--phi-cs PHI_CS]\n'
+                '                                        [--young PA] [--poisson NU]\n'
+                '                                        [--friction-angle DEG]\n'
+                '                                        [--dilation-angle DEG] [--cohesion PA]\n'
+                '                                        [--critical-friction-angle DEG]\n'
                 '                                        [--softening-strain SOFTENING_STRAIN]\n'
                 '                                        [--material-file FILE] [--rve RVE]\n'
                 '                                        [--particles PARTICLES] [--seed SEED]\n'
@@ -964,9 +973,9 @@ HELP_TEXTS = {
                 '                                        [--radius-min RADIUS_MIN]\n'
                 '                                        [--radius-max RADIUS_MAX]\n'
                 '                                        [--law {constant,frictmat}] [--kn KN]\n'
-                '                                        [--kt KT] [--young YOUNG]\n'
+                '                                        [--kt KT] [--contact-young PA]\n'
                 '                                        [--kt-over-kn KT_OVER_KN]\n'
-                '                                        [--friction-angle FRICTION_ANGLE]\n'
+                '                                        [--contact-friction-angle RAD]\n'
                 '                                        [--damping DAMPING]\n'
                 '                                        [--density DENSITY]\n'
                 '                                        [--thickness THICKNESS]\n'
@@ -1018,18 +1027,20 @@ HELP_TEXTS = {
                 '\n'
                 'continuum materials:\n'
                 '  linear-elastic and mohr-coulomb: moduli; mohr-coulomb: strength (angles in\n'
-                "  degrees; the RVEs' --friction-angle is the contacts', in rad)\n"
+                "  degrees; the RVEs' --contact-friction-angle is in rad)\n"
                 '\n'
-                "  --E E                 Young's modulus [Pa] (default 6e+07)\n"
-                "  --nu NU               Poisson's ratio (default 0.3)\n"
-                '  --phi PHI             mohr-coulomb: peak friction angle [deg] (default 30)\n'
-                '  --psi PSI             mohr-coulomb: dilation angle [deg] (default 0)\n'
-                '  --cohesion COHESION   mohr-coulomb: cohesion [Pa] (default 0)\n'
-                '  --phi-cs PHI_CS       mohr-coulomb: critical-state friction angle [deg] that\n'
-                '                        phi softens to (default: no softening)\n'
+                "  --young PA            Young's modulus [Pa] (default 6e+07)\n"
+                "  --poisson NU          Poisson's ratio [-] (default 0.3)\n"
+                '  --friction-angle DEG  mohr-coulomb: peak friction angle [deg] (default 30)\n'
+                '  --dilation-angle DEG  mohr-coulomb: dilation angle [deg] (default 0)\n'
+                '  --cohesion PA         mohr-coulomb: cohesion [Pa] (default 0)\n'
+                '  --critical-friction-angle DEG\n'
+                '                        mohr-coulomb: critical-state friction angle [deg] that\n'
+                '                        --friction-angle softens to (default: no softening)\n'
                 '  --softening-strain SOFTENING_STRAIN\n'
-                '                        mohr-coulomb: plastic shear strain over which phi\n'
-                '                        softens to --phi-cs and psi to 0 (default 0)\n'
+                '                        mohr-coulomb: plastic shear strain [-] over which\n'
+                '                        --friction-angle softens to --critical-friction-angle\n'
+                '                        and --dilation-angle to 0 (default 0)\n'
                 "  --material-file FILE  the material's parameters from a TOML file (what\n"
                 '                        `granular-material calibrate` writes); options given\n'
                 '                        beside it win\n'
@@ -1221,13 +1232,13 @@ HELP_TEXTS = {
                 '                        default constant)\n'
                 '  --kn KN               normal stiffness [N/m] (3e+06)\n'
                 '  --kt KT               tangential stiffness [N/m] (2.4e+06)\n'
-                "  --young YOUNG         --law frictmat: the discs' Young's modulus [Pa], which\n"
+                "  --contact-young PA    --law frictmat: the discs' Young's modulus [Pa], which\n"
                 '                        sets the contact stiffness kn = 2E r1 r2/(r1 + r2)\n'
-                '                        (6e+08; not the --E of a linear-elastic material)\n'
+                "                        (6e+08; not a continuum's --young)\n"
                 '  --kt-over-kn KT_OVER_KN\n'
                 '                        FrictMat kt/kn (0.8)\n'
-                '  --friction-angle FRICTION_ANGLE\n'
-                '                        contact friction angle [rad] (0.5)\n'
+                '  --contact-friction-angle RAD\n'
+                "                        the contacts' friction angle [rad] (0.5)\n"
                 '  --damping DAMPING     local damping (0.1)\n'
                 '  --density DENSITY     [kg/m³] (2650)\n'
                 '  --thickness THICKNESS\n'

@@ -25,6 +25,7 @@ from granular_material.checks import (
 )
 from granular_material.errors import ParameterError
 from granular_material.procedures.strain_path import DEFAULT_MAX_DEM_STEPS
+from granular_material.vocabulary import renamed, renames
 
 __all__ = [
     "DEFAULT_MAX_DEM_STEPS",
@@ -46,6 +47,7 @@ __all__ = [
     "check_output_dir",
     "check_output_file",
     "cleanup_on_rejection",
+    "dem_renamed",
     "emit",
     "flag_of",
     "make_parents",
@@ -161,7 +163,22 @@ def packing_parameters(args: argparse.Namespace, particles: int, pressure: float
     (the pressure as ``pressure_option``)."""
     field = pressure_option.removeprefix("--").replace("-", "_")
     with _as_option(None):
-        return checks.packing_parameters(args, particles, pressure, field)
+        return checks.packing_parameters(dem_renamed(args), particles, pressure, field)
+
+
+def dem_renamed(args: argparse.Namespace) -> argparse.Namespace:
+    """``args`` with the deprecated RVE material options of a DEM command (``--young``,
+    ``--friction-angle``: :func:`granular_material.vocabulary.renames` of ``dem``) given
+    read as their new ones, with a warning; one given beside its new one (not at its
+    default) is refused."""
+    old = {name: getattr(args, name) for name in renames("dem")
+           if getattr(args, name, None) is not None}
+    if not old:
+        return args
+    new = {rename.new: getattr(args, rename.new) for name, rename in renames("dem").items()
+           if name in old and getattr(args, rename.new) != RVE_MATERIAL_DEFAULTS[rename.new]}
+    values = renamed({**new, **old}, "dem")
+    return argparse.Namespace(**{**vars(args), **{k: None for k in old}, **values})
 
 
 def positive(text: str) -> float:
@@ -277,13 +294,16 @@ def add_max_dem_steps(parser: argparse.ArgumentParser | argparse._ArgumentGroup,
 
 
 def add_rve_material_options(parser: argparse.ArgumentParser | argparse._ArgumentGroup,
-                             defaults: bool = True) -> None:
+                             defaults: bool = True, old_names: bool = False) -> None:
     """The material of prepared RVEs and how they are packed (e0, radii, contact law,
     friction, damping, density, thickness): ``prepare`` and the FEM commands take the same;
     :func:`packing_parameters` turns them into :class:`PackingParameters`. With ``defaults``
     False each defaults to None (its default is the material's, applied where the DEM
     settings are built, and shown in the help), so an option given at its default value
-    still counts as given: refused beside a material that prepares no RVEs."""
+    still counts as given: refused beside a material that prepares no RVEs. ``old_names``
+    (a command whose material is the DEM's alone, ``prepare``): the deprecated
+    ``--friction-angle`` and ``--young`` are read too, as ``--contact-friction-angle`` and
+    ``--contact-young`` (:func:`packing_parameters` renames them, with a warning)."""
     d = RVE_MATERIAL_DEFAULTS
 
     def default(name: str) -> Any:
@@ -302,14 +322,21 @@ def add_rve_material_options(parser: argparse.ArgumentParser | argparse._Argumen
                         help=f"normal stiffness [N/m] ({d['kn']:g})")
     parser.add_argument("--kt", type=positive, default=default("kt"),
                         help=f"tangential stiffness [N/m] ({d['kt']:g})")
-    parser.add_argument("--young", type=positive, default=default("young"),
+    parser.add_argument("--contact-young", type=positive, default=default("contact_young"),
+                        metavar="PA",
                         help="--law frictmat: the discs' Young's modulus [Pa], which sets the "
-                             f"contact stiffness kn = 2E r1 r2/(r1 + r2) ({d['young']:g}; not "
-                             "the --E of a linear-elastic material)")
+                             "contact stiffness kn = 2E r1 r2/(r1 + r2) "
+                             f"({d['contact_young']:g}; not a continuum's --young)")
     parser.add_argument("--kt-over-kn", type=positive, default=default("kt_over_kn"),
                         help=f"FrictMat kt/kn ({d['kt_over_kn']:g})")
-    parser.add_argument("--friction-angle", type=float, default=default("friction_angle"),
-                        help=f"contact friction angle [rad] ({d['friction_angle']:g})")
+    parser.add_argument("--contact-friction-angle", type=float, metavar="RAD",
+                        default=default("contact_friction_angle"),
+                        help="the contacts' friction angle [rad] "
+                             f"({d['contact_friction_angle']:g})")
+    if old_names:  # deprecated, not shown: read as the new ones (packing_parameters)
+        for old in renames("dem"):
+            parser.add_argument(flag_of(old), type=float, default=None,
+                                help=argparse.SUPPRESS)
     parser.add_argument("--damping", type=float, default=default("damping"),
                         help=f"local damping ({d['damping']:g})")
     parser.add_argument("--density", type=positive, default=default("density"),

@@ -95,7 +95,8 @@ def _write_summary(folder: Path, report: dict[str, Any]) -> None:
 
 def _located(scene: Scene, message: str) -> str:
     """``message`` of the command, with the scene's line of the first option it names."""
-    for name in re.findall(r"--([A-Za-z][A-Za-z0-9_-]*)", message):
+    for flag in re.findall(r"--([A-Za-z][A-Za-z0-9_-]*)", message):
+        name = flag.replace("-", "_")  # the scene key of the option (snake_case)
         if name in scene.lines:
             return f"{scene.path}, line {scene.lines[name]}: {message}"
     return f"{scene.path}: {message}"

@@ -1,6 +1,7 @@
 """The keys of a scene, read from the command parsers (each a
 :class:`~granular_material.cli.parsers.CommandParser`, which records its options): every
-option of a command is a key (its long name without dashes), its TOML value converted and
+option of a command is a key, its long name in snake_case (``--axial-strain`` →
+``axial_strain``: :func:`granular_material.vocabulary.key_of`), its TOML value converted and
 checked by the parser's own ``type`` and ``choices``."""
 
 from __future__ import annotations
@@ -12,6 +13,7 @@ from typing import Any
 
 from granular_material.cli.parsers import CommandParser, HelpAll
 from granular_material.cli.scene_toml import toml_repr
+from granular_material.vocabulary import key_of
 
 __all__ = ["command_parsers", "convert", "help_of", "kind_of", "scene_keys", "suggest"]
 
@@ -26,13 +28,16 @@ def command_parsers() -> dict[str, CommandParser]:
     return parsers
 
 
+def _flag(action: argparse.Action) -> str | None:
+    """The first long option of ``action`` (None: a positional argument)."""
+    return next((o for o in action.option_strings if o.startswith("--")), None)
+
+
 def _key_name(action: argparse.Action) -> str:
-    """The scene key of an option: its first long option without the dashes (``--axial-strain``
-    → ``axial-strain``); of a positional argument, its name."""
-    for option in action.option_strings:
-        if option.startswith("--"):
-            return option[2:]
-    return action.dest
+    """The scene key of an option: its first long option in snake_case (``--axial-strain``
+    → ``axial_strain``); of a positional argument, its name."""
+    flag = _flag(action)
+    return action.dest if flag is None else key_of(flag)
 
 
 def scene_keys(parser: CommandParser) -> dict[str, argparse.Action]:
@@ -87,12 +92,13 @@ def convert(key: str, kind: str, action: argparse.Action, value: Any) -> tuple[A
     """A TOML value of the option ``action`` → (the parsed value, its command-line words);
     ValueError (naming ``key``) where the parser would refuse it."""
     nargs = action.nargs
+    flag = _flag(action) or ""
     if kind == "flag":
         if not isinstance(value, bool):
             raise ValueError(f"'{key}' is a switch: true or false, got {toml_repr(value)}")
         if isinstance(action, argparse.BooleanOptionalAction):
-            return value, [f"--{key}" if value else f"--no-{key}"]
-        return (action.const, [f"--{key}"]) if value else (action.default, [])
+            return value, [flag if value else "--no-" + flag[2:]]
+        return (action.const, [flag]) if value else (action.default, [])
     if nargs in (None, "?"):
         if isinstance(value, (list, dict)):
             raise ValueError(f"'{key}' takes one value, got {toml_repr(value)}")
@@ -118,8 +124,8 @@ def convert(key: str, kind: str, action: argparse.Action, value: Any) -> tuple[A
     if not action.option_strings:  # a positional argument
         return result, texts
     if len(texts) == 1 and nargs in (None, "?") and texts[0].startswith("-"):
-        return result, [f"--{key}={texts[0]}"]
-    return result, [f"--{key}", *texts]
+        return result, [f"{flag}={texts[0]}"]
+    return result, [flag, *texts]
 
 
 def help_of(action: argparse.Action) -> str:

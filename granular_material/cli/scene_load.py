@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import shlex
+import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -26,6 +27,7 @@ from granular_material.cli.scene_keys import (
     suggest,
 )
 from granular_material.cli.scene_toml import Where, flatten, line_of, read_toml, toml_repr
+from granular_material.vocabulary import RenamedWarning, key_of, user_stacklevel
 
 __all__ = ["TESTS", "Scene", "load_scene"]
 
@@ -106,6 +108,14 @@ def load_scene(path: Path, parsers: Mapping[str, argparse.ArgumentParser] | None
         if name == "test":
             continue
         key = name if name in keys else aliases.get(name)
+        if key is None and key_of(name) in keys:  # the kebab-case spelling of old
+            key = key_of(name)
+            line = line_of(text, key_path)
+            warnings.warn(f"{path}{f', line {line}' if line else ''}: scene key '{name}' is "
+                          f"deprecated: it is spelled '{key}' now (scene keys are snake_case, "
+                          "as in Python and the run specification; the kebab-case spelling "
+                          "is read until the next release)", RenamedWarning,
+                          stacklevel=user_stacklevel())
         if key is None:
             raise where.error(key_path, f"unknown key '{name}': not an option of {test}"
                                         f"{suggest(name, sorted(keys))}; its keys are the "
@@ -154,7 +164,7 @@ def load_scene(path: Path, parsers: Mapping[str, argparse.ArgumentParser] | None
     for key, name in _DEFAULT_FILES.get(test, {}).items():
         if keys[key].dest not in values:
             values[keys[key].dest] = run_dir / name
-            options += [f"--{key}", str(run_dir / name)]
+            options += [keys[key].option_strings[0], str(run_dir / name)]
     values["out"] = run_dir / TESTS[test] if TESTS[test] else run_dir
     options += ["--out", str(values["out"])]
     if resume:

@@ -21,6 +21,7 @@ from granular_material.dem.tangents import TANGENTS
 from granular_material.errors import ParameterError
 from granular_material.multiscale.parameters import DRIVES, REUSE_CORRECTIONS, DEMRVEs
 from granular_material.reference_values import DEFAULT_DISCS
+from granular_material.vocabulary import accept_old_keywords
 
 if TYPE_CHECKING:
     from granular_material.fem.materials.run_context import RunContext
@@ -48,6 +49,7 @@ SHARE_TOLERANCE = 0.02
 RUN_TANGENT = "condensed-sticking"
 
 
+@accept_old_keywords("dem")
 @dataclass(frozen=True, kw_only=True)
 class DEMParameters(DEMRVEs):
     """The DEM material of a run (SI units, angles in rad): the fields of
@@ -59,7 +61,12 @@ class DEMParameters(DEMRVEs):
         independent: single element: four independent RVEs instead of one replicated.
         compare_dem: single element: also the pure-DEM drained biaxial test of RVE 0.
         target_void_ratio … thickness: the material and packing of prepared RVEs (those of
-            ``granular-material prepare``; Wu et al. 2025, Table 1 by default).
+            ``granular-material prepare``; Wu et al. 2025, Table 1 by default): 2D void ratio
+            e0 [-], radii [m], contact law, kn and kt [N/m], ``contact_young`` [Pa] and
+            ``kt_over_kn`` [-] (law frictmat), ``contact_friction_angle`` [rad] (the contacts'
+            friction; its old name ``friction_angle`` is still read, with a
+            :class:`~granular_material.vocabulary.RenamedWarning`, as is ``young``), damping
+            [-], density [kg/m³], thickness [m].
 
     The run's problem gives the confining pressure, its ``[run]`` fields the device, CPU
     shards and backend (:func:`material_keywords`).
@@ -81,9 +88,9 @@ class DEMParameters(DEMRVEs):
     law: str = RVE_MATERIAL_DEFAULTS["law"]
     kn: float = RVE_MATERIAL_DEFAULTS["kn"]
     kt: float = RVE_MATERIAL_DEFAULTS["kt"]
-    young: float = RVE_MATERIAL_DEFAULTS["young"]
+    contact_young: float = RVE_MATERIAL_DEFAULTS["contact_young"]
     kt_over_kn: float = RVE_MATERIAL_DEFAULTS["kt_over_kn"]
-    friction_angle: float = RVE_MATERIAL_DEFAULTS["friction_angle"]
+    contact_friction_angle: float = RVE_MATERIAL_DEFAULTS["contact_friction_angle"]
     damping: float = RVE_MATERIAL_DEFAULTS["damping"]
     density: float = RVE_MATERIAL_DEFAULTS["density"]
     thickness: float = RVE_MATERIAL_DEFAULTS["thickness"]
@@ -160,7 +167,7 @@ def material_keywords(p: DEMParameters, context: RunContext) -> dict[str, Any]:
 
 def run_summary(p: DEMParameters, context: RunContext) -> dict[str, Any]:
     """What the run's summary says of the material: its RVEs' (``rve_material``), SI units,
-    angles in rad."""
+    angles in rad (``friction_angle``, as the RVE file's meta calls it)."""
     packing = _packing(p, context)
     if packing is None:
         from granular_material.dem import load_rve

@@ -41,6 +41,7 @@ from granular_material.procedures.calibration_reading import (
     read_parameters,
 )
 from granular_material.procedures.packing import check_pressure_for_rves
+from granular_material.vocabulary import renamed
 
 __all__ = ["DEFAULT_CRITICAL_FRACTION", "DEFAULT_DILATANCY_WINDOW", "DEFAULT_ELASTIC_WINDOW",
            "DEFAULT_RECORD_EVERY", "PARAMETER_UNITS", "Calibration", "Reading",
@@ -81,7 +82,7 @@ def drained_point_curve(material: Any, pressure: float, axial_strain: float,
     lateral strain does not converge.
     """
     if not (math.isfinite(pressure) and pressure > 0):
-        raise ParameterError("pressure", f"must be a positive number of Pa, got {pressure!r}")
+        raise ParameterError("confining", f"must be a positive number of Pa, got {pressure!r}")
     if not (math.isfinite(axial_strain) and 0 < axial_strain < 0.9):
         raise ParameterError("axial_strain", f"must lie in (0, 0.9), got {axial_strain!r}")
     if not (math.isfinite(strain_per_increment) and strain_per_increment > 0):
@@ -179,23 +180,30 @@ def _rve_data(rve: Any, rves: int | None) -> tuple[Any, str]:
     return data, source
 
 
-def calibrate_mohr_coulomb(rve_path_or_data: Any, pressure: float, axial_strain: float = 0.1,
+def calibrate_mohr_coulomb(rve_path_or_data: Any, confining: float | None = None,
+                           axial_strain: float = 0.1,
                            device: str | None = "cpu", progress: bool = False,
                            rves: int | None = None, dtype: str = "float64",
                            record_every: int = DEFAULT_RECORD_EVERY,
                            **reading: float) -> Calibration:
     """Drained biaxial DEM tests of the RVEs of a file (or an ``RVEData``) at the confining
-    pressure ``pressure`` [Pa] to ``axial_strain`` (compression positive), then
-    :func:`read_parameters` on their curves (``reading``: its window settings).
+    pressure ``confining`` P [Pa] to ``axial_strain`` (compression positive), then
+    :func:`read_parameters` on their curves (``reading``: its window settings; ``pressure=``,
+    the old name of ``confining``, is still read, with a
+    :class:`~granular_material.vocabulary.RenamedWarning`).
 
     Every RVE (or the first ``rves``) is tested: the scatter between them is part of the
     answer. An RVE whose σxx or σyy is off −P by more than 1 % is first re-consolidated
     isotropically to P (said in the notes: its void ratio changes). The stepping is the
     DEM material's default (``DEFAULT_STRAIN_PER_STEP`` of
     :mod:`~granular_material.procedures.strain_path`, 1e-5) a DEM step; a record every
-    ``record_every`` steps. ``ParameterError`` naming the field (``rve``, ``pressure``,
+    ``record_every`` steps. ``ParameterError`` naming the field (``rve``, ``confining``,
     ``axial_strain``, ``rves``) before any DEM step.
     """
+    if "pressure" in reading:
+        confining = renamed({"pressure": reading.pop("pressure"), "confining": confining},
+                            "calibrate", given=lambda v: v is not None)["confining"]
+    pressure = confining
     from granular_material.dem import DEMBatch
     from granular_material.procedures.element_tests import (
         BIAXIAL_NAMES,
@@ -207,7 +215,7 @@ def calibrate_mohr_coulomb(rve_path_or_data: Any, pressure: float, axial_strain:
     from granular_material.procedures.strain_path import DEFAULT_STRAIN_PER_STEP
 
     if not (isinstance(pressure, int | float) and math.isfinite(pressure) and pressure > 0):
-        raise ParameterError("pressure", f"must be a positive number of Pa, got {pressure!r}")
+        raise ParameterError("confining", f"must be a positive number of Pa, got {pressure!r}")
     if not (isinstance(record_every, int) and record_every >= 1):
         raise ParameterError("record_every", f"must be an integer >= 1, got {record_every!r}")
     try:
@@ -221,7 +229,7 @@ def calibrate_mohr_coulomb(rve_path_or_data: Any, pressure: float, axial_strain:
     if dtype not in ("float64", "float32"):
         raise ParameterError("dtype", f"must be float64 or float32, got {dtype!r}")
     data, source = _rve_data(rve_path_or_data, rves)
-    check_pressure_for_rves(data, pressure, "pressure")
+    check_pressure_for_rves(data, pressure, "confining")
     batch = DEMBatch(data, device=device, dtype=dtype)
     notes: list[str] = []
     h = batch.homogenize()

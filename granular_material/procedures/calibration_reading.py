@@ -25,8 +25,9 @@ DEFAULT_DILATANCY_WINDOW = 1.0e-2
 #: the last fraction of the axial strain φcs is read over (its mean stress ratio)
 DEFAULT_CRITICAL_FRACTION = 0.2
 #: the Mohr–Coulomb run parameters, in the order written, with their units
-PARAMETER_UNITS = {"E": "Pa", "nu": "-", "phi": "deg", "psi": "deg", "cohesion": "Pa",
-                   "phi_cs": "deg", "softening_strain": "-"}
+PARAMETER_UNITS = {"young": "Pa", "poisson": "-", "friction_angle": "deg",
+                   "dilation_angle": "deg", "cohesion": "Pa", "critical_friction_angle": "deg",
+                   "softening_strain": "-"}
 
 
 @dataclass(frozen=True)
@@ -69,8 +70,9 @@ class Calibration:
     """Mohr–Coulomb parameters read from drained biaxial curves.
 
     Attributes:
-        parameters: the run parameters by name (:data:`PARAMETER_UNITS`: ``E`` [Pa], ``nu``,
-            ``phi``, ``psi``, ``phi_cs`` [deg], ``cohesion`` [Pa], ``softening_strain``).
+        parameters: the run parameters by name (:data:`PARAMETER_UNITS`: ``young`` [Pa],
+            ``poisson`` [-], ``friction_angle``, ``dilation_angle``,
+            ``critical_friction_angle`` [deg], ``cohesion`` [Pa], ``softening_strain`` [-]).
         readings: how each was read (:class:`Reading`), by the same names.
         curve: the curve table read (one row per record and RVE; columns of
             :func:`~granular_material.procedures.biaxial_test`).
@@ -92,10 +94,12 @@ class Calibration:
         """The keywords of ``MohrCoulomb`` for these parameters at the pressure P
         (``initial_stress`` −P)."""
         p = self.parameters
-        softens = p["softening_strain"] > 0 and p["phi_cs"] < p["phi"]
-        return {"young": p["E"], "poisson": p["nu"], "friction_angle": p["phi"],
-                "dilation_angle": p["psi"], "cohesion": p["cohesion"],
-                "critical_friction_angle": p["phi_cs"] if softens else None,
+        softens = (p["softening_strain"] > 0
+                   and p["critical_friction_angle"] < p["friction_angle"])
+        return {"young": p["young"], "poisson": p["poisson"],
+                "friction_angle": p["friction_angle"],
+                "dilation_angle": p["dilation_angle"], "cohesion": p["cohesion"],
+                "critical_friction_angle": p["critical_friction_angle"] if softens else None,
                 "softening_strain": p["softening_strain"] if softens else 0.0,
                 "initial_stress": -self.pressure}
 
@@ -153,7 +157,7 @@ def _read_one(g: pd.DataFrame, elastic_window: float, dilatancy_window: float,
         raise ParameterError("curve", f"of RVE {rve} gives E = {young:.4g} Pa, ν = {nu:.4g} "
                              f"over its first {elastic_window:g} axial strain: not an elastic "
                              "solid (widen elastic_window, or look at the curve)")
-    out = {"E": (young, (ea[0], ea[win][-1])), "nu": (nu, (ea[0], ea[win][-1]))}
+    out = {"young": (young, (ea[0], ea[win][-1])), "poisson": (nu, (ea[0], ea[win][-1]))}
     # the plastic strains: the elastic strain of the stress change taken off
     d1, d3 = -syy - (-syy[0]), -sxx - (-sxx[0])
     e1p = e1 - ((1 - nu**2) * d1 - nu * (1 + nu) * d3) / young
@@ -164,7 +168,7 @@ def _read_one(g: pd.DataFrame, elastic_window: float, dilatancy_window: float,
     r_max = float(np.nanmax(ratio))
     peak = int(np.flatnonzero(ratio >= r_max * (1 - 1e-9))[0])
     phi = float(_phi(r_max))
-    out["phi"] = (phi, (ea[peak], ea[peak]))
+    out["friction_angle"] = (phi, (ea[peak], ea[peak]))
     if peak == len(ea) - 1:
         notes.append(f"RVE {rve}: σ1/σ3 still rises at the end of the test: φ is a lower "
                      "bound; test to a larger axial strain")
@@ -176,11 +180,11 @@ def _read_one(g: pd.DataFrame, elastic_window: float, dilatancy_window: float,
                              f"RVE {rve} holds no plastic flow to read ψ from: widen it")
     slope = np.polyfit(x, ev_p[around], 2)[1]
     psi = float(np.degrees(np.arcsin(np.clip(-slope, -1.0, 1.0))))
-    out["psi"] = (psi, (ea[around][0], ea[around][-1]))
+    out["dilation_angle"] = (psi, (ea[around][0], ea[around][-1]))
     # φcs: the mean stress ratio over the last fraction of the axial strain
     last = ea >= ea[-1] - critical_fraction * (ea[-1] - ea[0])
     phi_cs = float(_phi(np.nanmean(ratio[last])))
-    out["phi_cs"] = (phi_cs, (ea[last][0], ea[-1]))
+    out["critical_friction_angle"] = (phi_cs, (ea[last][0], ea[-1]))
     mobilised = _phi(ratio)
     tail = np.polyfit(ea[last], mobilised[last], 1)[0] * (ea[-1] - ea[last][0])
     if tail < -0.5:
@@ -213,17 +217,20 @@ def _read_one(g: pd.DataFrame, elastic_window: float, dilatancy_window: float,
 
 
 _METHODS = {
-    "E": "plane-strain secant over the elastic window: least-squares slopes k1 = dσ1/dε1, "
+    "young": "plane-strain secant over the elastic window: least-squares slopes k1 = dσ1/dε1, "
          "k3 = dσ3/dε1, r = dε3/dε1 solved for a = (1 − ν²)/E, b = ν(1 + ν)/E from "
          "dε1 = a dσ1 − b dσ3, dε3 = a dσ3 − b dσ1; E = (1 + ν)/(a + b)",
-    "nu": "as E: ν = b/(a + b) (σ3 constant: ν = −r/(1 − r))",
-    "phi": "peak of the principal stress ratio R = σ1/σ3, c = 0: sin φ = (R − 1)/(R + 1)",
-    "psi": "sin ψ = −dεv^p/dγ^p at the peak (γ^p = ε1^p − ε3^p, εv^p = ε1^p + ε3^p, the "
+    "poisson": "as E: ν = b/(a + b) (σ3 constant: ν = −r/(1 − r))",
+    "friction_angle": "peak of the principal stress ratio R = σ1/σ3, c = 0: "
+                      "sin φ = (R − 1)/(R + 1)",
+    "dilation_angle": "sin ψ = −dεv^p/dγ^p at the peak (γ^p = ε1^p − ε3^p, "
+                      "εv^p = ε1^p + ε3^p, the "
            "elastic strain of the stress change removed with E, ν), slope at the peak of a "
            "quadratic fit over the window",
     "cohesion": "0: a test at one pressure cannot separate c from φ; the discs are "
                 "cohesionless",
-    "phi_cs": "mean stress ratio over the last fraction of the axial strain, c = 0",
+    "critical_friction_angle": "mean stress ratio over the last fraction of the axial strain, "
+                               "c = 0",
     "softening_strain": "plastic shear strain γ^p over which the mobilised φ falls from its "
                         "peak to φcs: linear fit of φ against γ^p on the descent (0 when "
                         "there is none)",
@@ -280,18 +287,20 @@ def read_parameters(curve: pd.DataFrame, pressure: float,
                               tuple(values[name]), tuple(windows[name]))
                 for name, unit in PARAMETER_UNITS.items()}
     parameters = {name: r.value for name, r in readings.items()}
-    if parameters["phi_cs"] > parameters["phi"]:  # no softening: the peak is the end
-        parameters["phi_cs"] = parameters["phi"]
+    phi, phi_cs = "friction_angle", "critical_friction_angle"
+    if parameters[phi_cs] > parameters[phi]:  # no softening: the peak is the end
+        parameters[phi_cs] = parameters[phi]
         all_notes.append("φcs read above φ (no descent): φcs = φ")
-    if parameters["psi"] < 0:
-        parameters["psi"] = 0.0
-        all_notes.append(f"ψ read below 0 ({readings['psi'].value:.3g}°, contraction at the "
+    if parameters["dilation_angle"] < 0:
+        parameters["dilation_angle"] = 0.0
+        all_notes.append(f"ψ read below 0 ({readings['dilation_angle'].value:.3g}°, "
+                         "contraction at the "
                          "peak): ψ = 0")
-    if parameters["softening_strain"] <= 0 or parameters["phi_cs"] >= parameters["phi"]:
-        parameters["softening_strain"], parameters["phi_cs"] = 0.0, parameters["phi"]
-    if parameters["psi"] > parameters["phi"]:
-        parameters["psi"] = parameters["phi"]
-        all_notes.append(f"ψ read above φ ({readings['psi'].value:.3g}°): ψ = φ "
+    if parameters["softening_strain"] <= 0 or parameters[phi_cs] >= parameters[phi]:
+        parameters["softening_strain"], parameters[phi_cs] = 0.0, parameters[phi]
+    if parameters["dilation_angle"] > parameters[phi]:
+        parameters["dilation_angle"] = parameters[phi]
+        all_notes.append(f"ψ read above φ ({readings['dilation_angle'].value:.3g}°): ψ = φ "
                          "(Mohr–Coulomb flow is at most associated)")
     return Calibration(parameters, readings, curve, float(pressure), source,
                        tuple(all_notes), dict(settings or {}))

@@ -39,18 +39,19 @@ def plot_calibration(calibration: Calibration, model: pd.DataFrame | None,
         ax1.plot(eps, principal_ratio(model), "k--", lw=2, label="Mohr–Coulomb (calibrated)")
         ax2.plot(eps, -100 * model["volumetric_strain"], "k--", lw=2,
                  label="Mohr–Coulomb (calibrated)")
-    for angle, words, style in ((p["phi"], "φ", ":"), (p["phi_cs"], "φcs", "-.")):
+    for angle, words, style in ((p["friction_angle"], "φ", ":"),
+                                (p["critical_friction_angle"], "φcs", "-.")):
         s = np.sin(np.radians(angle))
         ax1.axhline((1 + s) / (1 - s), color="grey", ls=style, lw=1,
                     label=f"{words} = {angle:.1f}°")
-    phi = calibration.readings["phi"]
+    phi = calibration.readings["friction_angle"]
     sines = np.sin(np.radians(phi.per_rve))
     ax1.plot([100 * w[0] for w in phi.windows], (1 + sines) / (1 - sines), "rv", ms=6,
              label="peaks read")
-    lo, hi = calibration.readings["E"].windows[0]
+    lo, hi = calibration.readings["young"].windows[0]
     ax1.axvspan(100 * lo, 100 * hi, color="tab:green", alpha=0.15, label="E, ν window")
-    psi_lo = min(w[0] for w in calibration.readings["psi"].windows)
-    psi_hi = max(w[1] for w in calibration.readings["psi"].windows)
+    psi_lo = min(w[0] for w in calibration.readings["dilation_angle"].windows)
+    psi_hi = max(w[1] for w in calibration.readings["dilation_angle"].windows)
     ax2.axvspan(100 * psi_lo, 100 * psi_hi, color="tab:orange", alpha=0.15,
                 label="ψ window")
     ax1.set_ylabel("principal stress ratio σ1/σ3 [-]")
@@ -60,8 +61,9 @@ def plot_calibration(calibration: Calibration, model: pd.DataFrame | None,
         ax.grid(alpha=0.3)
         ax.legend(fontsize=7)
     fig.suptitle(f"Mohr–Coulomb from {calibration.source} at P = {calibration.pressure:.4g} "
-                 f"Pa: E = {p['E'] / 1e6:.3g} MPa, ν = {p['nu']:.3f}, φ = {p['phi']:.1f}°, "
-                 f"ψ = {p['psi']:.1f}°, φcs = {p['phi_cs']:.1f}°, softening strain "
+                 f"Pa: E = {p['young'] / 1e6:.3g} MPa, ν = {p['poisson']:.3f}, "
+                 f"φ = {p['friction_angle']:.1f}°, ψ = {p['dilation_angle']:.1f}°, "
+                 f"φcs = {p['critical_friction_angle']:.1f}°, softening strain "
                  f"{p['softening_strain']:.3g}", fontsize=9)
     try:
         return save_figure(fig, path)

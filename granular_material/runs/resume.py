@@ -6,6 +6,7 @@ from __future__ import annotations
 import contextlib
 import json
 import sys
+import warnings
 from collections.abc import Iterator, Mapping
 from dataclasses import asdict
 from pathlib import Path
@@ -16,6 +17,7 @@ from granular_material.errors import ParameterError
 from granular_material.runs.checkpoint import CheckpointError, RunCheckpoint
 from granular_material.runs.serial import from_dict, from_flat, to_dict, to_flat
 from granular_material.runs.spec import RunSpec
+from granular_material.vocabulary import RenamedWarning, renamed
 
 __all__ = ["StoppedRunError", "differences_from_saved", "open_checkpoint", "resolved_newton",
            "spec_differences", "start_checkpoint"]
@@ -40,13 +42,17 @@ _NOT_FIELDS = frozenset({"command", "resume", "json", "func"})
 def _saved_spec(record: dict[str, Any]) -> RunSpec:
     """The spec a checkpoint's record was started with: the spec itself, or the options of
     an older version's (every command-line option, those added since at their old value)."""
-    if "spec" in record:
-        return from_dict(record["spec"])
-    options = {**_ADDED_OPTIONS, **record}
-    options.setdefault("material", "dem")
-    options["test"] = options.get("command", "single-element")
-    flat = {k: v for k, v in options.items() if k not in _NOT_FIELDS and v is not None}
-    return from_flat(flat, strict=False)
+    with warnings.catch_warnings():  # the old names of a saved run: read, not the user's
+        warnings.simplefilter("ignore", RenamedWarning)
+        if "spec" in record:
+            return from_dict(record["spec"])
+        material = record.get("material", "dem")
+        options = {**_ADDED_OPTIONS, **renamed(record, material, warn=False,
+                                               given=lambda v: v is not None)}
+        options.setdefault("material", "dem")
+        options["test"] = options.get("command", "single-element")
+        flat = {k: v for k, v in options.items() if k not in _NOT_FIELDS and v is not None}
+        return from_flat(flat, strict=False)
 
 
 def _compared(spec: RunSpec) -> dict[str, Any]:

@@ -31,6 +31,7 @@ from granular_material.runs.spec import (
     RunSpec,
     SpecError,
 )
+from granular_material.vocabulary import renamed
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -144,7 +145,7 @@ def from_flat(values: Mapping[str, Any], *, strict: bool = True) -> RunSpec:
     data: dict[str, Any] = {key: {} for key in SECTIONS}
     parameters: dict[str, Any] = {}
     material_names = _material_names(name)
-    for key, value in values.items():
+    for key, value in renamed(values, name).items():  # old names: warned, read as new
         section = next((s for s, kind in SECTIONS.items() if key in _names(kind)), None)
         if section is not None:
             data[section][key] = value

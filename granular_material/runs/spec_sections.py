@@ -26,6 +26,7 @@ from granular_material.runs.spec_checks import (
     conform_fields,
     conform_mapping,
 )
+from granular_material.vocabulary import renamed
 
 __all__ = ["BACKENDS", "FULL_SCALE", "REDUCED_SCALE", "SCALES", "TESTS", "MaterialSpec",
            "NewtonSpec", "OutputSpec", "ProblemSpec"]
@@ -266,7 +267,8 @@ class MaterialSpec:
             raise SpecError("material", f"parameters of {self.name} must be a "
                                         f"{kind.__name__} or a mapping, got {type(given)}")
         known = {f.name for f in fields(kind)}
-        unknown = sorted(set(given or {}) - known)
+        given = renamed(dict(given or {}), self.name)  # old names: warned, read as new
+        unknown = sorted(set(given) - known)
         if unknown:
             raise SpecError(unknown[0], f"is no parameter of the material {self.name} "
                                         f"(it has {', '.join(sorted(known))})")

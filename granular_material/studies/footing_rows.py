@@ -54,7 +54,8 @@ FOOTING_BUDGETS: dict[str, dict[str, float]] = {
 #: the Mohr–Coulomb twin of the footing's RVE material: the calibration of 4 RVEs of 64
 #: discs at 20 kPa (docs/validation/mohr-coulomb, "gz20k": E, ν, and the critical-state
 #: angle φcs the DEM footing's load follows), perfectly plastic, small strain
-MOHR_COULOMB_TWIN = {"E": 19.04e6, "nu": 0.254, "phi": 22.35, "psi": 0.0}
+MOHR_COULOMB_TWIN = {"young": 19.04e6, "poisson": 0.254, "friction_angle": 22.35,
+                     "dilation_angle": 0.0}
 
 
 @dataclass(frozen=True)

@@ -24,6 +24,7 @@ from granular_material.fem.materials.protocol import (
 )
 from granular_material.filesafe import write_whole
 from granular_material.typed_fields import conform_fields
+from granular_material.vocabulary import accept_old_keywords, renamed
 
 __all__ = ["LinearElastic", "LinearElasticParameters", "LinearElasticRunParameters",
            "isotropic_tangent"]
@@ -119,20 +120,19 @@ def _check_stress_value(value: Any) -> None:
                                                f"{value!r}"[:200])
 
 
+@accept_old_keywords("linear-elastic")
 @dataclass(frozen=True, kw_only=True)
 class LinearElasticRunParameters:
     """The material of a run specification (its initial stress is the run's confining
-    pressure): ``E`` Young's modulus [Pa], ``nu`` Poisson's ratio [-]."""
+    pressure): ``young`` Young's modulus [Pa], ``poisson`` Poisson's ratio [-] (the old names
+    ``E`` and ``nu`` are still read, with a
+    :class:`~granular_material.vocabulary.RenamedWarning`)."""
 
-    E: float = LinearElasticParameters.young
-    nu: float = LinearElasticParameters.poisson
+    young: float = LinearElasticParameters.young
+    poisson: float = LinearElasticParameters.poisson
 
     def __post_init__(self) -> None:
-        try:  # the material's own checks, named as the spec's fields
-            LinearElasticParameters(self.E, self.nu)
-        except ParameterError as exc:
-            raise ParameterError({"young": "E", "poisson": "nu"}.get(exc.field, exc.field),
-                                 exc.message) from None
+        LinearElasticParameters(self.young, self.poisson)  # the material's own checks
 
 
 def isotropic_tangent(lam: float, mu: float) -> np.ndarray:
@@ -163,15 +163,15 @@ class LinearElastic(ScikitFemInterface):
     D_ijkl = ∂σ_ij/∂(∂u_k/∂x_l) = C_ijkl [Pa] has every symmetry (major and both minor), so
     its Voigt/Mandel 3 × 3 form is exact (a rotation costs nothing: small strain).
 
-    Names: the run specification and the command line call the moduli ``E`` and ``nu``
-    (:class:`LinearElasticRunParameters`, ``--E``/``--nu``); this class calls them
-    ``young`` and ``poisson`` (scikit-fem's ``lame_parameters`` convention) and also accepts
-    ``E=`` and ``nu=`` as keywords. The spec's confining pressure P becomes
-    ``initial_stress=-P`` (tension positive) in :meth:`for_run`.
+    Names: ``young`` and ``poisson`` here, in the run specification
+    (:class:`LinearElasticRunParameters`) and on the command line (``--young``,
+    ``--poisson``); ``E=`` and ``nu=``, their old names, are deprecated (a
+    :class:`~granular_material.vocabulary.RenamedWarning`). The spec's confining pressure P
+    becomes ``initial_stress=-P`` (tension positive) in :meth:`for_run`.
 
     Args:
-        young: Young's modulus E [Pa], > 0 (default 60 MPa); ``E`` is the same.
-        poisson: Poisson's ratio ν [-], in (−1, 0.5) (default 0.3); ``nu`` is the same.
+        young: Young's modulus E [Pa], > 0 (default 60 MPa).
+        poisson: Poisson's ratio ν [-], in (−1, 0.5) (default 0.3).
         initial_stress: stress at zero strain [Pa], tension positive: a number σ0 (the
             isotropic σ0 I, e.g. ``-100e3`` for a specimen consolidated to 100 kPa; default
             0), a (2, 2) tensor, or an (n, 2, 2) array, one per Gauss point (checked
@@ -190,10 +190,9 @@ class LinearElastic(ScikitFemInterface):
         initial_stress: float | np.ndarray = 0.0,
         *, E: float | None = None, nu: float | None = None,
     ) -> None:
-        if E is not None:
-            young = E
-        if nu is not None:
-            poisson = nu
+        old = renamed({k: v for k, v in (("E", E), ("nu", nu)) if v is not None},
+                      "linear-elastic")
+        young, poisson = old.get("young", young), old.get("poisson", poisson)
         self.parameters = LinearElasticParameters(young, poisson, initial_stress)
         self._tangent = isotropic_tangent(*self.parameters.lame)
         self._strain = np.zeros((0, 2, 2))
@@ -203,7 +202,7 @@ class LinearElastic(ScikitFemInterface):
     def for_run(parameters: LinearElasticRunParameters, context: Any) -> LinearElastic:
         """The material of a run: isotropic at the run's confining pressure (a
         :class:`~granular_material.fem.materials.run_context.RunContext`), not yet allocated."""
-        return LinearElastic(young=parameters.E, poisson=parameters.nu,
+        return LinearElastic(young=parameters.young, poisson=parameters.poisson,
                              initial_stress=-context.confining)
 
     @staticmethod
@@ -211,7 +210,7 @@ class LinearElastic(ScikitFemInterface):
                     initial_stress: np.ndarray) -> LinearElastic:
         """The material of a boundary-value problem: its Gauss points at ``initial_stress``
         [Pa] (n, 2, 2), tension positive; not yet allocated."""
-        return LinearElastic(young=parameters.E, poisson=parameters.nu,
+        return LinearElastic(young=parameters.young, poisson=parameters.poisson,
                              initial_stress=initial_stress)
 
     @property

@@ -39,6 +39,7 @@ from granular_material.fem.materials.protocol import (
     ScikitFemInterface,
 )
 from granular_material.filesafe import write_whole
+from granular_material.vocabulary import renamed
 
 __all__ = ["APEX_TANGENT", "MohrCoulomb", "MohrCoulombParameters", "MohrCoulombRunParameters"]
 
@@ -94,8 +95,9 @@ class MohrCoulomb(ScikitFemInterface):
 
     The constants ``young``, ``poisson``, ``friction_angle``, ``dilation_angle``,
     ``cohesion``, ``critical_friction_angle`` and ``softening_strain`` are those of
-    :class:`MohrCoulombParameters` (degrees, Pa); ``E`` and ``nu`` are aliases of ``young``
-    and ``poisson``. The run specification's names are :class:`MohrCoulombRunParameters`.
+    :class:`MohrCoulombParameters` (degrees, Pa), and a run specification's
+    (:class:`MohrCoulombRunParameters`); ``E`` and ``nu``, their old names, are deprecated
+    (a :class:`~granular_material.vocabulary.RenamedWarning`).
 
     Args:
         initial_stress: the stress at allocation [Pa], tension positive: a number
@@ -119,8 +121,10 @@ class MohrCoulomb(ScikitFemInterface):
         *, E: float | None = None, nu: float | None = None,
         apex_tangent: float = APEX_TANGENT,
     ) -> None:
+        old = renamed({k: v for k, v in (("E", E), ("nu", nu)) if v is not None},
+                      "mohr-coulomb")
         self.parameters = MohrCoulombParameters(
-            young if E is None else E, poisson if nu is None else nu, friction_angle,
+            old.get("young", young), old.get("poisson", poisson), friction_angle,
             dilation_angle, cohesion, critical_friction_angle, softening_strain)
         self._strength = self.parameters.strength()
         self.apex_tangent = number("apex_tangent", apex_tangent)
@@ -148,10 +152,11 @@ class MohrCoulomb(ScikitFemInterface):
     def for_run(parameters: MohrCoulombRunParameters, context: Any) -> MohrCoulomb:
         """The material of a run: isotropic at the run's confining pressure (a
         :class:`~granular_material.fem.materials.run_context.RunContext`), not yet allocated."""
-        return MohrCoulomb(young=parameters.E, poisson=parameters.nu,
-                           friction_angle=parameters.phi, dilation_angle=parameters.psi,
+        return MohrCoulomb(young=parameters.young, poisson=parameters.poisson,
+                           friction_angle=parameters.friction_angle,
+                           dilation_angle=parameters.dilation_angle,
                            cohesion=parameters.cohesion,
-                           critical_friction_angle=parameters.phi_cs,
+                           critical_friction_angle=parameters.critical_friction_angle,
                            softening_strain=parameters.softening_strain,
                            initial_stress=-context.confining)
 
@@ -161,10 +166,11 @@ class MohrCoulomb(ScikitFemInterface):
         """The material of a boundary-value problem: its Gauss points at ``initial_stress``
         [Pa] (n, 2, 2), tension positive (σzz = σxx: both horizontal stresses alike, as in a
         geostatic K0 state); not yet allocated."""
-        return MohrCoulomb(young=parameters.E, poisson=parameters.nu,
-                           friction_angle=parameters.phi, dilation_angle=parameters.psi,
+        return MohrCoulomb(young=parameters.young, poisson=parameters.poisson,
+                           friction_angle=parameters.friction_angle,
+                           dilation_angle=parameters.dilation_angle,
                            cohesion=parameters.cohesion,
-                           critical_friction_angle=parameters.phi_cs,
+                           critical_friction_angle=parameters.critical_friction_angle,
                            softening_strain=parameters.softening_strain,
                            initial_stress=initial_stress)
 

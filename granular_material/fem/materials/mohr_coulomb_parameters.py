@@ -1,6 +1,6 @@
 """The constants of the Mohr–Coulomb material (:class:`MohrCoulombParameters`, angles in
-degrees, stresses in Pa) and their names in a run specification
-(:class:`MohrCoulombRunParameters`), each checked once where it is built."""
+degrees, stresses in Pa) and the material of a run specification
+(:class:`MohrCoulombRunParameters`, the same names), each checked once where it is built."""
 
 from __future__ import annotations
 
@@ -10,6 +10,7 @@ from typing import Any
 
 from granular_material.errors import ParameterError
 from granular_material.fem.materials.mohr_coulomb_return import Strength
+from granular_material.vocabulary import accept_old_keywords
 
 __all__ = ["MohrCoulombParameters", "MohrCoulombRunParameters", "number"]
 
@@ -99,31 +100,34 @@ class MohrCoulombParameters:
                         else 0.0)
 
 
+@accept_old_keywords("mohr-coulomb")
 @dataclass(frozen=True, kw_only=True)
 class MohrCoulombRunParameters:
     """The material of a run specification (its initial stress is the run's confining
-    pressure): ``E`` [Pa], ``nu`` [-], ``phi``, ``psi``, ``phi_cs`` [°], ``cohesion`` [Pa],
-    ``softening_strain`` [-] (see :class:`MohrCoulombParameters`)."""
+    pressure), under the names of :class:`MohrCoulombParameters`: ``young`` [Pa],
+    ``poisson`` [-], ``friction_angle``, ``dilation_angle``, ``critical_friction_angle``
+    [°], ``cohesion`` [Pa], ``softening_strain`` [-]. The old names ``E``, ``nu``, ``phi``,
+    ``psi``, ``phi_cs`` are still read, with a
+    :class:`~granular_material.vocabulary.RenamedWarning`."""
 
-    E: float = 60.0e6
-    nu: float = 0.3
-    phi: float = 30.0
-    psi: float = 0.0
+    young: float = 60.0e6
+    poisson: float = 0.3
+    friction_angle: float = 30.0
+    dilation_angle: float = 0.0
     cohesion: float = 0.0
-    phi_cs: float | None = None
+    critical_friction_angle: float | None = None
     softening_strain: float = 0.0
 
     def __post_init__(self) -> None:
-        names = {"young": "E", "poisson": "nu", "friction_angle": "phi",
-                 "dilation_angle": "psi", "critical_friction_angle": "phi_cs"}
-        try:  # the material's own checks, named as the spec's fields
-            MohrCoulombParameters(young=self.E, poisson=self.nu, friction_angle=self.phi,
-                                  dilation_angle=self.psi, cohesion=self.cohesion,
-                                  critical_friction_angle=self.phi_cs,
+        try:  # the material's own checks
+            MohrCoulombParameters(young=self.young, poisson=self.poisson,
+                                  friction_angle=self.friction_angle,
+                                  dilation_angle=self.dilation_angle, cohesion=self.cohesion,
+                                  critical_friction_angle=self.critical_friction_angle,
                                   softening_strain=self.softening_strain)
         except ParameterError as exc:
             if exc.field == "softening_strain" and self.softening_strain == 0.0:
-                raise ParameterError("phi_cs", "needs softening_strain > 0 (the plastic shear "
-                                               "strain over which phi softens to phi_cs), "
-                                               "which is 0") from None
-            raise ParameterError(names.get(exc.field, exc.field), exc.message) from None
+                raise ParameterError("critical_friction_angle", "needs softening_strain > 0 "
+                                     "(the plastic shear strain over which friction_angle "
+                                     "softens to critical_friction_angle), which is 0") from None
+            raise

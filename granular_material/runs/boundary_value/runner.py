@@ -105,13 +105,13 @@ def _align(data: MeshData, axis: int, values: tuple[float, ...]) -> None:
     for value in values:
         lines = np.unique(p[axis])
         if not lines[0] < value < lines[-1]:  # the mesh's own edges stay where they are
-            raise SpecError("mesh.align-" + "xy"[axis], f"{value:g} m lies outside the mesh "
+            raise SpecError("mesh.align_" + "xy"[axis], f"{value:g} m lies outside the mesh "
                                                         f"({lines[0]:g} to {lines[-1]:g} m)")
         k = int(np.argmin(np.abs(lines - value)))
         low = lines[k - 1] if k > 0 else -np.inf
         high = lines[k + 1] if k + 1 < lines.size else np.inf
         if not low < value < high:
-            raise SpecError("mesh.align-" + "xy"[axis], f"{value:g} m lies outside the mesh or "
+            raise SpecError("mesh.align_" + "xy"[axis], f"{value:g} m lies outside the mesh or "
                                                         "would fold an element")
         p[axis, p[axis] == lines[k]] = value
 

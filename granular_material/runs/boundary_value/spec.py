@@ -15,7 +15,7 @@ into a :class:`BoundaryValueSpec` by :func:`bvp_from_dict` (every key checked, a
     elements = [12, 8]
     element = "tri6"                # tri3, tri6, quad4, quad8, quad9
     grading = [4.0, 0.25]           # last/first element size along x and y (refine a corner)
-    align-x = [0.05]                # move the nearest grid line onto these x [m] (a footing's edge)
+    align_x = [0.05]                # move the nearest grid line onto these x [m] (a footing's edge)
     quadrature = 3                  # optional: Gauss points (per direction for quads)
 
     [boundaries]                    # name = predicate, or a physical group of the file
@@ -54,6 +54,7 @@ into a :class:`BoundaryValueSpec` by :func:`bvp_from_dict` (every key checked, a
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -62,8 +63,9 @@ from typing import Any
 from granular_material.multiscale.parameters import MAX_SHARDS
 from granular_material.runs.spec import MaterialSpec, NewtonSpec, SpecError
 from granular_material.typed_fields import conform, conform_fields
+from granular_material.vocabulary import RenamedWarning, key_of, user_stacklevel
 
-__all__ = ["CONDITION_TYPES", "INITIAL_STATES", "BoundaryValueSpec", "ConditionSpec",
+__all__ = ["CONDITION_TYPES", "INITIAL_STATES", "SCENE_KEYS", "BoundaryValueSpec", "ConditionSpec",
            "InitialStateSpec", "MeshSpec", "bvp_from_dict"]
 
 #: the conditions a boundary may carry
@@ -125,12 +127,12 @@ class MeshSpec:
         for axis, values in enumerate((self.align_x, self.align_y)):
             lines = None if self.elements is None else self.elements[axis] - 1
             if lines is not None and len(values) > lines:
-                raise SpecError(f"mesh.align-{'xy'[axis]}", f"moves {len(values)} grid lines; "
+                raise SpecError(f"mesh.align_{'xy'[axis]}", f"moves {len(values)} grid lines; "
                                                           f"{self.elements[axis]} elements "
                                                           f"along {'xy'[axis]} have {lines} "
                                                           "inside the mesh")
         if (self.file is not None) and (self.align_x or self.align_y):
-            raise SpecError("mesh.align-x", "aligns a generated mesh's grid lines; a mesh "
+            raise SpecError("mesh.align_x", "aligns a generated mesh's grid lines; a mesh "
                                             "file has its own nodes")
         if (self.file is None) == (self.size is None):
             raise SpecError("mesh", "needs either file (a mesh file) or size and elements "
@@ -328,8 +330,7 @@ _GENERATED_SIDES = frozenset({"left", "right", "bottom", "top"})
 
 def _condition(entry: Any, index: int) -> ConditionSpec:
     entry = _table(f"conditions[{index}]", entry)
-    _unknown("conditions", entry, {"type", "boundary", "component", "value", "end",
-                                   "displacement", "rough"})
+    _unknown("conditions", entry, SCENE_KEYS["conditions"])
     component = entry.get("component")
     if component is not None:
         if isinstance(component, bool) or not isinstance(component, str | int) \
@@ -344,9 +345,9 @@ def _condition(entry: Any, index: int) -> ConditionSpec:
 
 
 def _mesh(table: dict[str, Any], folder: Path) -> MeshSpec:
-    _unknown("mesh", table, {"file", "size", "elements", "element", "grading", "quadrature",
-                             "align-x", "align-y"})
-    values = {key.replace("-", "_"): value for key, value in table.items()}
+    table = _snake_case("mesh", table)
+    _unknown("mesh", table, SCENE_KEYS["mesh"])
+    values = dict(table)
     file = values.get("file")
     if isinstance(file, str) and file:
         path = Path(file) if Path(file).is_absolute() else folder / file
@@ -356,14 +357,45 @@ def _mesh(table: dict[str, Any], folder: Path) -> MeshSpec:
     return _within("mesh", lambda: MeshSpec(**values))
 
 
+def _snake_case(section: str, table: dict[str, Any]) -> dict[str, Any]:
+    """``table`` with its kebab-case keys of old (``align-x``) read as their snake_case ones,
+    each with a :class:`~granular_material.vocabulary.RenamedWarning`; both given: a
+    SpecError."""
+    out: dict[str, Any] = {}
+    for key, value in table.items():
+        new = key_of(key)
+        if new != key:
+            if new in table:
+                raise SpecError(f"{section}.{new}", f"is given twice: as {new!r} and as {key!r} "
+                                                    f"(its old spelling); give {new!r} only")
+            warnings.warn(f"[{section}] key '{key}' is deprecated: it is spelled '{new}' now "
+                          "(scene keys are snake_case; the kebab-case spelling is read until "
+                          "the next release)", RenamedWarning, stacklevel=user_stacklevel())
+        out[new] = value
+    return out
+
+
 def _initial(table: dict[str, Any]) -> InitialStateSpec:
-    _unknown("initial", table, {"state", "pressure", "k0", "surcharge", "surface"})
+    _unknown("initial", table, SCENE_KEYS["initial"])
     return _within("initial", lambda: InitialStateSpec(**table))
 
 
-_SCENE_KEYS = {"test", "steps", "name", "out", "mesh", "boundaries", "conditions", "gravity",
-               "initial", "material", "newton", "output"}
-_OUTPUT_KEYS = {"out", "device", "shards", "progress", "fields"}
+#: the keys of a boundary-value scene, by table ("": the top level; [newton] takes
+#: NewtonSpec's fields, [material.parameters] the material's own, [boundaries] free names)
+SCENE_KEYS: dict[str, frozenset[str]] = {
+    "": frozenset({"test", "steps", "name", "out", "mesh", "boundaries", "conditions",
+                   "gravity", "initial", "material", "newton", "output"}),
+    "mesh": frozenset({"file", "size", "elements", "element", "grading", "quadrature",
+                       "align_x", "align_y"}),
+    "conditions": frozenset({"type", "boundary", "component", "value", "end", "displacement",
+                             "rough"}),
+    "gravity": frozenset({"unit_weight", "factor"}),
+    "initial": frozenset({"state", "pressure", "k0", "surcharge", "surface"}),
+    "material": frozenset({"name", "parameters"}),
+    "output": frozenset({"out", "device", "shards", "progress", "fields"}),
+}
+_SCENE_KEYS = SCENE_KEYS[""]
+_OUTPUT_KEYS = SCENE_KEYS["output"]
 
 
 def bvp_from_dict(data: Mapping[str, Any], folder: Path | str = ".") -> BoundaryValueSpec:
@@ -383,9 +415,9 @@ def bvp_from_dict(data: Mapping[str, Any], folder: Path | str = ".") -> Boundary
     if not isinstance(conditions, list):
         raise SpecError("conditions", "must be an array of tables ([[conditions]])")
     gravity = _table("gravity", data.get("gravity"))
-    _unknown("gravity", gravity, {"unit_weight", "factor"})
+    _unknown("gravity", gravity, SCENE_KEYS["gravity"])
     material = _table("material", data.get("material"))
-    _unknown("material", material, {"name", "parameters"})
+    _unknown("material", material, SCENE_KEYS["material"])
     newton = _table("newton", data.get("newton"))
     output = _table("output", data.get("output"))
     _unknown("output", output, _OUTPUT_KEYS)
