@@ -32,6 +32,7 @@ from granular_material.procedures.calibration import calibrate_mohr_coulomb
 from granular_material.procedures.packing import PackingParameters, prepare_packing
 from granular_material.runs import from_flat
 from granular_material.runs.boundary_value.spec import SCENE_KEYS
+from granular_material.runs.dem import BiaxialDemSpec, DriveSpec, PrepareSpec
 from granular_material.runs.spec import MaterialSpec, NewtonSpec, OutputSpec, ProblemSpec, RunSpec
 from granular_material.vocabulary import RENAMED, RenamedWarning, renamed
 
@@ -43,7 +44,8 @@ EXAMPLES = ROOT / "examples" / "scenes"
 SIGNATURES = (MohrCoulomb, LinearElastic, DEMMaterial, prepare_packing, calibrate_mohr_coulomb)
 #: the public parameter dataclasses whose fields are names a user writes
 DATACLASSES = (MohrCoulombParameters, LinearElasticParameters, DEMMaterialParameters,
-               PackingParameters, RunSpec, ProblemSpec, NewtonSpec, OutputSpec, MaterialSpec)
+               PackingParameters, RunSpec, ProblemSpec, NewtonSpec, OutputSpec, MaterialSpec,
+               PrepareSpec, BiaxialDemSpec, DriveSpec)
 
 
 def code_names() -> tuple[dict[str, set[str]], dict[str, set[str]]]:

@@ -25,6 +25,7 @@ from granular_material.cli.options import (
     add_progress,
     add_rve_material_options,
     as_flags,
+    dem_renamed,
     emit,
     flag_of,
     positive,
@@ -59,11 +60,6 @@ from granular_material.runs.dem import (
 from granular_material.runs.dem.spec import DRIVE_INCREMENTS, field_names
 
 __all__ = ["check_args", "command_line", "register", "run_spec_file", "spec_from_args"]
-
-#: the spec fields named otherwise by today's options (spec field -> the option's dest): the
-#: one place where the command line's names of the RVE material meet the spec's
-_OPTION_NAMES = {"contact_friction_angle": "friction_angle", "contact_young": "young"}
-
 
 def _grad_u(text: str) -> np.ndarray:
     parts = text.split(",")
@@ -104,9 +100,7 @@ def _add_resume_options(parser: argparse.ArgumentParser) -> None:
 
 def _text(text: str) -> str:
     """A library message (fields in backquotes) as the command line says it: each field as
-    its option (:data:`_OPTION_NAMES` where the option is named otherwise)."""
-    for field, dest in _OPTION_NAMES.items():
-        text = text.replace(f"`{field}`", f"`{dest}`")
+    its option."""
     return as_flags(text)
 
 
@@ -119,7 +113,9 @@ def _usage(exc: ParameterError) -> UsageError:
 def _spec(args: argparse.Namespace, kind: type) -> DemSpec:
     """The spec ``kind`` of the command's options (a UsageError naming the option where a
     value cannot run)."""
-    values = {name: getattr(args, _OPTION_NAMES.get(name, name)) for name in field_names(kind)
+    if kind is PrepareSpec:  # the RVE material's old option names, read with a warning
+        args = dem_renamed(args)
+    values = {name: getattr(args, name) for name in field_names(kind)
               if name != "progress"}
     if "grad_u" in values:
         values["grad_u"] = tuple(np.asarray(values["grad_u"], dtype=float).ravel())
@@ -188,7 +184,7 @@ _FILES = {"prepare": "rve.npz", "biaxial-dem": "curve.csv", "dem-drive": "path.c
 
 def command_line(spec: DemSpec) -> str:
     """The command line of ``spec``: its command and an option for every field not at its
-    default (:data:`_OPTION_NAMES` where the option is named otherwise)."""
+    default."""
     words = ["granular-material", spec.test]
     if hasattr(spec, "rve"):
         words.append(str(spec.rve))
@@ -197,7 +193,7 @@ def command_line(spec: DemSpec) -> str:
         value = getattr(spec, f.name)
         if f.name in ("rve", "progress") or value == defaults[f.name] or value is None:
             continue
-        flag = flag_of(_OPTION_NAMES.get(f.name, f.name))
+        flag = flag_of(f.name)
         if f.name == "grad_u":
             words.append(f"{flag}={','.join(repr(v) for v in value)}")
         else:

@@ -36,14 +36,13 @@ from granular_material.runs.dem.serial import (
 )
 from granular_material.runs.dem.spec import (
     DEM_TESTS,
-    RENAMED_MATERIAL_FIELDS,
     BiaxialDemSpec,
     DemSpec,
     DriveSpec,
     PrepareSpec,
 )
 
-__all__ = ["DEM_TESTS", "RENAMED_MATERIAL_FIELDS", "RESUME_FREE", "SERVO_FAIL", "SERVO_WARN",
+__all__ = ["DEM_TESTS", "RESUME_FREE", "SERVO_FAIL", "SERVO_WARN",
            "BiaxialDemSpec", "DemCheckpoint", "DemOutcome", "DemPlan", "DemSpec", "DriveSpec",
            "PrepareSpec", "SavedRecord", "check", "checkpoint_folder", "from_dict", "is_dem",
            "load", "run_dem", "save", "to_dict", "to_flat", "to_toml"]

@@ -27,7 +27,6 @@ from granular_material.runs.checkpoint_files import CheckpointError, file_sha256
 from granular_material.runs.dem.checkpoint import DemCheckpoint, checkpoint_folder
 from granular_material.runs.dem.serial import from_dict, to_dict, to_flat
 from granular_material.runs.dem.spec import (
-    RENAMED_MATERIAL_FIELDS,
     BiaxialDemSpec,
     DemSpec,
     DriveSpec,
@@ -82,16 +81,6 @@ class DemOutcome:
         return {**self.report, "error": self.error}
 
 
-def _renamed(exc: ParameterError) -> ParameterError:
-    """A refusal of the packing's checks, which name the RVE material by their old names,
-    with the spec's names (:data:`RENAMED_MATERIAL_FIELDS`)."""
-    back = {old: new for new, old in RENAMED_MATERIAL_FIELDS.items()}
-    message = exc.message
-    for old, new in back.items():
-        message = message.replace(f"`{old}`", f"`{new}`")
-    return type(exc)(back.get(exc.field, exc.field), message)
-
-
 def _check_figure(path: Path | None, others: dict[str, Path | None]) -> None:
     """The figure file ``path`` (None: none) can be written, in a format matplotlib writes,
     and is no other output file."""
@@ -120,10 +109,7 @@ def check(spec: DemSpec) -> DemPlan:
     if isinstance(spec, PrepareSpec):
         checks.check_output_file(spec.out)
         values = type("Fields", (), spec.packing_fields())()
-        try:
-            packing = checks.packing_parameters(values, spec.particles, spec.pressure)
-        except ParameterError as exc:
-            raise _renamed(exc) from None
+        packing = checks.packing_parameters(values, spec.particles, spec.pressure)
         try:
             checks.check_memory(float(spec.batch) * spec.particles * checks.DISC_BYTES,
                                 f"`batch` {spec.batch} RVEs of `particles` {spec.particles} "

@@ -28,7 +28,7 @@ from granular_material.procedures.strain_path import (
 )
 from granular_material.runs.spec_checks import SpecError, check_device, conform_fields
 
-__all__ = ["DEM_TESTS", "DRIVE_INCREMENTS", "DTYPES", "LAWS", "RENAMED_MATERIAL_FIELDS",
+__all__ = ["DEM_TESTS", "DRIVE_INCREMENTS", "DTYPES", "LAWS",
            "SPECS", "BiaxialDemSpec", "DemSpec", "DriveSpec", "PrepareSpec", "field_names"]
 
 #: the DEM problems, by the command that runs each
@@ -37,10 +37,6 @@ DEM_TESTS = ("prepare", "biaxial-dem", "dem-drive")
 LAWS = ("constant", "frictmat")
 #: the increments of dem-drive by default
 DRIVE_INCREMENTS = 10
-#: the RVE material fields whose names the spec gives anew: spec field -> the name the
-#: packing's checks (granular_material.checks) and the RVE file's meta still use
-RENAMED_MATERIAL_FIELDS = {"contact_friction_angle": "friction_angle",
-                           "contact_young": "young"}
 
 _D = RVE_MATERIAL_DEFAULTS
 
@@ -117,9 +113,9 @@ class PrepareSpec(_RunFields):
     law: str = _D["law"]
     kn: float = _D["kn"]
     kt: float = _D["kt"]
-    contact_young: float = _D["young"]
+    contact_young: float = _D["contact_young"]
     kt_over_kn: float = _D["kt_over_kn"]
-    contact_friction_angle: float = _D["friction_angle"]
+    contact_friction_angle: float = _D["contact_friction_angle"]
     damping: float = _D["damping"]
     density: float = _D["density"]
     thickness: float = _D["thickness"]
@@ -140,14 +136,12 @@ class PrepareSpec(_RunFields):
         _one_of("law", self.law, LAWS)
 
     def packing_fields(self) -> dict[str, Any]:
-        """The RVE material fields by the names the packing's checks take
-        (:data:`RENAMED_MATERIAL_FIELDS`), with the seed."""
-        values = {name: getattr(self, name) for name in
-                  ("target_void_ratio", "radius_min", "radius_max", "law", "kn", "kt",
-                   "kt_over_kn", "damping", "density", "thickness", "seed")}
-        values.update({old: getattr(self, new)
-                       for new, old in RENAMED_MATERIAL_FIELDS.items()})
-        return values
+        """The RVE material fields as the packing's checks take them
+        (:data:`~granular_material.checks.RVE_MATERIAL_DEFAULTS`), with the seed."""
+        return {name: getattr(self, name) for name in
+                ("target_void_ratio", "radius_min", "radius_max", "law", "kn", "kt",
+                 "contact_young", "kt_over_kn", "contact_friction_angle", "damping",
+                 "density", "thickness", "seed")}
 
 
 @dataclass(frozen=True, kw_only=True)
