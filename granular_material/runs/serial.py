@@ -215,33 +215,43 @@ def to_toml(spec: RunSpec) -> str:
     return "\n".join(lines) + "\n"
 
 
-def save(spec: RunSpec, path: str | Path) -> None:
-    """Write ``spec`` to ``path``: TOML for a ``.toml`` suffix, else JSON; whole or not at
-    all (:func:`~granular_material.filesafe.write_whole`: a failed write, a full disk
-    included, keeps the file that was there)."""
+def write_spec_file(path: str | Path, toml_text: str, data: Mapping[str, Any]) -> None:
+    """Write a spec's forms to ``path``: ``toml_text`` for a ``.toml`` suffix, else ``data``
+    as JSON; whole or not at all (:func:`~granular_material.filesafe.write_whole`: a failed
+    write, a full disk included, keeps the file that was there)."""
     from granular_material.filesafe import write_whole
 
+    path = Path(path)
+    text = toml_text if path.suffix == ".toml" else json.dumps(data, indent=2) + "\n"
+    write_whole(path, lambda tmp: tmp.write_text(text, encoding="utf-8"))
+
+
+def read_spec_file(path: str | Path, what: str = "run spec") -> dict[str, Any]:
+    """The nested dict saved in ``path`` (TOML for a ``.toml`` suffix, else JSON); a file
+    that is no such text a ValueError naming it and ``what`` it should have been."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError:
+        raise ValueError(f"{path} is no {what}: not UTF-8 text (TOML or JSON)") from None
+    kind = "TOML" if path.suffix == ".toml" else "JSON"
+    try:
+        return tomllib.loads(text) if path.suffix == ".toml" else json.loads(text)
+    except ValueError as exc:  # TOMLDecodeError, JSONDecodeError
+        raise ValueError(f"{path} is no {kind} {what}: {exc}") from None
+    except RecursionError:  # arrays or tables nested thousands deep
+        raise ValueError(f"{path} is no {kind} {what}: nested too deep to read") from None
+
+
+def save(spec: RunSpec, path: str | Path) -> None:
+    """Write ``spec`` to ``path``: TOML for a ``.toml`` suffix, else JSON; whole or not at
+    all (:func:`write_spec_file`)."""
     if not isinstance(spec, RunSpec):
         raise TypeError(f"save() takes a RunSpec, got {type(spec).__name__}")
-    path = Path(path)
-    text = (to_toml(spec) if path.suffix == ".toml"
-            else json.dumps(to_dict(spec), indent=2) + "\n")
-    write_whole(path, lambda tmp: tmp.write_text(text, encoding="utf-8"))
+    write_spec_file(path, to_toml(spec), to_dict(spec))
 
 
 def load(path: str | Path) -> RunSpec:
     """The spec saved in ``path`` (TOML for a ``.toml`` suffix, else JSON); a file that is
     no spec is a ValueError naming it, a bad field a SpecError naming the field."""
-    path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except UnicodeDecodeError:
-        raise ValueError(f"{path} is no run spec: not UTF-8 text (TOML or JSON)") from None
-    kind = "TOML" if path.suffix == ".toml" else "JSON"
-    try:
-        data = tomllib.loads(text) if path.suffix == ".toml" else json.loads(text)
-    except ValueError as exc:  # TOMLDecodeError, JSONDecodeError
-        raise ValueError(f"{path} is no {kind} run spec: {exc}") from None
-    except RecursionError:  # arrays or tables nested thousands deep
-        raise ValueError(f"{path} is no {kind} run spec: nested too deep to read") from None
-    return from_dict(data)
+    return from_dict(read_spec_file(path))

@@ -13,7 +13,6 @@ section, a missing required one or a value of the wrong type is a
 
 from __future__ import annotations
 
-import json
 import sys
 from collections.abc import Mapping
 from dataclasses import MISSING, fields
@@ -21,13 +20,13 @@ from pathlib import Path
 from typing import Any
 
 from granular_material.runs.dem.spec import DEM_TESTS, SPECS, DemSpec
-from granular_material.runs.serial import _toml_value
+from granular_material.runs.serial import _toml_value, read_spec_file, write_spec_file
 from granular_material.runs.spec_checks import SpecError
 
 if sys.version_info >= (3, 11):
-    import tomllib
+    pass
 else:  # Python 3.10
-    import tomli as tomllib
+    pass
 
 __all__ = ["from_dict", "is_dem", "load", "save", "to_dict", "to_flat", "to_toml"]
 
@@ -141,26 +140,12 @@ def to_toml(spec: DemSpec) -> str:
 def save(spec: DemSpec, path: str | Path) -> None:
     """Write ``spec`` to ``path``: TOML for a ``.toml`` suffix, else JSON; whole or not at
     all."""
-    from granular_material.filesafe import write_whole
-
     if not is_dem(spec):
         raise TypeError(f"save() takes a DEM run's spec, got {type(spec).__name__}")
-    path = Path(path)
-    text = (to_toml(spec) if path.suffix == ".toml"
-            else json.dumps(to_dict(spec), indent=2) + "\n")
-    write_whole(path, lambda tmp: tmp.write_text(text, encoding="utf-8"))
+    write_spec_file(path, to_toml(spec), to_dict(spec))
 
 
 def load(path: str | Path) -> DemSpec:
     """The DEM spec saved in ``path`` (TOML for a ``.toml`` suffix, else JSON); a file that
     is no spec a ValueError naming it, a bad field a SpecError naming the field."""
-    path = Path(path)
-    kind = "TOML" if path.suffix == ".toml" else "JSON"
-    try:
-        text = path.read_text(encoding="utf-8")
-        data = tomllib.loads(text) if path.suffix == ".toml" else json.loads(text)
-    except UnicodeDecodeError:
-        raise ValueError(f"{path} is no DEM run spec: not UTF-8 text") from None
-    except ValueError as exc:  # TOMLDecodeError, JSONDecodeError
-        raise ValueError(f"{path} is no {kind} DEM run spec: {exc}") from None
-    return from_dict(data)
+    return from_dict(read_spec_file(path, "DEM run spec"))
