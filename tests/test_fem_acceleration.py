@@ -15,10 +15,10 @@ from granular_material.fem import (
     NewtonSettings,
     NewtonSolver,
     build_biaxial,
-    newton,
 )
 from granular_material.fem.forms import stiffness
 from granular_material.fem.materials.linear_elastic import isotropic_tangent
+from granular_material.fem.solver import newton
 from granular_material.fem.solver.acceleration import AitkenRelaxation, SecantTangent
 
 
