@@ -344,7 +344,7 @@ def _finish(plan: RunPlan, outcome: RunOutcome, times: PhaseTimes, started: floa
     if out is not None:
         with times.phase("outputs"):
             write_outputs(result, out, map_strain=list(spec.output.map_strain),
-                          reference=outcome.reference)
+                          reference=outcome.reference, tables=False)  # the writer's, whole
             if outcome.reference is not None:
                 write_csv(outcome.reference, Path(out) / "pure_dem.csv")
     times.add_all(result.timings)
