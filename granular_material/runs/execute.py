@@ -90,6 +90,14 @@ class RunOutcome:
 
 
 def _device(spec: RunSpec) -> str:
+    """The DEM device of the run. A material that holds no RVEs (no ``check_run`` hook) runs
+    on the CPU where no other device is asked for and the mesh does not depend on it: warp is
+    then not loaded at all (issue 62)."""
+    problem = spec.problem
+    by_device = problem.test == "biaxial" and not problem.elements and not problem.scale
+    if (spec.device in (None, "cpu") and not by_device
+            and not hasattr(spec.material.cls, "check_run")):
+        return "cpu"
     from granular_material.dem import resolve_device
 
     return resolve_device(spec.device)
