@@ -5,6 +5,7 @@ tables are not written again, whole, at its end when the appended ones are alrea
 from __future__ import annotations
 
 import io
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -13,7 +14,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from granular_material.results import writers
-from granular_material.results.writers import BiaxialWriter, format_rows, xml_text
+from granular_material.results.writers import BiaxialWriter, format_rows, read_table, xml_text
 
 _FLOATS = st.floats(allow_nan=True, allow_infinity=True, width=64)
 
@@ -108,6 +109,35 @@ def test_a_column_whose_type_changed_is_written_anew_as_the_result_holds_it(tmp_
                           for s in range(3)])
     result = _Result(tmp_path)
     result.steps = steps
+    assert not writer.holds(result)
+    writer.finish(result)
+    assert (tmp_path / "steps.csv").read_text() == steps.to_csv(index=False)
+
+
+def test_a_stop_between_a_steps_writes_has_the_tables_written_whole(tmp_path, monkeypatch):
+    """Ctrl-C delivered after a step's points are appended and before its steps row is: the
+    run's result holds the step, so finish() writes the tables whole with it."""
+    writer = BiaxialWriter(tmp_path)
+    _record(writer, 2, kind=int)
+    real = writers.write_csv
+
+    def interrupted(frame, path, append=False):
+        result = real(frame, path, append)
+        if Path(path).name == "points.csv":
+            raise KeyboardInterrupt
+        return result
+
+    monkeypatch.setattr(writers, "write_csv", interrupted)
+    points = pd.DataFrame({"step": 2, "point": np.arange(3), "sxx": np.arange(3.0) - 2})
+    with pytest.raises(KeyboardInterrupt):
+        writer.record({"step": 2, "axial_strain": 2e-3, "cost": 2}, points, np.zeros(2))
+    monkeypatch.setattr(writers, "write_csv", real)
+    steps = pd.DataFrame([{"step": s, "axial_strain": s * 1e-3, "cost": s} for s in range(3)])
+    result = _Result(tmp_path)
+    assert len(result.steps) == 2  # the steps row of step 2 is not on disk
+    result.steps = steps  # the run's result holds step 2, its points too
+    result.points = pd.concat([read_table(tmp_path / "points.csv")], ignore_index=True)
+    assert len(result.points) == 9
     assert not writer.holds(result)
     writer.finish(result)
     assert (tmp_path / "steps.csv").read_text() == steps.to_csv(index=False)

@@ -370,17 +370,19 @@ class BiaxialWriter:
         if self._fields is None:
             raise RuntimeError("BiaxialWriter.start(problem) must come before record()")
         self._fields.write(row["axial_strain"], u, points)
-        if tracked is not None:
-            self._seen("tracked", tracked)
+        # each table's rows count once written: a stop signal delivered between two writes
+        # leaves the count short, and finish() then writes the tables whole
         if tracked is not None and len(tracked):
             write_csv(tracked, self.out_dir / "tracked.csv", append=self._tracked_any)
             self._tracked_any = True
+        if tracked is not None:
+            self._seen("tracked", tracked)
         more = self._steps > 0
         step = pd.DataFrame([row])
-        self._seen("points", points)
-        self._seen("steps", step)
         write_csv(points, self.out_dir / "points.csv", append=more)
+        self._seen("points", points)
         write_csv(step, self.out_dir / "steps.csv", append=more)  # the commit
+        self._seen("steps", step)
         self._steps += 1
 
     def holds(self, result: BiaxialResult) -> bool:
