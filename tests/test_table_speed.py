@@ -40,6 +40,9 @@ def test_rows_are_formatted_as_pandas_formats_them(rows, data):
     assert format_rows(frame) == frame.to_csv(index=False, header=False)
     # a second time (every column remembered, as from one step to the next) alike
     assert format_rows(frame) == frame.to_csv(index=False, header=False)
+    # the columns in another order (a table's header's)
+    order = list(range(frame.shape[1]))[::-1]
+    assert format_rows(frame, order) == frame.iloc[:, order].to_csv(index=False, header=False)
 
 
 def test_remembered_columns_tell_minus_zero_and_nan_apart():
