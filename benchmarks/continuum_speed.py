@@ -104,11 +104,12 @@ def _label(rev: str) -> str:
 
 
 def _growth_ratio(per_step: list[float], early: int = 5) -> tuple[float, float, float]:
-    """The tables' seconds per step near step ``early`` and near the last step (medians of
-    five steps around each) and their ratio."""
+    """The tables' seconds per step about step ``early`` and at the end (medians of the ten
+    steps from ``early`` − 2 on and of the last ten; a step's few milliseconds vary with the
+    load) and their ratio."""
     v = np.asarray(per_step)
-    start = float(np.median(v[max(early - 2, 1): early + 3]))
-    end = float(np.median(v[-5:]))
+    start = float(np.median(v[max(early - 2, 1): early + 8]))
+    end = float(np.median(v[-10:]))
     return start, end, end / start
 
 
@@ -155,7 +156,8 @@ def _markdown(table: pd.DataFrame, extras: pd.DataFrame, labels: list[str]) -> s
 def main(argv: list[str] | None = None) -> dict[str, pd.DataFrame] | None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("revs", nargs="*", help="git revisions, or . for this working tree")
-    parser.add_argument("--meshes", default="4x8,8x16,16x32")
+    parser.add_argument("--meshes", default="4x8,8x16,16x32",
+                        help="meshes NXxNY; the first is also the one of the growth run")
     parser.add_argument("--steps", type=int, default=50)
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--growth-steps", type=int, default=200,
@@ -199,20 +201,24 @@ def main(argv: list[str] | None = None) -> dict[str, pd.DataFrame] | None:
             growth = []
             if args.growth_steps:
                 nx, ny = meshes[0]
-                growth = [_run(source, str(nx), str(ny), str(args.growth_steps), "0.05",
-                               "1")[0]["tables_per_step"] for source in sources]
+                growth = [[] for _ in sources]
+                for _ in range(args.repeats):  # the revisions take turns here too
+                    for index, source in enumerate(sources):
+                        growth[index].append(_growth_ratio(_run(
+                            source, str(nx), str(ny), str(args.growth_steps), "0.05",
+                            "1")[0]["tables_per_step"]))
             for index, (rev, label) in enumerate(zip(args.revs, labels, strict=True)):
                 extra = {"rev": rev, "commit": label,
                          "wall_1x2_one_step_s": float(np.median(walls[index])),
                          "wall_ratio": float(np.median(np.array(walls[index])
                                                        / np.array(walls[0])))}
                 if growth:
-                    start, end, ratio = _growth_ratio(growth[index])
+                    start, end, ratio = np.median(np.array(growth[index]), axis=0)
                     extra.update({"growth_mesh": f"{meshes[0][0]}x{meshes[0][1]}",
                                   "growth_steps": args.growth_steps,
-                                  "tables_s_per_step_at_5": start,
-                                  "tables_s_per_step_at_end": end,
-                                  "tables_end_over_5": ratio})
+                                  "tables_s_per_step_at_5": float(start),
+                                  "tables_s_per_step_at_end": float(end),
+                                  "tables_end_over_5": float(ratio)})
                 extras.append(extra)
         finally:
             for rev, source in zip(args.revs, sources, strict=True):
