@@ -92,11 +92,12 @@ def stiffness_pattern(basis: Basis) -> StiffnessPattern | None:
     return _PATTERNS[basis]
 
 
-def stiffness(basis: Basis, tangent: np.ndarray) -> csr_matrix:
+def stiffness(basis: Basis, tangent: np.ndarray, kept: bool = True) -> csr_matrix:
     """Global tangent stiffness K [N/m per m of thickness] from D [Pa] (n, 2, 2, 2, 2); the
     basis's sparsity pattern and weighted gradients are kept between calls
-    (:class:`StiffnessPattern`)."""
-    pattern = stiffness_pattern(basis)
+    (:class:`StiffnessPattern`), or with ``kept`` False scikit-fem's form assembles it, bit
+    for bit as before issue 62 (what a noisy material's runs use)."""
+    pattern = stiffness_pattern(basis) if kept else None
     if pattern is None:
         return tangent_form.assemble(basis, D=to_quadrature(tangent, _nqp(basis)))
     return pattern.matrix(tangent)
