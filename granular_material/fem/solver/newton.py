@@ -101,6 +101,7 @@ class NewtonSolver:
         # its runs assemble as before issue 62, bit for bit; the others keep the stiffness's
         # pattern and form the finite-strain tangent by batched products (round-off)
         self._kept = not getattr(material, "noisy", False)
+        self._assembly: dict[str, bool] = {} if self._kept else {"kept": False}
         self.kinematics = Kinematics(self.settings.formulation,
                                      self.settings.geometric_stiffness, batched=self._kept)
         n_points = basis.nelems * basis.X.shape[-1]
@@ -240,7 +241,8 @@ class NewtonSolver:
             du = np.zeros_like(self.u)
             du[D] = u_d - self.u[D]
             K = stiffness(self.basis, kin.assembled_tangent(response.tangent, response.stress,
-                                                            grad_n, grad_n), self._kept)
+                                                            grad_n, grad_n),
+                          **self._assembly)
             A, b, x, interior = condense(K, f_ext - self.f_int, x=du, D=D)
         r0 = float(np.linalg.norm(b))
         with times.phase("linear_solve"):
@@ -288,7 +290,7 @@ class NewtonSolver:
             with times.phase("assembly"):
                 K = stiffness(self.basis, kin.assembled_tangent(tangent, response.stress,
                                                                 grad_n, grad_total),
-                              self._kept)
+                              **self._assembly)
                 A, b, x, interior = condense(K, -residual, D=D)
             with times.phase("linear_solve"):
                 correction = solve(A, b, x, interior)
