@@ -16,7 +16,11 @@ taking turns ``--repeats`` times so that a drifting load hits them alike. From i
 each phase, the share of the run that is neither material, assembly nor solve (tables,
 outputs, checkpoints, other), the cost per point-step [µs] of the whole run and of its
 Newton work alone, and the ratio of the total to the first revision's (the median of the
-repeats' ratios, with their smallest and largest). Two more cases, per revision: the wall
+repeats' ratios, with their smallest and largest). Beside them, per mesh, the same specimen
+as a scikit-fem user would run it (``plain``): the material this tree's command builds, then
+plain Newton in small strain with scikit-fem's forms, ``condense`` and ``solve``, nothing
+written (its row: ``plain scikit-fem``, its evaluations and unconverged steps in ``commit``;
+``--no-plain`` leaves it out). Two more cases, per revision: the wall
 time of the whole process of one step on 1 × 2 elements (imports, set-up, figures), and
 the tables' seconds per step at step 5 and at the end of a ``--growth-steps`` run to the same
 5 % on the first mesh (their ratio: 1 when the tables cost the same at every step). Measures; never
@@ -81,6 +85,84 @@ def worker(nx: int, ny: int, steps: int, axial_strain: float, growth: bool) -> d
     return {"code": code, "timing": summary["timing_s"], "tables_per_step": pairs.tolist()}
 
 
+class _Captured(BaseException):
+    """Stops the command once its material and specimen are built (not an Exception, which
+    the command line would report)."""
+
+
+def plain(nx: int, ny: int, steps: int, axial_strain: float, max_iterations: int = 25,
+          rtol: float = 1e-4) -> dict:
+    """The same specimen as a scikit-fem user would run it: the material the command builds
+    (its arrays, on the same Gauss points), then plain Newton in small strain with
+    scikit-fem's forms, ``condense`` and ``solve``, the residual's interior norm below
+    ``rtol`` times the predictor's, no cut-backs, tables, files or checkpoints. Seconds by
+    part, material evaluations and the steps that did not converge."""
+    from skfem import condense, solve
+
+    import granular_material.runs.execute as execute
+    from granular_material.cli import main
+    from granular_material.fem import build_biaxial
+    from granular_material.fem.forms import stress_form, tangent_form
+    from granular_material.fem.layout import to_points, to_quadrature
+
+    captured: dict = {}
+
+    def capture(setup: object, material: object, *args: object, **kwargs: object) -> None:
+        captured.update(setup=setup, material=material)
+        raise _Captured
+
+    execute.run_biaxial = capture
+    with tempfile.TemporaryDirectory() as scratch, contextlib.suppress(_Captured):
+        main([*COMMAND, "--axial-strain", str(axial_strain), "--steps", str(steps),
+              "--elements", str(nx), str(ny), "--out", str(Path(scratch) / "run")])
+    setup, material = captured["setup"], captured["material"]
+    problem = build_biaxial(setup)
+    basis, loading = problem.basis, problem.loading
+    nqp, fixed = basis.X.shape[-1], loading.dirichlet_dofs
+    interior = np.setdiff1d(np.arange(basis.N), fixed)
+    times = {"material": 0.0, "assembly": 0.0, "solve": 0.0}
+
+    def timed(part: str, f, *args, **kwargs):
+        start = time.perf_counter()
+        try:
+            return f(*args, **kwargs)
+        finally:
+            times[part] += time.perf_counter() - start
+
+    def forms(response) -> tuple:
+        return (tangent_form.assemble(basis, D=to_quadrature(response.tangent, nqp)),
+                stress_form.assemble(basis, sigma=to_quadrature(response.stress, nqp)))
+
+    started = time.perf_counter()
+    u = np.zeros(basis.N)
+    response = timed("material", material.evaluate, np.zeros((setup.n_points, 2, 2)))
+    evaluations, unconverged = 0, 0
+    k, f_int = timed("assembly", forms, response)
+    for step in range(1, steps + 1):
+        u_d, f_ext = loading.at(step / steps)
+        du = np.zeros_like(u)
+        du[fixed] = u_d - u[fixed]
+        a, b, x, inner = condense(k, f_ext - f_int, x=du, D=fixed)
+        r0 = float(np.linalg.norm(b))
+        du = timed("solve", solve, a, b, x, inner)
+        for _ in range(max_iterations):
+            grad = to_points(basis.interpolate(du).grad)
+            response = timed("material", material.evaluate, grad)
+            evaluations += 1
+            k, f_int = timed("assembly", forms, response)
+            residual = f_int - f_ext
+            if np.linalg.norm(residual[interior]) <= rtol * r0:
+                break
+            du = du + timed("solve", solve, *condense(k, -residual, D=fixed))
+        else:
+            unconverged += 1
+        material.commit()
+        u += du
+    total = time.perf_counter() - started
+    return {"total_s": total, **{f"{k}_s": v for k, v in times.items()},
+            "evaluations": evaluations, "unconverged_steps": unconverged}
+
+
 def _run(source: Path, *arguments: str) -> tuple[dict, float]:
     """A worker in a fresh process importing the package found at ``source``; what it
     returns and the process's wall time [s]."""
@@ -134,6 +216,26 @@ def _row(rev: str, label: str, nx: int, ny: int, steps: int, results: list[dict]
     return row
 
 
+def _plain_row(nx: int, ny: int, steps: int, loops: list[dict], first: list[dict]) -> dict:
+    """The medians of the plain scikit-fem loop on one mesh, as a row of the table."""
+    points = 4 * nx * ny
+    frame = pd.DataFrame(loops)
+    totals = frame["total_s"].to_numpy()
+    ratios = totals / np.array([r["timing"]["total"] for r in first])
+    return {"rev": "plain scikit-fem", "commit": f"{int(frame['evaluations'].median())} "
+            f"evaluations, {int(frame['unconverged_steps'].max())} unconverged",
+            "elements": f"{nx}x{ny}", "points": points, "steps": steps,
+            "repeats": len(loops), "total_s": float(np.median(totals)),
+            "material_other_s": float(frame["material_s"].median()),
+            "assembly_s": float(frame["assembly_s"].median()),
+            "linear_solve_s": float(frame["solve_s"].median()),
+            "overhead_pct": 0.0,
+            "us_per_point_step": float(np.median(totals)) / (points * steps) * 1e6,
+            "newton_us_per_point_step": float(np.median(totals)) / (points * steps) * 1e6,
+            "ratio": float(np.median(ratios)), "ratio_min": float(ratios.min()),
+            "ratio_max": float(ratios.max())}
+
+
 def _markdown_table(table: pd.DataFrame) -> str:
     """``table`` as a Markdown table, numbers to 4 significant digits."""
     def cell(value: object) -> str:
@@ -163,11 +265,16 @@ def main(argv: list[str] | None = None) -> dict[str, pd.DataFrame] | None:
     parser.add_argument("--growth-steps", type=int, default=200,
                         help="steps of the run whose tables are timed step by step (0: none)")
     parser.add_argument("--out", type=Path, default=None)
+    parser.add_argument("--no-plain", action="store_true",
+                        help="leave out the plain scikit-fem loop of the same specimen")
     parser.add_argument("--worker", nargs=5, default=None, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.worker is not None:
-        nx, ny, steps, strain, growth = args.worker
-        print(json.dumps(worker(int(nx), int(ny), int(steps), float(strain), growth == "1")))
+        nx, ny, steps, strain, mode = args.worker
+        if mode == "plain":
+            print(json.dumps(plain(int(nx), int(ny), int(steps), float(strain))))
+        else:
+            print(json.dumps(worker(int(nx), int(ny), int(steps), float(strain), mode == "1")))
         return None
     if not args.revs:
         parser.error("give one revision or more (. is this working tree)")
@@ -193,6 +300,10 @@ def main(argv: list[str] | None = None) -> dict[str, pd.DataFrame] | None:
                                                 "0.05", "0")[0])
                 rows += [_row(rev, label, nx, ny, args.steps, result, runs[0])
                          for rev, label, result in zip(args.revs, labels, runs, strict=True)]
+                if not args.no_plain:  # this tree's material in a plain scikit-fem loop
+                    loops = [_run(REPO, str(nx), str(ny), str(args.steps), "0.05", "plain")[0]
+                             for _ in range(args.repeats)]
+                    rows.append(_plain_row(nx, ny, args.steps, loops, runs[0]))
                 print(f"{nx}x{ny} done", file=sys.stderr, flush=True)
             walls: list[list[float]] = [[] for _ in sources]
             for _ in range(args.repeats):

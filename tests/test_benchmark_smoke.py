@@ -108,10 +108,14 @@ def test_continuum_speed_benchmark_smoke(tmp_path):
     tables = module.main([".", ".", "--meshes", "1x2", "--steps", "2", "--repeats", "1",
                           "--growth-steps", "12", "--out", str(tmp_path)])
     meshes, extras = tables["meshes"], tables["extras"]
-    assert meshes["elements"].tolist() == ["1x2", "1x2"] and (meshes["points"] == 8).all()
+    assert meshes["elements"].tolist() == ["1x2"] * 3 and (meshes["points"] == 8).all()
+    assert meshes["rev"].tolist() == [".", ".", "plain scikit-fem"]
     assert (meshes["total_s"] > 0).all() and (meshes["assembly_s"] > 0).all()
     assert meshes["ratio"].iloc[0] == 1.0 and 0 < meshes["ratio"].iloc[1] < 10
-    assert (0 < meshes["overhead_pct"]).all() and (meshes["overhead_pct"] < 100).all()
+    assert (0 < meshes["overhead_pct"][:2]).all() and (meshes["overhead_pct"] < 100).all()
+    # the plain loop: no tables, files or checkpoints, every step converged
+    assert meshes["commit"].iloc[2].endswith(", 0 unconverged")
+    assert meshes["total_s"].iloc[2] < meshes["total_s"].iloc[0]
     assert (extras["wall_1x2_one_step_s"] > 0).all()
     assert (extras["tables_s_per_step_at_end"] > 0).all() and extras["growth_steps"].eq(12).all()
     for name in ("continuum_speed.csv", "continuum_speed_extras.csv", "continuum_speed.md"):
