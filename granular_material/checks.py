@@ -19,9 +19,9 @@ import os
 import re
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from granular_material.dem.rve.file import FRICTMAT_STIFFNESS, RVEMeta
+from granular_material.dem.rve.format import FRICTMAT_STIFFNESS, RVEMeta
 from granular_material.errors import ParameterError
 from granular_material.memory import (
     MEMORY_LIMIT,
@@ -29,14 +29,14 @@ from granular_material.memory import (
     memory_refusal,
     size_in_words,
 )
-from granular_material.procedures.packing import (
-    DEFAULT_RADIUS_RANGE,
-    PackingParameters,
-    check_packing,
-    check_radius_range,
-    min_discs,
-)
+from granular_material.reference_values import DEFAULT_RADIUS_RANGE
 from granular_material.vocabulary import renames
+
+if TYPE_CHECKING:
+    from granular_material.procedures.packing import PackingParameters
+
+# The packing's checks (procedures.packing, which loads the DEM and warp) are imported where
+# they are used: a run of a continuum material imports this module, never the DEM (issue 62).
 
 __all__ = ["DISC_BYTES", "MEMORY_LIMIT", "RVE_MATERIAL_DEFAULTS", "WordedError",
            "available_memory", "check_memory", "check_output_dir", "check_output_file",
@@ -235,6 +235,8 @@ def _packing_refusal(exc: ValueError, pressure_field: str, particles: int, press
     """A refusal of :func:`~granular_material.procedures.packing.check_packing` (which names
     the values as it is told: the fields, in backquotes) with the field it is about: the
     radii's, the discs', else the pressure's."""
+    from granular_material.procedures.packing import min_discs
+
     r_min, r_max = radius_range
     if not (0 < r_min <= r_max and math.isfinite(r_max)):
         field = "radius_min"
@@ -253,6 +255,12 @@ def packing_parameters(args: Any, particles: int, pressure: float,
     :func:`~granular_material.procedures.packing.check_packing`): a ParameterError naming
     the field when the radii, the contact law, the discs or the pressure cannot make a
     packing."""
+    from granular_material.procedures.packing import (
+        PackingParameters,
+        check_packing,
+        check_radius_range,
+    )
+
     radius_range = (args.radius_min, args.radius_max)
     names = {"radius_range": tuple(_named(f) for f in _PACKING_FIELDS["radius_range"]),
              "n_disc": _named("particles"),

@@ -96,3 +96,27 @@ def test_mpi_scaling_benchmark_smoke(tmp_path):
     assert 0 <= evaluations["communication_share_pct"].iloc[1] <= 100
     assert set(tables["estimate"]["ranks"]) == {1, 2, 4, 8, 16, 32, 64}
     assert (tmp_path / "mpi_scaling.md").exists() and (tmp_path / "mpi_scaling.json").exists()
+
+
+def test_continuum_speed_benchmark_smoke(tmp_path):
+    """The continuum benchmark at smoke size: this tree against itself, every phase's
+    column, the start-up and growth cases, ratios near 1."""
+    path = BENCH.with_name("continuum_speed.py")
+    spec = importlib.util.spec_from_file_location("continuum_speed", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    tables = module.main([".", ".", "--meshes", "1x2", "--steps", "2", "--repeats", "1",
+                          "--growth-steps", "12", "--out", str(tmp_path)])
+    meshes, extras = tables["meshes"], tables["extras"]
+    assert meshes["elements"].tolist() == ["1x2"] * 3 and (meshes["points"] == 8).all()
+    assert meshes["rev"].tolist() == [".", ".", "plain scikit-fem"]
+    assert (meshes["total_s"] > 0).all() and (meshes["assembly_s"] > 0).all()
+    assert meshes["ratio"].iloc[0] == 1.0 and 0 < meshes["ratio"].iloc[1] < 10
+    assert (0 < meshes["overhead_pct"][:2]).all() and (meshes["overhead_pct"] < 100).all()
+    # the plain loop: no tables, files or checkpoints, every step converged
+    assert meshes["commit"].iloc[2].endswith(", 0 unconverged")
+    assert meshes["total_s"].iloc[2] < meshes["total_s"].iloc[0]
+    assert (extras["wall_1x2_one_step_s"] > 0).all()
+    assert (extras["tables_s_per_step_at_end"] > 0).all() and extras["growth_steps"].eq(12).all()
+    for name in ("continuum_speed.csv", "continuum_speed_extras.csv", "continuum_speed.md"):
+        assert (tmp_path / name).exists()

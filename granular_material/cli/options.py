@@ -24,7 +24,7 @@ from granular_material.checks import (
     rve_material_given,
 )
 from granular_material.errors import ParameterError
-from granular_material.procedures.strain_path import DEFAULT_MAX_DEM_STEPS
+from granular_material.reference_values import DEFAULT_MAX_DEM_STEPS
 from granular_material.vocabulary import renamed, renames
 
 __all__ = [

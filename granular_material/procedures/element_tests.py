@@ -4,17 +4,38 @@
 from __future__ import annotations
 
 import math
+import sys
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pandas as pd
 
-from granular_material.dem import DEMBatch
 from granular_material.procedures.packing import DEFAULT_PRESSURE, given_as
-from granular_material.procedures.servo import CONTROL_STRAIN, CONTROL_STRESS, servo_steps
-from granular_material.procedures.strain_path import DEFAULT_STRAIN_PER_STEP, STEP_LIMIT
 from granular_material.progress import progress_bar
+from granular_material.reference_values import DEFAULT_STRAIN_PER_STEP, STEP_LIMIT
+
+if TYPE_CHECKING:
+    from granular_material.dem import DEMBatch
+
+# The DEM (warp) is imported where a test runs: a run specification reads this module's
+# defaults without loading it (issue 62).
+#: names of this module loaded on first use (:func:`__getattr__`), by the module they are in
+_LATE = {"CONTROL_STRAIN": "granular_material.procedures.servo",
+         "CONTROL_STRESS": "granular_material.procedures.servo",
+         "servo_steps": "granular_material.procedures.servo"}
+
+
+def __getattr__(name: str) -> Any:
+    """The servo's names, imported on first use and kept as this module's."""
+    if name not in _LATE:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    import importlib
+
+    value = getattr(importlib.import_module(_LATE[name]), name)
+    globals()[name] = value
+    return value
 
 __all__ = ["BIAXIAL_NAMES", "DEFAULT_AXIAL_STRAIN", "DEFAULT_RECORD_EVERY", "MAX_AXIAL_STRAIN",
            "BiaxialInterrupted", "BiaxialStart", "biaxial_steps", "biaxial_test", "check_biaxial",
@@ -184,7 +205,9 @@ def biaxial_test(
         rows.append(start.curve)
         done = int(start.done)
     target = np.tile([-float(confining), step_strain], (b, 1))
-    control = np.tile([CONTROL_STRESS, CONTROL_STRAIN], (b, 1))
+    module = sys.modules[__name__]  # the servo as this module holds it
+    servo_steps = module.servo_steps
+    control = np.tile([module.CONTROL_STRESS, module.CONTROL_STRAIN], (b, 1))
     bar = progress_bar(total, "biaxial", progress)
     if done:
         bar.update(done)

@@ -3,16 +3,39 @@
 from __future__ import annotations
 
 import math
+import sys
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from granular_material.dem import DEMBatch, RVEData, RVEMeta
-from granular_material.dem.model import FLOAT32_MAX_RESOLUTION, SKIN_FRACTION
+from granular_material.dem.rve.data import RVEData
+from granular_material.dem.rve.format import RVEMeta
 from granular_material.errors import ParameterError
-from granular_material.procedures.servo import consolidate
-from granular_material.reference_values import DEFAULT_DISCS, DEFAULT_PRESSURE
+from granular_material.reference_values import (
+    DEFAULT_DISCS,
+    DEFAULT_PRESSURE,
+    DEFAULT_RADIUS_RANGE,
+)
+
+if TYPE_CHECKING:
+    from granular_material.dem import DEMBatch
+
+# The DEM model and its batch (warp) are imported where a packing is checked against them or
+# made: a run specification reads this module's defaults without loading them (issue 62).
+#: names of this module loaded on first use (:func:`__getattr__`), by the module they are in
+_LATE = {"DEMBatch": "granular_material.dem", "consolidate": "granular_material.procedures.servo"}
+
+
+def __getattr__(name: str) -> Any:
+    """``DEMBatch`` and ``consolidate``, imported on first use and kept as this module's."""
+    if name not in _LATE:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    import importlib
+
+    value = getattr(importlib.import_module(_LATE[name]), name)
+    globals()[name] = value
+    return value
 
 __all__ = ["DEFAULT_DISCS", "DEFAULT_PRESSURE", "DEFAULT_RADIUS_RANGE", "MAX_OVERLAP",
            "MIN_OVERLAP", "PACKING_NAMES", "VOID_RATIO_TOLERANCE", "PackingParameters",
@@ -21,9 +44,6 @@ __all__ = ["DEFAULT_DISCS", "DEFAULT_PRESSURE", "DEFAULT_RADIUS_RANGE", "MAX_OVE
            "min_pressure", "prepare_packing", "random_gas", "smallest_normal_stiffness",
            "typical_normal_stiffness"]
 
-#: (r_min, r_max) [m] of the uniform disc radii: Wu et al. (2025) Table 1; Guo & Zhao rMean
-#: 5 mm ± 40 %
-DEFAULT_RADIUS_RANGE = (3.0e-3, 7.0e-3)
 
 #: solid fraction of the densest consolidated packing :func:`min_discs` allows for (e = 0.11;
 #: random frictionless disc packings consolidate to 0.84–0.86, pressure adds a little)
@@ -73,6 +93,8 @@ def min_discs(radius_range: tuple[float, float] = DEFAULT_RADIUS_RANGE) -> int:
     cut-off ``2·r_max + skin`` [m] (the engine finds each pair in its nearest periodic image
     only, and stops a cell whose half height falls below the cut-off): radii uniform in
     ``radius_range`` [m], solid fraction :data:`DENSE_SOLID_FRACTION`. 12 for 3–7 mm."""
+    from granular_material.dem.model import SKIN_FRACTION
+
     r_min, r_max = radius_range
     mean_square = (r_min**2 + r_min * r_max + r_max**2) / 3.0
     cutoff = 2.0 * r_max + 2.0 * SKIN_FRACTION * 0.5 * (r_min + r_max)
@@ -201,6 +223,8 @@ def check_packing(n_disc: int, pressure: float, meta: RVEMeta,
         side = math.sqrt(n_disc * math.pi * mean_square / DENSE_SOLID_FRACTION)
         overlap = pressure * meta.thickness * (r_min + r_max) / kn
         share = 2.0**-24 * side / overlap
+        from granular_material.dem.model import FLOAT32_MAX_RESOLUTION
+
         if share > FLOAT32_MAX_RESOLUTION:
             raise ValueError(
                 f"dtype float32 cannot resolve contacts overlapping about {overlap:.3g} m "
@@ -279,6 +303,8 @@ def _check_drawn_radii(n_disc: int, n_rve: int, seed: int,
     ones. Only near that limit (below four times it), where a draw can matter."""
     if n_disc >= 4 * min_discs(radius_range):
         return
+    from granular_material.dem.model import SKIN_FRACTION
+
     r_min, r_max = radius_range
     for b in range(n_rve):
         radius = np.random.default_rng(seed + b).uniform(r_min, r_max, size=n_disc)
@@ -320,12 +346,14 @@ def prepare_packing(
     consolidated cell would be too large for float32 to resolve the estimated overlaps
     (:data:`~granular_material.dem.model.FLOAT32_MAX_RESOLUTION`).
     """
+    module = sys.modules[__name__]  # the batch and servo as this module holds them
+    batch_class, consolidate = module.DEMBatch, module.consolidate
     meta = meta or RVEMeta()
     meta.validate()
     check_packing(n_disc, pressure, meta, radius_range, dtype)
     _check_drawn_radii(n_disc, n_rve, seed, radius_range)
     gas = random_gas(n_disc, n_rve, seed, radius_range, meta=replace(meta, friction_angle=0.0))
-    batch = DEMBatch(gas, device=device, dtype=dtype, shards=shards)
+    batch = batch_class(gas, device=device, dtype=dtype, shards=shards)
     if target_void_ratio is not None:
         if not (math.isfinite(target_void_ratio) and target_void_ratio > 0):
             raise ValueError(

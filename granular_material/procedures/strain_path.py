@@ -14,6 +14,11 @@ import numpy as np
 from granular_material.dem import DEMBatch, DEMInstabilityError
 from granular_material.dem.loading import expm_2x2
 from granular_material.dem.model import cell_heights
+from granular_material.reference_values import (
+    DEFAULT_MAX_DEM_STEPS,
+    DEFAULT_STRAIN_PER_STEP,
+    STEP_LIMIT,
+)
 
 __all__ = [
     "DEFAULT_MAX_DEM_STEPS",
@@ -34,23 +39,11 @@ __all__ = [
 ]
 
 
-#: largest strain of one DEM step [-] (Guo & Zhao 2014), the quasi-static criterion of every
-#: strain path and element test: an RVE driven along ∇u, the axial strain of a biaxial test
-DEFAULT_STRAIN_PER_STEP = 1.0e-5
 
-#: default cap on the DEM steps of one run of the DEM (a path, a test): 10⁶ steps is about 100
-#: times the default biaxial test (1.05 × 10⁴ steps to 10 % at 1e-5 a step) or a path of
-#: ``|∇u|`` = 10 at 1e-5 a step; one 64-disc RVE runs about 4 × 10³ steps/s on one CPU core (a
-#: 400-disc one about six times fewer), so the cap is minutes to half an hour of work: far
-#: past any run a typo would start on purpose, well short of the 10⁷ – 10³⁰⁰ steps a
-#: mistyped strain asks for.
-DEFAULT_MAX_DEM_STEPS = 10**6
 
 #: the fewest DEM steps of a path (its increments: the velocity gradient is then resolved)
 DEFAULT_MIN_STEPS = 2
 
-#: the most DEM steps one path or test may take: beyond it a float64 count is no longer exact
-STEP_LIMIT = 10**15
 
 #: points along a path at which :func:`drive_grad_u` checks the cell's heights beforehand
 PATH_CHECKS = 32

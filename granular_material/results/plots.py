@@ -24,6 +24,15 @@ __all__ = ["deformed_triangles", "plot_biaxial_curves", "plot_maps", "plot_stres
            "save_figure"]
 
 
+#: the margins of a run's two figures (fractions of the figure), set once instead of by
+#: matplotlib's constrained layout: measured on the 16 × 32 specimen (median of 5), the curves
+#: took 0.151 s with it and 0.100 s without, the maps 0.362 s and 0.228 s (issue 62)
+_PLAIN_LAYOUT = {"curves": {"left": 0.07, "right": 0.98, "bottom": 0.13, "top": 0.95,
+                            "wspace": 0.25},
+                 "maps": {"left": 0.05, "right": 0.96, "bottom": 0.1, "top": 0.82,
+                          "wspace": 0.45}}
+
+
 def pyplot() -> ModuleType:
     """``matplotlib.pyplot`` on the non-interactive Agg backend."""
     import matplotlib
@@ -73,7 +82,8 @@ def plot_stress_strain(steps: pd.DataFrame, path: str | Path, reference: pd.Data
     ``volumetric_strain`` columns in the same conventions (e.g. the pure-DEM biaxial test).
     """
     plt = pyplot()
-    fig, (a, b) = plt.subplots(1, 2, figsize=(10, 4), constrained_layout=True)
+    fig, (a, b) = plt.subplots(1, 2, figsize=(10, 4))
+    fig.subplots_adjust(**_PLAIN_LAYOUT["curves"])
     series = [(steps, label)] + ([(reference, "DEM (single RVE)")] if reference is not None else [])
     for table, name in series:
         a.plot(100 * table["axial_strain"], table["stress_ratio"], label=name)
@@ -152,7 +162,8 @@ def plot_maps(result: BiaxialResult, axial_strain: float, path: str | Path) -> P
     x, y, ux, uy, triangles, element = deformed_triangles(xy, cells, kind, u[dofs[0]],
                                                           u[dofs[1]])
     tri = Triangulation(1e3 * x, 1e3 * y, triangles)
-    fig, axes = plt.subplots(1, 3, figsize=(12, 5), constrained_layout=True)
+    fig, axes = plt.subplots(1, 3, figsize=(12, 5))
+    fig.subplots_adjust(**_PLAIN_LAYOUT["maps"])
     for ax, values, title in ((axes[0], 1e3 * ux, "u_x [mm]"), (axes[1], 1e3 * uy, "u_y [mm]")):
         im = ax.tripcolor(tri, values, shading="gouraud", cmap="viridis")
         fig.colorbar(im, ax=ax, label=title)

@@ -94,6 +94,14 @@ class RunOutcome:
 
 
 def _device(spec: RunSpec) -> str:
+    """The DEM device of the run. A material that holds no RVEs (no ``check_run`` hook) runs
+    on the CPU where no other device is asked for and the mesh does not depend on it: warp is
+    then not loaded at all (issue 62)."""
+    problem = spec.problem
+    by_device = problem.test == "biaxial" and not problem.elements and not problem.scale
+    if (spec.device in (None, "cpu") and not by_device
+            and not hasattr(spec.material.cls, "check_run")):
+        return "cpu"
     from granular_material.dem import resolve_device
 
     return resolve_device(spec.device)
@@ -363,7 +371,7 @@ def _finish(plan: RunPlan, outcome: RunOutcome, times: PhaseTimes, started: floa
     if out is not None:
         with times.phase("outputs"):
             write_outputs(result, out, map_strain=list(spec.output.map_strain),
-                          reference=outcome.reference)
+                          reference=outcome.reference, tables=False)  # the writer's, whole
             if outcome.reference is not None:
                 write_csv(outcome.reference, Path(out) / "pure_dem.csv")
     times.add_all(result.timings)

@@ -9,7 +9,6 @@ import math
 from typing import TYPE_CHECKING
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from granular_material.dem.rve.format import _BATCH_ARRAYS, CONTACT_HISTORY_KEYS, RVEFileError
 
@@ -311,6 +310,8 @@ def _touching_pairs(
         idx = np.triu_indices(len(radius), 1)  # a small or sheared cell: every pair
         pairs = np.stack(idx, axis=1)
     else:
+        from scipy.spatial import cKDTree  # here: a continuum run never loads it
+
         pairs = cKDTree(s, boxsize=1.0).query_pairs(search, output_type="ndarray")
     i, j = pairs[:, 0].astype(np.int64), pairs[:, 1].astype(np.int64)
     ds = s[j] - s[i]
