@@ -13,7 +13,8 @@ import pytest
 
 #: modules a continuum run must not load
 _NOT_NEEDED = ["warp", "scipy.spatial", "granular_material.dem.batch",
-               "granular_material.dem.model", "granular_material.dem.kernels",
+               "granular_material.dem.model", "granular_material.dem.kernels.sets",
+               "granular_material.dem.kernels.step",
                "granular_material.multiscale", "granular_material.procedures.servo",
                "granular_material.procedures.strain_path"]
 

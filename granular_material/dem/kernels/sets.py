@@ -44,6 +44,7 @@ from typing import Any
 
 import warp as wp
 
+from granular_material.dem.kernels import DTYPES
 from granular_material.dem.kernels import step as kernels_step
 from granular_material.dem.kernels.block import BLOCK_THREADS, block_pending, step_block
 from granular_material.dem.kernels.lists import (
@@ -79,7 +80,6 @@ __all__ = [
     "step_kernels_for",
 ]
 
-DTYPES = ("float64", "float32")  #: the float types the kernels are built for
 
 _KERNELS = (
     check_lists, any_rebuild, begin_build, fill_bins, build_lists, commit_lists, link_lists,

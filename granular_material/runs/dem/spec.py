@@ -19,11 +19,12 @@ from pathlib import Path
 from typing import Any, ClassVar
 
 from granular_material.checks import RVE_MATERIAL_DEFAULTS
-from granular_material.dem.kernels.sets import DTYPES
+from granular_material.dem.kernels import DTYPES
 from granular_material.procedures.element_tests import DEFAULT_AXIAL_STRAIN, DEFAULT_RECORD_EVERY
-from granular_material.procedures.packing import DEFAULT_DISCS, DEFAULT_PRESSURE
-from granular_material.procedures.strain_path import (
+from granular_material.reference_values import (
+    DEFAULT_DISCS,
     DEFAULT_MAX_DEM_STEPS,
+    DEFAULT_PRESSURE,
     DEFAULT_STRAIN_PER_STEP,
 )
 from granular_material.runs.spec_checks import SpecError, check_device, conform_fields
