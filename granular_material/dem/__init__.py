@@ -15,8 +15,9 @@ continuum material never does (issue 62).
 
 from __future__ import annotations
 
-import importlib
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
+
+from granular_material.lazy_names import lazy_names
 
 if TYPE_CHECKING:
     from granular_material.dem.batch import DEMBatch
@@ -65,25 +66,8 @@ _HOME = {
 }
 
 
-def __getattr__(name: str) -> Any:
-    """A public name (or a submodule) of the package, imported on first use."""
-    home = _HOME.get(name)
-    if home is None:
-        if name.startswith("__"):
-            raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-        try:
-            return importlib.import_module(f"{__name__}.{name}")
-        except ModuleNotFoundError as exc:
-            if exc.name != f"{__name__}.{name}":
-                raise
-            raise AttributeError(f"module {__name__!r} has no attribute {name!r}") from None
-    value = getattr(importlib.import_module(home), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted({*globals(), *_HOME})
+# a public name (or a submodule) of the package, imported on first use
+__getattr__, __dir__ = lazy_names(__name__, _HOME, globals(), submodules=True)
 
 
 __all__ = [

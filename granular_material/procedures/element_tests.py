@@ -7,11 +7,12 @@ import math
 import sys
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pandas as pd
 
+from granular_material.lazy_names import lazy_names
 from granular_material.procedures.packing import DEFAULT_PRESSURE, given_as
 from granular_material.progress import progress_bar
 from granular_material.reference_values import DEFAULT_STRAIN_PER_STEP, STEP_LIMIT
@@ -27,15 +28,8 @@ _LATE = {"CONTROL_STRAIN": "granular_material.procedures.servo",
          "servo_steps": "granular_material.procedures.servo"}
 
 
-def __getattr__(name: str) -> Any:
-    """The servo's names, imported on first use and kept as this module's."""
-    if name not in _LATE:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    import importlib
-
-    value = getattr(importlib.import_module(_LATE[name]), name)
-    globals()[name] = value
-    return value
+# the names of _LATE, imported on first use and kept as this module's
+__getattr__ = lazy_names(__name__, _LATE, globals())[0]
 
 __all__ = ["BIAXIAL_NAMES", "DEFAULT_AXIAL_STRAIN", "DEFAULT_RECORD_EVERY", "MAX_AXIAL_STRAIN",
            "BiaxialInterrupted", "BiaxialStart", "biaxial_steps", "biaxial_test", "check_biaxial",

@@ -12,6 +12,7 @@ import numpy as np
 from granular_material.dem.rve.data import RVEData
 from granular_material.dem.rve.format import RVEMeta
 from granular_material.errors import ParameterError
+from granular_material.lazy_names import lazy_names
 from granular_material.reference_values import (
     DEFAULT_DISCS,
     DEFAULT_PRESSURE,
@@ -27,15 +28,8 @@ if TYPE_CHECKING:
 _LATE = {"DEMBatch": "granular_material.dem", "consolidate": "granular_material.procedures.servo"}
 
 
-def __getattr__(name: str) -> Any:
-    """``DEMBatch`` and ``consolidate``, imported on first use and kept as this module's."""
-    if name not in _LATE:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    import importlib
-
-    value = getattr(importlib.import_module(_LATE[name]), name)
-    globals()[name] = value
-    return value
+# the names of _LATE, imported on first use and kept as this module's
+__getattr__ = lazy_names(__name__, _LATE, globals())[0]
 
 __all__ = ["DEFAULT_DISCS", "DEFAULT_PRESSURE", "DEFAULT_RADIUS_RANGE", "MAX_OVERLAP",
            "MIN_OVERLAP", "PACKING_NAMES", "VOID_RATIO_TOLERANCE", "PackingParameters",

@@ -20,7 +20,12 @@ from pathlib import Path
 from typing import Any
 
 from granular_material.runs.dem.spec import DEM_TESTS, SPECS, DemSpec
-from granular_material.runs.serial import _toml_value, read_spec_file, write_spec_file
+from granular_material.runs.serial import (
+    _section,
+    _toml_value,
+    read_spec_file,
+    write_spec_file,
+)
 from granular_material.runs.spec_checks import SpecError
 
 if sys.version_info >= (3, 11):
@@ -82,22 +87,13 @@ def to_dict(spec: DemSpec) -> dict[str, Any]:
     return data
 
 
-def _table(name: str, value: Any) -> Mapping[str, Any]:
-    if value is None:
-        return {}
-    if not isinstance(value, Mapping):
-        raise SpecError(name, f"must be a table of fields ([{name}] in TOML, an object in "
-                              f"JSON), got {value!r} ({type(value).__name__})")
-    return value
-
-
 def from_dict(data: Mapping[str, Any]) -> DemSpec:
     """The spec of a nested form (:func:`to_dict`); SpecError naming an unknown, misplaced,
     missing or ill-typed field."""
     if not isinstance(data, Mapping):
         raise SpecError("spec", f"must be a table of sections, got {data!r} "
                                 f"({type(data).__name__})")
-    problem = dict(_table("problem", data.get("problem")))
+    problem = dict(_section("problem", data.get("problem")))
     test = problem.pop("test", None)
     if test not in DEM_TESTS:
         raise SpecError("test", f"must be one of {', '.join(DEM_TESTS)}, got {test!r}")
@@ -110,7 +106,7 @@ def from_dict(data: Mapping[str, Any]) -> DemSpec:
                                     f"{', '.join(sorted(sections | set(_RUN_FIELDS)))})")
     values: dict[str, Any] = {k: data[k] for k in _RUN_FIELDS if k in data}
     for section in sorted(sections):
-        table = problem if section == "problem" else _table(section, data.get(section))
+        table = problem if section == "problem" else _section(section, data.get(section))
         for key, value in table.items():
             key = str(key)
             if key not in names or _section_of(key) != section:
