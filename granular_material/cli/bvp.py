@@ -24,11 +24,21 @@ __all__ = ["BOUNDARY_VALUE", "run_bvp_scene"]
 BOUNDARY_VALUE = "boundary-value"
 
 
-def _line_of(text: str, key: str) -> int | None:
-    """The line of the scene's text where ``key`` (the last part of a dotted name) is set."""
+def _line_of(text: str, key: str, entry: tuple[str, int] | None = None) -> int | None:
+    """The line of the scene's text where ``key`` (the last part of a dotted name) is set;
+    ``entry`` = (array, index): within the index-th ``[[array]]`` table (from its header)."""
     name = key.rsplit(".", 1)[-1].replace("_", "[-_]")
     pattern = re.compile(rf"^\s*{name}\s*=")
-    for number, line in enumerate(text.splitlines(), start=1):
+    lines = list(enumerate(text.splitlines(), start=1))
+    if entry is not None:
+        header = re.compile(rf"^\s*\[\[\s*{re.escape(entry[0])}\s*\]\]")
+        starts = [k for k, (_, line) in enumerate(lines) if header.match(line)]
+        if entry[1] >= len(starts):
+            return None
+        lines = lines[starts[entry[1]] + 1:]
+        ends = [k for k, (_, line) in enumerate(lines) if line.lstrip().startswith("[")]
+        lines = lines[:ends[0]] if ends else lines
+    for number, line in lines:
         if pattern.match(line):
             return number
     return None
@@ -36,7 +46,7 @@ def _line_of(text: str, key: str) -> int | None:
 
 def _refusal(path: Path, text: str, exc: ValueError) -> UsageError:
     key = getattr(exc, "field", None)
-    line = _line_of(text, key) if key else None
+    line = _line_of(text, key, getattr(exc, "entry", None)) if key else None
     where = f"{path}, line {line}" if line else f"{path}"
     named = f"{key}: " if key and key not in str(exc) else ""
     return UsageError(f"{where}: {named}{exc}")
