@@ -55,7 +55,7 @@ into a :class:`BoundaryValueSpec` by :func:`bvp_from_dict` (every key checked, a
 from __future__ import annotations
 
 import warnings
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -330,6 +330,7 @@ class BoundaryValueSpec:
     name: str = "problem"
 
     def __post_init__(self) -> None:
+        self._check_sections()
         conform_fields(self, error=SpecError, skip=_SECTIONS)
         if self.shards is not None and not 1 <= self.shards <= MAX_SHARDS:
             raise SpecError("shards", f"must be an integer from 1 to {MAX_SHARDS} (a CPU "
@@ -359,6 +360,33 @@ class BoundaryValueSpec:
                                                   "does nothing and is refused (set "
                                                   "gravity.unit_weight)")
             object.__setattr__(self, "gravity_factor", factor)
+
+    def _check_sections(self) -> None:
+        """SpecError naming the first section that is not of its class (a table given where
+        a spec object belongs: ``mesh={...}``), the conditions made a tuple."""
+        for name, cls in (("mesh", MeshSpec), ("initial", InitialStateSpec),
+                          ("material", MaterialSpec), ("newton", NewtonSpec)):
+            value = getattr(self, name)
+            if not isinstance(value, cls):
+                raise SpecError(name, f"must be a {cls.__name__}, got "
+                                      f"{type(value).__name__} (a scene's tables are read by "
+                                      "bvp_from_dict)")
+        if not isinstance(self.boundaries, Mapping) or not all(
+                isinstance(k, str) and isinstance(v, str) for k, v in self.boundaries.items()):
+            raise SpecError("boundaries", f"must map names to predicates (text), got "
+                                          f"{self.boundaries!r}")
+        conditions = self.conditions
+        if isinstance(conditions, str | bytes | Mapping) or not isinstance(conditions,
+                                                                            Iterable):
+            raise SpecError("conditions", f"must be a sequence of ConditionSpec, got "
+                                          f"{type(conditions).__name__}")
+        conditions = tuple(conditions)
+        for k, c in enumerate(conditions):
+            if not isinstance(c, ConditionSpec):
+                raise SpecError("conditions", f"must be ConditionSpec objects; condition {k} "
+                                              f"is a {type(c).__name__} (a scene's tables are "
+                                              "read by bvp_from_dict)")
+        object.__setattr__(self, "conditions", conditions)
 
     @property
     def reference_pressure(self) -> float:
@@ -466,6 +494,9 @@ _OUTPUT_KEYS = SCENE_KEYS["output"]
 def bvp_from_dict(data: Mapping[str, Any], folder: Path | str = ".") -> BoundaryValueSpec:
     """The spec of a boundary-value scene (a TOML file's table); paths are relative to
     ``folder``. Every key is checked; a refusal is a SpecError naming it."""
+    if not isinstance(data, Mapping):
+        raise SpecError("scene", f"must be a table of keys (a TOML file's), got "
+                                 f"{type(data).__name__}")
     folder = Path(folder)
     data = dict(data)
     _unknown("", data, _SCENE_KEYS)
