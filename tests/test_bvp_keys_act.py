@@ -166,3 +166,51 @@ def test_the_api_refuses_what_a_scene_refuses(build, field):
     with pytest.raises(SpecError) as refused:
         build()
     assert refused.value.field == field
+
+
+#: a changed value for every key of every table but [[conditions]] and [initial] (walked by
+#: type and state above), [newton] (NewtonSpec's own fields) and [material.parameters] (the
+#: material's own)
+CHANGED = {
+    "": {"test": "biaxial", "steps": 3, "name": "other", "out": "elsewhere"},
+    "mesh": {"file": "m.msh", "size": [0.8, 0.2], "elements": [3, 2], "element": "tri6",
+             "grading": [2.0, 1.0], "quadrature": 3, "align_x": [0.15], "align_y": [0.05]},
+    "gravity": {"unit_weight": 18e3, "factor": [1.0, 2.0]},
+    "material": {"name": "mohr-coulomb", "parameters": {"young": 70e6, "poisson": 0.3}},
+    "output": {"out": "elsewhere", "device": "cpu", "shards": 2, "progress": True,
+               "fields": False},
+}
+TABLES = ("mesh", "boundaries", "conditions", "gravity", "initial", "material", "newton",
+          "output")
+
+
+def test_the_walk_reaches_every_key_of_every_table():
+    assert set(CHANGED[""]) | set(TABLES) == SCENE_KEYS[""]
+    for table in ("mesh", "gravity", "material", "output"):
+        assert set(CHANGED[table]) == SCENE_KEYS[table], table
+
+
+WALK = [(table, key) for table, keys in CHANGED.items() for key in keys]
+
+
+@pytest.mark.parametrize("table, key", WALK, ids=[f"{t or 'scene'}.{k}" for t, k in WALK])
+def test_every_key_either_acts_or_is_refused_naming_it(tmp_path, table, key):
+    """Changing the key's value changes the spec, or is refused naming the key (or a key of
+    its table): no key is read and then dropped."""
+    (tmp_path / "m.msh").write_text("")
+    data = tomllib.loads(_text())
+    base = bvp_from_dict(data, tmp_path)
+    changed = dict(data)
+    if table:
+        changed[table] = {**changed.get(table, {}), key: CHANGED[table][key]}
+    else:
+        changed[key] = CHANGED[table][key]
+    try:
+        spec = bvp_from_dict(changed, tmp_path)
+    except SpecError as refused:
+        # named: the key, or within its table (a mesh file beside the generated mesh's keys
+        # names the first of those it would ignore)
+        assert refused.field == key if not table else (
+            refused.field == table or refused.field.startswith(f"{table}."))
+        return
+    assert spec != base
