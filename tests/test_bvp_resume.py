@@ -118,7 +118,7 @@ def test_the_command_line_resumes_a_scene(tmp_path, monkeypatch, capsys):
     out = tmp_path / "run"
     with monkeypatch.context() as m:
         _stop_at(m, 2)
-        assert main(["run", str(scene), "--out", str(out)]) == 1
+        assert main(["run", str(scene), "--out", str(out)]) == 130  # Ctrl-C's code
     assert main(["run", str(scene), "--out", str(out)]) == 2
     assert "--resume" in capsys.readouterr().err
     assert main(["run", str(scene), "--out", str(out), "--resume"]) == 0

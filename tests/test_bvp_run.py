@@ -171,7 +171,8 @@ def test_dem_footing_smoke(tmp_path):
     (('footing = "y = top and x <= 0.05"', 'footing = "y = top and x <= -1"'), "footing",
      "selects no boundary facet"),
     (("steps = 4", "steps = 0"), "steps", "must be an integer >= 1"),
-    (("[initial]", "[initial]\nk0 = -1"), "initial.k0", "must be > 0"),
+    (('state = "uniform"\npressure = 20e3', 'state = "geostatic"\nsurcharge = 20e3\nk0 = -1'),
+     "initial.k0", "must be > 0"),
     (("[mesh]", "[mesh]\ncolour = 3"), "mesh.colour", "is not a key of [mesh]"),
 ])
 def test_a_scene_that_cannot_run_is_refused_naming_its_key(tmp_path, capsys, change, key,

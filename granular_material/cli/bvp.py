@@ -9,11 +9,13 @@ from __future__ import annotations
 
 import argparse
 import re
+import shlex
 import sys
 from pathlib import Path
 from typing import Any
 
 from granular_material.cli.options import UsageError, as_flags, check_output_dir, emit
+from granular_material.cli.signals import interrupt_exit_code
 from granular_material.filesafe import write_whole
 from granular_material.results.lock import FolderLock
 from granular_material.runs.spec_checks import SpecError
@@ -24,11 +26,21 @@ __all__ = ["BOUNDARY_VALUE", "run_bvp_scene"]
 BOUNDARY_VALUE = "boundary-value"
 
 
-def _line_of(text: str, key: str) -> int | None:
-    """The line of the scene's text where ``key`` (the last part of a dotted name) is set."""
+def _line_of(text: str, key: str, entry: tuple[str, int] | None = None) -> int | None:
+    """The line of the scene's text where ``key`` (the last part of a dotted name) is set;
+    ``entry`` = (array, index): within the index-th ``[[array]]`` table (from its header)."""
     name = key.rsplit(".", 1)[-1].replace("_", "[-_]")
     pattern = re.compile(rf"^\s*{name}\s*=")
-    for number, line in enumerate(text.splitlines(), start=1):
+    lines = list(enumerate(text.splitlines(), start=1))
+    if entry is not None:
+        header = re.compile(rf"^\s*\[\[\s*{re.escape(entry[0])}\s*\]\]")
+        starts = [k for k, (_, line) in enumerate(lines) if header.match(line)]
+        if entry[1] >= len(starts):
+            return None
+        lines = lines[starts[entry[1]] + 1:]
+        ends = [k for k, (_, line) in enumerate(lines) if line.lstrip().startswith("[")]
+        lines = lines[:ends[0]] if ends else lines
+    for number, line in lines:
         if pattern.match(line):
             return number
     return None
@@ -36,7 +48,7 @@ def _line_of(text: str, key: str) -> int | None:
 
 def _refusal(path: Path, text: str, exc: ValueError) -> UsageError:
     key = getattr(exc, "field", None)
-    line = _line_of(text, key) if key else None
+    line = _line_of(text, key, getattr(exc, "entry", None)) if key else None
     where = f"{path}, line {line}" if line else f"{path}"
     named = f"{key}: " if key and key not in str(exc) else ""
     return UsageError(f"{where}: {named}{exc}")
@@ -61,7 +73,8 @@ def run_bvp_scene(path: Path, text: str, data: dict[str, Any],
                   args: argparse.Namespace) -> int:
     """Check and run the boundary-value scene ``path`` (``data``: its TOML); the exit code
     (0: it reached the end, 1: it stopped short). ``args``: the ``run`` command's (``out``,
-    ``check``, ``resume``: continue a stopped run in the same folder)."""
+    ``check``, ``resume``: continue a stopped run in the same folder); stopped by Ctrl-C,
+    SIGTERM or SIGHUP: 130, 143 or 129, with the command that continues it on stderr."""
     from granular_material.runs.boundary_value.resume import check_not_stopped
     from granular_material.runs.boundary_value.runner import build, run_boundary_value
     from granular_material.runs.boundary_value.spec import bvp_from_dict
@@ -91,6 +104,13 @@ def run_bvp_scene(path: Path, text: str, data: dict[str, Any],
         except ValueError as exc:
             raise _refusal(path, text, exc) from exc
     emit(argparse.Namespace(json=False), outcome.summary)
+    if outcome.interrupt is not None:  # Ctrl-C, SIGTERM, SIGHUP: the shell's code, and how on
+        print(f"error: {outcome.error}", file=sys.stderr)
+        again = shlex.join(["granular-material", "run", str(path),
+                            *(["--out", str(args.out)] if args.out is not None else []),
+                            "--resume"])
+        print(f"continue it with `{again}`", file=sys.stderr)
+        return interrupt_exit_code(outcome.interrupt)
     if outcome.error:
         print(f"error: {outcome.error}", file=sys.stderr)
         return 1

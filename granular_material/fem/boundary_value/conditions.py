@@ -27,7 +27,8 @@ Conflicts: where two conditions prescribe the same dof, **the later in the list 
 wall listed after the fixed base it stands on owns their shared node); equal values are no
 conflict. A problem whose prescribed dofs leave a rigid-body motion free (a translation in x
 or y, or a rotation) is refused, a :class:`~granular_material.errors.ParameterError` naming
-it.
+it; so is one with a part of the mesh (elements joined by their facets, unconnected to the
+rest) that the conditions leave free, the message naming the part.
 """
 
 from __future__ import annotations
@@ -273,8 +274,50 @@ def _prescribed(conditions: Sequence[Condition], dofs: dict[str, BoundaryDofs],
     return out
 
 
-def _check_rigid_modes(basis: Basis, prescribed: dict[int, tuple[float, int]]) -> None:
-    """ParameterError when the prescribed dofs leave a translation or a rotation free."""
+def _parts(basis: Basis) -> list[np.ndarray]:
+    """The elements of each connected part of the mesh (elements joined by a shared facet),
+    largest first."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    t2f = basis.mesh.t2f  # (facets per element, nelems)
+    n_el = t2f.shape[1]
+    elements = np.repeat(np.arange(n_el), t2f.shape[0])
+    graph = coo_matrix((np.ones(elements.size), (elements, n_el + t2f.T.ravel())),
+                       shape=(n_el + basis.mesh.facets.shape[1],) * 2)
+    _, labels = connected_components(graph, directed=False)
+    labels = labels[:n_el]
+    parts = [np.flatnonzero(labels == k) for k in np.unique(labels)]
+    return sorted(parts, key=lambda part: -part.size)
+
+
+def _check_each_part(basis: Basis, prescribed: dict[int, tuple[float, int]]) -> None:
+    """ParameterError naming the first connected part of the mesh that the prescribed dofs
+    leave free to move as a rigid body (a part held by nothing: a singular system)."""
+    parts = _parts(basis)
+    if len(parts) == 1:
+        _check_rigid_modes(basis, prescribed)
+        return
+    p = basis.mesh.p
+    for number, elements in enumerate(parts, start=1):
+        dofs = np.unique(basis.element_dofs[:, elements])
+        held = {int(d): prescribed[int(d)] for d in dofs if int(d) in prescribed}
+        try:
+            _check_rigid_modes(basis, held, dofs)
+        except ParameterError as exc:
+            nodes = np.unique(basis.mesh.t[:, elements])
+            lo, hi = p[:, nodes].min(axis=1), p[:, nodes].max(axis=1)
+            raise ParameterError("conditions", f"of part {number} of the mesh's {len(parts)} "
+                                               f"unconnected parts ({elements.size} elements, "
+                                               f"x {lo[0]:.4g} to {hi[0]:.4g} m, y {lo[1]:.4g} "
+                                               f"to {hi[1]:.4g} m; first element "
+                                               f"{int(elements[0])}) {exc.message}") from None
+
+
+def _check_rigid_modes(basis: Basis, prescribed: dict[int, tuple[float, int]],
+                       within: np.ndarray | None = None) -> None:
+    """ParameterError when the prescribed dofs leave a translation or a rotation free (of
+    the body, or of the part whose dofs are ``within``)."""
     if not prescribed:
         raise ParameterError("conditions", "prescribe no displacement: the body is free to "
                                            "move as a rigid body (add a Fixed or a Roller)")
@@ -285,8 +328,9 @@ def _check_rigid_modes(basis: Basis, prescribed: dict[int, tuple[float, int]]) -
             raise ParameterError("conditions", f"hold no {name} anywhere: the body is free to "
                                                f"translate in {'xy'[k]}")
     x = basis.doflocs[:, dofs]
-    centre = basis.mesh.p.mean(axis=1)
-    size = float(np.ptp(basis.mesh.p, axis=1).max())
+    region = basis.doflocs[:, within] if within is not None else basis.mesh.p
+    centre = region.mean(axis=1)
+    size = float(np.ptp(region, axis=1).max())
     rows = np.zeros((dofs.size, 3))
     rows[comps == 0, 0] = 1.0
     rows[comps == 1, 1] = 1.0
@@ -369,7 +413,7 @@ def build_problem(mesh_data: MeshData, conditions: Sequence[Condition],
     basis = make_basis(mesh_data, gauss)
     dofs = {name: boundary_dofs(basis, facets) for name, facets in mesh_data.boundaries.items()}
     prescribed = _prescribed(conditions, dofs)
-    _check_rigid_modes(basis, prescribed)
+    _check_each_part(basis, prescribed)
     order = sorted(prescribed)
     force_start, force_end, follower, follower_end = _external_loads(mesh_data, basis,
                                                                       conditions)

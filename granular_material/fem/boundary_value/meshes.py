@@ -119,11 +119,19 @@ def make_basis(mesh_data: MeshData, gauss: int | None = None) -> Basis:
     if not triangle and (int(n) != n or not 1 <= n <= 10):
         raise ParameterError("gauss", f"must be an integer in [1, 10], got {gauss!r}")
     if n == 1:  # the centroid, by hand (scikit-fem's least rules have more points)
+        _check_degenerate(mesh_data)
         centre, weight = (1 / 3, 0.5) if triangle else (0.5, 1.0)
         return Basis(mesh_data.mesh, element_of(element),
                      quadrature=(np.full((2, 1), centre), np.full(1, weight)))
     intorder = TRIANGLE_RULES[n] if triangle else 2 * int(n) - 1
-    basis = Basis(mesh_data.mesh, element_of(element), intorder=intorder)
+    _check_degenerate(mesh_data)
+    try:
+        basis = Basis(mesh_data.mesh, element_of(element), intorder=intorder)
+    except Exception as exc:  # scikit-fem raises a bare Exception for it
+        if "Jacobian" not in str(exc):
+            raise
+        raise ParameterError("mesh", f"{mesh_data.source}: an element's Jacobian is zero at a "
+                                     "Gauss point (a degenerate or folded element)") from None
     expected = n if triangle else int(n) ** 2
     if basis.X.shape[-1] != expected:
         raise RuntimeError(f"intorder {intorder} gave {basis.X.shape[-1]} points per element, "
@@ -194,6 +202,7 @@ def rectangle_mesh(width: float, height: float, nx: int, ny: int, element: str =
 def _signed_areas(p: np.ndarray, t: np.ndarray) -> np.ndarray:
     """Signed area [m²] of each polygon of corners ``t`` (k, nelems) (shoelace)."""
     x, y = p[0][t], p[1][t]
+    x, y = x - x[:1], y - y[:1]  # from the first corner: exact however far the mesh lies
     return 0.5 * np.sum(x * np.roll(y, -1, axis=0) - np.roll(x, -1, axis=0) * y, axis=0)
 
 
@@ -225,6 +234,35 @@ def _check_straight(points: np.ndarray, cells: np.ndarray, kind: str, source: st
                                      "curved elements, or a node order other than gmsh's "
                                      "(corners, then the midsides of edges 01, 12, ...), are "
                                      "not supported")
+
+
+def _check_listed_once(t: np.ndarray, source: str) -> None:
+    """ParameterError naming the first element of corners ``t`` (k, nelems) whose corners are
+    another's (an element listed twice would be integrated twice)."""
+    order = np.sort(t, axis=0).T
+    _, first, counts = np.unique(order, axis=0, return_index=True, return_counts=True)
+    if np.any(counts > 1):
+        twice = np.flatnonzero(~np.isin(np.arange(order.shape[0]), first))
+        same = int(np.flatnonzero((order == order[twice[0]]).all(axis=1))[0])
+        raise ParameterError("mesh", f"{source}: element {int(twice[0])} has the corners of "
+                                     f"element {same} (listed twice; {twice.size} such "
+                                     "elements): each element must be listed once")
+
+
+def _check_degenerate(mesh_data: MeshData) -> None:
+    """ParameterError naming the first element whose area is zero, or too small beside the
+    mesh's mean element for a float Jacobian (below 1e-12 of it)."""
+    mesh = mesh_data.mesh
+    areas = np.abs(_signed_areas(mesh.p, mesh.t))
+    mean = float(areas.mean()) if areas.size else 0.0
+    thin = np.flatnonzero(~(areas > 1e-12 * mean))
+    if thin.size:
+        k = int(thin[0])
+        raise ParameterError("mesh", f"{mesh_data.source}: {thin.size} degenerate elements "
+                                     f"(first: element {k}, area {areas[k]:.3g} m² beside a "
+                                     f"mean of {mean:.3g} m²): their Jacobian is zero or lost "
+                                     "in rounding (use a milder grading, or elements of "
+                                     "less disparate sizes)")
 
 
 def _group_names(m: meshio.Mesh, dim: int) -> dict[int, str]:
@@ -305,6 +343,7 @@ def read_mesh(path: str | Path) -> MeshData:
     t = _counter_clockwise(p, t)
     if np.any(np.abs(_signed_areas(p, t)) == 0.0):
         raise ParameterError("mesh", f"{source}: has elements of zero area")
+    _check_listed_once(t, source)
     mesh = (MeshTri1 if corners == 3 else MeshQuad1)(p, np.ascontiguousarray(t))
     local = np.full(points.shape[0], -1, dtype=np.int64)
     local[used] = np.arange(used.size)

@@ -11,11 +11,18 @@ Ctrl-C, a kill or a step that did not converge keeps it, and
 from its last saved state: the tables, fields and figures are those of a run that never
 stopped. A folder holding a stopped run's checkpoint is refused to a fresh run, so that hours
 of work are not thrown away by a run started twice.
+
+Beside the scene the checkpoint keeps the SHA-256 of every file the run reads (its mesh file,
+its RVE file: :func:`run_files`); a resume whose file has changed is refused naming it, with
+nothing in the folder changed. A checkpoint written before the hashes were kept (no
+``files`` in its options) still resumes: its files cannot be checked, and a note on stderr
+says so.
 """
 
 from __future__ import annotations
 
 import json
+import sys
 from dataclasses import asdict
 from pathlib import Path
 from typing import Any
@@ -24,9 +31,10 @@ import pandas as pd
 
 from granular_material.runs.boundary_value.spec import BoundaryValueSpec
 from granular_material.runs.checkpoint import CheckpointError, RunCheckpoint, SavedRun
+from granular_material.runs.checkpoint_files import file_sha256
 from granular_material.runs.spec import SpecError
 
-__all__ = ["RESUME_FREE", "check_not_stopped", "open_bvp_checkpoint", "remember",
+__all__ = ["RESUME_FREE", "check_not_stopped", "open_bvp_checkpoint", "remember", "run_files",
            "scene_record"]
 
 #: the scene's fields a resume may change: where it writes, how it reports, the device and
@@ -39,6 +47,38 @@ SAVE_MINUTES = 10.0
 def scene_record(spec: BoundaryValueSpec) -> dict[str, Any]:
     """``spec`` as JSON values (paths as text), as a checkpoint records and compares it."""
     return json.loads(json.dumps(asdict(spec), default=str))
+
+
+def run_files(spec: BoundaryValueSpec) -> dict[str, Path]:
+    """The files a run of ``spec`` reads, by the scene key that names them: ``mesh.file`` and
+    the DEM material's ``material.parameters.rve`` (where given)."""
+    files = {"mesh.file": spec.mesh.file,
+             "material.parameters.rve": getattr(spec.material.parameters, "rve", None)}
+    return {name: Path(path) for name, path in files.items() if path is not None}
+
+
+def _hashes(spec: BoundaryValueSpec) -> dict[str, dict[str, str]]:
+    """key → {"path", "sha256"} of every file of :func:`run_files` (one that cannot be read:
+    no hash; the run's own check refuses it)."""
+    return {name: {"path": str(path), "sha256": file_sha256(path)}
+            for name, path in run_files(spec).items() if path.is_file()}
+
+
+def _changed_file(spec: BoundaryValueSpec, saved: Any, out: Path) -> None:
+    """SpecError naming the first file of the run whose content differs from the one the
+    checkpoint's ``saved`` hashes record (None: an older checkpoint, not checked)."""
+    if saved is None:
+        print(f"granular-material: {out}'s checkpoint predates the files' hashes: the mesh "
+              "and RVE files are not checked against the ones the run started with",
+              file=sys.stderr)
+        return
+    for name, now in _hashes(spec).items():
+        then = saved.get(name) if isinstance(saved, dict) else None
+        if not isinstance(then, dict) or then.get("sha256") != now["sha256"]:
+            raise SpecError(name, f"{now['path']} is not the file the run in {out} was "
+                                  "started with (its SHA-256 differs from the checkpoint's): "
+                                  "resume it with the same file (nothing in the folder was "
+                                  "changed)")
 
 
 def _same(now: Any, then: Any) -> bool:
@@ -90,12 +130,13 @@ def open_bvp_checkpoint(spec: BoundaryValueSpec, out: Path | None, resume: bool,
     record = scene_record(spec)
     if not resume:
         check_not_stopped(spec, out)
-        checkpoint.start({"scene": record})
+        checkpoint.start({"scene": record, "files": _hashes(spec)})
         return checkpoint, None
     if not checkpoint.has_options():
         raise SpecError("out", f"{out} holds no boundary-value run to resume (no "
                                "checkpoint/options.json)")
-    saved_scene = checkpoint.read_options().get("scene")
+    options = checkpoint.read_options()
+    saved_scene = options.get("scene")
     if not isinstance(saved_scene, dict):
         raise SpecError("out", f"{out}'s checkpoint is not a boundary-value run's")
     differ = _differences(record, saved_scene)
@@ -103,6 +144,7 @@ def open_bvp_checkpoint(spec: BoundaryValueSpec, out: Path | None, resume: bool,
         raise SpecError(differ[0], f"the scene differs from the one the run in {out} was "
                                    f"started with in {', '.join(differ)}: resume it with "
                                    "the same scene (nothing in the folder was changed)")
+    _changed_file(spec, options.get("files"), out)
     if not checkpoint.has_state():
         return checkpoint, None
     try:

@@ -74,6 +74,8 @@ class BVPOutcome:
         error: why the run stopped short (None: it reached the end).
         points: the Gauss-point table of the last committed step.
         u: the last committed nodal displacement [m].
+        interrupt: the Ctrl-C or stop signal (SIGTERM, SIGHUP) that stopped the run, if one
+            did (its exit code: :func:`~granular_material.cli.signals.interrupt_exit_code`).
     """
 
     steps: pd.DataFrame
@@ -81,6 +83,7 @@ class BVPOutcome:
     error: str | None = None
     points: pd.DataFrame = field(default_factory=pd.DataFrame)
     u: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    interrupt: KeyboardInterrupt | None = None
 
 
 def _mesh(spec: BoundaryValueSpec) -> MeshData:
@@ -313,14 +316,16 @@ def run_boundary_value(spec: BoundaryValueSpec, out: Path | None = None,
         initial_residual = remember(checkpoint, "initial_residual")
     t_initial = time.perf_counter() - t_initial
     error = None
+    interrupt = None
     try:
         solver.run(spec.steps, on_step=collect, progress=spec.progress,
                    description=f"{spec.name} ({problem.basis.nelems} elements)",
                    done=0 if saved is None else saved.step)
     except NewtonError as exc:
         error = str(exc)
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as exc:
         error = interrupted_error(len(rows) - 1, spec.steps)
+        interrupt = exc
     finally:
         if writer is not None:
             writer.__exit__(None, None, None)
@@ -335,7 +340,7 @@ def run_boundary_value(spec: BoundaryValueSpec, out: Path | None = None,
         summary["out"] = str(out)
         write_json(summary, out / "summary.json")
     return BVPOutcome(steps, summary, error, last.get("points", pd.DataFrame()),
-                      last.get("u", np.zeros(0)))
+                      last.get("u", np.zeros(0)), interrupt)
 
 
 def _initial_residual(solver: NewtonSolver) -> dict[str, float]:

@@ -55,7 +55,7 @@ into a :class:`BoundaryValueSpec` by :func:`bvp_from_dict` (every key checked, a
 from __future__ import annotations
 
 import warnings
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -65,13 +65,29 @@ from granular_material.runs.spec import MaterialSpec, NewtonSpec, SpecError
 from granular_material.typed_fields import conform, conform_fields
 from granular_material.vocabulary import RenamedWarning, key_of, user_stacklevel
 
-__all__ = ["CONDITION_TYPES", "INITIAL_STATES", "SCENE_KEYS", "BoundaryValueSpec", "ConditionSpec",
-           "InitialStateSpec", "MeshSpec", "bvp_from_dict"]
+__all__ = ["CONDITION_KEYS", "CONDITION_TYPES", "INITIAL_KEYS", "INITIAL_STATES", "SCENE_KEYS",
+           "BoundaryValueSpec", "ConditionSpec", "InitialStateSpec", "MeshSpec",
+           "bvp_from_dict"]
 
 #: the conditions a boundary may carry
 CONDITION_TYPES = ("fixed", "roller", "displacement", "rigid", "pressure")
 #: the initial states of a problem
 INITIAL_STATES = ("uniform", "geostatic")
+#: the keys each type of condition acts on (any other is refused, not ignored)
+CONDITION_KEYS: dict[str, frozenset[str]] = {
+    "fixed": frozenset({"type", "boundary"}),
+    "roller": frozenset({"type", "boundary", "component"}),
+    "displacement": frozenset({"type", "boundary", "component", "value"}),
+    "rigid": frozenset({"type", "boundary", "displacement", "rough"}),
+    "pressure": frozenset({"type", "boundary", "value", "end"}),
+}
+#: the keys each initial state acts on (any other is refused, not ignored)
+INITIAL_KEYS: dict[str, frozenset[str]] = {
+    "uniform": frozenset({"state", "pressure"}),
+    "geostatic": frozenset({"state", "k0", "surcharge", "surface"}),
+}
+#: the keys of [mesh] that only a generated rectangle acts on
+_GENERATED_KEYS = frozenset({"size", "elements", "element", "grading", "align_x", "align_y"})
 #: the components by name
 _COMPONENTS = {"x": 0, "y": 1, 0: 0, 1: 1}
 _ELEMENTS = ("tri3", "tri6", "quad4", "quad8", "quad9")
@@ -93,6 +109,16 @@ def _table(name: str, value: Any) -> dict[str, Any]:
     if not isinstance(value, Mapping):
         raise SpecError(name, f"must be a table, got {value!r}")
     return dict(value)
+
+
+def _not_acting(section: str, given: Mapping[str, Any], acting: frozenset[str],
+                what: str) -> None:
+    """SpecError naming the first key of ``given`` outside ``acting`` (keys ``what`` does not
+    act on: refused, where they would be ignored)."""
+    extra = sorted(set(given) - acting)
+    if extra:
+        raise SpecError(f"{section}.{extra[0]}", f"does nothing for {what}, so it is refused "
+                                                 f"(it takes {', '.join(sorted(acting))})")
 
 
 def _unknown(section: str, given: Mapping[str, Any], known: set[str]) -> None:
@@ -134,6 +160,13 @@ class MeshSpec:
         if (self.file is not None) and (self.align_x or self.align_y):
             raise SpecError("mesh.align_x", "aligns a generated mesh's grid lines; a mesh "
                                             "file has its own nodes")
+        if self.file is not None:
+            for name, value, default in (("elements", self.elements, None),
+                                         ("grading", self.grading, None),
+                                         ("element", self.element, "quad4")):
+                if value != default:
+                    raise SpecError(f"mesh.{name}", "shapes a generated rectangle; a mesh file "
+                                                    "has its own elements, so it is refused")
         if (self.file is None) == (self.size is None):
             raise SpecError("mesh", "needs either file (a mesh file) or size and elements "
                                     "(a generated rectangle)")
@@ -187,13 +220,18 @@ class ConditionSpec:
         if self.type not in CONDITION_TYPES:
             raise SpecError("conditions.type", f"must be one of {', '.join(CONDITION_TYPES)}, "
                                                f"got {self.type!r}")
+        if self.end is not None and self.type != "pressure":
+            raise SpecError("conditions.end", f"only a pressure has an end value (a "
+                                              f"{self.type}'s value is its end)")
+        given = {"component": self.component is not None, "value": self.value is not None,
+                 "end": self.end is not None, "displacement": self.displacement is not None,
+                 "rough": self.rough is not True}
+        _not_acting("conditions", {k for k, on in given.items() if on},
+                    CONDITION_KEYS[self.type], f"a {self.type} condition")
         if self.type in ("roller", "displacement") and self.component not in (0, 1):
             raise SpecError("conditions.component", f"a {self.type} needs component x or y")
         if self.type in ("displacement", "pressure") and self.value is None:
             raise SpecError("conditions.value", f"a {self.type} needs a value")
-        if self.end is not None and self.type != "pressure":
-            raise SpecError("conditions.end", f"only a pressure has an end value (a "
-                                              f"{self.type}'s value is its end)")
         for name in ("value", "end"):
             p = getattr(self, name)
             if self.type == "pressure" and p is not None and not p >= 0:
@@ -228,6 +266,10 @@ class InitialStateSpec:
         if self.state not in INITIAL_STATES:
             raise SpecError("initial.state", f"must be one of {', '.join(INITIAL_STATES)}, "
                                              f"got {self.state!r}")
+        given = {"pressure": self.pressure is not None, "k0": self.k0 != 0.5,
+                 "surcharge": self.surcharge != 0.0, "surface": self.surface is not None}
+        _not_acting("initial", {k for k, on in given.items() if on}, INITIAL_KEYS[self.state],
+                    f"a {self.state} initial state")
         if self.state == "uniform" and (self.pressure is None or self.pressure <= 0):
             raise SpecError("initial.pressure", "a uniform initial state needs a pressure "
                                                 f"> 0 Pa, got {self.pressure!r}")
@@ -288,6 +330,7 @@ class BoundaryValueSpec:
     name: str = "problem"
 
     def __post_init__(self) -> None:
+        self._check_sections()
         conform_fields(self, error=SpecError, skip=_SECTIONS)
         if self.shards is not None and not 1 <= self.shards <= MAX_SHARDS:
             raise SpecError("shards", f"must be an integer from 1 to {MAX_SHARDS} (a CPU "
@@ -312,7 +355,38 @@ class BoundaryValueSpec:
                              SpecError)
             if min(factor) < 0:
                 raise SpecError("gravity.factor", f"must be >= 0, got {list(factor)}")
+            if self.unit_weight == 0.0:
+                raise SpecError("gravity.factor", "multiplies a unit weight of 0 N/m³, so it "
+                                                  "does nothing and is refused (set "
+                                                  "gravity.unit_weight)")
             object.__setattr__(self, "gravity_factor", factor)
+
+    def _check_sections(self) -> None:
+        """SpecError naming the first section that is not of its class (a table given where
+        a spec object belongs: ``mesh={...}``), the conditions made a tuple."""
+        for name, cls in (("mesh", MeshSpec), ("initial", InitialStateSpec),
+                          ("material", MaterialSpec), ("newton", NewtonSpec)):
+            value = getattr(self, name)
+            if not isinstance(value, cls):
+                raise SpecError(name, f"must be a {cls.__name__}, got "
+                                      f"{type(value).__name__} (a scene's tables are read by "
+                                      "bvp_from_dict)")
+        if not isinstance(self.boundaries, Mapping) or not all(
+                isinstance(k, str) and isinstance(v, str) for k, v in self.boundaries.items()):
+            raise SpecError("boundaries", f"must map names to predicates (text), got "
+                                          f"{self.boundaries!r}")
+        conditions = self.conditions
+        if isinstance(conditions, str | bytes | Mapping) or not isinstance(conditions,
+                                                                            Iterable):
+            raise SpecError("conditions", f"must be a sequence of ConditionSpec, got "
+                                          f"{type(conditions).__name__}")
+        conditions = tuple(conditions)
+        for k, c in enumerate(conditions):
+            if not isinstance(c, ConditionSpec):
+                raise SpecError("conditions", f"must be ConditionSpec objects; condition {k} "
+                                              f"is a {type(c).__name__} (a scene's tables are "
+                                              "read by bvp_from_dict)")
+        object.__setattr__(self, "conditions", conditions)
 
     @property
     def reference_pressure(self) -> float:
@@ -329,8 +403,22 @@ _GENERATED_SIDES = frozenset({"left", "right", "bottom", "top"})
 
 
 def _condition(entry: Any, index: int) -> ConditionSpec:
+    """The condition of the ``index``-th [[conditions]] table; a SpecError it raises carries
+    ``entry = ("conditions", index)`` (for the line of its key)."""
+    try:
+        return _condition_of(entry, index)
+    except SpecError as exc:
+        exc.entry = ("conditions", index)
+        raise
+
+
+def _condition_of(entry: Any, index: int) -> ConditionSpec:
     entry = _table(f"conditions[{index}]", entry)
     _unknown("conditions", entry, SCENE_KEYS["conditions"])
+    if entry.get("type") in CONDITION_KEYS:
+        _not_acting("conditions", set(entry) - {"end"},  # end: ConditionSpec's own message
+                    CONDITION_KEYS[entry["type"]],
+                    f"a {entry['type']} condition")
     component = entry.get("component")
     if component is not None:
         if isinstance(component, bool) or not isinstance(component, str | int) \
@@ -347,6 +435,8 @@ def _condition(entry: Any, index: int) -> ConditionSpec:
 def _mesh(table: dict[str, Any], folder: Path) -> MeshSpec:
     table = _snake_case("mesh", table)
     _unknown("mesh", table, SCENE_KEYS["mesh"])
+    if "file" in table:
+        _not_acting("mesh", table, SCENE_KEYS["mesh"] - _GENERATED_KEYS, "a mesh file")
     values = dict(table)
     file = values.get("file")
     if isinstance(file, str) and file:
@@ -377,6 +467,9 @@ def _snake_case(section: str, table: dict[str, Any]) -> dict[str, Any]:
 
 def _initial(table: dict[str, Any]) -> InitialStateSpec:
     _unknown("initial", table, SCENE_KEYS["initial"])
+    state = table.get("state", "uniform")
+    if state in INITIAL_KEYS:
+        _not_acting("initial", table, INITIAL_KEYS[state], f"a {state} initial state")
     return _within("initial", lambda: InitialStateSpec(**table))
 
 
@@ -401,6 +494,9 @@ _OUTPUT_KEYS = SCENE_KEYS["output"]
 def bvp_from_dict(data: Mapping[str, Any], folder: Path | str = ".") -> BoundaryValueSpec:
     """The spec of a boundary-value scene (a TOML file's table); paths are relative to
     ``folder``. Every key is checked; a refusal is a SpecError naming it."""
+    if not isinstance(data, Mapping):
+        raise SpecError("scene", f"must be a table of keys (a TOML file's), got "
+                                 f"{type(data).__name__}")
     folder = Path(folder)
     data = dict(data)
     _unknown("", data, _SCENE_KEYS)
@@ -421,6 +517,9 @@ def bvp_from_dict(data: Mapping[str, Any], folder: Path | str = ".") -> Boundary
     newton = _table("newton", data.get("newton"))
     output = _table("output", data.get("output"))
     _unknown("output", output, _OUTPUT_KEYS)
+    if "out" in output and "out" in data:
+        raise SpecError("out", "is given twice, at the top and in [output]: give one (the "
+                               "other would be ignored)")
     try:
         newton_spec = NewtonSpec(**newton)
     except TypeError as exc:
