@@ -137,3 +137,38 @@ def test_the_fields_carry_what_paraview_is_promised(tmp_path):
     assert "displacement" in point_data
     assert {"sxx", "shear_strain", "rotation", "mean_pressure", "unconfined", "failed",
             "plastic_shear_strain", "friction_angle", "stress_zz"} <= set(cell_data)
+
+
+def _without_surcharge(steps: int):
+    """A DEM footing with nothing on the surface beside it: the soil there unloads and some
+    points lose their confinement (their tangent floored by the initial one)."""
+    surcharge = '[[conditions]]\ntype = "pressure"\nboundary = "surface"\nvalue = 20e3\n'
+    text = FOOTING.format(steps=steps, elements="[3, 2]", settlement=-0.0005 * steps,
+                          material=DEM)
+    assert surcharge in text
+    return bvp_from_dict(tomllib.loads(text.replace(surcharge, "")))
+
+
+@pytest.mark.filterwarnings("ignore::granular_material.multiscale.UnconfinedWarning")
+def test_a_footing_with_unconfined_points_resumes_to_the_run_that_never_stopped(
+        tmp_path, monkeypatch):
+    # the floor of an unconfined point's tangent is its initial tangent: a resume that took
+    # the tangent of its own first evaluation as the floor (near zero at the points already
+    # unconfined) went another way, and diverged on larger scenes (issue 61)
+    steps = 3
+    whole = run_boundary_value(_without_surcharge(steps), out=tmp_path / "whole")
+    assert whole.error is None
+    unconfined = whole.steps["unconfined_points"].to_numpy()
+    assert unconfined[0] == 0 and (unconfined[1:] > 0).all()
+    for stop in (1, 2):
+        out = tmp_path / f"stopped-{stop}"
+        with monkeypatch.context() as m:
+            _stop_at(m, stop + 1)
+            stopped = run_boundary_value(_without_surcharge(steps), out=out)
+        assert f"interrupted after load step {stop}" in stopped.error
+        resumed = run_boundary_value(_without_surcharge(steps), out=out, resume=True)
+        # the state is saved by elapsed time: after the stop, or earlier where saving is slow
+        assert resumed.error is None and 0 <= resumed.summary["resumed_from_step"] <= stop
+        for a, b in zip(_tables(tmp_path / "whole"), _tables(out), strict=True):
+            pd.testing.assert_frame_equal(a, b, check_exact=True)
+        np.testing.assert_array_equal(whole.u, resumed.u)

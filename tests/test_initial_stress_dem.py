@@ -128,6 +128,26 @@ def test_material_initial_stress_evaluate_zero_returns_the_targets():
     assert not np.array_equal(radii[0], radii[1])
 
 
+def test_a_restored_material_keeps_each_points_initial_pressure(tmp_path):
+    # a point has lost its confinement below 1 % of its own initial mean pressure: restored
+    # from a checkpoint (no preparation), a material took its confining pressure (the
+    # deepest point's) for every point instead (issue 61)
+    target = k0_targets([15e3, 45e3])
+    material = DEMMaterial(initial_stress=target, particles=DISCS, seed=2, device="cpu",
+                           shards=1)
+    material.allocate(2)
+    material.evaluate(np.zeros((2, 2, 2)))
+    material.commit()
+    material.checkpoint(tmp_path / "dem.npz")
+    back = DEMMaterial(initial_stress=target, particles=DISCS, seed=2, device="cpu",
+                       shards=1)
+    back.restore(tmp_path / "dem.npz")
+    assert back.preparation is None
+    initial = material._initial_pressure()
+    assert initial[0] < 0.5 * initial[1]
+    np.testing.assert_array_equal(back._initial_pressure(), initial)
+
+
 @pytest.mark.parametrize("bad, match", [
     (np.full((3, 2), -1e4), "shape"),
     (k0_targets([1e4])[0], "shape"),

@@ -137,6 +137,40 @@ def test_dem_material_total_form_checkpoint_and_committed_stress_on_failure(
     assert np.isfinite(committed.stress).all()
 
 
+def test_a_dem_checkpoint_keeps_what_unconfined_and_failed_points_answer_by(
+        small_rve_path, tmp_path):
+    # the floor of an unconfined point's tangent is the tangent of the first evaluation (the
+    # initial state's), and a failed point answers by the committed response: a restored
+    # material answers by the same ones, not by those of its own first evaluation (issue 61)
+    from dataclasses import replace
+
+    from granular_material.dem import load_rve, save_rve
+
+    m = DEMMaterial(rve=small_rve_path, device="cpu")
+    m.allocate(2)
+    m.evaluate(np.zeros((2, 2, 2)))
+    m.revert()
+    g = np.array([[[0.0, 0.0], [0.0, -2e-4]], [[1e-4, 0.0], [0.0, -1e-4]]])
+    m.evaluate(g)
+    m.commit()
+    m.checkpoint(tmp_path / "dem.npz")
+    back = DEMMaterial(rve=small_rve_path, device="cpu")
+    back.restore(tmp_path / "dem.npz")
+    assert not np.array_equal(m._initial_tangent, m._committed_response.tangent)
+    np.testing.assert_array_equal(back._initial_tangent, m._initial_tangent)
+    for name in ("stress", "tangent"):
+        np.testing.assert_array_equal(getattr(back._committed_response, name),
+                                      getattr(m._committed_response, name))
+    assert back._committed_response.fields.keys() == m._committed_response.fields.keys()
+    # a checkpoint written before the floor was kept in it is refused, not resumed to
+    # another run
+    data = load_rve(tmp_path / "dem.npz")
+    extra = {k: v for k, v in data.extra.items() if k != "backend_material_initial_tangent"}
+    save_rve(tmp_path / "old.npz", replace(data, extra=extra), compress=False, validate=False)
+    with pytest.raises(ValueError, match=r"initial tangent.*start the run afresh"):
+        DEMMaterial(rve=small_rve_path, device="cpu").restore(tmp_path / "old.npz")
+
+
 def test_dem_failure_before_any_commit_reports_the_prepared_stress(small_rve_path):
     m = DEMMaterial(rve=small_rve_path, device="cpu")
     m.allocate(1)

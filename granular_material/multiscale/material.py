@@ -78,6 +78,14 @@ __all__ = ["UNCONFINED_FRACTION", "DEMMaterial", "UnconfinedWarning"]
 #: the checkpoint's array of the committed total ∇u (a ``backend_*`` array: the RVE states
 #: of a checkpoint are read without it)
 _GRAD_KEY = "backend_material_grad_u"
+#: the checkpoint's arrays of what the material answers its unconfined and failed points by
+#: (``backend_*`` arrays too): the tangent of its first evaluation (the initial state's, the
+#: floor of unconfined points; empty before any evaluation), each point's initial mean
+#: pressure (with an initial stress), and the committed response (``..._stress``,
+#: ``..._tangent``, ``..._field_NAME``: what a failed point answers)
+_FLOOR_KEY = "backend_material_initial_tangent"
+_PRESSURE_KEY = "backend_material_initial_pressure"
+_COMMITTED_PREFIX = "backend_material_committed_"
 
 
 class DEMMaterial(ScikitFemInterface):
@@ -115,6 +123,9 @@ class DEMMaterial(ScikitFemInterface):
         self._last_response: MaterialResponse | None = None
         self._warned_unconfined = False
         self._initial_tangent: np.ndarray | None = None  # of the first evaluation
+        #: each point's initial mean pressure [Pa] as a checkpoint restored it (its
+        #: :attr:`preparation` is not restored)
+        self._restored_pressure: np.ndarray | None = None
         #: how the RVEs were brought to ``initial_stress`` (None without it, or before
         #: :meth:`allocate`): the targets, clamped points, groups and errors
         self.preparation: StressPreparation | None = None
@@ -249,6 +260,7 @@ class DEMMaterial(ScikitFemInterface):
         self._track_allocate(n_points)
         self._committed_response = self._last_response = None
         self._initial_tangent = None
+        self._restored_pressure = None
 
     def evaluate(self, grad_u: np.ndarray) -> MaterialResponse:
         """Symmetrised Love stress and the tangent for ∇u (n, 2, 2) since the commit.
@@ -299,6 +311,8 @@ class DEMMaterial(ScikitFemInterface):
         pressure."""
         if self.preparation is not None:
             return -0.5 * np.trace(self.preparation.prepared, axis1=1, axis2=2)
+        if self._restored_pressure is not None:
+            return self._restored_pressure
         return self.confining
 
     def _check_confinement(self, response: MaterialResponse) -> MaterialResponse:
@@ -363,21 +377,61 @@ class DEMMaterial(ScikitFemInterface):
 
     def checkpoint(self, path: str | Path) -> None:
         """Write the committed RVE states (an RVE file, B = n_points) to ``path``, with the
-        committed total ∇u; with the ``mpi`` backend rank 0 gathers the shards and writes
-        the one file, which either backend, on any number of ranks, restores."""
+        committed total ∇u and what unconfined and failed points are answered by (the
+        initial tangent, the initial pressures, the committed response); with the ``mpi``
+        backend rank 0 gathers the shards and writes the one file, which either backend, on
+        any number of ranks, restores."""
         data = self._allocated().checkpoint_data()
-        extra = {**data.extra, _GRAD_KEY: self.committed_grad_u}
+        extra = {**data.extra, _GRAD_KEY: self.committed_grad_u, **self._answers()}
         # a run's own state, checked whole when a resume reads it: written fast
         save_rve(path, replace(data, extra=extra), compress=False, validate=False)
 
+    def _answers(self) -> dict[str, np.ndarray]:
+        """The checkpoint's arrays of what unconfined and failed points are answered by (see
+        ``_FLOOR_KEY``): without them a resumed run floors its unconfined points by the
+        tangent of its first evaluation after the resume, and answers failed points by a
+        measured response, so that it is another run."""
+        floor = self._initial_tangent
+        answers = {_FLOOR_KEY: np.zeros(0) if floor is None else floor}
+        if self.preparation is not None:
+            answers[_PRESSURE_KEY] = np.asarray(self._initial_pressure(), dtype=np.float64)
+        committed = self._committed_response
+        if committed is not None:
+            answers[_COMMITTED_PREFIX + "stress"] = committed.stress
+            answers[_COMMITTED_PREFIX + "tangent"] = committed.tangent
+            for name, values in committed.fields.items():
+                answers[f"{_COMMITTED_PREFIX}field_{name}"] = np.asarray(values)
+        return answers
+
     def restore(self, path: str | Path) -> None:
         """Load the committed state written by :meth:`checkpoint` (RVE states with contact
-        history, what reuse and ``continue`` carry between steps, the committed total ∇u);
-        ValueError naming the material for another material's checkpoint."""
+        history, what reuse and ``continue`` carry between steps, the committed total ∇u,
+        what unconfined and failed points are answered by); ValueError naming the material
+        for another material's checkpoint, and for one written before the material kept its
+        initial tangent (the floor of unconfined points: the committed RVEs no longer hold
+        it, and another floor gives another run)."""
         with checkpoint_archive(path, "dem", ()):
             pass  # another material's checkpoint is refused by its name
         data = load_rve(path)
+        if _FLOOR_KEY not in data.extra:
+            raise ValueError(f"{path} was written before the DEM material kept its initial "
+                             "tangent (the floor of the points that lose their confinement) "
+                             "in its checkpoint: resumed, it would give another run than "
+                             "the one that was stopped; start the run afresh")
         self.backend = self._backend(data, resume=True)
         self._reset_state(self.backend.n_rve)
-        if _GRAD_KEY in data.extra:
-            self._committed_grad = np.array(data.extra[_GRAD_KEY], dtype=np.float64)
+        extra = data.extra
+        if _GRAD_KEY in extra:
+            self._committed_grad = np.array(extra[_GRAD_KEY], dtype=np.float64)
+        floor = np.array(extra[_FLOOR_KEY], dtype=np.float64)
+        self._initial_tangent = floor if floor.size else None
+        if _PRESSURE_KEY in extra:
+            self._restored_pressure = np.array(extra[_PRESSURE_KEY], dtype=np.float64)
+        if _COMMITTED_PREFIX + "stress" in extra:
+            fields = {k.removeprefix(_COMMITTED_PREFIX + "field_"): np.array(v)
+                      for k, v in extra.items() if k.startswith(_COMMITTED_PREFIX + "field_")}
+            stress = np.array(extra[_COMMITTED_PREFIX + "stress"], dtype=np.float64)
+            self._committed_response = MaterialResponse(
+                stress=stress,
+                tangent=np.array(extra[_COMMITTED_PREFIX + "tangent"], dtype=np.float64),
+                status=np.zeros(len(stress), dtype=np.int8), fields=fields)
