@@ -1,5 +1,6 @@
 """Helpers shared by the FEM tests: test materials' committed strain, a unit element loaded
-on top, a stop at a load step, tables without their clock times."""
+on top, a stop at a load step, tables without their clock times, the scene text of a block
+pressed on top."""
 
 from __future__ import annotations
 
@@ -8,6 +9,27 @@ import pandas as pd
 from skfem import Basis, ElementQuad1, ElementVector, FacetBasis, LinearForm, MeshQuad
 
 from granular_material.fem import Loading
+
+#: a boundary-value scene's block held at its boundary ``{base}`` and pressed 1 mm on top,
+#: linear-elastic at a uniform 20 kPa: its [[conditions]], [initial] and [material] (format
+#: ``base``)
+PRESSED_BLOCK = """[[conditions]]
+type = "fixed"
+boundary = "{base}"
+[[conditions]]
+type = "displacement"
+boundary = "top"
+component = "y"
+value = -0.001
+[initial]
+state = "uniform"
+pressure = 20e3
+[material]
+name = "linear-elastic"
+[material.parameters]
+young = 60e6
+poisson = 0.3
+"""
 
 #: columns that hold clock times, which differ between equal runs
 CLOCK = ("wall_time", "seconds", "timings")

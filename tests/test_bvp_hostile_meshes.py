@@ -10,6 +10,7 @@ import meshio
 import numpy as np
 import pytest
 import tomllib
+from run_helpers import PRESSED_BLOCK
 
 from granular_material.cli import main
 from granular_material.errors import ParameterError
@@ -25,17 +26,8 @@ steps = 2
 [boundaries]
 {boundaries}
 {conditions}
-[initial]
-state = "uniform"
-pressure = 20e3
-[material]
-name = "linear-elastic"
-[material.parameters]
-young = 60e6
-poisson = 0.3
 """
-BLOCK = ('[[conditions]]\ntype = "fixed"\nboundary = "base"\n[[conditions]]\n'
-         'type = "displacement"\nboundary = "top"\ncomponent = "y"\nvalue = -0.001\n')
+BLOCK = PRESSED_BLOCK.format(base="base")
 
 
 def _blocks(path: Path, offsets=(0.0,), kind: str = "quad", twice: tuple[int, ...] = (),

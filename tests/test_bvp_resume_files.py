@@ -14,6 +14,7 @@ import numpy as np
 import pandas as pd
 import pytest
 import tomllib
+from run_helpers import PRESSED_BLOCK
 from test_bvp_resume import _stop_at
 
 from granular_material.cli import main
@@ -30,23 +31,7 @@ file = "block.msh"
 [boundaries]
 base = "y = bottom"
 top = "y = top"
-[[conditions]]
-type = "fixed"
-boundary = "base"
-[[conditions]]
-type = "displacement"
-boundary = "top"
-component = "y"
-value = -0.001
-[initial]
-state = "uniform"
-pressure = 20e3
-[material]
-name = "linear-elastic"
-[material.parameters]
-young = 60e6
-poisson = 0.3
-"""
+""" + PRESSED_BLOCK.format(base="base")
 
 
 def _block(path: Path, shift: float = 0.0) -> Path:

@@ -13,6 +13,7 @@ import time
 
 import pandas as pd
 import pytest
+from run_helpers import PRESSED_BLOCK
 
 from granular_material.cli import main
 from granular_material.cli.signals import Terminated
@@ -23,23 +24,7 @@ steps = {steps}
 [mesh]
 size = [0.4, 0.2]
 elements = [{nx}, 2]
-[[conditions]]
-type = "fixed"
-boundary = "bottom"
-[[conditions]]
-type = "displacement"
-boundary = "top"
-component = "y"
-value = -0.001
-[initial]
-state = "uniform"
-pressure = 20e3
-[material]
-name = "linear-elastic"
-[material.parameters]
-young = 60e6
-poisson = 0.3
-"""
+""" + PRESSED_BLOCK.format(base="bottom").replace("{", "{{").replace("}", "}}")
 SIGNALS = {"SIGINT": 130, "SIGTERM": 143, "SIGHUP": 129}
 
 
