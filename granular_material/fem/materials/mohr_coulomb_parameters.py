@@ -110,13 +110,13 @@ class MohrCoulombRunParameters:
     ``psi``, ``phi_cs`` are still read, with a
     :class:`~granular_material.vocabulary.RenamedWarning`."""
 
-    young: float = 60.0e6
-    poisson: float = 0.3
-    friction_angle: float = 30.0
-    dilation_angle: float = 0.0
-    cohesion: float = 0.0
-    critical_friction_angle: float | None = None
-    softening_strain: float = 0.0
+    young: float = MohrCoulombParameters.young
+    poisson: float = MohrCoulombParameters.poisson
+    friction_angle: float = MohrCoulombParameters.friction_angle
+    dilation_angle: float = MohrCoulombParameters.dilation_angle
+    cohesion: float = MohrCoulombParameters.cohesion
+    critical_friction_angle: float | None = MohrCoulombParameters.critical_friction_angle
+    softening_strain: float = MohrCoulombParameters.softening_strain
 
     def __post_init__(self) -> None:
         try:  # the material's own checks

@@ -21,6 +21,7 @@ from typing import Any
 
 from granular_material.runs.dem.spec import DEM_TESTS, SPECS, DemSpec
 from granular_material.runs.serial import (
+    _plain,
     _section,
     _toml_value,
     read_spec_file,
@@ -42,14 +43,6 @@ def is_dem(data: Any) -> bool:
         problem = data.get("problem")
         return isinstance(problem, Mapping) and problem.get("test") in DEM_TESTS
     return isinstance(data, tuple(SPECS.values()))
-
-
-def _plain(value: Any) -> Any:
-    if isinstance(value, Path):
-        return str(value)
-    if isinstance(value, tuple):
-        return [_plain(v) for v in value]
-    return value
 
 
 #: the sections of a DEM spec's nested form but ``problem``, and their fields
