@@ -179,14 +179,15 @@ CHANGED = {
     "material": {"name": "mohr-coulomb", "parameters": {"young": 70e6, "poisson": 0.3}},
     "output": {"out": "elsewhere", "device": "cpu", "shards": 2, "progress": True,
                "fields": False},
+    "regularisation": {"model": "second-gradient", "internal_length": 0.01},
 }
 TABLES = ("mesh", "boundaries", "conditions", "gravity", "initial", "material", "newton",
-          "output")
+          "output", "regularisation")
 
 
 def test_the_walk_reaches_every_key_of_every_table():
     assert set(CHANGED[""]) | set(TABLES) == SCENE_KEYS[""]
-    for table in ("mesh", "gravity", "material", "output"):
+    for table in ("mesh", "gravity", "material", "output", "regularisation"):
         assert set(CHANGED[table]) == SCENE_KEYS[table], table
 
 

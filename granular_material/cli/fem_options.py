@@ -28,16 +28,24 @@ from granular_material.cli.parsers import CommandParser
 from granular_material.fem import available_postprocessors, load_material
 from granular_material.fem.boundary_value.biaxial import PLATENS
 from granular_material.fem.kinematics import FORMULATIONS
+from granular_material.fem.regularisation import REGULARISATIONS
 from granular_material.fem.solver.newton import PREDICTORS, RELAXATIONS, TANGENT_UPDATES
 from granular_material.runs import OutputSpec
 from granular_material.runs.presets import PRESET_NAMES
-from granular_material.runs.spec import BACKENDS, SCALES, NewtonSpec, ProblemSpec
+from granular_material.runs.spec import (
+    BACKENDS,
+    SCALES,
+    NewtonSpec,
+    ProblemSpec,
+    RegularisationSpec,
+)
 
 __all__ = ["DEFAULT_MATERIAL", "DEFAULT_PARTICLES", "TANGENTS", "add_fem_commands"]
 
 #: the defaults the options show: those of the run specification's fields
 _NEWTON = NewtonSpec()
 _OUTPUT = OutputSpec()
+_REGULARISATION = RegularisationSpec()
 _PROBLEM = {f: ProblemSpec.__dataclass_fields__[f].default
             for f in ("axial_strain", "confining", "steps")}
 #: the material the FEM commands run by default, and its parameters' defaults
@@ -45,6 +53,23 @@ DEFAULT_MATERIAL = "dem"
 _DEM = load_material(DEFAULT_MATERIAL).Parameters()
 TANGENTS = _DEM.tangents
 DEFAULT_PARTICLES = _DEM.default_particles
+
+
+def regularisation_arguments(parser: argparse.ArgumentParser) -> None:
+    """The FEM's regularisation: ``--regularisation`` and ``--internal-length`` (the spec's
+    [regularisation] table, fields ``model`` and ``internal_length``)."""
+    g = parser.add_argument_group("regularisation (past the peak)")
+    g.add_argument("--regularisation", dest="model", choices=REGULARISATIONS,
+                   default=_REGULARISATION.model,
+                   help="none (default): the classical medium, whose softening localises in "
+                        "one row of elements; second-gradient: Chambon's local second "
+                        "gradient, a band whose width follows --internal-length, not the "
+                        "mesh (quad8, quad9 or tri6 elements)")
+    g.add_argument("--internal-length", type=float, default=_REGULARISATION.internal_length,
+                   metavar="L",
+                   help="the second gradient's internal length [m]: its modulus is "
+                        "D = G0 (L/10)^2 with G0 the material's initial shear modulus; the band is "
+                        "a few L wide")
 
 
 def _newton_arguments(parser: argparse.ArgumentParser) -> None:
@@ -244,6 +269,7 @@ def add_fem_commands(subparsers: argparse._SubParsersAction) -> dict[str, Comman
     p.add_argument("--compare-dem", action="store_true",
                    help="dem: also run the pure-DEM drained biaxial of the same RVE")
     _common_arguments(p)
+    regularisation_arguments(p)
     _newton_arguments(p)
     _dem_arguments(p)
     _rve_material_arguments(p)
@@ -276,6 +302,7 @@ def add_fem_commands(subparsers: argparse._SubParsersAction) -> dict[str, Comman
                    help="smooth: platen nodes slide freely, one bottom node pinned (default); "
                         "rough: no platen node moves sideways")
     _common_arguments(b)
+    regularisation_arguments(b)
     _newton_arguments(b)
     _dem_arguments(b)
     _rve_material_arguments(b)

@@ -81,6 +81,17 @@ HELP_TEXTS = {
                 '                        `granular-material calibrate` writes); options given\n'
                 '                        beside it win\n'
                 '\n'
+                'regularisation (past the peak):\n'
+                '  --regularisation {none,second-gradient}\n'
+                '                        none (default): the classical medium, whose softening\n'
+                '                        localises in one row of elements; second-gradient:\n'
+                "                        Chambon's local second gradient, a band whose width\n"
+                '                        follows --internal-length, not the mesh (quad8, quad9\n'
+                '                        or tri6 elements)\n'
+                "  --internal-length L   the second gradient's internal length [m]: its modulus\n"
+                "                        is D = G0 (L/10)^2 with G0 the material's initial\n"
+                '                        shear modulus; the band is a few L wide\n'
+                '\n'
                 'more options, shown by --help-all:\n'
                 '  finite elements (2)\n'
                 '  where the RVEs run, maps and checkpoints (5)\n'
@@ -112,7 +123,9 @@ HELP_TEXTS = {
                 '                                 [--backend {inprocess,mpi}]\n'
                 '                                 [--map-strain MAP_STRAIN [MAP_STRAIN ...]]\n'
                 '                                 [--checkpoint-every N]\n'
-                '                                 [--checkpoint-minutes M] [--rtol RTOL]\n'
+                '                                 [--checkpoint-minutes M]\n'
+                '                                 [--regularisation {none,second-gradient}]\n'
+                '                                 [--internal-length L] [--rtol RTOL]\n'
                 '                                 [--stress-tol STRESS_TOL]\n'
                 '                                 [--stall-rtol STALL_RTOL]\n'
                 '                                 [--stall-window STALL_WINDOW]\n'
@@ -258,6 +271,17 @@ HELP_TEXTS = {
                 '  --checkpoint-minutes M\n'
                 '                        without --checkpoint-every: the longest time between\n'
                 '                        two saves of the committed state (default 10 min)\n'
+                '\n'
+                'regularisation (past the peak):\n'
+                '  --regularisation {none,second-gradient}\n'
+                '                        none (default): the classical medium, whose softening\n'
+                '                        localises in one row of elements; second-gradient:\n'
+                "                        Chambon's local second gradient, a band whose width\n"
+                '                        follows --internal-length, not the mesh (quad8, quad9\n'
+                '                        or tri6 elements)\n'
+                "  --internal-length L   the second gradient's internal length [m]: its modulus\n"
+                "                        is D = G0 (L/10)^2 with G0 the material's initial\n"
+                '                        shear modulus; the band is a few L wide\n'
                 '\n'
                 'Newton solver:\n'
                 '  --rtol RTOL           relative tolerance of the --convergence test:\n'
@@ -914,6 +938,17 @@ HELP_TEXTS = {
                 '                        `granular-material calibrate` writes); options given\n'
                 '                        beside it win\n'
                 '\n'
+                'regularisation (past the peak):\n'
+                '  --regularisation {none,second-gradient}\n'
+                '                        none (default): the classical medium, whose softening\n'
+                '                        localises in one row of elements; second-gradient:\n'
+                "                        Chambon's local second gradient, a band whose width\n"
+                '                        follows --internal-length, not the mesh (quad8, quad9\n'
+                '                        or tri6 elements)\n'
+                "  --internal-length L   the second gradient's internal length [m]: its modulus\n"
+                "                        is D = G0 (L/10)^2 with G0 the material's initial\n"
+                '                        shear modulus; the band is a few L wide\n'
+                '\n'
                 'more options, shown by --help-all:\n'
                 '  finite elements (2)\n'
                 '  where the RVEs run, maps and checkpoints (5)\n'
@@ -945,7 +980,9 @@ HELP_TEXTS = {
                 '                                        [--backend {inprocess,mpi}]\n'
                 '                                        [--map-strain MAP_STRAIN [MAP_STRAIN ...]]\n'
                 '                                        [--checkpoint-every N]\n'
-                '                                        [--checkpoint-minutes M] [--rtol RTOL]\n'
+                '                                        [--checkpoint-minutes M]\n'
+                '                                        [--regularisation {none,second-gradient}]\n'
+                '                                        [--internal-length L] [--rtol RTOL]\n'
                 '                                        [--stress-tol STRESS_TOL]\n'
                 '                                        [--stall-rtol STALL_RTOL]\n'
                 '                                        [--stall-window STALL_WINDOW]\n'
@@ -1088,6 +1125,17 @@ HELP_TEXTS = {
                 '  --checkpoint-minutes M\n'
                 '                        without --checkpoint-every: the longest time between\n'
                 '                        two saves of the committed state (default 10 min)\n'
+                '\n'
+                'regularisation (past the peak):\n'
+                '  --regularisation {none,second-gradient}\n'
+                '                        none (default): the classical medium, whose softening\n'
+                '                        localises in one row of elements; second-gradient:\n'
+                "                        Chambon's local second gradient, a band whose width\n"
+                '                        follows --internal-length, not the mesh (quad8, quad9\n'
+                '                        or tri6 elements)\n'
+                "  --internal-length L   the second gradient's internal length [m]: its modulus\n"
+                "                        is D = G0 (L/10)^2 with G0 the material's initial\n"
+                '                        shear modulus; the band is a few L wide\n'
                 '\n'
                 'Newton solver:\n'
                 '  --rtol RTOL           relative tolerance of the --convergence test:\n'

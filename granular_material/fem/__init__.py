@@ -52,6 +52,12 @@ from granular_material.fem.materials.protocol import (
     create_material,
     load_material,
 )
+from granular_material.fem.regularisation import (
+    REGULARISATIONS,
+    Regularisation,
+    SecondGradient,
+    add_second_gradient,
+)
 from granular_material.fem.solver.defaults import (
     default_settings,
     default_stress_tol,
@@ -71,6 +77,7 @@ from granular_material.fem.tracking import (
 
 __all__ = [
     "MEASURES",
+    "REGULARISATIONS",
     "BiaxialProblem",
     "BiaxialSetup",
     "BoundaryDofs",
@@ -96,12 +103,15 @@ __all__ = [
     "Pressure",
     "Problem",
     "QuadratureResponse",
+    "Regularisation",
     "RigidBody",
     "Roller",
     "RunContext",
     "ScikitFemInterface",
+    "SecondGradient",
     "StepRecord",
     "Tracking",
+    "add_second_gradient",
     "available_materials",
     "available_postprocessors",
     "boundary_dofs",

@@ -297,6 +297,9 @@ def state_arrays(step: int, material: str, state: CommittedState,
         "response.fields": dumps(sorted(response.fields)),
         **{f"response.field.{k}": np.asarray(v) for k, v in response.fields.items()},
         "manifest": dumps(manifest),
+        **({} if state.second_gradient is None else {
+            "second_gradient": state.second_gradient,
+            "second_gradient_modulus": np.array(state.second_gradient_modulus)}),
     }
 
 
@@ -341,9 +344,17 @@ def read_state(path: Path) -> tuple[int, str, CommittedState, dict[str, Any] | N
         if not (math.isfinite(float(npz["load_factor"]))
                 and math.isfinite(float(npz["run_start"]))):
             raise CheckpointError(f"{path}: its load factor is not a number")
+        second_gradient = (np.array(npz["second_gradient"], dtype=np.float64)
+                           if "second_gradient" in npz else None)
+        modulus = (float(npz["second_gradient_modulus"])
+                   if "second_gradient_modulus" in npz else None)
+        if (second_gradient is None) != (modulus is None) or (
+                modulus is not None and not (math.isfinite(modulus) and modulus > 0)):
+            raise CheckpointError(f"{path}: its second-gradient state is damaged")
         state = CommittedState(
             u=u, load_factor=float(npz["load_factor"]),
             run_start=float(npz["run_start"]), last_increment=last,
             records=[_record(path, r) for r in records], response=response,
+            second_gradient=second_gradient, second_gradient_modulus=modulus,
         )
     return step, material, state, manifest

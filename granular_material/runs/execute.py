@@ -309,7 +309,8 @@ def _execute(plan: RunPlan, material: Material, observer: RunObserver | None,
                              observer=_Fanout(observers) if observers else None,
                              stress_tol=spec.newton.stress_tolerance(
                                  noisy, spec.problem.confining),
-                             tracking=plan.tracking, checkpoint=checkpoint, resume=resuming)
+                             tracking=plan.tracking, checkpoint=checkpoint, resume=resuming,
+                             regularisation=spec.regularisation.regularisation())
     summary = run_summary(result, time.perf_counter() - t0)
     summary["resumed_from_step"] = result.resumed_from
     summary["preset"] = spec.preset

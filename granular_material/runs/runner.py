@@ -22,6 +22,7 @@ from granular_material.fem import (
     NewtonError,
     NewtonSettings,
     NewtonSolver,
+    Regularisation,
     StepRecord,
     Tracking,
     build_biaxial,
@@ -204,6 +205,7 @@ def run_biaxial(
     resume: bool = False,
     progress: bool = False,
     on_step: Callable[[NewtonSolver, StepRecord, pd.DataFrame], None] | None = None,
+    regularisation: Regularisation | None = None,
 ) -> BiaxialResult:
     """Drive ``material`` through a drained biaxial test in ``n_steps`` load steps.
 
@@ -217,6 +219,8 @@ def run_biaxial(
     sees every committed step as it comes and the result at the end, in both cases.
     ``on_step(solver, record, points)`` is called after every committed load step.
     ``tracking`` runs post-processors on chosen points' committed RVEs (``result.tracked``).
+    ``regularisation`` (:class:`~granular_material.fem.regularisation.Regularisation`) adds
+    the second gradient's terms; None or model "none": the classical medium.
 
     ``checkpoint`` saves every committed step and, when it says a save is due (every
     ``checkpoint.every`` steps, or by elapsed time), the committed state of solver and
@@ -238,7 +242,8 @@ def run_biaxial(
     if resume and checkpoint is not None and checkpoint.has_state():
         saved = checkpoint.load()
         material.restore(saved.material_path)
-    solver = NewtonSolver(problem.basis, material, problem.loading, settings)
+    solver = NewtonSolver(problem.basis, material, problem.loading, settings,
+                          regularisation)
     if saved is not None:
         solver.resume(saved.state)
     steps = _Collector(problem, material, n_steps, observer, tracking, checkpoint, on_step)

@@ -28,6 +28,7 @@ from granular_material.runs.spec import (
     NewtonSpec,
     OutputSpec,
     ProblemSpec,
+    RegularisationSpec,
     RunSpec,
     SpecError,
 )
@@ -43,7 +44,7 @@ __all__ = ["SECTIONS", "from_dict", "from_flat", "load", "save", "to_dict", "to_
 
 #: the sections of a spec and their types
 SECTIONS: dict[str, type] = {"problem": ProblemSpec, "newton": NewtonSpec,
-                             "output": OutputSpec}
+                             "output": OutputSpec, "regularisation": RegularisationSpec}
 #: the spec's own fields (beside its sections)
 _RUN_FIELDS = ("device", "shards", "backend", "preset")
 

@@ -39,6 +39,7 @@ from granular_material.runs.spec_sections import (
     NewtonSpec,
     OutputSpec,
     ProblemSpec,
+    RegularisationSpec,
     _at_least,
     _one_of,
     _typed,
@@ -47,7 +48,7 @@ from granular_material.runs.spec_sections import (
 __all__ = ["BACKENDS", "FULL_SCALE", "MAX_CUTBACKS", "MAX_ITERATIONS", "MAX_MAP_STRAINS",
            "MAX_TRACKED_ROWS", "REDUCED_SCALE",
            "SCALES", "TESTS", "MaterialSpec", "NewtonSpec", "OutputSpec", "ProblemSpec",
-           "RunSpec", "SpecError"]
+           "RegularisationSpec", "RunSpec", "SpecError"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -59,6 +60,7 @@ class RunSpec:
         material: the material at the Gauss points.
         newton: the Newton solver.
         output: what is written.
+        regularisation: the FEM's regularisation (none: the classical medium).
         device: the DEM device, "cpu", "cuda" or "cuda:N"; None: CUDA where present.
         shards: CPU threads (shards) of a DEM batch; None: one per core.
         backend: "inprocess" or "mpi" (a material's points in shards on an MPI job's ranks).
@@ -70,6 +72,7 @@ class RunSpec:
     material: MaterialSpec
     newton: NewtonSpec = field(default_factory=NewtonSpec)
     output: OutputSpec = field(default_factory=OutputSpec)
+    regularisation: RegularisationSpec = field(default_factory=RegularisationSpec)
     device: str | None = None
     shards: int | None = None
     backend: str = "inprocess"
@@ -77,7 +80,8 @@ class RunSpec:
 
     def __post_init__(self) -> None:
         for name, kind in (("problem", ProblemSpec), ("material", MaterialSpec),
-                           ("newton", NewtonSpec), ("output", OutputSpec)):
+                           ("newton", NewtonSpec), ("output", OutputSpec),
+                           ("regularisation", RegularisationSpec)):
             if not isinstance(getattr(self, name), kind):
                 raise SpecError(name, f"must be a {kind.__name__}, got "
                                       f"{type(getattr(self, name)).__name__}")
@@ -89,6 +93,7 @@ class RunSpec:
 
             _one_of("preset", self.preset, PRESET_NAMES)
         _one_of("backend", self.backend, BACKENDS)
+        self.regularisation.check_element(self.problem.element)
         if self.shards is not None:
             _at_least("shards", self.shards, 1)
         if self.backend != "inprocess" and not hasattr(self.material.cls, "launch"):

@@ -13,6 +13,7 @@ from typing import Any
 
 from granular_material.errors import ParameterError
 from granular_material.fem.boundary_value.biaxial import BiaxialSetup
+from granular_material.fem.regularisation import SECOND_GRADIENT_ELEMENTS, Regularisation
 from granular_material.fem.solver.defaults import COMMAND_DEFAULTS
 from granular_material.fem.solver.newton import NewtonSettings
 from granular_material.procedures.element_tests import DEFAULT_AXIAL_STRAIN
@@ -29,7 +30,7 @@ from granular_material.runs.spec_checks import (
 from granular_material.vocabulary import renamed
 
 __all__ = ["BACKENDS", "FULL_SCALE", "REDUCED_SCALE", "SCALES", "TESTS", "MaterialSpec",
-           "NewtonSpec", "OutputSpec", "ProblemSpec"]
+           "NewtonSpec", "OutputSpec", "ProblemSpec", "RegularisationSpec"]
 
 #: the tests a run specification describes: one element, or the biaxial specimen
 TESTS = ("single-element", "biaxial")
@@ -298,6 +299,41 @@ class MaterialSpec:
         if is_dataclass(self.parameters):
             return {f.name: getattr(self.parameters, f.name) for f in fields(self.parameters)}
         return dict(self.parameters)
+
+
+@dataclass(frozen=True, kw_only=True)
+class RegularisationSpec:
+    """The regularisation of the FEM problem (:mod:`granular_material.fem.regularisation`):
+    a scene's ``[regularisation]`` table.
+
+    Attributes:
+        model: "none" (the classical medium, default) or "second-gradient" (Chambon's
+            local second gradient; quad8, quad9 or tri6 elements).
+        internal_length: ℓ [m] of the second gradient (its modulus D = G₀ (ℓ/10)²), > 0 with
+            "second-gradient", 0 without.
+    """
+
+    model: str = "none"
+    internal_length: float = 0.0
+
+    def __post_init__(self) -> None:
+        _typed(self)
+        self.regularisation()
+
+    def regularisation(self) -> Regularisation:
+        """The FEM's :class:`~granular_material.fem.regularisation.Regularisation`; a value
+        it refuses is a SpecError naming the field."""
+        try:
+            return Regularisation(self.model, self.internal_length)
+        except ParameterError as exc:
+            field = "model" if exc.field == "regularisation" else exc.field
+            raise SpecError(field, exc.message) from None
+
+    def check_element(self, element: str) -> None:
+        """SpecError when the run's ``element`` cannot carry the regularisation."""
+        if self.model == "second-gradient" and element not in SECOND_GRADIENT_ELEMENTS:
+            raise SpecError("model", f"the second gradient needs quadratic elements "
+                                     f"({', '.join(SECOND_GRADIENT_ELEMENTS)}), not {element}")
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -31,6 +31,13 @@ from granular_material.fem.boundary_value.loading import Loading
 from granular_material.fem.forms import gauss_points_grad, internal_force, stiffness
 from granular_material.fem.kinematics import Kinematics
 from granular_material.fem.materials.protocol import Material, MaterialResponse
+from granular_material.fem.regularisation import (
+    Regularisation,
+    SecondGradient,
+    check_element,
+    initial_shear_modulus,
+    second_gradient_modulus,
+)
 from granular_material.fem.solver.acceleration import AitkenRelaxation, SecantTangent
 from granular_material.fem.solver.convergence import RULES, IterationState, Outcome, Verdict, judge
 from granular_material.fem.solver.records import CommittedState, NewtonError, StepRecord
@@ -91,6 +98,7 @@ class NewtonSolver:
         material: Material,
         loading: Loading,
         settings: NewtonSettings | None = None,
+        regularisation: Regularisation | None = None,
     ) -> None:
         self.basis = basis
         self.material = material
@@ -122,6 +130,40 @@ class NewtonSolver:
         self._response: MaterialResponse | None = None
         self._f_int: np.ndarray | None = None
         self._mass_matrix = None
+        # the second gradient (fem.regularisation): its terms, made when first needed (their
+        # modulus comes from the initial tangent), and its committed unknowns v and λ
+        self.regularisation = regularisation or Regularisation()
+        self._second_gradient: SecondGradient | None = None
+        self._modulus: float | None = None
+        self.extra = np.zeros(0)
+        if self.regularisation.active:
+            check_element(basis)  # linear elements are refused before any evaluation
+
+    @property
+    def second_gradient(self) -> SecondGradient | None:
+        """The second-gradient terms of a regularised run (None otherwise); their modulus
+        D = G₀ (ℓ/10)² [N] is set from the committed tangent when they are first asked for."""
+        if not self.regularisation.active:
+            return None
+        if self._second_gradient is None:
+            if self._modulus is None:
+                self._modulus = second_gradient_modulus(
+                    initial_shear_modulus(self.response.tangent),
+                    self.regularisation.internal_length)
+            self._second_gradient = SecondGradient(self.basis, self._modulus)
+            if self.extra.size != self._second_gradient.n_extra:
+                self.extra = np.zeros(self._second_gradient.n_extra)
+        return self._second_gradient
+
+    def _with_second_gradient(self, f_int: np.ndarray, u: np.ndarray,
+                              extra: np.ndarray) -> np.ndarray:
+        """``f_int`` [N/m] of the displacement's rows, with the second gradient's rows
+        appended and its −∫ λ : ∇u* added (unchanged for a run without it)."""
+        sg = self.second_gradient
+        if sg is None:
+            return f_int
+        terms = sg.residual(u, extra)
+        return np.concatenate([f_int + terms[: f_int.size], terms[f_int.size:]])
 
     def _initial(self) -> None:
         """The material's stress and tangent in its committed state (∇u = 0), asked of it
@@ -135,7 +177,7 @@ class NewtonSolver:
                 f"material fails in its initial state at points {response.failed_points()}"
             )
         self._response = response
-        self._f_int = internal_force(self.basis, response.stress)
+        self._f_int = internal_force(self.basis, response.stress)  # (v and λ are 0 here)
 
     @property
     def response(self) -> MaterialResponse:
@@ -171,13 +213,17 @@ class NewtonSolver:
             order = max(int(getattr(self.basis.elem, "maxdeg", 2)), 1)
             exact = Basis(self.basis.mesh, self.basis.elem, intorder=2 * order)
             self._mass_matrix = _mass.assemble(exact)
+        v = v[: self.basis.N]  # a regularised run's increments carry v and λ after u
         return math.sqrt(max(float(v @ (self._mass_matrix @ v)), 0.0))
 
     def committed_state(self) -> CommittedState:
         """The solver's committed state (copies), to checkpoint a run."""
         last = None if self._last is None else (self._last[0], self._last[1].copy())
+        sg = self.second_gradient
         return CommittedState(self.u.copy(), self.load_factor, self._run_start, last,
-                              list(self.records), self.response)
+                              list(self.records), self.response,
+                              None if sg is None else self.extra.copy(),
+                              None if sg is None else sg.modulus)
 
     def resume(self, state: CommittedState) -> None:
         """Continue from ``state`` (from :meth:`committed_state`, perhaps of another process):
@@ -197,6 +243,21 @@ class NewtonSolver:
         self._grad_committed = gauss_points_grad(self.basis, self.u)
         self.f_int = internal_force(self.basis, self.kinematics.assembled_stress(
             self.response.stress, self._grad_committed))
+        saved = state.second_gradient is not None
+        if saved != self.regularisation.active:
+            raise ValueError("the saved state was " + ("" if saved else "not ")
+                             + "regularised by the second gradient, this run is "
+                             + ("not" if saved else "so"))
+        if saved:
+            self._modulus = float(state.second_gradient_modulus)
+            self._second_gradient = None
+            sg = self.second_gradient
+            if state.second_gradient.shape != (sg.n_extra,):
+                raise ValueError(f"the saved second-gradient unknowns have shape "
+                                 f"{state.second_gradient.shape}, this mesh ({sg.n_extra},)")
+            self.extra = np.array(state.second_gradient, dtype=np.float64)
+            self.f_int = self._with_second_gradient(self.f_int, self.u, self.extra)[
+                : self.basis.N]
 
     @property
     def reaction(self) -> np.ndarray:
@@ -236,15 +297,23 @@ class NewtonSolver:
         s, D, kin = self.settings, self.loading.dirichlet_dofs, self.kinematics
         grad_n = self._grad_committed
         response = self.response
+        sg, n = self.second_gradient, self.basis.N
         with times.phase("assembly"):
             u_d, f_ext = self._external(target, self.u)
-            du = np.zeros_like(self.u)
+            du = np.zeros(n + (0 if sg is None else sg.n_extra))
             du[D] = u_d - self.u[D]
             K = stiffness(self.basis, kin.assembled_tangent(response.tangent, response.stress,
                                                             grad_n, grad_n),
                           **self._assembly)
-            A, b, x, interior = condense(K, f_ext - self.f_int, x=du, D=D)
-        r0 = float(np.linalg.norm(b))
+            rhs = f_ext - self.f_int
+            if sg is not None:  # v and λ's rows (zero at a committed state, to round-off)
+                K = sg.augment(K)
+                rhs = np.concatenate([rhs, -sg.residual(self.u, self.extra)[n:]])
+            A, b, x, interior = condense(K, rhs, x=du, D=D)
+        # the residual's norm is that of the forces: the rows of v and λ are linear and
+        # hold exactly after every solve
+        r0 = float(np.linalg.norm(b if sg is None else b[interior < n]))
+        forces = interior if sg is None else interior[interior < n]
         with times.phase("linear_solve"):
             du = solve(A, b, x, interior)
         if s.predictor == "extrapolate" and self._last is not None:
@@ -258,7 +327,7 @@ class NewtonSolver:
         aitken = AitkenRelaxation() if s.relaxation == "aitken" else None
         tangent_of = self._tangents()
         for it in itertools.count(1):  # the rule ``spent`` ends it at max_iterations
-            grad_step = gauss_points_grad(self.basis, du)
+            grad_step = gauss_points_grad(self.basis, du[:n])
             grad_u = kin.material_gradient(grad_n, grad_step)
             with times.phase("material"):
                 response = self.material.evaluate(grad_u)
@@ -278,19 +347,26 @@ class NewtonSolver:
                 f_int = internal_force(self.basis, kin.assembled_stress(response.stress,
                                                                         grad_total))
                 if kin.finite:
-                    f_ext = self._external(target, self.u + du)[1]
-            residual = f_int - f_ext
-            r = float(np.linalg.norm(residual[interior]))
+                    f_ext = self._external(target, self.u + du[:n])[1]
+                if sg is not None:
+                    f_int = self._with_second_gradient(f_int, self.u + du[:n],
+                                                       self.extra + du[n:])
+            residual = f_int - (f_ext if sg is None else
+                                np.concatenate([f_ext, np.zeros(sg.n_extra)]))
+            r = float(np.linalg.norm(residual[forces]))
             history.append(r / r0 if r0 > 0 else r)
             state = IterationState(it, r0, r, tuple(history), tuple(corrections), predicted)
             verdict = judge(rules.evaluated, state, s)
             if verdict.outcome is not Outcome.GO_ON:
-                return _Attempt(verdict, du, response, f_int, history, corrections, it, cost)
+                return _Attempt(verdict, du, response, f_int[:n], history, corrections, it,
+                                cost)
             tangent = tangent_of(grad_u, response)
             with times.phase("assembly"):
                 K = stiffness(self.basis, kin.assembled_tangent(tangent, response.stress,
                                                                 grad_n, grad_total),
                               **self._assembly)
+                if sg is not None:
+                    K = sg.augment(K)
                 A, b, x, interior = condense(K, -residual, D=D)
             with times.phase("linear_solve"):
                 correction = solve(A, b, x, interior)
@@ -301,7 +377,8 @@ class NewtonSolver:
             state = replace(state, corrections=tuple(corrections), step_norm=step_norm)
             verdict = judge(rules.corrected, state, s)
             if verdict.outcome is not Outcome.GO_ON:
-                return _Attempt(verdict, du, response, f_int, history, corrections, it, cost)
+                return _Attempt(verdict, du, response, f_int[:n], history, corrections, it,
+                                cost)
             du = proposed
         raise AssertionError("unreachable: the rules end every increment")
 
@@ -328,7 +405,9 @@ class NewtonSolver:
             if attempt.verdict.accepted:
                 record.converged_by.append(attempt.verdict.by)
                 self.material.commit()
-                self.u = self.u + attempt.du
+                self.u = self.u + attempt.du[:self.basis.N]
+                if self._second_gradient is not None:
+                    self.extra = self.extra + attempt.du[self.basis.N:]
                 self._grad_committed = gauss_points_grad(self.basis, self.u)
                 self.response, self.f_int = attempt.response, attempt.f_int
                 self._last = (end - self.load_factor, attempt.du)

@@ -80,6 +80,10 @@ class CommittedState:
             None before the first.
         records: the committed steps' records.
         response: the material response of the committed state.
+        second_gradient: a run regularised by the second gradient
+            (:mod:`granular_material.fem.regularisation`): its unknowns v [-] and λ [Pa] of
+            the committed state, shape (extra,); None for a run without it.
+        second_gradient_modulus: its modulus D [N] (None without it).
     """
 
     u: np.ndarray
@@ -88,6 +92,8 @@ class CommittedState:
     last_increment: tuple[float, np.ndarray] | None
     records: list[StepRecord]
     response: MaterialResponse
+    second_gradient: np.ndarray | None = None
+    second_gradient_modulus: float | None = None
 
 
 class NewtonError(RuntimeError):

@@ -32,6 +32,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from granular_material.errors import ParameterError
 from granular_material.fem import NewtonError, NewtonSolver, PointStatus, StepRecord
 from granular_material.fem.boundary_value.boundaries import select_boundaries
 from granular_material.fem.boundary_value.conditions import (
@@ -274,7 +275,11 @@ def run_boundary_value(spec: BoundaryValueSpec, out: Path | None = None,
     if saved is not None:
         b.material.restore(saved.material_path)
     problem = b.problem
-    solver = NewtonSolver(problem.basis, b.material, problem.loading, b.settings)
+    try:
+        solver = NewtonSolver(problem.basis, b.material, problem.loading, b.settings,
+                              spec.regularisation.regularisation())
+    except ParameterError as exc:  # the mesh file's elements cannot carry the regularisation
+        raise SpecError(f"regularisation.{exc.field}", exc.message) from None
     if saved is not None:
         solver.resume(saved.state)
     p0 = np.maximum(-0.5 * np.trace(b.initial_stress, axis1=1, axis2=2), 1e-300)

@@ -49,6 +49,8 @@ into a :class:`BoundaryValueSpec` by :func:`bvp_from_dict` (every key checked, a
     phi = 30.0
 
     [newton]                        # NewtonSpec's fields
+    [regularisation]                # past a peak: model = "second-gradient" (quad8, quad9,
+    internal_length = 0.005         # tri6), ℓ [m]; default model = "none"
     [output]                        # out, device, shards, progress, fields
 """
 
@@ -61,7 +63,7 @@ from pathlib import Path
 from typing import Any
 
 from granular_material.multiscale.parameters import MAX_SHARDS
-from granular_material.runs.spec import MaterialSpec, NewtonSpec, SpecError
+from granular_material.runs.spec import MaterialSpec, NewtonSpec, RegularisationSpec, SpecError
 from granular_material.typed_fields import conform, conform_fields
 from granular_material.vocabulary import RenamedWarning, key_of, user_stacklevel
 
@@ -305,6 +307,8 @@ class BoundaryValueSpec:
         steps: load steps.
         material: the material (as in a run specification).
         newton: the Newton solver.
+        regularisation: the FEM's regularisation (``[regularisation]``: ``model``,
+            ``internal_length`` [m]; none by default).
         out: the run folder (None: nothing written).
         device: the DEM device ("cpu", "cuda", "cuda:N"; None: CUDA where present); shards:
             CPU shards; progress: progress bars.
@@ -322,6 +326,7 @@ class BoundaryValueSpec:
     steps: int = 10
     material: MaterialSpec = field(default_factory=lambda: MaterialSpec(name="linear-elastic"))
     newton: NewtonSpec = field(default_factory=NewtonSpec)
+    regularisation: RegularisationSpec = field(default_factory=RegularisationSpec)
     out: Path | None = None
     device: str | None = None
     shards: int | None = None
@@ -335,6 +340,9 @@ class BoundaryValueSpec:
         if self.shards is not None and not 1 <= self.shards <= MAX_SHARDS:
             raise SpecError("shards", f"must be an integer from 1 to {MAX_SHARDS} (a CPU "
                                       f"thread each), got {self.shards!r}")
+        if self.mesh.file is None:
+            _within("regularisation", lambda: self.regularisation.check_element(
+                self.mesh.element))
         if self.steps < 1:
             raise SpecError("steps", f"must be an integer >= 1, got {self.steps!r}")
         if not self.conditions:
@@ -365,7 +373,8 @@ class BoundaryValueSpec:
         """SpecError naming the first section that is not of its class (a table given where
         a spec object belongs: ``mesh={...}``), the conditions made a tuple."""
         for name, cls in (("mesh", MeshSpec), ("initial", InitialStateSpec),
-                          ("material", MaterialSpec), ("newton", NewtonSpec)):
+                          ("material", MaterialSpec), ("newton", NewtonSpec),
+                          ("regularisation", RegularisationSpec)):
             value = getattr(self, name)
             if not isinstance(value, cls):
                 raise SpecError(name, f"must be a {cls.__name__}, got "
@@ -397,7 +406,7 @@ class BoundaryValueSpec:
 #: the fields of BoundaryValueSpec that are sections, each checked by its own class (or,
 #: ``unit_weight``, a number or "rve")
 _SECTIONS = ("mesh", "boundaries", "conditions", "unit_weight", "gravity_factor", "initial",
-             "material", "newton")
+             "material", "newton", "regularisation")
 #: the sides every generated rectangle names
 _GENERATED_SIDES = frozenset({"left", "right", "bottom", "top"})
 
@@ -477,7 +486,8 @@ def _initial(table: dict[str, Any]) -> InitialStateSpec:
 #: NewtonSpec's fields, [material.parameters] the material's own, [boundaries] free names)
 SCENE_KEYS: dict[str, frozenset[str]] = {
     "": frozenset({"test", "steps", "name", "out", "mesh", "boundaries", "conditions",
-                   "gravity", "initial", "material", "newton", "output"}),
+                   "gravity", "initial", "material", "newton", "output",
+                   "regularisation"}),
     "mesh": frozenset({"file", "size", "elements", "element", "grading", "quadrature",
                        "align_x", "align_y"}),
     "conditions": frozenset({"type", "boundary", "component", "value", "end", "displacement",
@@ -485,6 +495,7 @@ SCENE_KEYS: dict[str, frozenset[str]] = {
     "gravity": frozenset({"unit_weight", "factor"}),
     "initial": frozenset({"state", "pressure", "k0", "surcharge", "surface"}),
     "material": frozenset({"name", "parameters"}),
+    "regularisation": frozenset({"model", "internal_length"}),
     "output": frozenset({"out", "device", "shards", "progress", "fields"}),
 }
 _SCENE_KEYS = SCENE_KEYS[""]
@@ -515,6 +526,8 @@ def bvp_from_dict(data: Mapping[str, Any], folder: Path | str = ".") -> Boundary
     material = _table("material", data.get("material"))
     _unknown("material", material, SCENE_KEYS["material"])
     newton = _table("newton", data.get("newton"))
+    regularisation = _table("regularisation", data.get("regularisation"))
+    _unknown("regularisation", regularisation, SCENE_KEYS["regularisation"])
     output = _table("output", data.get("output"))
     _unknown("output", output, _OUTPUT_KEYS)
     if "out" in output and "out" in data:
@@ -538,6 +551,8 @@ def bvp_from_dict(data: Mapping[str, Any], folder: Path | str = ".") -> Boundary
             unit_weight=gravity.get("unit_weight", 0.0),
             gravity_factor=gravity.get("factor"), steps=data.get("steps", 10),
             newton=newton_spec, out=output.get("out", data.get("out")),
+            regularisation=_within("regularisation",
+                                   lambda: RegularisationSpec(**regularisation)),
             device=output.get("device"), shards=output.get("shards"),
             progress=output.get("progress", False), fields=output.get("fields", True),
             name=data.get("name", "problem"))
