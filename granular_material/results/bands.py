@@ -23,15 +23,20 @@ shear_strain), in three passes:
    least 3 points and 0.3 of the median bin's count). The band's **width** is the full
    width at half maximum (FWHM) of that profile above the background: the distance between
    the two points, one on each side of the peak, where the profile falls to
-   γ_b + (γ_peak − γ_b)/2, each interpolated linearly between the bins around it (so the
-   width is not a multiple of the element size). The peak is the largest bin's mean,
-   refined by the parabola through the logarithm of the three bins' excess around it (exact
-   for a Gaussian profile, at most 20 % above the largest bin). A Gaussian band
+   γ_b + (γ_peak − γ_b)/2, each read between the bins around it (so the width is not a
+   multiple of the element size) on the parabola through the logarithm of the excess
+   γ − γ_b of those two bins and of the next one towards the peak h/2 or more from them
+   (exact for a Gaussian profile, where a straight line would widen a band sampled by two
+   or three points), or linearly where an excess there is not positive (a sharp-edged
+   band). The peak is the largest bin's mean, refined likewise by the parabola through the
+   logarithm of its excess and that of the nearest bins h/2 or more from it on each side
+   (at most 20 % above the largest bin). A Gaussian band
    γ_b + A exp(−d²/2s²) has a width of 2√(2 ln 2) s ≈ 2.3548 s.
 3. **Bands.** A line is a band when its profile peak is at least :data:`MIN_CONTRAST` times
    the background, the profile falls to half its peak on both sides inside the specimen,
-   and the band is at least :data:`MIN_ASPECT` times longer than wide (its length is the
-   area of its points above the half level, each point standing for h², over its width).
+   and the band is at least :data:`MIN_ASPECT` times longer than wide (its length is that
+   of the stretch of its axis, in bins of h, along which the mean γ of the points within
+   half a width of it stays above the background by half its largest excess or more).
    A uniform field, a smooth gradient or a round hot spot gives no band, nor does a profile
    narrower than the point spacing h (not resolved).
 
@@ -97,7 +102,8 @@ class Band:
         centre_x, centre_y: the point of the axis nearest the band's centre of excess
             γ [m].
         width: full width at half maximum of the band's γ profile above the background [m].
-        length: area of the band's points above the half level over its width [m].
+        length: how far along its axis the band's γ stays above the background by half its
+            largest excess or more, to the point spacing [m].
         peak_shear_strain: the profile's peak γ [-].
         mean_shear_strain: mean γ of the points within half a width of the axis [-].
         background_shear_strain: the median γ of the points away from the bands [-].
@@ -140,19 +146,54 @@ def _crossing(d0: float, m0: float, d1: float, m1: float, level: float) -> float
     return d0 if m1 == m0 else d0 + (level - m0) / (m1 - m0) * (d1 - d0)
 
 
-def _fwhm(d: np.ndarray, m: np.ndarray, i: int, level: float) -> tuple[float, float]:
+def _fwhm(d: np.ndarray, m: np.ndarray, i: int, level: float,
+          base: float | None = None, gap: float = 0.0) -> tuple[float, float]:
     """The distances left and right of index ``i`` where ``m`` (sampled at increasing ``d``)
-    first falls to ``level`` or below; NaN on a side where it never does."""
+    first falls to ``level`` or below; NaN on a side where it never does. With ``base``,
+    each crossing is read on the parabola through the logarithm of ``m − base`` at the two
+    samples around it and the next one towards ``i`` at least ``gap`` from the inner one
+    (exact for a Gaussian, whose tails a straight line would widen), where those are
+    positive and the parabola crosses between the two; linearly otherwise."""
     left = right = math.nan
     below = np.flatnonzero(m[:i] <= level)
     if below.size:
         j = int(below[-1])
         left = _crossing(d[j], m[j], d[j + 1], m[j + 1], level)
+        third = np.flatnonzero(d[j + 2:i + 1] >= d[j + 1] + gap)
+        if base is not None and third.size:
+            k = j + 2 + int(third[0])
+            left = _log_crossing(d[[j, j + 1, k]], m[[j, j + 1, k]], level, base, left)
     below = np.flatnonzero(m[i + 1:] <= level)
     if below.size:
         j = i + 1 + int(below[0])
         right = _crossing(d[j - 1], m[j - 1], d[j], m[j], level)
+        third = np.flatnonzero(d[i:j - 1] <= d[j - 1] - gap)
+        if base is not None and third.size:
+            k = i + int(third[-1])
+            right = _log_crossing(d[[k, j - 1, j]], m[[k, j - 1, j]], level, base, right)
     return left, right
+
+
+def _log_crossing(d: np.ndarray, m: np.ndarray, level: float, base: float,
+                  linear: float) -> float:
+    """Where the parabola through (d, log(m − base)) at three samples reaches
+    log(level − base) between the two samples that bracket ``level`` (the outer pair: the
+    first two on the left, the last two on the right); ``linear`` where it does not."""
+    excess = m - base
+    if not (excess.min() > 0 and level > base):
+        return linear
+    a, b, c = np.polyfit(d - d[1], np.log(excess), 2)
+    c -= math.log(level - base)
+    if a == 0:
+        return linear
+    root = b * b - 4 * a * c
+    if root < 0:
+        return linear
+    lo, hi = (d[0], d[1]) if m[0] <= level else (d[1], d[2])
+    for x in ((-b - math.sqrt(root)) / (2 * a), (-b + math.sqrt(root)) / (2 * a)):
+        if lo <= x + d[1] <= hi:
+            return float(x + d[1])
+    return linear
 
 
 def _parabola_vertex(y0: float, y1: float, y2: float) -> tuple[float, float]:
@@ -331,29 +372,34 @@ def _measure(xy: np.ndarray, gamma: np.ndarray, keep: np.ndarray, line: _Line,
         return None
     i = int(close[np.argmax(mean[close])])
     peak = float(mean[i])
-    if 0 < i < mean.size - 1 and min(mean[i - 1], mean[i + 1]) > background:
+    lower = np.flatnonzero(centre_d <= centre_d[i] - bin_size)
+    upper = np.flatnonzero(centre_d >= centre_d[i] + bin_size)
+    if lower.size and upper.size:
         # the log of a Gaussian is a parabola: refine the peak between the bins around it
-        logs = np.log(mean[i - 1:i + 2] - background)
-        spread = centre_d[i - 1:i + 2]
-        coefficients = np.polyfit(spread - spread[1], logs, 2)
-        if coefficients[0] < 0:
-            top = -coefficients[1] / (2 * coefficients[0])
-            if abs(top) <= max(spread[2] - spread[1], spread[1] - spread[0]):
-                refined = background + math.exp(np.polyval(coefficients, top))
-                peak = min(max(refined, peak), background + _PEAK_CAP * (peak - background))
+        around = [int(lower[-1]), i, int(upper[0])]
+        excess = mean[around] - background
+        if excess.min() > 0:
+            spread = centre_d[around] - centre_d[i]
+            coefficients = np.polyfit(spread, np.log(excess), 2)
+            if coefficients[0] < 0:
+                top = -coefficients[1] / (2 * coefficients[0])
+                if spread[0] <= top <= spread[2]:
+                    refined = background + math.exp(np.polyval(coefficients, top))
+                    peak = min(max(refined, peak),
+                               background + _PEAK_CAP * (peak - background))
     if not (peak > background and peak >= contrast * background):
         return None
     level = background + 0.5 * (peak - background)
-    left, right = _fwhm(centre_d, mean, i, level)
+    left, right = _fwhm(centre_d, mean, i, level, background, spacing / 2)
     if not (math.isfinite(left) and math.isfinite(right)) or right <= left:
         return None
-    width = right - left
+    width = float(right - left)
     if width < spacing:
         return None  # narrower than the points' spacing: not resolved
     middle = 0.5 * (left + right)
     inside = np.abs(distance - middle) <= 0.5 * width
-    above = inside & (gamma >= level)
-    length = float(above.sum()) * spacing ** 2 / width
+    length = _length(xy[inside] @ np.array([normal[1], -normal[0]]), gamma[inside],
+                     background, spacing)
     if length < aspect * width:
         return None
     excess = np.maximum(gamma - background, 0.0) * inside
@@ -363,6 +409,17 @@ def _measure(xy: np.ndarray, gamma: np.ndarray, keep: np.ndarray, line: _Line,
             "width": float(width), "length": length, "peak": peak,
             "mean": float(gamma[inside].mean()), "background": background,
             "strength": line.strength}
+
+
+def _length(t: np.ndarray, gamma: np.ndarray, background: float, spacing: float) -> float:
+    """How long [m] a band is whose points lie at ``t`` along its axis: the length, in bins
+    of the point spacing, over which their mean γ stays above the background by half its
+    largest excess or more."""
+    index = np.floor((t - t.min()) / spacing).astype(int)
+    count = np.bincount(index)
+    mean = np.bincount(index, weights=gamma)[count > 0] / count[count > 0]
+    level = background + 0.5 * (mean.max() - background)
+    return float(np.count_nonzero(mean >= level)) * spacing
 
 
 def _placed(band: dict[str, float], origin: np.ndarray, step: int, strain: float) -> Band:
