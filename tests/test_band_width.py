@@ -286,3 +286,46 @@ def test_the_summary_adds_the_width_and_the_bands():
     flat = SimpleNamespace(steps=steps, points=_specimen(False)[1], row_nearest=lambda e: 2)
     summary = band_summary(flat, [0.1], 3.0)
     assert math.isnan(summary["band_width"]) and summary["bands_final"] == []
+
+
+def test_a_cross_of_a_strong_and_a_weak_band_gives_both():
+    """The weaker band of a cross, half the stronger's excess, at its own angle and width;
+    the stronger one is listed first."""
+    x, y = gauss_points(16, 32, 3)
+    weak = 0.01 + 0.1 * np.exp(-distance(x, y, -57.0) ** 2 / (2 * 0.004 ** 2))
+    bands = find_bands(table(x, y, np.maximum(gaussian(x, y, 55.0, 0.003), weak)))
+    assert len(bands) == 2
+    assert angle_error(bands[0].inclination_deg, 55.0) < 1.5
+    assert angle_error(bands[1].inclination_deg, -57.0) < 1.5
+    assert bands[0].width == pytest.approx(FWHM * 0.003, rel=0.10)
+    assert bands[1].width == pytest.approx(FWHM * 0.004, rel=0.10)
+    assert bands[0].strength > bands[1].strength
+    assert bands[1].peak_shear_strain == pytest.approx(0.11, rel=0.05)
+
+
+@pytest.mark.parametrize("mesh", [(8, 16, 2), (16, 32, 3)])
+def test_noise_on_the_field_moves_the_width_little(mesh):
+    """γ of a band with 10 % of noise at every point: within 10 % of its width still."""
+    x, y = gauss_points(*mesh)
+    rng = np.random.default_rng(7)
+    for _ in range(5):
+        gamma = gaussian(x, y, 55.0, 0.003) * (1 + 0.1 * rng.standard_normal(x.size))
+        bands = find_bands(table(x, y, gamma))
+        assert len(bands) == 1
+        assert bands[0].width == pytest.approx(FWHM * 0.003, rel=0.10)
+        assert angle_error(bands[0].inclination_deg, 55.0) < 1.5
+
+
+def test_a_band_reflected_at_a_side_gives_its_two_legs():
+    """A band rising at 50° from the bottom-left corner to the right side, reflected there
+    into −50° up to the top: two bands, each at its own angle and in its own place."""
+    x, y = gauss_points(16, 32, 3)
+    turn = (WIDTH, WIDTH * math.tan(math.radians(50.0)))
+    legs = np.where(y < turn[1], np.exp(-distance(x, y, 50.0, (0.0, 0.0)) ** 2 / 18e-6),
+                    np.exp(-distance(x, y, -50.0, turn) ** 2 / 18e-6))
+    bands = find_bands(table(x, y, 0.01 + 0.2 * legs))
+    assert [round(b.inclination_deg) for b in bands] == [50, -50]
+    assert [b.width for b in bands] == pytest.approx([FWHM * 0.003] * 2, rel=0.10)
+    assert (bands[1].centre_x, bands[1].centre_y) == pytest.approx(
+        ((WIDTH + WIDTH - (HEIGHT - turn[1]) / math.tan(math.radians(50.0))) / 2,
+         (turn[1] + HEIGHT) / 2), abs=3e-3)

@@ -36,7 +36,8 @@ shear_strain), in three passes:
    the background, the profile falls to half its peak on both sides inside the specimen,
    and the band is at least :data:`MIN_ASPECT` times longer than wide (its length is that
    of the stretch of its axis, in bins of h, along which the mean γ of the points within
-   half a width of it stays above the background by half its largest excess or more).
+   half a width of it, away from the other lines, stays above the background by half its
+   largest excess or more).
    A uniform field, a smooth gradient or a round hot spot gives no band, nor does a profile
    narrower than the point spacing h (not resolved).
 
@@ -398,8 +399,9 @@ def _measure(xy: np.ndarray, gamma: np.ndarray, keep: np.ndarray, line: _Line,
         return None  # narrower than the points' spacing: not resolved
     middle = 0.5 * (left + right)
     inside = np.abs(distance - middle) <= 0.5 * width
-    length = _length(xy[inside] @ np.array([normal[1], -normal[0]]), gamma[inside],
-                     background, spacing)
+    own = inside & keep  # a stronger band crossing this one would set its level
+    length = (_length(xy[own] @ np.array([normal[1], -normal[0]]), gamma[own], background,
+                      spacing) if own.any() else 0.0)
     if length < aspect * width:
         return None
     excess = np.maximum(gamma - background, 0.0) * inside
