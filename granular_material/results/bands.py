@@ -67,8 +67,9 @@ MIN_ASPECT = 3.0
 #: a further line's integral of excess γ over the strongest line's it needs at least [-]
 MIN_STRENGTH = 0.25
 
-#: the directions searched [°]: −90 to 89.5 by 0.5
+#: the directions searched [°]: −90 to 89.5 by 0.5, so many at a time
 _ANGLES_DEG = np.arange(-90.0, 90.0, 0.5)
+_CHUNK = 30
 #: the points within this many half-widths (half the search's FWHM) of a found line are taken
 #: out of the next search, and within _EXCLUDE of the other lines' profiles and fits
 _STRIP = 1.5
@@ -215,12 +216,15 @@ def _strongest_line(xy: np.ndarray, weight: np.ndarray, spacing: float,
     angles = np.radians(_ANGLES_DEG)
     bin_size = spacing / 4
     bins = math.ceil(2 * reach / bin_size) + 1
-    distance = xy[:, 0:1] * -np.sin(angles) + xy[:, 1:2] * np.cos(angles)
-    index = np.clip(np.floor((distance + reach) / bin_size).astype(int), 0, bins - 1)
-    index = index + bins * np.arange(angles.size)
-    area = spacing ** 2
-    accumulator = np.bincount(index.ravel(), weights=np.repeat(weight * area, angles.size),
-                              minlength=bins * angles.size).reshape(angles.size, bins)
+    accumulator = np.empty((angles.size, bins))
+    for start in range(0, angles.size, _CHUNK):  # a few directions at a time: bounded memory
+        chunk = angles[start:start + _CHUNK]
+        distance = xy[:, 0:1] * -np.sin(chunk) + xy[:, 1:2] * np.cos(chunk)
+        index = np.clip(np.floor((distance + reach) / bin_size).astype(int), 0, bins - 1)
+        index = index + bins * np.arange(chunk.size)
+        accumulator[start:start + chunk.size] = np.bincount(
+            index.ravel(), weights=np.repeat(weight[:, None] * spacing ** 2, chunk.size, axis=1)
+            .ravel(), minlength=bins * chunk.size).reshape(chunk.size, bins)
     accumulator = gaussian_filter1d(accumulator / bin_size, sigma=4.0, axis=1, mode="constant")
     k, j = np.unravel_index(int(np.argmax(accumulator)), accumulator.shape)
     ridge = accumulator.max(axis=1)
