@@ -8,6 +8,7 @@ from granular_material.results.band_measures import (
     band_onset,
     localisation_history,
 )
+from granular_material.results.bands import Band, band_width, find_bands
 from granular_material.results.biaxial import COST_COLUMNS, BiaxialResult
 from granular_material.results.localization import (
     ShearBand,
@@ -38,6 +39,7 @@ from granular_material.results.writers import (
 
 __all__ = [
     "COST_COLUMNS",
+    "Band",
     "BiaxialResult",
     "BiaxialSummary",
     "BiaxialWriter",
@@ -46,6 +48,8 @@ __all__ = [
     "band_measures",
     "band_onset",
     "band_summary",
+    "band_width",
+    "find_bands",
     "find_peak",
     "localisation_history",
     "mohr_coulomb_inclination",

@@ -12,6 +12,9 @@ axial_strain, x, y, shear_strain) at every load step:
   :data:`ONSET_RATIO` (linear between steps; NaN when it never does);
 - the band's inclination [°] and where its axis crosses the specimen's mid-height, at the
   last step (from :func:`~granular_material.results.localization.shear_band`);
+- the straight bands at the last step, each with its own inclination (from
+  :func:`~granular_material.results.bands.find_bands`): how many, the two strongest ones'
+  inclinations, and the strongest one's width in metres;
 - σ1/σ3 and the volumetric strain at :data:`SOFTENING_STRAINS`.
 """
 
@@ -24,6 +27,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from granular_material.results.bands import find_bands
 from granular_material.results.localization import shear_band
 
 __all__ = ["MEASURE_STRAINS", "ONSET_RATIO", "SOFTENING_STRAINS", "band_measures",
@@ -99,7 +103,13 @@ def band_measures(steps: pd.DataFrame, points: pd.DataFrame, height: float,
     (where its axis crosses mid-height; NaN where that is outside the specimen),
     ``elongation`` (1 for one straight band, near 0 for a cross of two: then the
     inclination means little), ``localization`` (its mean γ inside over outside),
-    ``stress_ratio_<e>``, ``volumetric_strain_<e>``.
+    ``stress_ratio_<e>``, ``volumetric_strain_<e>``; ``band_width`` [m] (the full width at
+    half maximum of the shear-strain profile across the strongest straight band at the last
+    step, the band of the largest line integral of γ above the background; NaN where there
+    is no band), ``band_count`` (the straight bands found there, each with its own
+    inclination: 1 for one band, 2 for a cross, 0 for none), ``band_1_inclination_deg`` and
+    ``band_2_inclination_deg`` (the two strongest bands' angles to the x axis, signed, in
+    (−90, 90], positive rising to the right; NaN where there are fewer).
     """
     history = localisation_history(points)
     strain = history["axial_strain"].to_numpy(dtype=float)
@@ -114,6 +124,11 @@ def band_measures(steps: pd.DataFrame, points: pd.DataFrame, height: float,
         crossing = math.nan  # the band's axis leaves the specimen before mid-height
     measures.update({"inclination_deg": abs(band.inclination_deg), "crossing_x": crossing,
                      "elongation": band.elongation, "localization": band.localization})
+    bands = find_bands(points)
+    inclinations = [b.inclination_deg for b in bands[:2]] + [math.nan] * 2
+    measures.update({"band_width": bands[0].width if bands else math.nan,
+                     "band_count": len(bands), "band_1_inclination_deg": inclinations[0],
+                     "band_2_inclination_deg": inclinations[1]})
     run_strain = steps["axial_strain"].to_numpy(dtype=float)
     for e in softening:
         measures[f"stress_ratio_{100 * e:g}"] = _at(

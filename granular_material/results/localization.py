@@ -6,6 +6,10 @@ points carrying the largest γ (the top ``fraction``) are taken as the band, the
 axis of their γ-weighted spread gives its inclination, how line-like that spread is gives
 its elongation, and the mean γ inside over the mean γ outside gives the localisation ratio.
 A homogeneous specimen gives a ratio near 1 and no preferred axis.
+
+This reads one band: a cross of two, or several reflected bands, have no single axis, and
+their principal axis means little (its elongation says so). Each band on its own, with its
+width in metres, is :func:`granular_material.results.bands.find_bands`'s.
 """
 
 from __future__ import annotations

@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING, Any
 
 import pandas as pd
 
+from granular_material.results.bands import find_bands
 from granular_material.results.biaxial import COST_COLUMNS
 from granular_material.results.localization import mohr_coulomb_inclination, shear_band
 from granular_material.results.peaks import find_peak
@@ -70,14 +71,20 @@ def run_summary(result: BiaxialResult, wall: float) -> dict[str, Any]:
 def band_summary(result: BiaxialResult, map_strains: Sequence[float],
                  peak_ratio: float) -> dict[str, Any]:
     """Shear-band measures at the map strains and at the last step (see
-    :mod:`granular_material.results.localization`)."""
+    :mod:`granular_material.results.localization`), and the straight bands of the last step
+    (:func:`~granular_material.results.bands.find_bands`): ``bands_final`` (each band's
+    measures, strongest first; empty where there is none) and ``band_width`` (the strongest
+    band's full width at half maximum of γ across it [m]; NaN where there is no band)."""
     steps = result.steps
     if len(steps) < 2:
         return {}
     rows = sorted({result.row_nearest(e) for e in map_strains})
+    bands = find_bands(result.points)
     return {
         "shear_bands": [shear_band(result.points, int(steps["step"].iloc[r])).as_dict()
                         for r in rows],
         "shear_band_final": shear_band(result.points).as_dict(),
         "mohr_coulomb_inclination_deg": mohr_coulomb_inclination(max(peak_ratio, 1.0)),
+        "band_width": bands[0].width if bands else math.nan,
+        "bands_final": [band.as_dict() for band in bands],
     }
