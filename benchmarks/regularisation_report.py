@@ -1,0 +1,209 @@
+"""The figures and tables of benchmarks/regularisation_study.py: ``report.md`` and the
+``*.png`` beside it, from the runs' folders and ``results.json``."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+import numpy as np
+import pandas as pd
+
+
+def _label(length: float) -> str:
+    return "no regularisation" if length == 0 else f"second gradient, ℓ = {length * 1e3:g} mm"
+
+
+def _f(value: Any, digits: int = 3) -> str:
+    if value is None or (isinstance(value, float) and not math.isfinite(value)):
+        return "–"
+    return f"{value:.{digits}f}"
+
+
+def _mm(value: Any) -> str:
+    if value is None or (isinstance(value, float) and not math.isfinite(value)):
+        return "–"
+    return f"{value * 1e3:.1f}"
+
+
+def specimen_figures(out: Path, rows: list[dict[str, Any]]) -> list[str]:
+    """Stress ratio against axial strain per internal length; the shear strain of every
+    mesh at the last step; band width against element size."""
+    table = pd.DataFrame(rows)
+    lengths = sorted(table["internal_length"].unique())
+    meshes = list(dict.fromkeys(table["mesh"]))
+    fig, axes = plt.subplots(1, len(lengths), figsize=(4.2 * len(lengths), 3.6), sharey=True)
+    for ax, length in zip(np.atleast_1d(axes), lengths, strict=True):
+        for mesh in meshes:
+            line = table[(table["mesh"] == mesh) & (table["internal_length"] == length)]
+            if line.empty:
+                continue
+            steps = pd.read_csv(out / line["folder"].iloc[0] / "steps.csv")
+            ax.plot(100 * steps["axial_strain"], steps["stress_ratio"], label=mesh)
+        ax.set_title(_label(length), fontsize=10)
+        ax.set_xlabel("axial strain [%]")
+        ax.grid(alpha=0.3)
+    np.atleast_1d(axes)[0].set_ylabel("σ1/σ3")
+    np.atleast_1d(axes)[0].legend(title="quad8 elements", fontsize=8)
+    fig.tight_layout()
+    fig.savefig(out / "specimen_curves.png", dpi=110)
+    plt.close(fig)
+
+    fig, axes = plt.subplots(len(lengths), len(meshes), figsize=(2.3 * len(meshes),
+                                                                   3.9 * len(lengths)),
+                             squeeze=False)
+    for i, length in enumerate(lengths):
+        for j, mesh in enumerate(meshes):
+            ax = axes[i, j]
+            line = table[(table["mesh"] == mesh) & (table["internal_length"] == length)]
+            ax.set_xticks([])
+            ax.set_yticks([])
+            if line.empty:
+                continue
+            points = pd.read_csv(out / line["folder"].iloc[0] / "points.csv")
+            last = points[points["step"] == points["step"].max()]
+            ax.scatter(last["x"], last["y"], c=last["shear_strain"], s=4 if len(last) > 600
+                       else 12, cmap="inferno", marker="s", linewidths=0)
+            ax.set_aspect("equal")
+            row = line.iloc[0]
+            width = "no band found" if not row["band_count"] else (
+                f"w = {_mm(row['band_width'])} mm")
+            ax.set_title(f"{mesh}, {_label(length).split(',')[-1].strip()}\n{width}",
+                         fontsize=8)
+    fig.suptitle("shear strain γ at the last step", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(out / "specimen_maps.png", dpi=110)
+    plt.close(fig)
+
+    fig, ax = plt.subplots(figsize=(5, 3.6))
+    for length in lengths:
+        line = table[table["internal_length"] == length]
+        ax.plot(1e3 * line["element_size"], 1e3 * line["band_width"], "o-",
+                label=_label(length))
+    sizes = 1e3 * np.array(sorted(table["element_size"].unique()))
+    ax.plot(sizes, sizes, "k:", label="one element")
+    ax.set_xlabel("element size [mm]")
+    ax.set_ylabel("band width (FWHM) [mm]")
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(out / "band_width.png", dpi=110)
+    plt.close(fig)
+    return ["specimen_curves.png", "specimen_maps.png", "band_width.png"]
+
+
+def dem_figure(out: Path, rows: list[dict[str, Any]]) -> list[str]:
+    table = pd.DataFrame(rows)
+    fig, axes = plt.subplots(1, 2, figsize=(8.5, 3.6), sharey=True)
+    lengths = sorted(table["internal_length"].unique())
+    meshes = list(dict.fromkeys(table["mesh"]))
+    for ax, column, strain in zip(axes, ("ratio_5", "ratio_10"), (5, 10), strict=True):
+        for k, length in enumerate(lengths):
+            for j, mesh in enumerate(meshes):
+                values = table[(table["mesh"] == mesh)
+                               & (table["internal_length"] == length)][column]
+                x = j + 0.15 * (2 * k - 1)
+                ax.plot(np.full(len(values), x), values, "o", color=f"C{k}",
+                        label=_label(length) if j == 0 else None)
+        ax.set_xticks(range(len(meshes)), meshes)
+        ax.set_xlabel("quad8 elements")
+        ax.set_title(f"σ1/σ3 at {strain} % (each dot a seed)", fontsize=10)
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(out / "dem_ratios.png", dpi=110)
+    plt.close(fig)
+    return ["dem_ratios.png"]
+
+
+def footing_figure(out: Path, rows: list[dict[str, Any]]) -> list[str]:
+    table = pd.DataFrame(rows)
+    fig, axes = plt.subplots(1, 2, figsize=(9, 3.8), sharey=True)
+    for ax, kind in zip(axes, ("mc", "dem"), strict=True):
+        for k, (_, row) in enumerate(table[table["material"] == kind].iterrows()):
+            steps = pd.read_csv(out / row["folder"] / "steps.csv")
+            style = "-" if row["internal_length"] else "--"
+            ax.plot(-1e3 * steps["footing_displacement_y"],
+                    -steps["footing_force_y"] / 0.05 / 1e3, style, color=f"C{k // 2}"
+                    if kind == "mc" else f"C{k}",
+                    label=f"{row['mesh']}, {_label(row['internal_length'])}")
+        ax.set_title("softening Mohr–Coulomb twin" if kind == "mc" else "DEM RVEs",
+                     fontsize=10)
+        ax.set_xlabel("settlement [mm]")
+        ax.grid(alpha=0.3)
+        if ax.lines:
+            ax.legend(fontsize=7)
+    axes[0].set_ylabel("bearing pressure [kPa]")
+    fig.tight_layout()
+    fig.savefig(out / "footing_curves.png", dpi=110)
+    plt.close(fig)
+    return ["footing_curves.png"]
+
+
+def write_report(out: Path, results: dict[str, Any]) -> None:
+    """``report.md`` and the figures of the stages in ``results``."""
+    lines = ["# Regularisation study: the numbers", "",
+             "Written by `benchmarks/regularisation_study.py` (see README.md beside it for "
+             "what they mean).", ""]
+    if results.get("specimen"):
+        specimen_figures(out, results["specimen"])
+        lines += ["## Mohr–Coulomb softening specimen", "",
+                  "| mesh | ℓ [mm] | steps | peak σ1/σ3 | at ε [%] | σ1/σ3 at 5 % | bands | "
+                  "band width [mm] | angles [°] | iterations / step | time [s] | "
+                  "linear solve [s] |",
+                  "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+        for r in results["specimen"]:
+            angles = ", ".join(f"{a:.0f}" for a in r["band_angles"]) or "–"
+            lines.append(
+                f"| {r['mesh']} | {r['internal_length'] * 1e3:g} | {r['steps_completed']} | "
+                f"{_f(r['peak_ratio'])} | {_f(100 * r['peak_strain'], 1)} | "
+                f"{_f(r['ratio_5'])} | {r['band_count']} | {_mm(r['band_width'])} | "
+                f"{angles} | {_f(r['iterations'], 1)} | {_f(r['time_s'], 1)} | "
+                f"{_f(r['linear_solve_s'], 1)} |")
+        lines += ["", "![stress ratio](specimen_curves.png)", "",
+                  "![shear strain](specimen_maps.png)", "", "![band width](band_width.png)",
+                  ""]
+    if results.get("dem"):
+        dem_figure(out, results["dem"])
+        lines += ["## FEM × DEM specimen", "",
+                  "| mesh | seed | ℓ [mm] | steps | peak σ1/σ3 | σ1/σ3 at 5 % | at 10 % | "
+                  "bands | band width [mm] | angles [°] | iterations / step | time [s] |",
+                  "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+        for r in results["dem"]:
+            angles = ", ".join(f"{a:.0f}" for a in r["band_angles"]) or "–"
+            lines.append(
+                f"| {r['mesh']} | {r['seed']} | {r['internal_length'] * 1e3:g} | "
+                f"{r['steps_completed']} | {_f(r['peak_ratio'])} | {_f(r['ratio_5'])} | "
+                f"{_f(r['ratio_10'])} | {r['band_count']} | {_mm(r['band_width'])} | "
+                f"{angles} | {_f(r['iterations'], 1)} | {_f(r['time_s'], 0)} |")
+        table = pd.DataFrame(results["dem"])
+        lines += ["", "Mean ± standard deviation over the seeds:", "",
+                  "| mesh | ℓ [mm] | σ1/σ3 at 5 % | σ1/σ3 at 10 % |", "|---|---|---|---|"]
+        for (mesh, length), group in table.groupby(["mesh", "internal_length"], sort=False):
+            lines.append(f"| {mesh} | {length * 1e3:g} | "
+                         f"{_f(group['ratio_5'].mean())} ± {_f(group['ratio_5'].std())} | "
+                         f"{_f(group['ratio_10'].mean())} ± {_f(group['ratio_10'].std())} |")
+        lines += ["", "![DEM specimen](dem_ratios.png)", ""]
+    if results.get("footing"):
+        footing_figure(out, results["footing"])
+        lines += ["## Footing", "",
+                  "| material | mesh | ℓ [mm] | steps | settlement reached [mm] | "
+                  "peak pressure [kPa] | at [mm] | pressure at the end [kPa] | "
+                  "iterations / step | time [s] |",
+                  "|---|---|---|---|---|---|---|---|---|---|"]
+        for r in results["footing"]:
+            lines.append(
+                f"| {r['material']} | {r['mesh']} | {r['internal_length'] * 1e3:g} | "
+                f"{r['steps_completed']} | {_mm(r['settlement_reached'])} | "
+                f"{_f(r['peak_pressure'] / 1e3, 0)} | {_mm(r['peak_settlement'])} | "
+                f"{_f(r['final_pressure'] / 1e3, 0)} | {_f(r['iterations'], 1)} | "
+                f"{_f(r['time_s'], 0)} |")
+        lines += ["", "![footing](footing_curves.png)", ""]
+    (out / "report.md").write_text("\n".join(lines) + "\n", encoding="utf-8")
