@@ -42,6 +42,7 @@ from granular_material.fem import (
     NewtonError,
     NewtonSettings,
     NewtonSolver,
+    Regularisation,
     StepRecord,
     create_material,
     geostatic_stress,
@@ -164,9 +165,10 @@ class ParaViewSeries:
 
 def main(material_name: str = "mohr-coulomb", steps: int = 16, settlement: float = 0.04,
          out: str | Path | None = None, progress: bool = True,
-         elements: tuple[int, int] = (6, 3)) -> Curve:
+         elements: tuple[int, int] = (6, 3), internal_length: float = 0.0) -> Curve:
     """Push the footing down by ``settlement`` [m] in ``steps`` steps; returns the curve
-    (``Curve.stopped`` says why a run ended early)."""
+    (``Curve.stopped`` says why a run ended early). ``internal_length`` > 0 [m]: the
+    second gradient past the peak (docs/guide/regularisation.md)."""
     basis = Basis(mesh(*elements), ElementVector(ElementTriP2()))  # 3 Gauss points a triangle
     points = to_points(np.asarray(basis.global_coordinates()))  # (n, 2) [m]
     sigma0 = geostatic_stress(points, surface_y=DEPTH, unit_weight=GAMMA, surcharge=Q, k0=K0)
@@ -184,7 +186,9 @@ def main(material_name: str = "mohr-coulomb", steps: int = 16, settlement: float
         accept_correction=0.01 if noisy else 0.0,  # ... then a small correction accepts it
         relaxation="aitken" if noisy else "none", tangent_update="hold" if noisy else "none",
         predictor="extrapolate", max_iterations=50, max_cutbacks=8)
-    solver = NewtonSolver(basis, material, load, settings)
+    regularisation = (Regularisation("second-gradient", internal_length) if internal_length
+                      else Regularisation())
+    solver = NewtonSolver(basis, material, load, settings, regularisation)
     initial_pressure = -0.5 * np.trace(sigma0, axis1=1, axis2=2)
     curve = Curve()
     series = None if out is None else ParaViewSeries(Path(out), basis)
@@ -223,8 +227,11 @@ def cli(argv: list[str] | None = None) -> int:
     p.add_argument("--settlement", type=float, default=0.04,
                    help="the footing's settlement at the end [m] (default 0.04)")
     p.add_argument("--out", default=None, help="folder for the ParaView series")
+    p.add_argument("--internal-length", type=float, default=0.0,
+                   help="the second gradient's internal length [m] (default 0: none)")
     a = p.parse_args(argv)
-    curve = main(a.material, a.steps, a.settlement, a.out)
+    curve = main(a.material, a.steps, a.settlement, a.out,
+                 internal_length=a.internal_length)
     k = curve.peak
     print(f"peak {curve.pressure[k] / 1e3:.1f} kPa at {curve.settlement[k] * 1e3:.1f} mm "
           f"(step {k}); last {curve.pressure[-1] / 1e3:.1f} kPa at "

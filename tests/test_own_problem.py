@@ -57,3 +57,17 @@ def test_a_step_that_cannot_converge_stops_with_the_committed_ones_kept(monkeypa
                          elements=(3, 2))
     assert "did not converge" in curve.stopped
     assert len(curve.pressure) >= 1 and curve.pressure[0] == pytest.approx(example.Q, rel=1e-6)
+
+
+def test_the_same_problem_runs_through_its_peak_with_the_second_gradient():
+    """The example with --internal-length: tri6 carries it; every step commits, the peak is
+    passed, and v and λ are carried (the terms are there)."""
+    curve = example.main("mohr-coulomb", steps=8, settlement=0.024, progress=False,
+                         elements=(4, 2), internal_length=0.05)
+    plain = example.main("mohr-coulomb", steps=8, settlement=0.024, progress=False,
+                         elements=(4, 2))
+    assert curve.stopped == ""
+    assert curve.pressure[0] == pytest.approx(example.Q, rel=1e-6)
+    assert 0 < curve.peak < len(curve.pressure) - 1
+    # the double stress stiffens the bands: a different curve, above the classical one
+    assert max(curve.pressure) > max(plain.pressure)

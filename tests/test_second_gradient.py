@@ -8,6 +8,8 @@ from itertools import pairwise
 
 import numpy as np
 import pytest
+import tomllib
+from run_helpers import PRESSED_BLOCK
 from skfem import (
     Basis,
     ElementQuad1,
@@ -38,6 +40,8 @@ from granular_material.fem import (
 from granular_material.fem.forms import gauss_points_grad, internal_force, stiffness
 from granular_material.fem.kinematics import Kinematics
 from granular_material.fem.regularisation import initial_shear_modulus, second_gradient_modulus
+from granular_material.runs.boundary_value.runner import run_boundary_value
+from granular_material.runs.boundary_value.spec import bvp_from_dict
 from granular_material.runs.checkpoint_files import state_arrays
 from granular_material.runs.runner import run_biaxial
 from granular_material.runs.spec import (
@@ -253,3 +257,22 @@ def test_without_the_option_a_run_is_what_it_was(element, formulation):
     np.testing.assert_array_equal(default.steps["stress_ratio"], named.steps["stress_ratio"])
     before = np.array([float.fromhex(v) for v in BEFORE[element]])
     np.testing.assert_allclose(default.steps["stress_ratio"], before, rtol=1e-11, atol=0)
+
+
+def _scene(element: str) -> str:
+    return (f'test = "boundary-value"\nsteps = 3\n[mesh]\nsize = [0.2, 0.1]\n'
+            f'elements = [4, 2]\nelement = "{element}"\n'
+            '[regularisation]\nmodel = "second-gradient"\ninternal_length = 0.02\n'
+            + PRESSED_BLOCK.format(base="bottom"))
+
+
+def test_a_boundary_value_scene_runs_regularised_and_refuses_linear_elements(tmp_path):
+    spec = bvp_from_dict(tomllib.loads(_scene("tri6")), tmp_path)
+    assert spec.regularisation == RegularisationSpec(model="second-gradient",
+                                                     internal_length=0.02)
+    outcome = run_boundary_value(spec, out=tmp_path / "run")
+    assert outcome.error is None and len(outcome.steps) == 4  # step 0 and three
+    with pytest.raises(SpecError) as refused:
+        bvp_from_dict(tomllib.loads(_scene("quad4")), tmp_path)
+    assert refused.value.field == "regularisation.model"
+    assert "quad8, quad9, tri6" in str(refused.value)

@@ -69,12 +69,17 @@ class UsageError(ValueError):
     """Bad input from the user: reported on stderr with exit code 2."""
 
 
+#: the run specification's fields whose option is not their name: [regularisation]'s
+#: ``model`` is ``--regularisation``
+_OPTION_NAMES = {"model": "regularisation"}
+
+
 def flag_of(field: str) -> str:
     """The command-line option of a field of the library (a
     :class:`~granular_material.errors.ParameterError`'s ``field``, a run specification's flat
     name): ``max_strain_per_step`` → ``--max-strain-per-step``. The one place where the
     library's names become the command line's."""
-    return f"--{field.replace('_', '-')}"
+    return f"--{_OPTION_NAMES.get(field, field).replace('_', '-')}"
 
 
 #: how a library message names a field beside its own: in backquotes, ```convergence```, or
