@@ -272,6 +272,11 @@ def test_a_boundary_value_scene_runs_regularised_and_refuses_linear_elements(tmp
                                                      internal_length=0.02)
     outcome = run_boundary_value(spec, out=tmp_path / "run")
     assert outcome.error is None and len(outcome.steps) == 4  # step 0 and three
+    # the summary says what ran: D = G (ℓ/10)², G = E / 2(1 + ν) of the linear-elastic block
+    said = outcome.summary["regularisation"]
+    assert said["model"] == "second-gradient" and said["internal_length"] == 0.02
+    assert said["second_gradient_modulus"] == pytest.approx(60e6 / 2.6 * 0.002 ** 2,
+                                                            rel=1e-12)
     with pytest.raises(SpecError) as refused:
         bvp_from_dict(tomllib.loads(_scene("quad4")), tmp_path)
     assert refused.value.field == "regularisation.model"

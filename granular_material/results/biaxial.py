@@ -37,7 +37,7 @@ Tables (tension positive unless the column says otherwise):
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pandas as pd
@@ -80,6 +80,9 @@ class BiaxialResult:
             (``initial_state``, ``tables``, ``tracking``, ``checkpoint``); a resumed run's
             steps before the resume count with the time they took then.
             :func:`granular_material.timing.phase_table` makes the run's table of them.
+        regularisation: a regularised run's model, internal length [m] and modulus D [N]
+            (:meth:`~granular_material.fem.NewtonSolver.regularisation_summary`); None
+            without one.
     """
 
     problem: BiaxialProblem
@@ -93,6 +96,7 @@ class BiaxialResult:
     interrupt: KeyboardInterrupt | None = None
     failures: dict[str, int] = field(default_factory=dict)
     timings: dict[str, float] = field(default_factory=dict)
+    regularisation: dict[str, Any] | None = None
 
     def row_nearest(self, axial_strain: float) -> int:
         """Row of ``steps`` (and of ``displacements``) whose axial strain [-] is nearest."""

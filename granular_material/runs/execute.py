@@ -313,6 +313,8 @@ def _execute(plan: RunPlan, material: Material, observer: RunObserver | None,
                              regularisation=spec.regularisation.regularisation())
     summary = run_summary(result, time.perf_counter() - t0)
     summary["resumed_from_step"] = result.resumed_from
+    if result.regularisation is not None:
+        summary["regularisation"] = result.regularisation
     summary["preset"] = spec.preset
     summary.update(element=plan.setup.element,
                    points_per_element=plan.setup.points_per_element,

@@ -189,6 +189,7 @@ class _Collector:
             resumed_from=None if saved is None else saved.step, interrupt=interrupt,
             failures=_failures([*solver.records, *unfinished]),
             timings=_timings([*solver.records, *unfinished], self.times),
+            regularisation=solver.regularisation_summary(),
         )
 
 

@@ -155,6 +155,16 @@ class NewtonSolver:
                 self.extra = np.zeros(self._second_gradient.n_extra)
         return self._second_gradient
 
+    def regularisation_summary(self) -> dict[str, float | str] | None:
+        """A regularised run's ``model``, ``internal_length`` [m] and the modulus D
+        (``second_gradient_modulus`` [N]) for its summary; None for a run without one."""
+        sg = self.second_gradient
+        if sg is None:
+            return None
+        return {"model": self.regularisation.model,
+                "internal_length": self.regularisation.internal_length,
+                "second_gradient_modulus": sg.modulus}
+
     def _with_second_gradient(self, f_int: np.ndarray, u: np.ndarray,
                               extra: np.ndarray) -> np.ndarray:
         """``f_int`` [N/m] of the displacement's rows, with the second gradient's rows
