@@ -20,7 +20,7 @@ import contextlib
 import re
 import shlex
 import sys
-from collections.abc import Iterator, Mapping
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -39,6 +39,7 @@ from granular_material.cli.scene_toml import read_toml
 from granular_material.filesafe import write_whole
 from granular_material.results import write_json
 from granular_material.results.lock import FolderLock
+from granular_material.runs.run_folder import when_starting
 
 __all__ = ["TESTS", "Scene", "check_scene", "command_parsers", "load_scene", "register",
            "run_scene", "scene_keys"]
@@ -47,45 +48,12 @@ _SCENE_COPY = "scene.toml"
 _SUMMARY = "summary.json"
 
 
-# -- the run ----------------------------------------------------------------------------------
-def _listing(folder: Path) -> dict[str, tuple[int, int]]:
-    """Name → (size, modification time in ns) of what ``folder`` holds (empty: none)."""
-    if not folder.is_dir():
-        return {}
-    return {p.name: (p.stat().st_size, p.stat().st_mtime_ns) for p in folder.iterdir()}
-
-
-@contextlib.contextmanager
-def _scene_copied(scene: Scene) -> Iterator[None]:
-    """The run folder made and the scene copied into it for the block. Input the command
-    rejects (``ValueError``) before it wrote anything leaves neither behind (an earlier
-    run's copy comes back as it was)."""
-    made = []
-    folder = scene.run_dir
-    while not folder.exists() and folder.parent != folder:
-        made.append(folder)
-        folder = folder.parent
-    copy = scene.run_dir / _SCENE_COPY
-    before = copy.read_bytes() if copy.is_file() else None
-    held = _listing(scene.run_dir)
-    held.pop(_SCENE_COPY, None)
+# -- the run ---------------------------------------------------------------------------------
+def _copy_scene(scene: Scene) -> None:
+    """The scene copied into its run folder as ``scene.toml`` (the folder made)."""
     scene.run_dir.mkdir(parents=True, exist_ok=True)
     text = scene.path.read_bytes()
-    write_whole(copy, lambda tmp: tmp.write_bytes(text))
-    try:
-        yield
-    except ValueError:
-        now = _listing(scene.run_dir)
-        now.pop(_SCENE_COPY, None)
-        if now == held:  # rejected before it wrote anything
-            if before is not None:
-                write_whole(copy, lambda tmp: tmp.write_bytes(before))
-            else:
-                copy.unlink()
-            for path in made:  # deepest first
-                with contextlib.suppress(OSError):
-                    path.rmdir()
-        raise
+    write_whole(scene.run_dir / _SCENE_COPY, lambda tmp: tmp.write_bytes(text))
 
 
 def _write_summary(folder: Path, report: dict[str, Any]) -> None:
@@ -111,11 +79,16 @@ def run_scene(scene: Scene) -> int:
     with contextlib.ExitStack() as stack:
         if TESTS[scene.test] is not None:
             stack.enter_context(FolderLock(scene.run_dir))
+        # the scene is copied in when the run starts writing, after every check of the
+        # command has passed: a refused run leaves the folder as it was
         try:
-            with _scene_copied(scene), reports_to(reports.append):
+            with when_starting(lambda: _copy_scene(scene)) as copied, \
+                    reports_to(reports.append):
                 code = int(namespace.func(namespace) or 0)
         except ValueError as exc:  # the command's own checks: say where the scene set it
             raise UsageError(_located(scene, message_of(exc))) from exc
+        if not copied():  # a command that never said it started (it ran all the same)
+            _copy_scene(scene)
         # the FEM commands write summary.json into their folder themselves; the DEM
         # commands, whose --out is a file, report on stdout only: their report is kept here
         if TESTS[scene.test] is not None and reports:

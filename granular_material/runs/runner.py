@@ -202,6 +202,7 @@ def run_biaxial(
     tracking: Tracking | None = None,
     checkpoint: RunCheckpoint | None = None,
     resume: bool = False,
+    restored: bool = False,
     progress: bool = False,
     on_step: Callable[[NewtonSolver, StepRecord, pd.DataFrame], None] | None = None,
 ) -> BiaxialResult:
@@ -224,7 +225,8 @@ def run_biaxial(
     continues from its last whole checkpoint (the material is restored from it: it need not
     be allocated) and gives the same steps, tables and final state as a run that never
     stopped; with no state saved yet the run starts from the beginning. The observer sees the
-    saved steps again first.
+    saved steps again first. ``restored``: the caller has already restored ``material`` from
+    that checkpoint (so that one it refuses is refused before anything is written).
     """
     problem = build_biaxial(setup)
     if tracking is not None:
@@ -237,7 +239,8 @@ def run_biaxial(
     saved: SavedRun | None = None
     if resume and checkpoint is not None and checkpoint.has_state():
         saved = checkpoint.load()
-        material.restore(saved.material_path)
+        if not restored:
+            material.restore(saved.material_path)
     solver = NewtonSolver(problem.basis, material, problem.loading, settings)
     if saved is not None:
         solver.resume(saved.state)

@@ -50,10 +50,18 @@ from granular_material.results.bvp_plots import plot_load_displacement, plot_mec
 from granular_material.results.writers import FieldWriter, write_csv, write_json
 from granular_material.runs.boundary_value.checks import check_disk, check_memory, generated_size
 from granular_material.runs.boundary_value.material import material_for_problem, unit_weight_of
-from granular_material.runs.boundary_value.resume import open_bvp_checkpoint, remember
+from granular_material.runs.boundary_value.resume import (
+    open_bvp_checkpoint,
+    remember,
+    start_bvp_checkpoint,
+)
 from granular_material.runs.boundary_value.spec import BoundaryValueSpec, ConditionSpec
-from granular_material.runs.run_folder import interrupted_error
+from granular_material.runs.run_folder import interrupted_error, starting
 from granular_material.runs.spec import SpecError
+
+#: the files a run writes into its folder beside its tables (removed when a run starts, so
+#: that an earlier run's never stand beside this one's)
+_OUTPUTS = ("fields.xdmf", "load_displacement.png", "mechanism.png", "summary.json")
 
 __all__ = [
     "BVPOutcome",
@@ -269,10 +277,10 @@ def run_boundary_value(spec: BoundaryValueSpec, out: Path | None = None,
             raise SpecError("out", f"{out} is a file, not a folder")
         check_disk(spec, next(p for p in (out, *out.absolute().parents) if p.exists()),
                    _mesh)
-    checkpoint, saved = open_bvp_checkpoint(spec, out, resume)
+    checkpoint, saved = open_bvp_checkpoint(spec, out, resume)  # read, nothing changed
     b = build(spec, allocate=saved is None)
     if saved is not None:
-        b.material.restore(saved.material_path)
+        b.material.restore(saved.material_path)  # refused (an older one) before any write
     problem = b.problem
     solver = NewtonSolver(problem.basis, b.material, problem.loading, b.settings)
     if saved is not None:
@@ -281,9 +289,12 @@ def run_boundary_value(spec: BoundaryValueSpec, out: Path | None = None,
     rows: list[dict[str, Any]] = []
     last: dict[str, Any] = {}
     writer = None
-    if out is not None:
+    if out is not None:  # every check passed: the run starts writing its folder
+        starting()
         out.mkdir(parents=True, exist_ok=True)
-        (out / "points.csv").unlink(missing_ok=True)
+        start_bvp_checkpoint(spec, checkpoint, saved)
+        for stale in ("points.csv", *_OUTPUTS):  # an earlier run's, rewritten by this one
+            (out / stale).unlink(missing_ok=True)
         if spec.fields:
             writer = FieldWriter(out / "fields.xdmf", problem).__enter__()
 
