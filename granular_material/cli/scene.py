@@ -187,11 +187,28 @@ def _run_spec_file(path: Path, text: str, data: dict[str, Any],
                   resume_with=again)
 
 
+def _check_test_spelling(path: Path, text: str, test: Any) -> None:
+    """A UsageError at the line of ``test`` where it names a test but for its case or its
+    underscores (``"Boundary-Value"``), before the rest of the scene is read as that of
+    another test."""
+    if not isinstance(test, str) or test == BOUNDARY_VALUE or test in TESTS:
+        return
+    meant = test.strip().lower().replace("_", "-")
+    if meant != BOUNDARY_VALUE and meant not in TESTS:
+        return
+    line = next((k for k, row in enumerate(text.splitlines(), start=1)
+                 if re.match(r"\s*test\s*=", row)), None)
+    where = f"{path}, line {line}" if line else f"{path}"
+    raise UsageError(f"{where}: test {test!r} is no test: did you mean {meant!r}? (a test "
+                     "is named in lower case, with dashes)")
+
+
 def _run_command(parsers: Mapping[str, argparse.ArgumentParser], args: argparse.Namespace,
                  ) -> int:
     text, data = read_toml(Path(args.scene))
     if "problem" in data:  # a run specification (a scene has no such key)
         return _run_spec_file(Path(args.scene), text, data, args)
+    _check_test_spelling(Path(args.scene), text, data.get("test"))
     if data.get("test") == BOUNDARY_VALUE:
         return run_bvp_scene(Path(args.scene), text, data, args)
     scene = load_scene(args.scene, parsers, out=args.out, resume=args.resume)
