@@ -153,3 +153,57 @@ def test_an_elastic_window_into_plastic_flow_is_noted():
     assert wide.parameters["young"] < 0.8 * fine.parameters["young"]
     with pytest.raises(ValueError, match="narrow elastic_window"):  # the whole 2 % test
         read_parameters(curve, 100e3, elastic_window=0.5)
+
+
+@pytest.fixture(scope="module")
+def rve16(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    from granular_material.dem import save_rve
+    from granular_material.procedures import prepare_packing
+
+    path = tmp_path_factory.mktemp("rve") / "rve16.npz"
+    save_rve(path, prepare_packing(n_disc=16, seed=1, pressure=100e3, device="cpu").to_data())
+    return path
+
+
+def _dem_scene(tmp_path: Path, rve: Path) -> Path:
+    scene = tmp_path / "dem.toml"
+    scene.write_text(f'test = "biaxial-dem"\nrve = "{rve}"\naxial_strain = 0.002\n'
+                     'record_every = 20\ndevice = "cpu"\nprogress = false\n')
+    return scene
+
+
+def test_a_dem_scene_checked_for_a_resume_shows_the_switch(tmp_path, capsys, rve16):
+    scene = _dem_scene(tmp_path, rve16)
+    assert main(["run", str(scene), "--out", str(tmp_path / "b"), "--check", "--resume"]) == 0
+    shown = capsys.readouterr().out.strip().splitlines()[-1]
+    assert shown.endswith("--resume") and f"--resume {tmp_path / 'b'}" not in shown
+
+
+@pytest.mark.parametrize("kind", ["dem", "fem"])
+def test_a_stopped_scene_says_how_to_continue_it(tmp_path, capsys, monkeypatch, rve16, kind):
+    out = tmp_path / "run"
+    if kind == "dem":
+        import granular_material.procedures.element_tests as element_tests
+
+        scene = _dem_scene(tmp_path, rve16)
+        real = element_tests.servo_steps
+        calls = {"n": 0}
+
+        def stop(*args, **kwargs):
+            calls["n"] += 1
+            if calls["n"] == 2:
+                raise KeyboardInterrupt("signal")
+            return real(*args, **kwargs)
+
+        monkeypatch.setattr(element_tests, "servo_steps", stop)
+    else:
+        scene = tmp_path / "fem.toml"
+        scene.write_text('test = "single-element"\nmaterial = "linear-elastic"\nsteps = 3\n'
+                         'axial_strain = 0.002\ndevice = "cpu"\nprogress = false\n')
+        _stop_at(monkeypatch, 2)
+    assert main(["run", str(scene), "--out", str(out)]) == 130
+    err = capsys.readouterr().err
+    assert f"`granular-material run {scene} --out {out} --resume`" in err
+    assert "the same options" not in err
+    monkeypatch.undo()
+    assert main(["run", str(scene), "--out", str(out), "--resume"]) == 0

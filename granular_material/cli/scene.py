@@ -10,7 +10,9 @@ Tables (``[loading]``, ``[newton]``, ...) only group keys; their names are free.
 The whole scene is checked before anything runs (a ``UsageError`` naming the key and its line:
 exit 2, nothing written). Then the command's own function runs with the namespace, so every
 check of the command applies as on the command line, into one folder per run: the scene
-copied in as ``scene.toml``, the command's tables, figures and fields, and ``summary.json``.
+copied in as ``scene.toml`` once the command's checks have passed and its run starts
+writing (:func:`granular_material.runs.run_folder.when_starting`; a refusal changes nothing
+in the folder), the command's tables, figures and fields, and ``summary.json``.
 """
 
 from __future__ import annotations
@@ -29,6 +31,7 @@ from granular_material.cli.options import (
     UsageError,
     message_of,
     reports_to,
+    resumed_with,
 )
 from granular_material.cli.scene_keys import (
     command_parsers,
@@ -83,7 +86,7 @@ def run_scene(scene: Scene) -> int:
         # command has passed: a refused run leaves the folder as it was
         try:
             with when_starting(lambda: _copy_scene(scene)) as copied, \
-                    reports_to(reports.append):
+                    reports_to(reports.append), resumed_with(scene.resume_with):
                 code = int(namespace.func(namespace) or 0)
         except ValueError as exc:  # the command's own checks: say where the scene set it
             raise UsageError(_located(scene, message_of(exc))) from exc
@@ -261,7 +264,8 @@ examples/scenes/footing-*.toml and docs/guide/boundary-value.md.""",
                    help="the run folder (overrides the scene's out)")
     p.add_argument("--resume", action="store_true",
                    help="continue the stopped or killed run in the run folder from its last "
-                        "checkpoint (single-element, biaxial, biaxial-dem, dem-drive)")
+                        "checkpoint (single-element, biaxial, biaxial-dem, dem-drive, "
+                        "boundary-value); a folder with no stopped run: the run starts there")
     p.add_argument("--check", action="store_true",
                    help="check the scene as the run would (for single-element, biaxial and "
                         "the DEM tests: its whole run specification) and print the same run "
