@@ -10,6 +10,7 @@ after), from each state it may be in: absent, empty, a finished run's, a stopped
 from __future__ import annotations
 
 import hashlib
+import re
 import shutil
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -27,6 +28,7 @@ from granular_material.dem import save_rve
 from granular_material.fem.materials.linear_elastic import LinearElastic
 from granular_material.procedures import prepare_packing
 from granular_material.results.lock import FolderLock
+from granular_material.runs import from_flat, save
 
 STATES = ("absent", "empty", "finished", "stopped")
 
@@ -136,6 +138,24 @@ def _bvp_degenerate(tmp: Path, folder: Path, _patch: pytest.MonkeyPatch) -> list
     return argv
 
 
+def _bvp_huge(tmp: Path, folder: Path, _patch: pytest.MonkeyPatch) -> list[str]:
+    """A generated mesh of 10¹⁰ elements."""
+    argv = _bvp(tmp, folder)
+    scene = tmp / "scene.toml"
+    scene.write_text(scene.read_text().replace(
+        'file = "block.msh"', "size = [0.4, 0.2]\nelements = [100000, 100000]"))
+    return argv
+
+
+def _stray_part(argv: Callable[..., list[str]]) -> Callable[..., list[str]]:
+    """The run's command, into a folder that holds a folder ``NAME.part`` (where a file is
+    written before it is renamed into place)."""
+    def make(tmp: Path, folder: Path, _patch: pytest.MonkeyPatch) -> list[str]:
+        (folder / "steps.csv.part").mkdir()
+        return argv(tmp, folder)
+    return make
+
+
 BVP = Command(
     argv=_bvp,
     stop=lambda patch: _stop_at(patch, 2),
@@ -152,6 +172,9 @@ BVP = Command(
         "a resume of an older checkpoint": (("stopped",), _bvp_old),
         "a fresh run over a stopped one": (("stopped",), lambda tmp, folder, _p: _bvp(
             tmp, folder)),
+        "a mesh beyond memory": (STATES, _bvp_huge),
+        "a half-written folder in it": (("empty", "finished", "stopped"),
+                                        _stray_part(_bvp)),
     })
 
 
@@ -194,6 +217,8 @@ def _fem_command(argv: Callable[..., list[str]]) -> Command:
             "a resume of an older checkpoint": (("stopped",), old),
             "a fresh run over a stopped one": (("stopped",), lambda tmp, folder, _p: argv(
                 tmp, folder)),
+            "a half-written folder in it": (("empty", "finished", "stopped"),
+                                            _stray_part(argv)),
         })
 
 
@@ -279,11 +304,40 @@ def _stop_drive(patch: pytest.MonkeyPatch) -> None:
     _interrupt_on_call(patch, driven_path, "drive_grad_u", 2)
 
 
+def _spec_file(tmp: Path, folder: Path, steps: int = 3, extra: tuple[str, ...] = (),
+               resume: bool = False) -> list[str]:
+    """``run SPEC.toml`` of a single element's run specification."""
+    path = tmp / "spec.toml"
+    values = {"test": "single-element", "material": "linear-elastic", "steps": steps,
+              "axial_strain": 0.002, "device": "cpu", "progress": False}
+    save(from_flat(values), path)
+    for key, value in zip(extra[::2], extra[1::2], strict=True):  # a value it refuses
+        name = key.removeprefix("--")
+        path.write_text(re.sub(rf"(?m)^{name} = .*$", f"{name} = {value}", path.read_text()))
+    return ["run", str(path), "--out", str(folder), *(["--resume"] if resume else [])]
+
+
+def _prepare_argv(tmp: Path, folder: Path, extra: tuple[str, ...] = ()) -> list[str]:
+    return ["prepare", "--particles", "16", "--seed", "2", "--device", "cpu",
+            "--no-progress", "--out", str(folder / "rve.npz"), *extra]
+
+
+#: prepare keeps no checkpoint: a stopped one is run again (no "stopped" state)
+PREPARE = Command(
+    argv=_prepare_argv, stop=lambda patch: None,
+    refusals={
+        "a bad value": (STATES[:3], lambda tmp, folder, _p: _prepare_argv(
+            tmp, folder, ("--pressure", "-1"))),
+        "a batch beyond memory": (STATES[:3], lambda tmp, folder, _p: _prepare_argv(
+            tmp, folder, ("--batch", "100000000"))),
+    })
 COMMANDS = {
     "run boundary-value": BVP,
     "single-element": _fem_command(_fem("single-element")),
     "biaxial": _fem_command(_fem("biaxial")),
     "run single-element": _fem_command(_fem_scene),
+    "run SPEC.toml": _fem_command(_spec_file),
+    "prepare": PREPARE,
     "biaxial-dem": _dem_command(_dem("biaxial-dem"), _stop_biaxial_dem),
     "dem-drive": _dem_command(_dem("dem-drive"), _stop_drive),
     "run biaxial-dem": _dem_command(_dem_scene, _stop_biaxial_dem, scene=True),
@@ -291,8 +345,10 @@ COMMANDS = {
 CASES = [pytest.param(command, refusal, state, id=f"{command}|{refusal}|{state}")
          for command, spec in COMMANDS.items()
          for refusal, (states, _) in spec.refusals.items() for state in states]
+# a folder in use is refused by its lock whatever it holds: from the state with most to lose
 CASES += [pytest.param(command, "a folder in use", state, id=f"{command}|in use|{state}")
-          for command in COMMANDS for state in ("empty", "finished", "stopped")]
+          for command in COMMANDS for state in (("finished",) if command == "prepare"
+                                                else ("stopped",))]
 
 
 def _prepare(command: Command, state: str, tmp: Path, folder: Path,
@@ -322,7 +378,8 @@ def test_a_refused_run_leaves_its_folder_as_it_was(command, refusal, state, tmp_
     if refusal == "a folder in use":
         argv = spec.argv(tmp_path, folder, **({"resume": True} if state == "stopped" else {}))
         held = folder if command in ("run boundary-value", "single-element", "biaxial",
-                                     "run single-element", "run biaxial-dem") else None
+                                     "run single-element", "run SPEC.toml",
+                                     "run biaxial-dem") else None
         if held is None:  # a DEM command locks the checkpoint folder beside its output
             out = Path(argv[argv.index("--out") + 1])
             held = out.with_name(out.name + ".checkpoint")
@@ -348,7 +405,7 @@ def test_the_cases_cover_every_command_and_state() -> None:
     """The family above: every command, each from every state it can be refused in."""
     assert {c.values[0] for c in CASES} == set(COMMANDS)
     assert {c.values[2] for c in CASES} == set(STATES)
-    assert len(CASES) >= 70
+    assert len(CASES) >= 100
 
 
 def test_a_scene_refused_before_its_run_leaves_no_scene_copy_to_trip_a_resume(tmp_path,
