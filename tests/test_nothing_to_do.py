@@ -74,6 +74,11 @@ def test_nothing_prescribed_needs_a_converged_start_and_no_change() -> None:
     assert nothing_prescribed(np.zeros(2), u, f, f * (1 + IDLE_RTOL / 10), converged=True)
     # all of it zero: a footing held at [0, 0] with no load
     assert nothing_prescribed(np.zeros(2), np.zeros(2), np.zeros(2), np.zeros(2), True)
+    # the initial state: nothing to do where it is in equilibrium (to round-off, or atol)
+    assert nothing_prescribed(np.zeros(2), u, f, f, False, r0=1e-9, force_scale=1e3)
+    assert nothing_prescribed(np.zeros(2), u, f, f, False, r0=1e-3, force_scale=1e3,
+                              atol=1e-2)
+    assert not nothing_prescribed(np.zeros(2), u, f, f, False, r0=1.0, force_scale=1e3)
 
 
 def test_the_idle_rule_accepts_the_first_evaluation_only() -> None:
@@ -122,6 +127,24 @@ def test_the_command_line_says_the_start_is_out_of_equilibrium_and_exits_0(tmp_p
         assert main(["run", str(scene), "--out", str(tmp_path / "run")]) == 0
     summary = json.loads((tmp_path / "run" / "summary.json").read_text())
     assert summary["error"] is None and summary["iterations"][1:] == [1, 1]
+
+
+@pytest.mark.parametrize("test", ["force", "displacement", "residual-displacement"])
+def test_a_footing_held_on_a_start_in_equilibrium_has_nothing_to_do(tmp_path: Path,
+                                                                     test: str) -> None:
+    data = _held(test=test)
+    data["initial"] = {"state": "geostatic", "k0": 0.5}
+    data["gravity"] = {"unit_weight": 18e3}
+    data["boundaries"].update(left="x = left", right="x = right")
+    data["conditions"] += [{"type": "roller", "boundary": side, "component": "x"}
+                           for side in ("left", "right")]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", OutOfEquilibriumWarning)
+        outcome = run_boundary_value(bvp_from_dict(data, tmp_path))
+    assert outcome.error is None
+    # every step, the first included: one evaluation, nothing moves (before: up to 106)
+    assert outcome.summary["iterations"] == [1, 1, 1]
+    assert np.abs(outcome.u).max() == 0.0
 
 
 def test_a_start_in_equilibrium_says_nothing(tmp_path: Path) -> None:

@@ -50,7 +50,9 @@ from granular_material.fem.solver.settings import CONVERGENCE_TESTS, NewtonSetti
 
 __all__ = [
     "GO_ON",
+    "IDLE_RTOL",
     "RULES",
+    "ZERO_RESIDUAL",
     "IterationState",
     "Outcome",
     "Rule",
@@ -145,22 +147,29 @@ class IterationState:
 IDLE_RTOL = 1e-12
 
 
+#: a residual at most this fraction of the internal forces is none (an initial state in
+#: equilibrium to round-off, a geostatic start)
+ZERO_RESIDUAL = 1e-10
+
+
 def nothing_prescribed(du_dirichlet: np.ndarray, u_dirichlet: np.ndarray,
                        f_ext: np.ndarray, f_ext_committed: np.ndarray,
-                       converged: bool) -> bool:
-    """Whether an increment has nothing to do: it starts from a ``converged`` state (one an
-    earlier increment was accepted at; not the initial state, which may be out of
-    equilibrium), and changes neither the prescribed displacements (``du_dirichlet`` [m],
-    against their values ``u_dirichlet``) nor the external forces (``f_ext`` [N/m] against
-    ``f_ext_committed``) beyond :data:`IDLE_RTOL` of their size."""
-    if not converged:
-        return False
-
+                       converged: bool, r0: float = math.inf, force_scale: float = 0.0,
+                       atol: float = 0.0) -> bool:
+    """Whether an increment has nothing to do: it changes neither the prescribed
+    displacements (``du_dirichlet`` [m], against their values ``u_dirichlet``) nor the
+    external forces (``f_ext`` [N/m] against ``f_ext_committed``) beyond :data:`IDLE_RTOL`
+    of their size, and it starts from a ``converged`` state (one an earlier increment was
+    accepted at) or from one in equilibrium: its residual ``r0`` [N/m] within ``atol`` or
+    within :data:`ZERO_RESIDUAL` of ``force_scale`` (‖f_int‖ [N/m], over all dofs). An
+    initial state out of equilibrium has something to do: the increment solves for it."""
     def unchanged(change: np.ndarray, size: np.ndarray) -> bool:
         return float(np.linalg.norm(change)) <= IDLE_RTOL * float(np.linalg.norm(size))
 
-    return (unchanged(du_dirichlet, u_dirichlet)
-            and unchanged(f_ext - f_ext_committed, f_ext_committed))
+    if not (unchanged(du_dirichlet, u_dirichlet)
+            and unchanged(f_ext - f_ext_committed, f_ext_committed)):
+        return False
+    return converged or r0 <= max(atol, ZERO_RESIDUAL * force_scale)
 
 
 def idle(state: IterationState, settings: NewtonSettings) -> Verdict:

@@ -259,7 +259,8 @@ class NewtonSolver:
             du[interior] = (target - self.load_factor) / last_step * last_du[interior]
         idle = nothing_prescribed(u_d - self.u[D], self.u[D], f_ext,
                                   self._external(self.load_factor, self.u)[1],
-                                  converged=self._last is not None)
+                                  converged=self._last is not None, r0=r0,
+                                  force_scale=float(np.linalg.norm(self.f_int)), atol=s.atol)
         if idle:  # nothing to do: the iterate is the committed state (see convergence.py)
             du = np.zeros_like(self.u)
         predicted = self.l2_norm(du)  # the first iterate's increment, for max_growth
