@@ -160,3 +160,14 @@ def test_a_start_in_equilibrium_says_nothing(tmp_path: Path) -> None:
         outcome = run_boundary_value(bvp_from_dict(data, tmp_path))
     assert outcome.error is None
     assert outcome.summary["initial_residual"]["relative"] < 1e-10
+
+
+def test_a_step_that_fails_after_a_start_out_of_equilibrium_says_so(tmp_path: Path) -> None:
+    # a footing on part of the top: the unloaded surface beside it at 20 kPa, cohesionless
+    data = _held()
+    data["boundaries"]["footing"] = "y = top and x <= 0.1"
+    data["newton"].update(max_iterations=20, max_cutbacks=1)
+    with pytest.warns(OutOfEquilibriumWarning):
+        outcome = run_boundary_value(bvp_from_dict(data, tmp_path))
+    assert outcome.error is not None and "did not converge" in outcome.error
+    assert "the initial state was not in equilibrium with the loads" in outcome.error

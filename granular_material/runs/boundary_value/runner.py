@@ -337,6 +337,11 @@ def run_boundary_value(spec: BoundaryValueSpec, out: Path | None = None,
                    done=0 if saved is None else saved.step)
     except NewtonError as exc:
         error = str(exc)
+        relative = initial_residual.get("relative", 0.0)
+        if relative > OUT_OF_EQUILIBRIUM and initial_residual.get("norm", 0.0) > b.settings.atol:
+            error += (f" (the initial state was not in equilibrium with the loads: its "
+                      f"residual {relative:.3g} times the load; a start in equilibrium, e.g. "
+                      "geostatic, lets the steps carry the load alone)")
     except KeyboardInterrupt as exc:
         error = interrupted_error(len(rows) - 1, spec.steps)
         interrupt = exc
