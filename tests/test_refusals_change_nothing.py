@@ -207,6 +207,15 @@ def _fem_command(argv: Callable[..., list[str]]) -> Command:
         _old_checkpoint(patch, folder)
         return argv(tmp, folder, resume=True)
 
+    def refused_allocation(tmp: Path, folder: Path, patch: pytest.MonkeyPatch) -> list[str]:
+        """The material refuses to allocate its points (as the DEM material refuses what it
+        cannot prepare)."""
+        def refuse(self, n_points):
+            raise ValueError(f"cannot allocate {n_points} points")
+
+        patch.setattr(LinearElastic, "allocate", refuse)
+        return argv(tmp, folder)
+
     return Command(
         argv=argv, stop=lambda patch: _stop_at(patch, 2),
         refusals={
@@ -219,6 +228,7 @@ def _fem_command(argv: Callable[..., list[str]]) -> Command:
                 tmp, folder)),
             "a half-written folder in it": (("empty", "finished", "stopped"),
                                             _stray_part(argv)),
+            "a material that refuses its allocation": (STATES[:3], refused_allocation),
         })
 
 

@@ -259,14 +259,16 @@ def run(spec: RunSpec | DemSpec, observer: RunObserver | None = None, *,
                                              "fresh=True) starts afresh over it)") from None
         plan = check(spec)
         material = _built(spec, plan.context)
-        if saved:  # restored (an older checkpoint refused) before the folder is touched
+        # the material allocated, or restored (an older checkpoint refused), before the
+        # folder is touched
+        if saved:
             material.restore(checkpoint.load(tidy=False).material_path)
+        else:
+            with times.phase("preparation"):
+                material.allocate(plan.setup.n_points)
         if out is not None:
             starting()  # every check passed: the run writes its folder from here on
         with cleanup_on_rejection(out), start_checkpoint(spec, checkpoint, saved):
-            if not saved:
-                with times.phase("preparation"):
-                    material.allocate(plan.setup.n_points)
             reference = _reference(material, plan, checkpoint, times)
             outcome = _execute(plan, material, observer, checkpoint, saved)
         outcome.reference = reference
