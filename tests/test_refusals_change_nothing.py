@@ -23,6 +23,8 @@ from test_bvp_resume_files import _block
 
 import granular_material.procedures.driven_path as driven_path
 import granular_material.procedures.element_tests as element_tests
+import granular_material.results.writers as writers
+import granular_material.runs.boundary_value.runner as bvp_runner
 from granular_material.cli import main
 from granular_material.dem import save_rve
 from granular_material.fem.materials.linear_elastic import LinearElastic
@@ -361,6 +363,14 @@ CASES += [pytest.param(command, "a folder in use", state, id=f"{command}|in use|
                                                 else ("stopped",))]
 
 
+def _figure_stub(*args, **kwargs) -> Path:
+    """A figure's file written as a few bytes (its path: the first Path among the
+    arguments)."""
+    path = next(a for a in (*args, *kwargs.values()) if isinstance(a, Path))
+    path.write_bytes(b"figure")
+    return path
+
+
 def _prepare(command: Command, state: str, tmp: Path, folder: Path,
              monkeypatch: pytest.MonkeyPatch) -> None:
     """``folder`` in ``state``: absent, empty, or holding a finished or stopped run."""
@@ -370,6 +380,12 @@ def _prepare(command: Command, state: str, tmp: Path, folder: Path,
     if state == "empty":
         return
     with monkeypatch.context() as patch:
+        # the figures drawn as small files (what they hold is no matter here: drawing them
+        # is most of a small run's time)
+        for module, name in ((writers, "plot_maps"), (writers, "plot_stress_strain"),
+                             (bvp_runner, "plot_load_displacement"),
+                             (bvp_runner, "plot_mechanism")):
+            patch.setattr(module, name, _figure_stub)
         if state == "stopped":
             command.stop(patch)
         code = main(command.argv(tmp, folder))
