@@ -445,3 +445,26 @@ def test_a_scene_refused_before_its_run_leaves_no_scene_copy_to_trip_a_resume(tm
     assert main(_bvp(tmp_path, folder, resume=True)) == 0
     assert (folder / "scene.toml").read_text() == (tmp_path / "scene.toml").read_text()
     shutil.rmtree(folder)
+
+
+@pytest.mark.parametrize("command", sorted(COMMANDS))
+def test_an_output_that_is_the_wrong_kind_of_thing_is_refused_unchanged(command, tmp_path,
+                                                                        capsys, rve16):
+    """The run folder given as an existing file (a DEM command's output file given as an
+    existing folder): refused, the file (folder) and all beside it as they were."""
+    RVE["rve"] = rve16
+    spec = COMMANDS[command]
+    folder = tmp_path / spec.folder
+    argv = spec.argv(tmp_path, folder)
+    out = Path(argv[argv.index("--out") + 1])
+    if out == folder:  # a folder's command: the folder is a file
+        folder.write_bytes(b"not a folder")
+    else:  # a file's command: its output file is a folder
+        out.mkdir(parents=True)
+        (out / "kept.txt").write_text("kept")
+    before = tree(tmp_path)
+    capsys.readouterr()
+    code = _main(argv)
+    err = capsys.readouterr().err
+    assert code == 2 and "Traceback" not in err, err
+    assert tree(tmp_path) == before, err
