@@ -81,8 +81,9 @@ def test_a_mesh_beyond_the_memory_is_refused_before_it_is_made(nx, ny):
 def test_a_file_that_is_no_mesh_is_a_parameter_error_not_an_exit(tmp_path, text):
     path = tmp_path / "bad.msh"
     path.write_text(text)
-    with pytest.raises(ParameterError, match=r"bad.msh: meshio cannot read it"):
-        read_mesh(path)  # meshio exits (SystemExit) for the first
+    # meshio exits (SystemExit) for the first; an empty file is said to be so
+    with pytest.raises(ParameterError, match=r"bad.msh( is empty|: meshio cannot read it)"):
+        read_mesh(path)
 
 
 def _vtk(tmp_path, points: str, cells: str):

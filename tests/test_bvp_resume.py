@@ -90,9 +90,10 @@ def test_a_resume_with_another_scene_is_refused_naming_the_field(tmp_path, monke
         run_boundary_value(_spec(MOHR_COULOMB, 4, "[4, 3]", -0.0015), out=tmp_path / "run",
                            resume=True)
     assert refused.value.field == "steps"
-    with pytest.raises(SpecError, match="no boundary-value run to resume"):
-        run_boundary_value(_spec(MOHR_COULOMB, 3, "[4, 3]"), out=tmp_path / "other",
-                           resume=True)
+    # a folder with no run to continue: the run starts there (as every command's --resume)
+    fresh = run_boundary_value(_spec(MOHR_COULOMB, 3, "[4, 3]"), out=tmp_path / "other",
+                               resume=True)
+    assert fresh.error is None and fresh.summary["resumed_from_step"] is None
 
 
 def test_a_checkpoint_written_before_a_field_was_added_still_resumes(tmp_path):

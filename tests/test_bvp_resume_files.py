@@ -18,7 +18,11 @@ from run_helpers import PRESSED_BLOCK
 from test_bvp_resume import _stop_at
 
 from granular_material.cli import main
-from granular_material.runs.boundary_value.resume import open_bvp_checkpoint, run_files
+from granular_material.runs.boundary_value.resume import (
+    open_bvp_checkpoint,
+    run_files,
+    start_bvp_checkpoint,
+)
 from granular_material.runs.boundary_value.runner import run_boundary_value
 from granular_material.runs.boundary_value.spec import bvp_from_dict
 from granular_material.runs.checkpoint import RunCheckpoint
@@ -114,7 +118,7 @@ def test_a_resume_after_the_rve_file_changed_is_refused_naming_it(tmp_path, smal
     spec = bvp_from_dict(data, tmp_path)
     assert set(run_files(spec)) == {"mesh.file", "material.parameters.rve"}
     out = tmp_path / "run"
-    open_bvp_checkpoint(spec, out, resume=False)  # what a fresh run records
+    start_bvp_checkpoint(spec, *open_bvp_checkpoint(spec, out, resume=False))  # a fresh run's
     open_bvp_checkpoint(spec, out, resume=True)  # the same files: accepted
     with np.load(small_rve_path) as npz:
         arrays = {k: npz[k] for k in npz.files}

@@ -3,7 +3,8 @@ the scene is read whole into a
 :class:`~granular_material.runs.boundary_value.spec.BoundaryValueSpec`
 (a refusal names the key and its line, exit 2, nothing written), then run into its folder
 (:func:`~granular_material.runs.boundary_value.runner.run_boundary_value`), the scene copied in as
-``scene.toml``."""
+``scene.toml`` once every check has passed and the run starts (a refused run changes
+nothing in the folder)."""
 
 from __future__ import annotations
 
@@ -18,6 +19,7 @@ from granular_material.cli.options import UsageError, as_flags, check_output_dir
 from granular_material.cli.signals import interrupt_exit_code
 from granular_material.filesafe import write_whole
 from granular_material.results.lock import FolderLock
+from granular_material.runs.run_folder import when_starting
 from granular_material.runs.spec_checks import SpecError
 
 __all__ = ["BOUNDARY_VALUE", "run_bvp_scene"]
@@ -90,16 +92,18 @@ def run_bvp_scene(path: Path, text: str, data: dict[str, Any],
     except ValueError as exc:
         raise _refusal(path, text, exc) from exc
     folder = _run_folder(path, data, args.out)
-    folder.mkdir(parents=True, exist_ok=True)
-    with FolderLock(folder):
+
+    def copy_scene() -> None:  # once every check has passed and the run starts writing
+        folder.mkdir(parents=True, exist_ok=True)
+        write_whole(folder / "scene.toml", lambda tmp: tmp.write_text(text, encoding="utf-8"))
+
+    with FolderLock(folder), when_starting(copy_scene):
         try:
             if not resume:
                 try:
                     check_not_stopped(spec, folder)
                 except SpecError as exc:  # `resume` is the run command's --resume
                     raise UsageError(as_flags(f"{path}: {exc}")) from None
-            write_whole(folder / "scene.toml",
-                        lambda tmp: tmp.write_text(text, encoding="utf-8"))
             outcome = run_boundary_value(spec, out=folder, resume=resume)
         except ValueError as exc:
             raise _refusal(path, text, exc) from exc

@@ -83,7 +83,7 @@ def _run_calibrate(args: argparse.Namespace) -> int:
     from granular_material.dem import resolve_device
     from granular_material.procedures.calibration import calibrate_mohr_coulomb, model_curve
     from granular_material.results.calibration_plot import plot_calibration
-    from granular_material.results.writers import write_csv
+    from granular_material.results.writers import strict_json, write_csv
 
     # refusals before any work: nothing is written on a refused run
     try:  # --pressure, its old name: warned, read as --confining
@@ -108,8 +108,9 @@ def _run_calibrate(args: argparse.Namespace) -> int:
     out: Path = args.out
     out.mkdir(parents=True, exist_ok=True)
     _write_text(out / "mohr-coulomb.toml", calibration_toml(calibration))
-    _write_text(out / "calibration.json",
-                json.dumps(calibration.as_dict(), indent=2, ensure_ascii=False) + "\n")
+    _write_text(out / "calibration.json",  # strict JSON: null for a number not finite
+                json.dumps(strict_json(calibration.as_dict()), indent=2, ensure_ascii=False,
+                           allow_nan=False) + "\n")
     write_csv(calibration.curve, out / "calibration.csv")
     write_csv(model, out / "mohr-coulomb.csv")
     plot_calibration(calibration, model, out / "calibration.png")

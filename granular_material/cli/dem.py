@@ -31,6 +31,7 @@ from granular_material.cli.options import (
     positive,
     positive_int,
     progress_enabled,
+    resume_hint,
     warn,
 )
 from granular_material.cli.signals import interrupt_exit_code
@@ -133,7 +134,11 @@ def _finish(args: argparse.Namespace, report: dict[str, Any], error: str | None,
     emit(args, report)
     if interrupt is not None:
         print(f"granular-material {args.command}: {error}", file=sys.stderr)
-        if getattr(args, "out", None) is not None and hasattr(args, "resume"):
+        again = resume_hint()  # a scene's: `run SCENE --resume`
+        if again is not None:
+            print(f"granular-material {args.command}: continue it with `{again}`",
+                  file=sys.stderr)
+        elif getattr(args, "out", None) is not None and hasattr(args, "resume"):
             print(f"granular-material {args.command}: continue it with --resume and the same "
                   "options", file=sys.stderr)
         return interrupt_exit_code(interrupt)

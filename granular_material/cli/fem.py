@@ -22,6 +22,7 @@ from granular_material.cli.options import (
     emit,
     flag_of,
     progress_enabled,
+    resume_hint,
     shown,
 )
 from granular_material.cli.parsers import CommandParser
@@ -167,7 +168,8 @@ def _command(args: argparse.Namespace) -> int:
     _check_resume_folder(args)
     spec = spec_from_args(args)
     outcome = run(spec, resume=args.resume is not None, keep_stopped=True)
-    return report(args, outcome.summary, outcome.interrupt)
+    # a scene's run is continued by `run SCENE --resume` (options.resumed_with)
+    return report(args, outcome.summary, outcome.interrupt, resume_with=resume_hint())
 
 
 def _on_backend(args: argparse.Namespace, command: Callable[[argparse.Namespace], int]) -> int:

@@ -814,7 +814,8 @@ HELP_TEXTS = {
                 "  --out DIR   the run folder (overrides the scene's out)\n"
                 '  --resume    continue the stopped or killed run in the run folder from its\n'
                 '              last checkpoint (single-element, biaxial, biaxial-dem, dem-\n'
-                '              drive)\n'
+                '              drive, boundary-value); a folder with no stopped run: the run\n'
+                '              starts there\n'
                 '  --check     check the scene as the run would (for single-element, biaxial\n'
                 '              and the DEM tests: its whole run specification) and print the\n'
                 '              same run as a command line; run nothing, write nothing\n'

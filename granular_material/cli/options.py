@@ -377,6 +377,26 @@ def reports_to(sink: Callable[[dict[str, Any]], None]) -> Iterator[None]:
         _REPORT_SINKS.remove(sink)
 
 
+#: the command that continues the run in hand where it is no command line's own (a scene's)
+_RESUME_WITH: list[str] = []
+
+
+@contextlib.contextmanager
+def resumed_with(command: str) -> Iterator[None]:
+    """While the block runs, a stopped run says ``command`` continues it (a scene's
+    ``granular-material run SCENE --resume``) instead of its own options with ``--resume``."""
+    _RESUME_WITH.append(command)
+    try:
+        yield
+    finally:
+        _RESUME_WITH.pop()
+
+
+def resume_hint() -> str | None:
+    """The command of :func:`resumed_with` in force, None where there is none."""
+    return _RESUME_WITH[-1] if _RESUME_WITH else None
+
+
 def emit(args: argparse.Namespace, result: dict[str, Any]) -> None:
     """Report ``result`` on stdout: JSON with ``--json``, else one aligned line per key (and
     to the sinks of :func:`reports_to`)."""

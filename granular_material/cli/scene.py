@@ -10,7 +10,9 @@ Tables (``[loading]``, ``[newton]``, ...) only group keys; their names are free.
 The whole scene is checked before anything runs (a ``UsageError`` naming the key and its line:
 exit 2, nothing written). Then the command's own function runs with the namespace, so every
 check of the command applies as on the command line, into one folder per run: the scene
-copied in as ``scene.toml``, the command's tables, figures and fields, and ``summary.json``.
+copied in as ``scene.toml`` once the command's checks have passed and its run starts
+writing (:func:`granular_material.runs.run_folder.when_starting`; a refusal changes nothing
+in the folder), the command's tables, figures and fields, and ``summary.json``.
 """
 
 from __future__ import annotations
@@ -20,7 +22,7 @@ import contextlib
 import re
 import shlex
 import sys
-from collections.abc import Iterator, Mapping
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -29,6 +31,7 @@ from granular_material.cli.options import (
     UsageError,
     message_of,
     reports_to,
+    resumed_with,
 )
 from granular_material.cli.scene_keys import (
     command_parsers,
@@ -39,6 +42,7 @@ from granular_material.cli.scene_toml import read_toml
 from granular_material.filesafe import write_whole
 from granular_material.results import write_json
 from granular_material.results.lock import FolderLock
+from granular_material.runs.run_folder import when_starting
 
 __all__ = ["TESTS", "Scene", "check_scene", "command_parsers", "load_scene", "register",
            "run_scene", "scene_keys"]
@@ -47,45 +51,12 @@ _SCENE_COPY = "scene.toml"
 _SUMMARY = "summary.json"
 
 
-# -- the run ----------------------------------------------------------------------------------
-def _listing(folder: Path) -> dict[str, tuple[int, int]]:
-    """Name → (size, modification time in ns) of what ``folder`` holds (empty: none)."""
-    if not folder.is_dir():
-        return {}
-    return {p.name: (p.stat().st_size, p.stat().st_mtime_ns) for p in folder.iterdir()}
-
-
-@contextlib.contextmanager
-def _scene_copied(scene: Scene) -> Iterator[None]:
-    """The run folder made and the scene copied into it for the block. Input the command
-    rejects (``ValueError``) before it wrote anything leaves neither behind (an earlier
-    run's copy comes back as it was)."""
-    made = []
-    folder = scene.run_dir
-    while not folder.exists() and folder.parent != folder:
-        made.append(folder)
-        folder = folder.parent
-    copy = scene.run_dir / _SCENE_COPY
-    before = copy.read_bytes() if copy.is_file() else None
-    held = _listing(scene.run_dir)
-    held.pop(_SCENE_COPY, None)
+# -- the run ---------------------------------------------------------------------------------
+def _copy_scene(scene: Scene) -> None:
+    """The scene copied into its run folder as ``scene.toml`` (the folder made)."""
     scene.run_dir.mkdir(parents=True, exist_ok=True)
     text = scene.path.read_bytes()
-    write_whole(copy, lambda tmp: tmp.write_bytes(text))
-    try:
-        yield
-    except ValueError:
-        now = _listing(scene.run_dir)
-        now.pop(_SCENE_COPY, None)
-        if now == held:  # rejected before it wrote anything
-            if before is not None:
-                write_whole(copy, lambda tmp: tmp.write_bytes(before))
-            else:
-                copy.unlink()
-            for path in made:  # deepest first
-                with contextlib.suppress(OSError):
-                    path.rmdir()
-        raise
+    write_whole(scene.run_dir / _SCENE_COPY, lambda tmp: tmp.write_bytes(text))
 
 
 def _write_summary(folder: Path, report: dict[str, Any]) -> None:
@@ -111,11 +82,16 @@ def run_scene(scene: Scene) -> int:
     with contextlib.ExitStack() as stack:
         if TESTS[scene.test] is not None:
             stack.enter_context(FolderLock(scene.run_dir))
+        # the scene is copied in when the run starts writing, after every check of the
+        # command has passed: a refused run leaves the folder as it was
         try:
-            with _scene_copied(scene), reports_to(reports.append):
+            with when_starting(lambda: _copy_scene(scene)) as copied, \
+                    reports_to(reports.append), resumed_with(scene.resume_with):
                 code = int(namespace.func(namespace) or 0)
         except ValueError as exc:  # the command's own checks: say where the scene set it
             raise UsageError(_located(scene, message_of(exc))) from exc
+        if not copied():  # a command that never said it started (it ran all the same)
+            _copy_scene(scene)
         # the FEM commands write summary.json into their folder themselves; the DEM
         # commands, whose --out is a file, report on stdout only: their report is kept here
         if TESTS[scene.test] is not None and reports:
@@ -214,11 +190,28 @@ def _run_spec_file(path: Path, text: str, data: dict[str, Any],
                   resume_with=again)
 
 
+def _check_test_spelling(path: Path, text: str, test: Any) -> None:
+    """A UsageError at the line of ``test`` where it names a test but for its case or its
+    underscores (``"Boundary-Value"``), before the rest of the scene is read as that of
+    another test."""
+    if not isinstance(test, str) or test == BOUNDARY_VALUE or test in TESTS:
+        return
+    meant = test.strip().lower().replace("_", "-")
+    if meant != BOUNDARY_VALUE and meant not in TESTS:
+        return
+    line = next((k for k, row in enumerate(text.splitlines(), start=1)
+                 if re.match(r"\s*test\s*=", row)), None)
+    where = f"{path}, line {line}" if line else f"{path}"
+    raise UsageError(f"{where}: test {test!r} is no test: did you mean {meant!r}? (a test "
+                     "is named in lower case, with dashes)")
+
+
 def _run_command(parsers: Mapping[str, argparse.ArgumentParser], args: argparse.Namespace,
                  ) -> int:
     text, data = read_toml(Path(args.scene))
     if "problem" in data:  # a run specification (a scene has no such key)
         return _run_spec_file(Path(args.scene), text, data, args)
+    _check_test_spelling(Path(args.scene), text, data.get("test"))
     if data.get("test") == BOUNDARY_VALUE:
         return run_bvp_scene(Path(args.scene), text, data, args)
     scene = load_scene(args.scene, parsers, out=args.out, resume=args.resume)
@@ -271,7 +264,8 @@ examples/scenes/footing-*.toml and docs/guide/boundary-value.md.""",
                    help="the run folder (overrides the scene's out)")
     p.add_argument("--resume", action="store_true",
                    help="continue the stopped or killed run in the run folder from its last "
-                        "checkpoint (single-element, biaxial, biaxial-dem, dem-drive)")
+                        "checkpoint (single-element, biaxial, biaxial-dem, dem-drive, "
+                        "boundary-value); a folder with no stopped run: the run starts there")
     p.add_argument("--check", action="store_true",
                    help="check the scene as the run would (for single-element, biaxial and "
                         "the DEM tests: its whole run specification) and print the same run "

@@ -61,6 +61,7 @@ class Scene:
     test: str                        #: the command (sub-command name)
     namespace: argparse.Namespace    #: the options, as the command's parser would give them
     run_dir: Path                    #: the run folder
+    resume_with: str = ""            #: the command that continues a stopped run of it
     argv: list[str] = field(default_factory=list)  #: the same run as a command line
     lines: dict[str, int] = field(default_factory=dict)  #: key → its line in the file
 
@@ -172,16 +173,23 @@ def load_scene(path: Path, parsers: Mapping[str, argparse.ArgumentParser] | None
             able = [t for t in TESTS if t in parsers and "resume" in scene_keys(parsers[t])]
             raise UsageError(f"--resume: a {test} run keeps no checkpoint to continue from "
                              f"(only {' and '.join(able)} do)")
-        values["resume"] = run_dir
-        options += ["--resume", str(run_dir)]
+        if keys["resume"].nargs == 0:  # a DEM command's switch: the checkpoint beside out
+            values["resume"] = True
+            options += ["--resume"]
+        else:  # a FEM command's folder
+            values["resume"] = run_dir
+            options += ["--resume", str(run_dir)]
 
     namespace = _defaults(parser)
     for dest, value in values.items():
         setattr(namespace, dest, value)
     namespace.command = test
     lines = {key: line_of(text, key_path) for key, key_path in seen.items()}
+    # how a stopped run of the scene is continued, as its command says when it stops
+    again = shlex.join(["granular-material", "run", str(path),
+                        *(["--out", str(out)] if out is not None else []), "--resume"])
     return Scene(path=path, test=test, namespace=namespace, run_dir=run_dir,
-                 argv=positional + options,
+                 resume_with=again, argv=positional + options,
                  lines={key: line for key, line in lines.items() if line is not None})
 
 

@@ -156,7 +156,9 @@ def _read_one(g: pd.DataFrame, elastic_window: float, dilatancy_window: float,
     if not (young > 0 and -1.0 < nu < 0.5):
         raise ParameterError("curve", f"of RVE {rve} gives E = {young:.4g} Pa, ν = {nu:.4g} "
                              f"over its first {elastic_window:g} axial strain: not an elastic "
-                             "solid (widen elastic_window, or look at the curve)")
+                             "solid (narrow elastic_window to the curve's first, straight "
+                             "part where it reaches into plastic flow, widen it where it "
+                             "holds only noise; or look at the curve)")
     out = {"young": (young, (ea[0], ea[win][-1])), "poisson": (nu, (ea[0], ea[win][-1]))}
     # the plastic strains: the elastic strain of the stress change taken off
     d1, d3 = -syy - (-syy[0]), -sxx - (-sxx[0])
@@ -172,6 +174,14 @@ def _read_one(g: pd.DataFrame, elastic_window: float, dilatancy_window: float,
     if peak == len(ea) - 1:
         notes.append(f"RVE {rve}: σ1/σ3 still rises at the end of the test: φ is a lower "
                      "bound; test to a larger axial strain")
+    window_end = float(ea[win][-1])
+    if window_end - ea[0] > 0.5 * (ea[peak] - ea[0]):
+        notes.append(f"RVE {rve}: the elastic window (elastic_window {elastic_window:g}, to "
+                     f"axial strain {window_end:.3g}) reaches past half the way to the peak "
+                     f"of σ1/σ3 (at {ea[peak]:.3g}; the test ends at {ea[-1]:.3g}): E "
+                     f"({young:.3g} Pa) and ν ({nu:.3g}) are secants over plastic flow, not "
+                     "elastic (E too low, ν towards 0.5); narrow elastic_window to the "
+                     "curve's first, straight part")
     # ψ: slope of εv^p against γ^p at the peak (a quadratic over the window around it)
     around = np.abs(ea - ea[peak]) <= dilatancy_window / 2
     x = gamma_p[around] - gamma_p[peak]

@@ -28,6 +28,7 @@ import contextlib
 import csv
 import io
 import json
+import math
 import os
 from collections.abc import Sequence
 from contextlib import ExitStack
@@ -45,7 +46,8 @@ if TYPE_CHECKING:
     from granular_material.results.biaxial import BiaxialResult
 
 __all__ = ["BiaxialWriter", "FieldWriter", "append_csv", "format_rows", "read_run_tables",
-           "read_table", "write_csv", "write_json", "write_outputs", "write_tables"]
+           "read_table", "strict_json", "write_csv", "write_json", "write_outputs",
+           "write_tables"]
 
 _CELL_FIELDS = ("sxx", "syy", "sxy", "exx", "eyy", "exy", "volumetric_strain",
                 "shear_strain", "rotation", "mean_pressure", "unconfined", "failed",
@@ -230,11 +232,29 @@ def read_run_tables(out_dir: str | Path) -> dict[str, pd.DataFrame]:
     return tables
 
 
+def strict_json(data: Any) -> Any:
+    """``data`` with every number that is not finite (NaN, ±inf, as Python or numpy floats,
+    also inside arrays) as None, so that it is written as strict JSON (``null``, where
+    Python's json would write ``NaN`` or ``Infinity``, which JSON readers refuse)."""
+    if isinstance(data, dict):
+        return {key: strict_json(value) for key, value in data.items()}
+    if isinstance(data, (list, tuple)):
+        return [strict_json(value) for value in data]
+    if isinstance(data, np.ndarray):
+        return strict_json(data.tolist())
+    if isinstance(data, (float, np.floating)):
+        return float(data) if math.isfinite(data) else None
+    if isinstance(data, np.integer):
+        return int(data)
+    return data
+
+
 def write_json(data: Any, path: str | Path, indent: int = 2) -> Path:
-    """Write ``data`` as JSON to ``path`` (values JSON cannot hold as their ``str``); a new
-    file replaces the old one only once it is complete, and a failed write leaves no
-    ``.part`` behind."""
-    text = json.dumps(data, indent=indent, default=str) + "\n"
+    """Write ``data`` as strict JSON to ``path`` (a number that is not finite as ``null``:
+    :func:`strict_json`; other values JSON cannot hold as their ``str``); a new file
+    replaces the old one only once it is complete, and a failed write leaves no ``.part``
+    behind."""
+    text = json.dumps(strict_json(data), indent=indent, default=str, allow_nan=False) + "\n"
     return write_whole(path, lambda tmp: tmp.write_text(text))
 
 

@@ -321,11 +321,15 @@ class RunCheckpoint:
         self._verified = SavedRun(step, steps, state, self.folder / material)
         return self._verified
 
-    def load(self) -> SavedRun:
+    def load(self, tidy: bool = True) -> SavedRun:
         """The last whole checkpoint (the one :meth:`verify` just returned, else verified
-        now); only then are step files past it (written before a later state that never
-        came) and half-written files removed."""
+        now); only then, with ``tidy``, are step files past it (written before a later state
+        that never came) and half-written files removed (without: the folder is left as it
+        is, and a later ``load()`` returns the same checkpoint and tidies)."""
         saved = self._verified if self._verified is not None else self.verify()
+        if not tidy:
+            self._verified = saved
+            return saved
         self._verified = None
         self._drop_stale(keep=saved.material_path.name)
         for later in self.folder.glob("steps/step_*.npz"):

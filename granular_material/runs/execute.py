@@ -43,6 +43,7 @@ from granular_material.runs.checkpoint import RunCheckpoint
 from granular_material.runs.dem import DemOutcome, DemPlan, DemSpec, is_dem, run_dem
 from granular_material.runs.dem import check as check_dem
 from granular_material.runs.resume import StoppedRunError, open_checkpoint, start_checkpoint
+from granular_material.runs.run_folder import starting
 from granular_material.runs.runner import RunObserver, run_biaxial
 from granular_material.runs.spec import (
     FULL_SCALE,
@@ -258,10 +259,16 @@ def run(spec: RunSpec | DemSpec, observer: RunObserver | None = None, *,
                                              "fresh=True) starts afresh over it)") from None
         plan = check(spec)
         material = _built(spec, plan.context)
+        # the material allocated, or restored (an older checkpoint refused), before the
+        # folder is touched
+        if saved:
+            material.restore(checkpoint.load(tidy=False).material_path)
+        else:
+            with times.phase("preparation"):
+                material.allocate(plan.setup.n_points)
+        if out is not None:
+            starting()  # every check passed: the run writes its folder from here on
         with cleanup_on_rejection(out), start_checkpoint(spec, checkpoint, saved):
-            if not saved:
-                with times.phase("preparation"):
-                    material.allocate(plan.setup.n_points)
             reference = _reference(material, plan, checkpoint, times)
             outcome = _execute(plan, material, observer, checkpoint, saved)
         outcome.reference = reference
@@ -310,6 +317,7 @@ def _execute(plan: RunPlan, material: Material, observer: RunObserver | None,
                              stress_tol=spec.newton.stress_tolerance(
                                  noisy, spec.problem.confining),
                              tracking=plan.tracking, checkpoint=checkpoint, resume=resuming,
+                             restored=resuming,
                              regularisation=spec.regularisation.regularisation())
     summary = run_summary(result, time.perf_counter() - t0)
     summary["resumed_from_step"] = result.resumed_from

@@ -1,16 +1,54 @@
 """What a run folder holds: a run that has ended (its ``summary.json``), or one interrupted
 part-way whose checkpoint lets it continue. The biaxial and boundary-value runners write
-both; a study or report that runs many folders asks here which still need their run."""
+both; a study or report that runs many folders asks here which still need their run.
+
+A run writes nothing into its folder before every check has passed: it says so by calling
+:func:`starting` once, right before its first write (a fresh checkpoint, a table, a tidied
+checkpoint). What a caller writes beside the run (the command line's ``scene.toml``) waits
+for that moment through :func:`when_starting`, so that a refused run leaves the folder as it
+was."""
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
 import json
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
 from granular_material.runs.checkpoint_files import OPTIONS
 
-__all__ = ["ended_summary", "interrupted_error", "resumable"]
+__all__ = ["ended_summary", "interrupted_error", "resumable", "starting", "when_starting"]
+
+#: what is to be done when the run in hand starts writing (see :func:`when_starting`)
+_ON_START: contextvars.ContextVar[list[Callable[[], None]] | None] = contextvars.ContextVar(
+    "granular_material_on_start", default=None)
+
+
+@contextlib.contextmanager
+def when_starting(action: Callable[[], None]) -> Iterator[Callable[[], bool]]:
+    """``action`` done once, when a run in the block calls :func:`starting` (all its checks
+    passed, its first write next); yields a function that tells whether it has been done."""
+    done = [False]
+
+    def once() -> None:
+        if not done[0]:
+            done[0] = True
+            action()
+
+    token = _ON_START.set([*(_ON_START.get() or []), once])
+    try:
+        yield lambda: done[0]
+    finally:
+        _ON_START.reset(token)
+
+
+def starting() -> None:
+    """Called by a run once every check has passed, right before it writes into its folder:
+    what :func:`when_starting` registered is done now (once)."""
+    for action in _ON_START.get() or []:
+        action()
 
 #: how the error of an interrupted run begins (Ctrl-C or a signal: it continues with resume)
 _INTERRUPTED = "interrupted after load step"

@@ -204,6 +204,7 @@ def run_biaxial(
     tracking: Tracking | None = None,
     checkpoint: RunCheckpoint | None = None,
     resume: bool = False,
+    restored: bool = False,
     progress: bool = False,
     on_step: Callable[[NewtonSolver, StepRecord, pd.DataFrame], None] | None = None,
     regularisation: Regularisation | None = None,
@@ -229,7 +230,8 @@ def run_biaxial(
     continues from its last whole checkpoint (the material is restored from it: it need not
     be allocated) and gives the same steps, tables and final state as a run that never
     stopped; with no state saved yet the run starts from the beginning. The observer sees the
-    saved steps again first.
+    saved steps again first. ``restored``: the caller has already restored ``material`` from
+    that checkpoint (so that one it refuses is refused before anything is written).
     """
     problem = build_biaxial(setup)
     if tracking is not None:
@@ -242,7 +244,8 @@ def run_biaxial(
     saved: SavedRun | None = None
     if resume and checkpoint is not None and checkpoint.has_state():
         saved = checkpoint.load()
-        material.restore(saved.material_path)
+        if not restored:
+            material.restore(saved.material_path)
     solver = NewtonSolver(problem.basis, material, problem.loading, settings,
                           regularisation)
     if saved is not None:

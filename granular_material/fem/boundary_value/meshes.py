@@ -312,11 +312,18 @@ def read_mesh(path: str | Path) -> MeshData:
     tri3, tri6, quad4, quad8, quad9 (:data:`MESHIO_ELEMENTS`), straight-sided; coordinates [m],
     z ignored. ParameterError naming the file for what cannot be used."""
     source = str(path)
+    if Path(path).is_dir():
+        raise ParameterError("mesh", f"{source} is a folder, not a mesh file")
+    if Path(path).is_file() and Path(path).stat().st_size == 0:
+        raise ParameterError("mesh", f"{source} is empty, not a mesh file")
     try:
         m = meshio.read(path)
     except (Exception, SystemExit) as exc:  # meshio raises many types for an unreadable
-        # file, and exits (SystemExit) for one that no reader of its suffix takes
-        why = str(exc) if str(exc) not in ("", "1") else "no reader of its suffix takes it"
+        # file, and exits (SystemExit) when every reader of its suffix refused its content
+        suffix = Path(path).suffix or "(none)"
+        why = (str(exc) if str(exc) not in ("", "1") else
+               f"its content is no mesh that meshio's readers of its suffix {suffix} take "
+               "(a damaged or truncated file, or another format under that suffix)")
         raise ParameterError("mesh", f"{source}: meshio cannot read it: {why}") from None
     kinds = sorted({b.type for b in m.cells if b.type in MESHIO_ELEMENTS})
     others = sorted({b.type for b in m.cells if b.type not in MESHIO_ELEMENTS

@@ -22,6 +22,13 @@ The convergence test is a choice (:attr:`NewtonSettings.convergence
   correction already known to be within rtol is saved: one DEM run per increment. An
   increment can converge on its predictor.
 
+An increment that prescribes nothing (its load factor changes neither the prescribed
+displacements nor the external forces, e.g. a footing held at [0, 0]) from a converged state
+has nothing to do: :func:`nothing_prescribed` says so before any correction is solved, the
+iterate is the committed state itself (no predictor), and the rule :func:`idle` accepts its
+one evaluation ("nothing-to-do"). Without it the force test would judge the round-off left
+by the last increment (‖R₀‖ near zero) against itself, and fail a step where nothing moves.
+
 Every rule has one signature, ``rule(state, settings) -> Verdict``: it reads the increment so
 far (an :class:`IterationState`, a frozen value) and the settings, and says that the
 increment converged, stalled (accepted all the same), failed (with the reason), or has to go
@@ -37,11 +44,15 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from enum import Enum
 
+import numpy as np
+
 from granular_material.fem.solver.settings import CONVERGENCE_TESTS, NewtonSettings
 
 __all__ = [
     "GO_ON",
+    "IDLE_RTOL",
     "RULES",
+    "ZERO_RESIDUAL",
     "IterationState",
     "Outcome",
     "Rule",
@@ -53,7 +64,9 @@ __all__ = [
     "diverged",
     "force_atol",
     "force_converged",
+    "idle",
     "judge",
+    "nothing_prescribed",
     "overgrown",
     "residual_displacement_converged",
     "residual_stalled",
@@ -115,6 +128,8 @@ class IterationState:
         predicted: ‖Δu‖_L2 [m · m] of the increment's first iterate (the predictor's).
         step_norm: ‖Δu‖_L2 [m · m] of the iterate the current iterate's correction proposes;
             None until that correction is solved.
+        idle: the increment prescribes nothing from a converged state
+            (:func:`nothing_prescribed`): its iterate is the committed state.
     """
 
     iteration: int
@@ -124,6 +139,45 @@ class IterationState:
     corrections: tuple[float, ...]
     predicted: float
     step_norm: float | None = None
+    idle: bool = False
+
+
+#: a change of the prescribed displacements or external forces at most this fraction of
+#: their size is none (the round-off of a load factor that scales a zero load)
+IDLE_RTOL = 1e-12
+
+
+#: a residual at most this fraction of the internal forces is none (an initial state in
+#: equilibrium to round-off, a geostatic start)
+ZERO_RESIDUAL = 1e-10
+
+
+def nothing_prescribed(du_dirichlet: np.ndarray, u_dirichlet: np.ndarray,
+                       f_ext: np.ndarray, f_ext_committed: np.ndarray,
+                       converged: bool, r0: float = math.inf, force_scale: float = 0.0,
+                       atol: float = 0.0) -> bool:
+    """Whether an increment has nothing to do: it changes neither the prescribed
+    displacements (``du_dirichlet`` [m], against their values ``u_dirichlet``) nor the
+    external forces (``f_ext`` [N/m] against ``f_ext_committed``) beyond :data:`IDLE_RTOL`
+    of their size, and it starts from a ``converged`` state (one an earlier increment was
+    accepted at) or from one in equilibrium: its residual ``r0`` [N/m] within ``atol`` or
+    within :data:`ZERO_RESIDUAL` of ``force_scale`` (‖f_int‖ [N/m], over all dofs). An
+    initial state out of equilibrium has something to do: the increment solves for it."""
+    def unchanged(change: np.ndarray, size: np.ndarray) -> bool:
+        return float(np.linalg.norm(change)) <= IDLE_RTOL * float(np.linalg.norm(size))
+
+    if not (unchanged(du_dirichlet, u_dirichlet)
+            and unchanged(f_ext - f_ext_committed, f_ext_committed)):
+        return False
+    return converged or r0 <= max(atol, ZERO_RESIDUAL * force_scale)
+
+
+def idle(state: IterationState, settings: NewtonSettings) -> Verdict:
+    """Converged, "nothing-to-do": the increment prescribes nothing from a converged state,
+    and its first iterate (the committed state) is evaluated without failing."""
+    if state.idle and state.iteration == 1 and math.isfinite(state.residual):
+        return Verdict(Outcome.CONVERGED, by="nothing-to-do")
+    return GO_ON
 
 
 #: the one signature of the rules
@@ -244,12 +298,12 @@ class Rules:
 
 #: the rules of each convergence test (NewtonSettings.convergence)
 RULES: dict[str, Rules] = {
-    "force": Rules((force_converged, force_atol, residual_stalled, correction_small,
+    "force": Rules((idle, force_converged, force_atol, residual_stalled, correction_small,
                     diverged, spent),
                    (overgrown,)),
-    "displacement": Rules((displacement_converged, correction_stalled, diverged, spent),
+    "displacement": Rules((idle, displacement_converged, correction_stalled, diverged, spent),
                           (overgrown,)),
-    "residual-displacement": Rules((diverged,),
+    "residual-displacement": Rules((idle, diverged),
                                    (overgrown, residual_displacement_converged,
                                     correction_stalled, spent)),
 }

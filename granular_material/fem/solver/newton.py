@@ -39,7 +39,14 @@ from granular_material.fem.regularisation import (
     second_gradient_modulus,
 )
 from granular_material.fem.solver.acceleration import AitkenRelaxation, SecantTangent
-from granular_material.fem.solver.convergence import RULES, IterationState, Outcome, Verdict, judge
+from granular_material.fem.solver.convergence import (
+    RULES,
+    IterationState,
+    Outcome,
+    Verdict,
+    judge,
+    nothing_prescribed,
+)
 from granular_material.fem.solver.records import CommittedState, NewtonError, StepRecord
 from granular_material.fem.solver.settings import CONVERGENCE_TESTS as CONVERGENCE_TESTS
 from granular_material.fem.solver.settings import PREDICTORS as PREDICTORS
@@ -329,6 +336,12 @@ class NewtonSolver:
         if s.predictor == "extrapolate" and self._last is not None:
             last_step, last_du = self._last
             du[interior] = (target - self.load_factor) / last_step * last_du[interior]
+        idle = nothing_prescribed(u_d - self.u[D], self.u[D], f_ext,
+                                  self._external(self.load_factor, self.u)[1],
+                                  converged=self._last is not None, r0=r0,
+                                  force_scale=float(np.linalg.norm(self.f_int)), atol=s.atol)
+        if idle:  # nothing to do: the iterate is the committed state (see convergence.py)
+            du = np.zeros_like(du)
         predicted = self.l2_norm(du)  # the first iterate's increment, for max_growth
         history: list[float] = []
         corrections: list[float] = []
@@ -365,7 +378,8 @@ class NewtonSolver:
                                 np.concatenate([f_ext, np.zeros(sg.n_extra)]))
             r = float(np.linalg.norm(residual[forces]))
             history.append(r / r0 if r0 > 0 else r)
-            state = IterationState(it, r0, r, tuple(history), tuple(corrections), predicted)
+            state = IterationState(it, r0, r, tuple(history), tuple(corrections), predicted,
+                                   idle=idle)
             verdict = judge(rules.evaluated, state, s)
             if verdict.outcome is not Outcome.GO_ON:
                 return _Attempt(verdict, du, response, f_int[:n], history, corrections, it,

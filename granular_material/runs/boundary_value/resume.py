@@ -35,7 +35,7 @@ from granular_material.runs.checkpoint_files import file_sha256
 from granular_material.runs.spec import SpecError
 
 __all__ = ["RESUME_FREE", "check_not_stopped", "open_bvp_checkpoint", "remember", "run_files",
-           "scene_record"]
+           "scene_record", "start_bvp_checkpoint"]
 
 #: the scene's fields a resume may change: where it writes, how it reports, the device and
 #: the CPU shards (none changes a result beyond the DEM's float rounding)
@@ -115,12 +115,15 @@ def check_not_stopped(spec: BoundaryValueSpec, out: Path) -> None:
 def open_bvp_checkpoint(spec: BoundaryValueSpec, out: Path | None, resume: bool,
                         ) -> tuple[RunCheckpoint | None, SavedRun | None]:
     """The checkpoint of the run of ``spec`` in ``out``, and what it saved when resuming
-    (None, None for a run that writes nothing; such a run cannot be resumed).
+    (None, None for a run that writes nothing; such a run cannot be resumed). Nothing in the
+    folder is changed here: :func:`start_bvp_checkpoint` does that once the run starts.
 
     ``resume``: the saved run, checked whole and against ``spec`` (:class:`SpecError`
-    naming the fields that differ; none saved yet: None, the run starts from step 0). A
-    fresh run into a folder whose checkpoint holds a stopped run is refused
-    (:class:`SpecError` on ``out``); an empty or finished one is started afresh.
+    naming the fields that differ). A folder with no run to continue (empty, never started,
+    or finished: its checkpoint is removed at the end) starts the run from step 0, with a
+    note on stderr, as the other commands' ``--resume`` does, so that a batch script can
+    always ask to resume. A fresh run into a folder whose checkpoint holds a stopped run is
+    refused (:class:`SpecError` on ``out``); an empty or finished one is started afresh.
     """
     if out is None:
         if resume:
@@ -130,15 +133,24 @@ def open_bvp_checkpoint(spec: BoundaryValueSpec, out: Path | None, resume: bool,
     record = scene_record(spec)
     if not resume:
         check_not_stopped(spec, out)
-        checkpoint.start({"scene": record, "files": _hashes(spec)})
         return checkpoint, None
     if not checkpoint.has_options():
-        raise SpecError("out", f"{out} holds no boundary-value run to resume (no "
-                               "checkpoint/options.json)")
-    options = checkpoint.read_options()
+        if checkpoint.has_state():
+            raise SpecError("out", f"{out}: {checkpoint.folder / 'options.json'} is missing, "
+                                   "so the scene the run was started with cannot be "
+                                   "checked (nothing in the folder was changed)")
+        print(f"granular-material run: {out} holds no stopped boundary-value run (no "
+              "checkpoint); the run starts from the beginning", file=sys.stderr)
+        return checkpoint, None
+    try:
+        options = checkpoint.read_options()
+    except CheckpointError as exc:
+        raise SpecError("out", f"cannot resume: {exc} (nothing in the folder was "
+                               "changed)") from None
     saved_scene = options.get("scene")
     if not isinstance(saved_scene, dict):
-        raise SpecError("out", f"{out}'s checkpoint is not a boundary-value run's")
+        raise SpecError("out", f"{out}'s checkpoint is not a boundary-value run's (nothing "
+                               "in the folder was changed)")
     differ = _differences(record, saved_scene)
     if differ:
         raise SpecError(differ[0], f"the scene differs from the one the run in {out} was "
@@ -148,9 +160,23 @@ def open_bvp_checkpoint(spec: BoundaryValueSpec, out: Path | None, resume: bool,
     if not checkpoint.has_state():
         return checkpoint, None
     try:
-        return checkpoint, checkpoint.load()
+        return checkpoint, checkpoint.verify()  # checked whole; the folder tidied at start
     except CheckpointError as exc:
-        raise SpecError("out", f"cannot resume: {exc}") from None
+        raise SpecError("out", f"cannot resume: {exc} (nothing in the folder was "
+                               "changed)") from None
+
+
+def start_bvp_checkpoint(spec: BoundaryValueSpec, checkpoint: RunCheckpoint | None,
+                         saved: SavedRun | None) -> None:
+    """The run starts writing: a fresh one records its scene and files in ``checkpoint``
+    (an earlier run's emptied), a resumed one tidies it (step files past the state it
+    continues from, half-written files)."""
+    if checkpoint is None:
+        return
+    if saved is None:
+        checkpoint.start({"scene": scene_record(spec), "files": _hashes(spec)})
+    else:
+        checkpoint.load()
 
 
 def remember(checkpoint: RunCheckpoint | None, name: str,

@@ -25,6 +25,7 @@ from __future__ import annotations
 import json
 import math
 import time
+import warnings
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -51,14 +52,24 @@ from granular_material.results.bvp_plots import plot_load_displacement, plot_mec
 from granular_material.results.writers import FieldWriter, write_csv, write_json
 from granular_material.runs.boundary_value.checks import check_disk, check_memory, generated_size
 from granular_material.runs.boundary_value.material import material_for_problem, unit_weight_of
-from granular_material.runs.boundary_value.resume import open_bvp_checkpoint, remember
+from granular_material.runs.boundary_value.resume import (
+    open_bvp_checkpoint,
+    remember,
+    start_bvp_checkpoint,
+)
 from granular_material.runs.boundary_value.spec import BoundaryValueSpec, ConditionSpec
-from granular_material.runs.run_folder import interrupted_error
+from granular_material.runs.run_folder import interrupted_error, starting
 from granular_material.runs.spec import SpecError
 
+#: the files a run writes into its folder beside its tables (removed when a run starts, so
+#: that an earlier run's never stand beside this one's)
+_OUTPUTS = ("fields.xdmf", "load_displacement.png", "mechanism.png", "summary.json")
+
 __all__ = [
+    "OUT_OF_EQUILIBRIUM",
     "BVPOutcome",
     "Built",
+    "OutOfEquilibriumWarning",
     "boundary_length",
     "build",
     "run_boundary_value",
@@ -270,10 +281,10 @@ def run_boundary_value(spec: BoundaryValueSpec, out: Path | None = None,
             raise SpecError("out", f"{out} is a file, not a folder")
         check_disk(spec, next(p for p in (out, *out.absolute().parents) if p.exists()),
                    _mesh)
-    checkpoint, saved = open_bvp_checkpoint(spec, out, resume)
+    checkpoint, saved = open_bvp_checkpoint(spec, out, resume)  # read, nothing changed
     b = build(spec, allocate=saved is None)
     if saved is not None:
-        b.material.restore(saved.material_path)
+        b.material.restore(saved.material_path)  # refused (an older one) before any write
     problem = b.problem
     try:
         solver = NewtonSolver(problem.basis, b.material, problem.loading, b.settings,
@@ -286,9 +297,12 @@ def run_boundary_value(spec: BoundaryValueSpec, out: Path | None = None,
     rows: list[dict[str, Any]] = []
     last: dict[str, Any] = {}
     writer = None
-    if out is not None:
+    if out is not None:  # every check passed: the run starts writing its folder
+        starting()
         out.mkdir(parents=True, exist_ok=True)
-        (out / "points.csv").unlink(missing_ok=True)
+        start_bvp_checkpoint(spec, checkpoint, saved)
+        for stale in ("points.csv", *_OUTPUTS):  # an earlier run's, rewritten by this one
+            (out / stale).unlink(missing_ok=True)
         if spec.fields:
             writer = FieldWriter(out / "fields.xdmf", problem).__enter__()
 
@@ -328,6 +342,11 @@ def run_boundary_value(spec: BoundaryValueSpec, out: Path | None = None,
                    done=0 if saved is None else saved.step)
     except NewtonError as exc:
         error = str(exc)
+        relative = initial_residual.get("relative", 0.0)
+        if relative > OUT_OF_EQUILIBRIUM and initial_residual.get("norm", 0.0) > b.settings.atol:
+            error += (f" (the initial state was not in equilibrium with the loads: its "
+                      f"residual {relative:.3g} times the load; a start in equilibrium, e.g. "
+                      "geostatic, lets the steps carry the load alone)")
     except KeyboardInterrupt as exc:
         error = interrupted_error(len(rows) - 1, spec.steps)
         interrupt = exc
@@ -350,16 +369,41 @@ def run_boundary_value(spec: BoundaryValueSpec, out: Path | None = None,
                       last.get("u", np.zeros(0)), interrupt)
 
 
+class OutOfEquilibriumWarning(UserWarning):
+    """The initial state of a boundary-value run is not in equilibrium with its loads at
+    step 0 (:data:`OUT_OF_EQUILIBRIUM`)."""
+
+
+#: the initial residual, relative to the load, above which the start is reported out of
+#: equilibrium (a geostatic start is in it to round-off; DEM RVEs meet their targets within
+#: about 1 %)
+OUT_OF_EQUILIBRIUM = 0.01
+
+
 def _initial_residual(solver: NewtonSolver) -> dict[str, float]:
-    """‖R‖ [N/m] of the initial state at λ = 0 over the free dofs, against ‖f_ext‖: zero when
-    the initial stress is in equilibrium with the loads (a geostatic start)."""
+    """‖R‖ [N/m] of the initial state at λ = 0 over the free dofs, against ‖f_ext‖ there (the
+    load; where none acts on the free dofs, ‖f_int‖ over all dofs, the forces the initial
+    stress puts on the supports): zero when the initial stress is in equilibrium with the
+    loads (a geostatic start). One out of equilibrium (:data:`OUT_OF_EQUILIBRIUM`) is said
+    with an :class:`OutOfEquilibriumWarning`."""
     _, f_ext = solver.loading.at(0.0, solver.u if solver.kinematics.finite else None)
     residual = solver.f_int - f_ext
     free = np.ones(residual.size, dtype=bool)
     free[solver.loading.dirichlet_dofs] = False
     norm = float(np.linalg.norm(residual[free]))
-    scale = float(np.linalg.norm(f_ext[free])) or float(np.linalg.norm(solver.f_int)) or 1.0
-    return {"norm": norm, "relative": norm / scale, "newton_atol": solver.settings.atol}
+    load = float(np.linalg.norm(f_ext[free]))
+    scale = load or float(np.linalg.norm(solver.f_int)) or 1.0
+    relative = norm / scale
+    balanced = relative <= OUT_OF_EQUILIBRIUM or norm <= solver.settings.atol
+    if not balanced:
+        against = ("the load" if load else
+                   "the forces of the initial stress (no load acts on the free nodes)")
+        warnings.warn(f"the initial state is not in equilibrium with the loads at step 0: its "
+                      f"residual is {norm:.3g} N/m, {relative:.3g} times {against}; the first "
+                      "load step brings it to equilibrium as well as applying its increment, "
+                      "so its response holds both (a geostatic start with the scene's unit "
+                      "weight starts in equilibrium)", OutOfEquilibriumWarning, stacklevel=3)
+    return {"norm": norm, "relative": relative, "newton_atol": solver.settings.atol}
 
 
 def _summary(b: Built, solver: NewtonSolver, steps: pd.DataFrame, points: pd.DataFrame,

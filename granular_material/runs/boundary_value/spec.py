@@ -450,6 +450,8 @@ def _mesh(table: dict[str, Any], folder: Path) -> MeshSpec:
     file = values.get("file")
     if isinstance(file, str) and file:
         path = Path(file) if Path(file).is_absolute() else folder / file
+        if path.is_dir():
+            raise SpecError("mesh.file", f"{path} is a folder, not a mesh file")
         if not path.is_file():
             raise SpecError("mesh.file", f"{path} does not exist")
         values["file"] = path

@@ -33,6 +33,7 @@ from granular_material.runs.dem.spec import (
     PrepareSpec,
 )
 from granular_material.runs.resume import StoppedRunError
+from granular_material.runs.run_folder import starting
 
 __all__ = ["RESUME_FREE", "SERVO_FAIL", "SERVO_WARN", "DemOutcome", "DemPlan", "check",
            "run_dem"]
@@ -261,11 +262,16 @@ def run_dem(spec: DemSpec, *, resume: bool = False, fresh: bool = False) -> DemO
             return _prepare(plan)
     with _locked(spec.out):
         checkpoint, saved = _open(spec, resume, fresh)
+        # the RVE file read (one that cannot be is refused) before anything is written
+        batch = _batch(spec, spec.rve if saved is None else saved.rve)
+        if spec.out is not None:
+            starting()  # every check passed: the run writes from here on
         _started(spec, checkpoint, saved)
         try:
-            outcome = _biaxial(spec, checkpoint, saved) if isinstance(spec, BiaxialDemSpec) \
-                else _drive(plan, spec, checkpoint, saved)
-        except ValueError:  # input rejected (an RVE file that cannot be read): no checkpoint
+            outcome = _biaxial(spec, checkpoint, saved, batch) \
+                if isinstance(spec, BiaxialDemSpec) else _drive(plan, spec, checkpoint, saved,
+                                                                 batch)
+        except ValueError:  # input rejected once running: no checkpoint of a fresh run
             if checkpoint is not None and saved is None:
                 checkpoint.remove()
             raise
@@ -308,6 +314,8 @@ def _prepare(plan: DemPlan) -> DemOutcome:
             outcome.warnings.append(text)
     report["warnings"] = outcome.warnings
     if outcome.error is None:
+        if spec.out is not None:
+            starting()
         make_parents(spec.out)
         save_rve(spec.out, batch.to_data())
         report["out"] = str(spec.out)
@@ -327,7 +335,7 @@ def _saver(checkpoint: DemCheckpoint | None, batch: Any) -> Any:
 
 
 def _biaxial(spec: BiaxialDemSpec, checkpoint: DemCheckpoint | None,
-             saved: Any) -> DemOutcome:
+             saved: Any, batch: Any) -> DemOutcome:
     from granular_material.checks import make_parents
     from granular_material.procedures import biaxial_test
     from granular_material.procedures.element_tests import (
@@ -337,7 +345,6 @@ def _biaxial(spec: BiaxialDemSpec, checkpoint: DemCheckpoint | None,
     )
     from granular_material.results import plot_biaxial_curves, summarize_biaxial, write_csv
 
-    batch = _batch(spec, spec.rve if saved is None else saved.rve)
     start = None if saved is None else BiaxialStart(saved.table, saved.counter, saved.cell0)
     save = _saver(checkpoint, batch)
     interrupt = None
@@ -395,13 +402,12 @@ def _biaxial(spec: BiaxialDemSpec, checkpoint: DemCheckpoint | None,
 
 
 def _drive(plan: DemPlan, spec: DriveSpec, checkpoint: DemCheckpoint | None,
-           saved: Any) -> DemOutcome:
+           saved: Any, batch: Any) -> DemOutcome:
     from granular_material.checks import make_parents
     from granular_material.procedures import drive_path, progress_bar
     from granular_material.procedures.driven_path import DrivenPath
     from granular_material.results import write_csv
 
-    batch = _batch(spec, spec.rve if saved is None else saved.rve)
     start = None if saved is None else DrivenPath(table=saved.table, steps=saved.steps)
     save = _saver(checkpoint, batch)
     cell0 = np.zeros((0, 2, 2))
