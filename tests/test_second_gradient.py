@@ -281,3 +281,14 @@ def test_a_boundary_value_scene_runs_regularised_and_refuses_linear_elements(tmp
         bvp_from_dict(tomllib.loads(_scene("quad4")), tmp_path)
     assert refused.value.field == "regularisation.model"
     assert "quad8, quad9, tri6" in str(refused.value)
+
+
+def test_a_regularised_step_with_nothing_to_do_is_accepted(tmp_path):
+    """The block held where it stands: once step 1 has brought the free sides into
+    equilibrium with the initial pressure, steps 2 and 3 have nothing to do, regularised
+    too (one evaluation each)."""
+    text = _scene("quad8").replace("value = -0.001", "value = 0.0")
+    outcome = run_boundary_value(bvp_from_dict(tomllib.loads(text), tmp_path),
+                                 out=tmp_path / "held")
+    assert outcome.error is None and len(outcome.steps) == 4
+    assert outcome.steps["iterations"].iloc[2:].tolist() == [1, 1]
