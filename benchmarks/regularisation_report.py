@@ -127,12 +127,15 @@ def footing_figure(out: Path, rows: list[dict[str, Any]]) -> list[str]:
     table = pd.DataFrame(rows)
     fig, axes = plt.subplots(1, 2, figsize=(9, 3.8), sharey=True)
     for ax, kind in zip(axes, ("mc", "dem"), strict=True):
-        for k, (_, row) in enumerate(table[table["material"] == kind].iterrows()):
+        rows = table[table["material"] == kind]
+        meshes = list(dict.fromkeys(rows["mesh"]))
+        lengths = sorted(rows["internal_length"].unique())
+        styles = dict(zip(lengths, ("--", "-", "-.", ":"), strict=False))
+        for _, row in rows.iterrows():
             steps = pd.read_csv(out / row["folder"] / "steps.csv")
-            style = "-" if row["internal_length"] else "--"
             ax.plot(-1e3 * steps["footing_displacement_y"],
-                    -steps["footing_force_y"] / 0.05 / 1e3, style, color=f"C{k // 2}"
-                    if kind == "mc" else f"C{k}",
+                    -steps["footing_force_y"] / 0.05 / 1e3, styles[row["internal_length"]],
+                    color=f"C{meshes.index(row['mesh'])}",
                     label=f"{row['mesh']}, {_label(row['internal_length'])}")
         ax.set_title("softening Mohr–Coulomb twin" if kind == "mc" else "DEM RVEs",
                      fontsize=10)
@@ -156,15 +159,17 @@ def write_report(out: Path, results: dict[str, Any]) -> None:
         specimen_figures(out, results["specimen"])
         lines += ["## Mohr–Coulomb softening specimen", "",
                   "| mesh | ℓ [mm] | steps | peak σ1/σ3 | at ε [%] | σ1/σ3 at 5 % | bands | "
-                  "band width [mm] | angles [°] | iterations / step | time [s] | "
+                  "widths [mm] | lengths [mm] | angles [°] | iterations / step | time [s] | "
                   "linear solve [s] |",
-                  "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+                  "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
         for r in results["specimen"]:
             angles = ", ".join(f"{a:.0f}" for a in r["band_angles"]) or "–"
+            widths = ", ".join(_mm(w) for w in r["band_widths"]) or "–"
+            lengths = ", ".join(_mm(w) for w in r.get("band_lengths", [])) or "–"
             lines.append(
                 f"| {r['mesh']} | {r['internal_length'] * 1e3:g} | {r['steps_completed']} | "
                 f"{_f(r['peak_ratio'])} | {_f(100 * r['peak_strain'], 1)} | "
-                f"{_f(r['ratio_5'])} | {r['band_count']} | {_mm(r['band_width'])} | "
+                f"{_f(r['ratio_5'])} | {r['band_count']} | {widths} | {lengths} | "
                 f"{angles} | {_f(r['iterations'], 1)} | {_f(r['time_s'], 1)} | "
                 f"{_f(r['linear_solve_s'], 1)} |")
         lines += ["", "![stress ratio](specimen_curves.png)", "",
