@@ -185,3 +185,25 @@ def test_the_tables_are_flushed_to_the_disk_now_and_then_and_at_the_end(tmp_path
     with BiaxialWriter(tmp_path / "every") as writer:
         _record(writer, 4, kind=int)
     assert synced == ["points.csv", "steps.csv"] * 3  # each appended step
+
+
+def test_the_checkpoints_newton_records_are_converted_once_and_read_alike():
+    """The state saved after every step converts each Newton record once: its JSON text is
+    that of converting them all again."""
+    from dataclasses import asdict
+
+    from granular_material.fem import StepRecord
+    from granular_material.runs import checkpoint_files
+
+    records = [StepRecord(step=k, load_factor=k / 3, iterations=2, costs={"dem_steps": k},
+                          residual_history=[[1.0, 10.0 ** -k]], timings={"assembly": 0.1})
+               for k in range(1, 5)]
+    for n in range(len(records) + 1):
+        assert str(checkpoint_files._records(records[:n])) == str(
+            checkpoint_files.dumps([asdict(r) for r in records[:n]]))
+    kept = len(checkpoint_files._RECORD_JSON)
+    del records
+    import gc
+
+    gc.collect()
+    assert len(checkpoint_files._RECORD_JSON) <= kept - 4  # forgotten with their records
