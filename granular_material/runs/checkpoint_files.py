@@ -322,6 +322,7 @@ def state_arrays(step: int, material: str, state: CommittedState,
         "response.fields": dumps(sorted(response.fields)),
         **{f"response.field.{k}": np.asarray(v) for k, v in response.fields.items()},
         "manifest": dumps(manifest),
+        **({} if state.f_int is None else {"f_int": np.asarray(state.f_int, dtype=np.float64)}),
     }
 
 
@@ -366,9 +367,13 @@ def read_state(path: Path) -> tuple[int, str, CommittedState, dict[str, Any] | N
         if not (math.isfinite(float(npz["load_factor"]))
                 and math.isfinite(float(npz["run_start"]))):
             raise CheckpointError(f"{path}: its load factor is not a number")
+        f_int = np.array(npz["f_int"]) if "f_int" in npz else None  # older: assembled anew
+        if f_int is not None and (f_int.shape != u.shape or f_int.dtype.kind != "f"):
+            raise CheckpointError(f"{path}: its internal force is not a vector of numbers "
+                                  "like its displacement")
         state = CommittedState(
             u=u, load_factor=float(npz["load_factor"]),
             run_start=float(npz["run_start"]), last_increment=last,
-            records=[_record(path, r) for r in records], response=response,
+            records=[_record(path, r) for r in records], response=response, f_int=f_int,
         )
     return step, material, state, manifest

@@ -177,7 +177,7 @@ class NewtonSolver:
         """The solver's committed state (copies), to checkpoint a run."""
         last = None if self._last is None else (self._last[0], self._last[1].copy())
         return CommittedState(self.u.copy(), self.load_factor, self._run_start, last,
-                              list(self.records), self.response)
+                              list(self.records), self.response, self.f_int.copy())
 
     def resume(self, state: CommittedState) -> None:
         """Continue from ``state`` (from :meth:`committed_state`, perhaps of another process):
@@ -195,8 +195,11 @@ class NewtonSolver:
         self.records = list(state.records)
         self.response = state.response
         self._grad_committed = gauss_points_grad(self.basis, self.u)
-        self.f_int = internal_force(self.basis, self.kinematics.assembled_stress(
-            self.response.stress, self._grad_committed))
+        # the force the step assembled (from ∇u of the step before plus its increment's), not
+        # one from the total ∇u, which differs at round-off and would move the next step
+        self.f_int = (np.array(state.f_int, dtype=np.float64) if state.f_int is not None
+                      else internal_force(self.basis, self.kinematics.assembled_stress(
+                          self.response.stress, self._grad_committed)))
 
     @property
     def reaction(self) -> np.ndarray:

@@ -80,6 +80,9 @@ class CommittedState:
             None before the first.
         records: the committed steps' records.
         response: the material response of the committed state.
+        f_int: the internal force [N/m] (ndofs,) of the committed state as the step that
+            committed it assembled it; None: assembled anew on resume (a checkpoint written
+            before it was kept, whose next step may then differ at round-off).
     """
 
     u: np.ndarray
@@ -88,6 +91,7 @@ class CommittedState:
     last_increment: tuple[float, np.ndarray] | None
     records: list[StepRecord]
     response: MaterialResponse
+    f_int: np.ndarray | None = None
 
 
 class NewtonError(RuntimeError):
