@@ -1,7 +1,7 @@
 """Only what the run needs (issue 62): a run of a continuum material (Mohr–Coulomb,
-linear-elastic) through the library's one entry point loads neither warp, the DEM's batch and
-kernels, the DEM material nor scipy.spatial; the DEM's and the procedures' packages load
-their modules when a name of theirs is first used."""
+linear-elastic) through the library's one entry point or the command line loads neither
+warp, the DEM's batch and kernels, the DEM material nor scipy.spatial; the DEM's and the
+procedures' packages load their modules when a name of theirs is first used."""
 
 from __future__ import annotations
 
@@ -48,6 +48,43 @@ def test_a_continuum_run_loads_no_dem(tmp_path, material, test, device):
     assert report["loaded"] == []
     if test == "biaxial":
         assert report["device"] == "cpu"
+
+
+#: modules a continuum run from the command line must not load: the command line shows the
+#: DEM material's defaults, so it loads that material's parameters (its package, lazy, and
+#: ``multiscale.parameters`` and ``run_hooks``), but not the material, its backend or the DEM
+_CLI_NOT_NEEDED = [*(m for m in _NOT_NEEDED if m != "granular_material.multiscale"),
+                   "granular_material.multiscale.material", "granular_material.multiscale.backend",
+                   "granular_material.dem.homogenization", "granular_material.dem.solver"]
+
+_CLI = f"""
+NOT_NEEDED = {_CLI_NOT_NEEDED!r}
+import json, sys
+from granular_material.cli import main
+code = main(["biaxial", "--material", sys.argv[2], "--elements", "1", "2", "--steps", "1",
+             "--axial-strain", "0.001", "--no-progress", "--out", sys.argv[1]])
+print(json.dumps({{"code": code, "loaded": [m for m in NOT_NEEDED if m in sys.modules]}}))
+"""
+
+
+@pytest.mark.parametrize("material", ["mohr-coulomb", "linear-elastic"])
+def test_a_continuum_run_from_the_command_line_loads_no_dem(tmp_path, material):
+    done = subprocess.run([sys.executable, "-c", _CLI, str(tmp_path / "run"), material],
+                          capture_output=True, text=True, timeout=300, check=False)
+    assert done.returncode == 0, done.stderr[-2000:]
+    report = json.loads(done.stdout.strip().splitlines()[-1])
+    assert report == {"code": 0, "loaded": []}
+    assert (tmp_path / "run" / "summary.json").is_file()
+
+
+def test_the_dem_material_still_loads_by_its_entry_point():
+    code = ("import sys\nfrom granular_material.fem import load_material\n"
+            "import granular_material.multiscale as m\nbefore = 'warp' in sys.modules\n"
+            "cls = load_material('dem')\n"
+            "print(before, cls is m.DEMMaterial, cls.Parameters is m.DEMParameters)\n")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=300, check=True)
+    assert done.stdout.split() == ["False", "True", "True"]
 
 
 def test_the_packages_load_their_names_on_first_use():

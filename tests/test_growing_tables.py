@@ -113,9 +113,10 @@ def test_a_step_writes_its_steps_row_last(tmp_path, monkeypatch):
     order = []
     real = writers.write_csv
 
-    def recording(frame: pd.DataFrame, path: str | Path, append: bool = False) -> Path:
+    def recording(frame: pd.DataFrame, path: str | Path, append: bool = False,
+                  **keywords: bool) -> Path:
         order.append(Path(path).name)
-        return real(frame, path, append)
+        return real(frame, path, append, **keywords)
 
     class Fields:
         def write(self, *args: object) -> None:

@@ -51,6 +51,21 @@ def test_remembered_columns_tell_minus_zero_and_nan_apart():
         assert format_rows(frame) == frame.to_csv(index=False, header=False)
 
 
+@settings(max_examples=100, deadline=None)
+@given(base=st.lists(_FLOATS, min_size=2, max_size=12), data=st.data())
+def test_a_column_changed_in_a_few_values_is_formatted_as_pandas_formats_it(base, data):
+    """From one step to the next only the changed values are formatted anew."""
+    frame = pd.DataFrame({"x": np.array(base), "point": np.arange(len(base))})
+    assert format_rows(frame) == frame.to_csv(index=False, header=False)
+    for _ in range(3):
+        changed = data.draw(st.lists(st.integers(0, len(base) - 1), max_size=len(base) // 2))
+        values = frame["x"].to_numpy().copy()
+        for k in changed:
+            values[k] = data.draw(_FLOATS)
+        frame = pd.DataFrame({"x": values, "point": np.arange(len(base))})
+        assert format_rows(frame) == frame.to_csv(index=False, header=False)
+
+
 def test_other_columns_are_formatted_by_pandas():
     frame = pd.DataFrame({"step": [1], "history": ["[1.5, 2.0]"], "by": [None]})
     assert format_rows(frame) == frame.to_csv(index=False, header=False)
@@ -124,8 +139,8 @@ def test_a_stop_between_a_steps_writes_has_the_tables_written_whole(tmp_path, mo
     _record(writer, 2, kind=int)
     real = writers.write_csv
 
-    def interrupted(frame, path, append=False):
-        result = real(frame, path, append)
+    def interrupted(frame, path, append=False, **keywords):
+        result = real(frame, path, append, **keywords)
         if Path(path).name == "points.csv":
             raise KeyboardInterrupt
         return result
@@ -144,3 +159,51 @@ def test_a_stop_between_a_steps_writes_has_the_tables_written_whole(tmp_path, mo
     assert not writer.holds(result)
     writer.finish(result)
     assert (tmp_path / "steps.csv").read_text() == steps.to_csv(index=False)
+
+
+def test_the_tables_are_flushed_to_the_disk_now_and_then_and_at_the_end(tmp_path, monkeypatch):
+    """A kill loses nothing the kernel holds: the tables are flushed (fsync) with the first
+    step SYNC_SECONDS after the last flush, points before steps, and when the run ends."""
+    synced = []
+    real = writers.os.fsync
+
+    def fsync(fd):
+        synced.append(Path(f"/proc/self/fd/{fd}").resolve().name)
+        real(fd)
+
+    monkeypatch.setattr(writers.os, "fsync", fsync)
+    monkeypatch.setattr(writers, "SYNC_SECONDS", 3600.0)
+    with BiaxialWriter(tmp_path) as writer:
+        _record(writer, 2, kind=int)  # step 0 written whole, step 1 appended and flushed
+        assert synced == ["points.csv", "steps.csv"]
+        _record(writer, 4, kind=int)  # appended only
+        assert synced == ["points.csv", "steps.csv"]
+        writer.finish(_Result(tmp_path))
+        assert synced == ["points.csv", "steps.csv"] * 2
+    monkeypatch.setattr(writers, "SYNC_SECONDS", 0.0)
+    synced.clear()
+    with BiaxialWriter(tmp_path / "every") as writer:
+        _record(writer, 4, kind=int)
+    assert synced == ["points.csv", "steps.csv"] * 3  # each appended step
+
+
+def test_the_checkpoints_newton_records_are_converted_once_and_read_alike():
+    """The state saved after every step converts each Newton record once: its JSON text is
+    that of converting them all again."""
+    from dataclasses import asdict
+
+    from granular_material.fem import StepRecord
+    from granular_material.runs import checkpoint_files
+
+    records = [StepRecord(step=k, load_factor=k / 3, iterations=2, costs={"dem_steps": k},
+                          residual_history=[[1.0, 10.0 ** -k]], timings={"assembly": 0.1})
+               for k in range(1, 5)]
+    for n in range(len(records) + 1):
+        assert str(checkpoint_files._records(records[:n])) == str(
+            checkpoint_files.dumps([asdict(r) for r in records[:n]]))
+    kept = len(checkpoint_files._RECORD_JSON)
+    del records
+    import gc
+
+    gc.collect()
+    assert len(checkpoint_files._RECORD_JSON) <= kept - 4  # forgotten with their records

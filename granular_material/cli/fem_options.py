@@ -25,11 +25,12 @@ from granular_material.cli.options import (
     positive_int,
 )
 from granular_material.cli.parsers import CommandParser
-from granular_material.fem import available_postprocessors, load_material
+from granular_material.fem import available_postprocessors
 from granular_material.fem.boundary_value.biaxial import PLATENS
 from granular_material.fem.kinematics import FORMULATIONS
 from granular_material.fem.regularisation import REGULARISATIONS
 from granular_material.fem.solver.newton import PREDICTORS, RELAXATIONS, TANGENT_UPDATES
+from granular_material.multiscale.run_hooks import DEMParameters
 from granular_material.runs import OutputSpec
 from granular_material.runs.presets import PRESET_NAMES
 from granular_material.runs.spec import (
@@ -48,9 +49,11 @@ _OUTPUT = OutputSpec()
 _REGULARISATION = RegularisationSpec()
 _PROBLEM = {f: ProblemSpec.__dataclass_fields__[f].default
             for f in ("axial_strain", "confining", "steps")}
-#: the material the FEM commands run by default, and its parameters' defaults
+#: the material the FEM commands run by default, and its parameters' defaults (the class the
+#: ``dem`` material's ``Parameters`` names, taken from its module: loading the material itself
+#: would load warp and the DEM for any run, a continuum one too)
 DEFAULT_MATERIAL = "dem"
-_DEM = load_material(DEFAULT_MATERIAL).Parameters()
+_DEM = DEMParameters()
 TANGENTS = _DEM.tangents
 DEFAULT_PARTICLES = _DEM.default_particles
 

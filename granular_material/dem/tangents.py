@@ -21,7 +21,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from granular_material.dem.homogenization import objective_tangent, spin_tangent
 from granular_material.errors import ParameterError
 
 __all__ = ["TANGENTS", "TangentMethod", "tangent_method"]
@@ -65,6 +64,9 @@ class TangentMethod:
             return tangent
         stress = np.asarray(stress, dtype=np.float64)
         symmetric = 0.5 * (stress + np.swapaxes(stress, 1, 2))
+        # imported here: naming a tangent (a run's options) loads no warp
+        from granular_material.dem.homogenization import objective_tangent, spin_tangent
+
         if self.spin == "objective":
             return objective_tangent(tangent, symmetric)
         return tangent + spin_tangent(symmetric)

@@ -14,21 +14,48 @@ job (:mod:`.mpi`), what an evaluation gives (:mod:`.evaluation`) and its run hoo
 (:mod:`.run_hooks`).
 """
 
-from granular_material.multiscale.backend import InProcessBackend
-from granular_material.multiscale.confinement import (
-    UNCONFINED_FRACTION,
-    UnconfinedWarning,
-    unconfined,
-)
-from granular_material.multiscale.evaluation import DEMBackend, Evaluation
-from granular_material.multiscale.material import DEMMaterial
-from granular_material.multiscale.parameters import (
-    BACKENDS,
-    DEMDriving,
-    DEMMaterialParameters,
-    DEMRVEs,
-)
-from granular_material.multiscale.run_hooks import DEMParameters
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+from granular_material.lazy_names import lazy_names
+
+if TYPE_CHECKING:
+    from granular_material.multiscale.backend import InProcessBackend
+    from granular_material.multiscale.confinement import (
+        UNCONFINED_FRACTION,
+        UnconfinedWarning,
+        unconfined,
+    )
+    from granular_material.multiscale.evaluation import DEMBackend, Evaluation
+    from granular_material.multiscale.material import DEMMaterial
+    from granular_material.multiscale.parameters import (
+        BACKENDS,
+        DEMDriving,
+        DEMMaterialParameters,
+        DEMRVEs,
+    )
+    from granular_material.multiscale.run_hooks import DEMParameters
+
+#: the module each public name comes from: imported on first use (PEP 562), so that the DEM
+#: material's parameters (the command line's defaults) load neither warp nor the DEM
+_HOME = {
+    "InProcessBackend": "granular_material.multiscale.backend",
+    "UNCONFINED_FRACTION": "granular_material.multiscale.confinement",
+    "UnconfinedWarning": "granular_material.multiscale.confinement",
+    "unconfined": "granular_material.multiscale.confinement",
+    "DEMBackend": "granular_material.multiscale.evaluation",
+    "Evaluation": "granular_material.multiscale.evaluation",
+    "DEMMaterial": "granular_material.multiscale.material",
+    "BACKENDS": "granular_material.multiscale.parameters",
+    "DEMDriving": "granular_material.multiscale.parameters",
+    "DEMMaterialParameters": "granular_material.multiscale.parameters",
+    "DEMRVEs": "granular_material.multiscale.parameters",
+    "DEMParameters": "granular_material.multiscale.run_hooks",
+}
+
+# a public name (or a submodule) of the package, imported on first use
+__getattr__, __dir__ = lazy_names(__name__, _HOME, globals(), submodules=True)
 
 __all__ = ["BACKENDS", "UNCONFINED_FRACTION", "DEMBackend", "DEMDriving", "DEMMaterial",
            "DEMMaterialParameters", "DEMParameters", "DEMRVEs", "Evaluation",

@@ -25,7 +25,6 @@ from pathlib import Path
 
 import numpy as np
 
-from granular_material.dem import resolve_device
 from granular_material.dem.tangents import TangentMethod, tangent_method
 from granular_material.errors import ParameterError
 from granular_material.procedures.packing import (
@@ -37,9 +36,12 @@ from granular_material.procedures.packing import (
     min_discs,
     smallest_normal_stiffness,
 )
-from granular_material.procedures.servo import check_stress_targets
-from granular_material.procedures.strain_path import DEFAULT_MAX_DEM_STEPS, DEFAULT_STRAIN_PER_STEP
-from granular_material.reference_values import DEFAULT_DISCS, DEFAULT_PRESSURE
+from granular_material.reference_values import (
+    DEFAULT_DISCS,
+    DEFAULT_MAX_DEM_STEPS,
+    DEFAULT_PRESSURE,
+    DEFAULT_STRAIN_PER_STEP,
+)
 from granular_material.typed_fields import conform_fields
 
 __all__ = ["BACKENDS", "DRIVES", "MAX_SHARDS", "MIN_PERTURBATION", "REUSE_CORRECTIONS",
@@ -255,6 +257,8 @@ class DEMMaterialParameters(DEMRVEs):
             self._check_consolidation()
         if self.device is not None:
             try:
+                from granular_material.dem import resolve_device  # warp: only when asked
+
                 resolve_device(self.device)  # the engine's one device check
             except ValueError as exc:
                 raise ParameterError("device", f"cannot be used: {exc}") from None
@@ -306,6 +310,8 @@ class DEMMaterialParameters(DEMRVEs):
             raise ParameterError("initial_stress", f"must be an array of shape (n, 2, 2) [Pa], "
                                                    f"one tensor per Gauss point, got shape "
                                                    f"{given.shape}")
+        from granular_material.procedures.servo import check_stress_targets  # the DEM's
+
         check_stress_targets(given, len(given), "initial_stress")
         object.__setattr__(self, "initial_stress",
                            tuple(tuple(tuple(float(v) for v in row) for row in tensor)

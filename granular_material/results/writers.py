@@ -4,10 +4,14 @@
 whether whole at the end or step by step while the run goes (:class:`BiaxialWriter`).
 
 A table that grows while a run goes is whole on disk at every step. Its rows are appended by
-:func:`append_csv`: the step's rows in one write after the table's last whole row, flushed to
-the disk (``fsync``), taken back (truncated) when the write fails, so that only a process
-killed outright (SIGKILL, power lost) can cut a row; a header of other columns rewrites the
-table whole (the union). A step writes ``tracked.csv`` and ``points.csv`` first and its
+:func:`append_csv`: the step's rows in one write after the table's last whole row, taken
+back (truncated) when the write fails, so that only a process killed outright (SIGKILL, power
+lost) can cut a row; a header of other columns rewrites the table whole (the union). A
+killed process loses nothing it wrote (the kernel holds it); against a power cut a
+:class:`BiaxialWriter` flushes its tables to the disk (``fsync``) with the first step that
+ends :data:`SYNC_SECONDS` after the last flush, points before steps, and when the run ends
+(an ``fsync`` at every step cost 1–4 ms a table on a shared disk, more than formatting a
+128-point step). A step writes ``tracked.csv`` and ``points.csv`` first and its
 ``steps.csv`` row last: a step is committed once that row is whole. :func:`read_table`
 leaves a cut last row out, and :func:`read_run_tables` also the rows of steps ``steps.csv``
 does not hold. A resumed run writes its tables anew from its checkpoint. The appended tables
@@ -30,6 +34,7 @@ import io
 import json
 import math
 import os
+import time
 from collections.abc import Sequence
 from contextlib import ExitStack
 from pathlib import Path
@@ -55,15 +60,22 @@ _CELL_FIELDS = ("sxx", "syy", "sxy", "exx", "eyy", "exy", "volumetric_strain",
                 "friction_angle", "return_region")
 
 
-def write_csv(frame: pd.DataFrame, path: str | Path, append: bool = False) -> Path:
+#: a :class:`BiaxialWriter` flushes its growing tables to the disk once this many seconds
+#: have passed since it last did, and at the run's end [s]
+SYNC_SECONDS = 1.0
+
+
+def write_csv(frame: pd.DataFrame, path: str | Path, append: bool = False, *,
+              sync: bool = True) -> Path:
     """Write ``frame`` to ``path`` without its index (its folder made if need be); a new file
     replaces the old one only once it is complete, and a failed write leaves no ``.part``
-    behind. ``append`` adds the rows to an existing table instead (:func:`append_csv`)."""
+    behind. ``append`` adds the rows to an existing table instead (:func:`append_csv`, with
+    ``sync``)."""
     path = Path(path)
     if path.is_dir():
         raise IsADirectoryError(f"{path} is a folder, not a CSV file")
     if append:
-        return append_csv(frame, path)
+        return append_csv(frame, path, sync=sync)
     path.parent.mkdir(parents=True, exist_ok=True)
     return write_whole(path, lambda tmp: frame.to_csv(tmp, index=False))
 
@@ -100,21 +112,31 @@ def _header(fh: Any) -> list[str]:
 _LAST_CELLS: dict[tuple[str, int, str], tuple[np.ndarray, list[str]]] = {}
 #: at most this many columns are remembered
 _LAST_CELLS_MAX = 64
+#: a column of which at most this share of values changed since the step before keeps the
+#: other cells' text and formats only those (the friction angle and return region of a
+#: Mohr–Coulomb point change only where it yields)
+_PATCHED_SHARE = 0.5
 
 
 def _cells(name: str, values: np.ndarray) -> list[str]:
     """The CSV cells of one column of numbers, as pandas writes them: floats as ``repr``
     (numpy's shortest round-trip text, which Python's ``repr`` matches), NaN as an empty
     cell, integers and booleans as ``str``; a column of one repeated value formatted once,
-    one equal bit for bit to the column last seen under ``name`` not formatted again."""
+    one equal bit for bit to the column last seen under ``name`` not formatted again, and of
+    one that differs from it in a few values only those formatted."""
     n = len(values)
     bits = values.view(np.uint64 if values.dtype.kind == "f" else values.dtype)
     key = (name, n, values.dtype.str)
     last = _LAST_CELLS.get(key)
-    if last is not None and np.array_equal(last[0], bits):
+    changed = None if last is None else np.flatnonzero(last[0] != bits)
+    if changed is not None and not len(changed):
         return last[1]
     if n and (bits == bits[0]).all():
         cells = _cells_of(values[:1]) * n
+    elif changed is not None and len(changed) <= _PATCHED_SHARE * n:
+        cells = list(last[1])  # the cells of the values that changed formatted anew
+        for k, cell in zip(changed.tolist(), _cells_of(values[changed]), strict=True):
+            cells[k] = cell
     else:
         cells = _cells_of(values)
     if len(_LAST_CELLS) >= _LAST_CELLS_MAX and key not in _LAST_CELLS:
@@ -155,12 +177,13 @@ def format_rows(frame: pd.DataFrame, order: list[int] | None = None) -> str:
     return os.linesep.join(map(",".join, zip(*cells, strict=True))) + os.linesep
 
 
-def append_csv(frame: pd.DataFrame, path: str | Path) -> Path:
+def append_csv(frame: pd.DataFrame, path: str | Path, *, sync: bool = True) -> Path:
     """Add the rows of ``frame`` to the CSV table at ``path``, whole rows or none.
 
     The rows go in one write at the end of the table's last whole row (a row an earlier
-    killed write cut is dropped first), are flushed to the disk (``fsync``), and are taken
-    back when the write fails (a full disk: ``OSError`` naming the table, the table as it
+    killed write cut is dropped first), are flushed to the disk (``fsync``) where ``sync``
+    (a killed process loses nothing the kernel holds; a power cut what is not flushed), and
+    are taken back when the write fails (a full disk: ``OSError`` naming the table, the table as it
     was). Stop signals wait until the rows are in. Columns are matched by name; a frame with
     other columns than the table's rewrites the table whole (the union of both, empty cells
     where a row has no value). A missing or empty table is written whole, with its header.
@@ -188,7 +211,8 @@ def append_csv(frame: pd.DataFrame, path: str | Path) -> Path:
             view = memoryview(payload)
             while view:
                 view = view[os.write(fd, view):]
-            os.fsync(fd)
+            if sync:
+                os.fsync(fd)
         except OSError as exc:
             with contextlib.suppress(OSError):
                 os.ftruncate(fd, end)
@@ -352,8 +376,10 @@ class BiaxialWriter:
     stopped; the module docstring says what a killed run leaves) and to ``fields.xdmf``.
     The appended tables are the whole tables of the run: :meth:`finish` writes them anew only
     where they could differ from the result's (a step not recorded here, or a column whose
-    type changed between steps, which the result's table holds as one type). The fields file
-    is finished when the ``with`` block ends, however it ends.
+    type changed between steps, which the result's table holds as one type). The tables are
+    flushed to the disk (``fsync``) with the first step :data:`SYNC_SECONDS` after the last
+    flush and by :meth:`finish`. The fields file is finished when the ``with`` block ends,
+    however it ends.
     """
 
     def __init__(self, out_dir: str | Path) -> None:
@@ -365,13 +391,46 @@ class BiaxialWriter:
         self._rows = {"steps": 0, "points": 0, "tracked": 0}  # rows recorded by table
         #: each table's columns and their types as first recorded; False once they changed
         self._kinds: dict[str, Any] = {}
+        self._synced_at = -math.inf  # when the tables were last flushed (time.monotonic)
+        self._unsynced: set[str] = set()  # tables appended to since
 
     def __enter__(self) -> BiaxialWriter:
         self.out_dir.mkdir(parents=True, exist_ok=True)
         return self
 
     def __exit__(self, *exc: object) -> None:
-        self._stack.close()
+        try:
+            self._stack.close()
+        finally:
+            if exc[0] is None:
+                self.sync()
+            else:  # already failing: the tables as far as they are
+                with contextlib.suppress(OSError):
+                    self.sync()
+
+    def sync(self) -> None:
+        """Flush the tables appended to since their last flush to the disk (``fsync``)."""
+        for name in ("tracked", "points", "steps"):  # steps last: the commit
+            if name in self._unsynced:
+                self._unsynced.discard(name)
+                try:
+                    fd = os.open(self.out_dir / f"{name}.csv", os.O_RDONLY)
+                except FileNotFoundError:  # removed meanwhile (a rejected run's folder)
+                    continue
+                try:
+                    os.fsync(fd)
+                finally:
+                    os.close(fd)
+        self._synced_at = time.monotonic()
+
+    def _append(self, name: str, frame: pd.DataFrame, append: bool, sync: bool) -> None:
+        """Add ``frame`` to table ``name`` (``append`` False: write it whole), flushed to the
+        disk where ``sync``."""
+        write_csv(frame, self.out_dir / f"{name}.csv", append=append, sync=sync)
+        if append and not sync:
+            self._unsynced.add(name)
+        else:
+            self._unsynced.discard(name)
 
     def start(self, problem: BiaxialProblem) -> None:
         """Open the fields file of ``problem``'s mesh."""
@@ -382,6 +441,7 @@ class BiaxialWriter:
         self._tracked_any = False
         self._rows = {"steps": 0, "points": 0, "tracked": 0}
         self._kinds = {}
+        self._synced_at, self._unsynced = -math.inf, set()
 
     def _seen(self, name: str, frame: pd.DataFrame) -> None:
         """Count ``frame``'s rows as recorded in table ``name`` and note whether its columns
@@ -398,18 +458,25 @@ class BiaxialWriter:
         if self._fields is None:
             raise RuntimeError("BiaxialWriter.start(problem) must come before record()")
         self._fields.write(row["axial_strain"], u, points)
+        # all of a step's tables flushed, or none: tracked and points before steps
+        more = self._steps > 0
+        now = time.monotonic()
+        sync = more and now - self._synced_at >= SYNC_SECONDS
+        if sync:
+            self._synced_at = now
+            if "tracked" in self._unsynced and (tracked is None or not len(tracked)):
+                self.sync()  # earlier steps' tracked rows, before this step's points
         # each table's rows count once written: a stop signal delivered between two writes
         # leaves the count short, and finish() then writes the tables whole
         if tracked is not None and len(tracked):
-            write_csv(tracked, self.out_dir / "tracked.csv", append=self._tracked_any)
+            self._append("tracked", tracked, self._tracked_any, sync)
             self._tracked_any = True
         if tracked is not None:
             self._seen("tracked", tracked)
-        more = self._steps > 0
         step = pd.DataFrame([row])
-        write_csv(points, self.out_dir / "points.csv", append=more)
+        self._append("points", points, more, sync)
         self._seen("points", points)
-        write_csv(step, self.out_dir / "steps.csv", append=more)  # the commit
+        self._append("steps", step, more, sync)  # the commit
         self._seen("steps", step)
         self._steps += 1
 
@@ -424,10 +491,12 @@ class BiaxialWriter:
             for name, table in tables.items())
 
     def finish(self, result: BiaxialResult) -> None:
-        """The whole tables of the run: those appended step by step, or written anew where
-        they could differ (:meth:`holds`)."""
+        """The whole tables of the run: those appended step by step (flushed to the disk), or
+        written anew where they could differ (:meth:`holds`)."""
         if self.holds(result):
+            self.sync()
             return
+        self._unsynced.clear()  # written anew, whole
         write_tables(result.steps, result.points, self.out_dir)
         if len(result.tracked):
             write_csv(result.tracked, self.out_dir / "tracked.csv")

@@ -212,7 +212,8 @@ class RunCheckpoint:
         files[name] = file_sha256(self.folder / name)
         manifest = {"version": MANIFEST_VERSION, "step": step, "options": self._options_sum,
                     "files": files}
-        write_npz(self.folder / STATE, state_arrays(step, name, state, manifest))
+        # the commit point, named by no manifest: its SHA-256 is not needed
+        write_npz(self.folder / STATE, state_arrays(step, name, state, manifest), digest=False)
         self._drop_stale(keep=name)
         self._saved_at = time.monotonic()
         self._save_seconds = self._saved_at - started

@@ -18,6 +18,7 @@ import io
 import json
 import math
 import re
+import weakref
 import zipfile
 from collections.abc import Iterator
 from dataclasses import MISSING, asdict, dataclass, fields
@@ -127,6 +128,29 @@ def dumps(value: Any) -> np.ndarray:
     return np.array(json.dumps(value, default=_native))
 
 
+#: the JSON of each Newton record saved so far, by the record's identity (with a weak
+#: reference to it): a committed record does not change, and the state saved after every
+#: step would otherwise convert every earlier record again, at a cost growing with the steps
+_RECORD_JSON: dict[int, tuple[weakref.ref, str]] = {}
+
+
+def _records(records: list[StepRecord]) -> np.ndarray:
+    """``dumps([asdict(r) for r in records])``, each record converted once."""
+    parts = []
+    for record in records:
+        known = _RECORD_JSON.get(id(record))
+        if known is None or known[0]() is not record:
+            text = json.dumps(asdict(record), default=_native)
+            key = id(record)
+            _RECORD_JSON[key] = (weakref.ref(record,
+                                             lambda _, key=key: _RECORD_JSON.pop(key, None)),
+                                 text)
+        else:
+            text = known[1]
+        parts.append(text)
+    return np.array("[" + ", ".join(parts) + "]")
+
+
 def loads(value: np.ndarray) -> Any:
     """What :func:`dumps` stored."""
     return json.loads(str(value))
@@ -165,13 +189,14 @@ def write_bytes(path: Path, data: bytes) -> None:
     write_whole(path, lambda tmp: tmp.write_bytes(data))
 
 
-def write_npz(path: Path, arrays: dict[str, np.ndarray]) -> str:
-    """``path`` written whole or not at all; returns the SHA-256 of what was written."""
+def write_npz(path: Path, arrays: dict[str, np.ndarray], digest: bool = True) -> str:
+    """``path`` written whole or not at all; returns the SHA-256 of what was written (with
+    ``digest`` False, of a file no manifest names: the empty string, not computed)."""
     buffer = io.BytesIO()
     np.savez(buffer, **arrays)
     data = buffer.getvalue()
     write_bytes(path, data)
-    return sha256(data)
+    return sha256(data) if digest else ""
 
 
 @contextlib.contextmanager
@@ -291,7 +316,7 @@ def state_arrays(step: int, material: str, state: CommittedState,
         "has_last": np.array(last is not None),
         "last_load": np.array(np.nan if last is None else last[0]),
         "last_du": np.zeros(0) if last is None else last[1],
-        "records": dumps([asdict(r) for r in state.records]),
+        "records": _records(state.records),
         "response.stress": response.stress, "response.tangent": response.tangent,
         "response.status": response.status,
         "response.fields": dumps(sorted(response.fields)),
@@ -300,6 +325,7 @@ def state_arrays(step: int, material: str, state: CommittedState,
         **({} if state.second_gradient is None else {
             "second_gradient": state.second_gradient,
             "second_gradient_modulus": np.array(state.second_gradient_modulus)}),
+        **({} if state.f_int is None else {"f_int": np.asarray(state.f_int, dtype=np.float64)}),
     }
 
 
@@ -351,10 +377,14 @@ def read_state(path: Path) -> tuple[int, str, CommittedState, dict[str, Any] | N
         if (second_gradient is None) != (modulus is None) or (
                 modulus is not None and not (math.isfinite(modulus) and modulus > 0)):
             raise CheckpointError(f"{path}: its second-gradient state is damaged")
+        f_int = np.array(npz["f_int"]) if "f_int" in npz else None  # older: assembled anew
+        if f_int is not None and (f_int.shape != u.shape or f_int.dtype.kind != "f"):
+            raise CheckpointError(f"{path}: its internal force is not a vector of numbers "
+                                  "like its displacement")
         state = CommittedState(
             u=u, load_factor=float(npz["load_factor"]),
             run_start=float(npz["run_start"]), last_increment=last,
-            records=[_record(path, r) for r in records], response=response,
+            records=[_record(path, r) for r in records], response=response, f_int=f_int,
             second_gradient=second_gradient, second_gradient_modulus=modulus,
         )
     return step, material, state, manifest

@@ -238,7 +238,7 @@ class NewtonSolver:
         last = None if self._last is None else (self._last[0], self._last[1].copy())
         sg = self.second_gradient
         return CommittedState(self.u.copy(), self.load_factor, self._run_start, last,
-                              list(self.records), self.response,
+                              list(self.records), self.response, self.f_int.copy(),
                               None if sg is None else self.extra.copy(),
                               None if sg is None else sg.modulus)
 
@@ -258,8 +258,6 @@ class NewtonSolver:
         self.records = list(state.records)
         self.response = state.response
         self._grad_committed = gauss_points_grad(self.basis, self.u)
-        self.f_int = internal_force(self.basis, self.kinematics.assembled_stress(
-            self.response.stress, self._grad_committed))
         saved = state.second_gradient is not None
         if saved != self.regularisation.active:
             raise ValueError("the saved state was " + ("" if saved else "not ")
@@ -273,8 +271,15 @@ class NewtonSolver:
                 raise ValueError(f"the saved second-gradient unknowns have shape "
                                  f"{state.second_gradient.shape}, this mesh ({sg.n_extra},)")
             self.extra = np.array(state.second_gradient, dtype=np.float64)
-            self.f_int = self._with_second_gradient(self.f_int, self.u, self.extra)[
-                : self.basis.N]
+        # the force the step assembled (from ∇u of the step before plus its increment's, with
+        # the second gradient's −∫ λ : ∇u*), not one from the total ∇u, which differs at
+        # round-off and would move the next step
+        if state.f_int is not None:
+            self.f_int = np.array(state.f_int, dtype=np.float64)
+        else:
+            f_int = internal_force(self.basis, self.kinematics.assembled_stress(
+                self.response.stress, self._grad_committed))
+            self.f_int = self._with_second_gradient(f_int, self.u, self.extra)[: self.basis.N]
 
     @property
     def reaction(self) -> np.ndarray:

@@ -80,6 +80,10 @@ class CommittedState:
             None before the first.
         records: the committed steps' records.
         response: the material response of the committed state.
+        f_int: the internal force [N/m] (ndofs,) of the committed state as the step that
+            committed it assembled it (with a regularised run's −∫ λ : ∇u*); None: assembled
+            anew on resume (a checkpoint written before it was kept, whose next step may
+            then differ at round-off).
         second_gradient: a run regularised by the second gradient
             (:mod:`granular_material.fem.regularisation`): its unknowns v [-] and λ [Pa] of
             the committed state, shape (extra,); None for a run without it.
@@ -92,6 +96,7 @@ class CommittedState:
     last_increment: tuple[float, np.ndarray] | None
     records: list[StepRecord]
     response: MaterialResponse
+    f_int: np.ndarray | None = None
     second_gradient: np.ndarray | None = None
     second_gradient_modulus: float | None = None
 
