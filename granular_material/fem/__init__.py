@@ -8,8 +8,8 @@ the :class:`NewtonSolver` drives it on a scikit-fem basis, on the drained biaxia
 boundaries, :func:`select_boundaries`; the conditions :class:`Fixed`, :class:`Roller`,
 :class:`Displacement`, :class:`RigidBody`, :class:`Pressure`, :class:`Gravity`; an initial
 state, :func:`geostatic_stress`); :class:`RegionalMaterial` holds one material per region
-of the mesh (a layer, a fill) and answers as one; :class:`RunContext` is what a material is told of the run
-it is built for; :class:`Tracking` names the
+of the mesh (a layer, a fill) and answers as one; :class:`RunContext` is what a material is
+told of the run it is built for; :class:`Tracking` names the
 post-processors run on chosen Gauss points. :func:`default_settings` holds the Newton settings
 the commands use. The run loop that collects a run's tables and keeps its checkpoint is
 :func:`granular_material.runs.run_biaxial`.
