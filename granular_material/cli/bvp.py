@@ -86,8 +86,10 @@ def run_bvp_scene(path: Path, text: str, data: dict[str, Any],
         spec = bvp_from_dict(data, path.parent)
         if args.check:
             build(spec, allocate=False)  # mesh, boundaries, conditions, material: no step
-            print(f"{path}: a boundary-value problem of {spec.steps} steps, material "
-                  f"{spec.material.name}: checked")
+            what = (f"material {spec.material.name}" if spec.materials is None else
+                    "materials " + ", ".join(f"{m.region}: {m.material.name}"
+                                             for m in spec.materials))
+            print(f"{path}: a boundary-value problem of {spec.steps} steps, {what}: checked")
             return 0
     except ValueError as exc:
         raise _refusal(path, text, exc) from exc
