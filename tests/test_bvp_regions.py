@@ -245,3 +245,20 @@ def test_an_unknown_physical_group_and_a_geostatic_start_of_two_weights_are_refu
     with pytest.raises(SpecError, match="one unit weight") as info:
         build(spec, allocate=False)
     assert info.value.field == "initial.state"
+
+
+def test_a_dem_region_beside_a_linear_elastic_one_runs_with_the_noisy_defaults(tmp_path):
+    dem = ('particles = 16\nseed = 1\ntangent = "kruyt-rothenburg"')
+    spec = _spec(LAYERS + _entry("lower", "dem", dem) + _entry("upper", "linear-elastic",
+                                                               _elastic(30e6)),
+                 end=22e3, steps=1, mesh='size = [0.2, 0.5]\nelements = [1, 2]',
+                 output={"device": "cpu"})
+    assert spec.noisy
+    b = build(spec)
+    assert b.material.noisy and b.settings.stall_rtol > 0  # a noisy material's defaults
+    outcome = run_boundary_value(spec, out=tmp_path / "run")
+    assert outcome.error is None
+    points = outcome.points[outcome.points.step == 1]
+    lower = points[points.region == "lower"]
+    assert lower.void_ratio.notna().all()  # the DEM's own field, where it is the material
+    assert points[points.region == "upper"].void_ratio.isna().all()
