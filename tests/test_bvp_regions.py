@@ -262,3 +262,23 @@ def test_a_dem_region_beside_a_linear_elastic_one_runs_with_the_noisy_defaults(t
     lower = points[points.region == "lower"]
     assert lower.void_ratio.notna().all()  # the DEM's own field, where it is the material
     assert points[points.region == "upper"].void_ratio.isna().all()
+
+
+def test_the_command_line_names_the_line_of_a_bad_key_in_a_region_s_parameters(tmp_path,
+                                                                                capsys):
+    from granular_material.cli import main
+
+    text = COLUMN.format(materials=LAYERS + _entry("lower", "linear-elastic", _elastic(1e7))
+                         + _entry("upper", "linear-elastic", "stiffness = 3"), end=30e3,
+                         steps=1, mesh=GENERATED)
+    scene = tmp_path / "scene.toml"
+    scene.write_text(text)
+    assert main(["run", str(scene), "--out", str(tmp_path / "run")]) == 2
+    line = text.splitlines().index("stiffness = 3") + 1
+    err = capsys.readouterr().err
+    assert f"line {line}: materials.parameters.stiffness is no parameter" in err
+    assert not (tmp_path / "run").exists()
+    scene.write_text(text.replace("stiffness = 3", "young = 3e7"))
+    assert main(["run", str(scene), "--check"]) == 0
+    assert "materials lower: linear-elastic, upper: linear-elastic: checked" in (
+        capsys.readouterr().out)
