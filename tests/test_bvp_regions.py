@@ -92,6 +92,9 @@ def test_two_layers_settle_by_the_sum_of_their_compressions(tmp_path):
     # each point's stress is the one its own layer gives: σxx = ν/(1−ν) Δσyy + σ0
     for _, layer in last.groupby("region"):
         assert layer.syy.to_numpy() == pytest.approx(-120e3, rel=1e-9)
+    # ParaView: each element's region, numbered in the alphabetical order of the names
+    fields = (tmp_path / "run" / "fields.xdmf").read_text()
+    assert fields.count('Name="region"') == 3  # steps 0, 1, 2
     summary = outcome.summary
     assert summary["material"] == "regions"
     assert summary["regions"]["lower"] == {"material": "linear-elastic", "unit_weight": 0.0,
@@ -228,6 +231,17 @@ def test_regions_that_overlap_leave_cells_out_or_select_nothing_are_refused(regi
     with pytest.raises(SpecError, match=match) as info:
         build(spec, allocate=False)
     assert info.value.field == field
+
+
+def test_a_gravity_on_elements_outside_the_mesh_is_refused():
+    from granular_material.errors import ParameterError
+    from granular_material.fem import Fixed, Gravity, build_problem, rectangle_mesh
+
+    data = rectangle_mesh(0.2, 0.5, 2, 4)
+    with pytest.raises(ParameterError, match="names element 8; the mesh has 8"):
+        build_problem(data, [Fixed("bottom"), Gravity(1e4, elements=np.array([0, 8]))])
+    with pytest.raises(ParameterError, match="1-D array of element indices"):
+        Gravity(1e4, elements=np.array([-1]))
 
 
 def test_an_unknown_physical_group_and_a_geostatic_start_of_two_weights_are_refused(
