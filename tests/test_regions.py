@@ -97,6 +97,19 @@ def test_fields_a_region_lacks_are_nan_and_costs_are_summed():
     alone.allocate(2)
     assert r.costs == dict(alone.evaluate(grad[:2]).costs)
     np.testing.assert_array_equal(r.stress[[0, 3]], _elastic_stress(grad[[0, 3]]))
+    # the scikit-fem way in: the total ∇u, measured from allocate
+    material.commit()
+    np.testing.assert_array_equal(material.committed_grad_u, grad)
+    np.testing.assert_array_equal(material.response(2 * grad).stress,
+                                  material.evaluate(grad).stress)
+
+
+def test_element_sets_no_material_names_are_not_used():
+    sets = {"all": np.arange(3), "a": np.array([0, 2]), "b": np.array([1])}
+    material = RegionalMaterial.from_elements({"a": LinearElastic(), "b": LinearElastic()},
+                                              sets, n_elements=3, nqp=2)
+    assert list(material.regions) == ["a", "a", "b", "b", "a", "a"]
+    assert material.points_of("b").tolist() == [2, 3]
 
 
 def _elastic_stress(grad):

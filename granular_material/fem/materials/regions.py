@@ -163,13 +163,15 @@ class RegionalMaterial(ScikitFemInterface):
                       n_elements: int, nqp: int) -> RegionalMaterial:
         """The regional material of a mesh whose regions are element sets (``elements``:
         name → element indices, e.g. ``MeshData.subdomains``), ``nqp`` Gauss points an
-        element; the sets must cover every element once (:func:`point_regions`). A set
-        without a material is refused, as a material without a set is."""
+        element. The sets the materials name must cover every element once
+        (:func:`point_regions`); other sets (a file's group of the whole body) are not used.
+        A material whose region is no set is refused."""
         missing = [name for name in materials if name not in elements]
         if missing:
             raise ParameterError("materials", f"region {missing[0]!r} is not one of the "
                                               f"element sets ({', '.join(map(repr, elements))})")
-        return cls(materials, point_regions(elements, n_elements, nqp))
+        used = {name: elements[name] for name in materials}
+        return cls(materials, point_regions(used, n_elements, nqp))
 
     # -- what it holds -------------------------------------------------------------------
     @property
