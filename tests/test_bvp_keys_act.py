@@ -182,13 +182,64 @@ CHANGED = {
     "regularisation": {"model": "second-gradient", "internal_length": 0.01},
 }
 TABLES = ("mesh", "boundaries", "conditions", "gravity", "initial", "material", "newton",
-          "output", "regularisation")
+          "output", "regularisation", "regions", "materials")
+#: the materials by region: [regions] (free names, walked by changing a predicate) and a
+#: changed value for every key of a [[materials]] entry (walked on the first of two)
+REGIONAL = {"regions": {"lower": "y <= 0.05"},
+            "materials": {"region": "upper", "name": "mohr-coulomb",
+                          "parameters": {"young": 70e6}, "unit_weight": 18e3}}
 
 
 def test_the_walk_reaches_every_key_of_every_table():
     assert set(CHANGED[""]) | set(TABLES) == SCENE_KEYS[""]
     for table in ("mesh", "gravity", "material", "output", "regularisation"):
         assert set(CHANGED[table]) == SCENE_KEYS[table], table
+    assert set(REGIONAL["materials"]) == SCENE_KEYS["materials"]
+
+
+def _regional() -> dict:
+    """The scene of :func:`_text` with a material per region in place of [material]."""
+    data = tomllib.loads(_text())
+    del data["material"]
+    data["regions"] = {"lower": "y <= 0.1", "upper": "y >= 0.1"}
+    data["materials"] = [{"region": r, "name": "linear-elastic",
+                          "parameters": {"young": 60e6, "poisson": 0.3}}
+                         for r in ("lower", "upper")]
+    return data
+
+
+@pytest.mark.parametrize("table, key", [(t, k) for t, keys in REGIONAL.items() for k in keys])
+def test_every_key_of_the_regions_either_acts_or_is_refused_naming_it(table, key):
+    data = _regional()
+    base = bvp_from_dict(data)
+    changed = dict(data)
+    if table == "regions":
+        changed["regions"] = {**data["regions"], **REGIONAL["regions"]}
+    else:
+        first = {**data["materials"][0], key: REGIONAL["materials"][key]}
+        changed["materials"] = [first, data["materials"][1]]
+    try:
+        spec = bvp_from_dict(changed)
+    except SpecError as refused:
+        assert refused.field.startswith(f"{table}.")
+        return
+    assert spec != base
+
+
+def test_the_api_refuses_a_material_beside_materials_by_region():
+    from granular_material.runs.boundary_value.spec import RegionMaterialSpec
+    from granular_material.runs.spec import MaterialSpec
+
+    spec = bvp_from_dict(_regional())
+    with pytest.raises(SpecError) as refused:
+        BoundaryValueSpec(mesh=spec.mesh, conditions=spec.conditions, regions=spec.regions,
+                          materials=spec.materials,
+                          material=MaterialSpec(name="mohr-coulomb"))
+    assert refused.value.field == "material"
+    with pytest.raises(SpecError) as refused:
+        RegionMaterialSpec(region="lower", material=MaterialSpec(name="linear-elastic"),
+                           unit_weight="heavy")
+    assert refused.value.field == "materials.unit_weight"
 
 
 WALK = [(table, key) for table, keys in CHANGED.items() for key in keys]

@@ -30,7 +30,8 @@ BOUNDARY_VALUE = "boundary-value"
 
 def _line_of(text: str, key: str, entry: tuple[str, int] | None = None) -> int | None:
     """The line of the scene's text where ``key`` (the last part of a dotted name) is set;
-    ``entry`` = (array, index): within the index-th ``[[array]]`` table (from its header)."""
+    ``entry`` = (array, index): within the index-th ``[[array]]`` table (from its header,
+    its sub-tables such as ``[materials.parameters]`` included)."""
     name = key.rsplit(".", 1)[-1].replace("_", "[-_]")
     pattern = re.compile(rf"^\s*{name}\s*=")
     lines = list(enumerate(text.splitlines(), start=1))
@@ -40,7 +41,9 @@ def _line_of(text: str, key: str, entry: tuple[str, int] | None = None) -> int |
         if entry[1] >= len(starts):
             return None
         lines = lines[starts[entry[1]] + 1:]
-        ends = [k for k, (_, line) in enumerate(lines) if line.lstrip().startswith("[")]
+        own = re.compile(rf"^\s*\[\s*{re.escape(entry[0])}\.")  # its sub-table (parameters)
+        ends = [k for k, (_, line) in enumerate(lines)
+                if line.lstrip().startswith("[") and not own.match(line)]
         lines = lines[:ends[0]] if ends else lines
     for number, line in lines:
         if pattern.match(line):
@@ -86,8 +89,10 @@ def run_bvp_scene(path: Path, text: str, data: dict[str, Any],
         spec = bvp_from_dict(data, path.parent)
         if args.check:
             build(spec, allocate=False)  # mesh, boundaries, conditions, material: no step
-            print(f"{path}: a boundary-value problem of {spec.steps} steps, material "
-                  f"{spec.material.name}: checked")
+            what = (f"material {spec.material.name}" if spec.materials is None else
+                    "materials " + ", ".join(f"{m.region}: {m.material.name}"
+                                             for m in spec.materials))
+            print(f"{path}: a boundary-value problem of {spec.steps} steps, {what}: checked")
             return 0
     except ValueError as exc:
         raise _refusal(path, text, exc) from exc

@@ -7,8 +7,9 @@ the :class:`NewtonSolver` drives it on a scikit-fem basis, on the drained biaxia
 :func:`build_problem` (a mesh from a file, :func:`read_mesh`, or :func:`rectangle_mesh`; named
 boundaries, :func:`select_boundaries`; the conditions :class:`Fixed`, :class:`Roller`,
 :class:`Displacement`, :class:`RigidBody`, :class:`Pressure`, :class:`Gravity`; an initial
-state, :func:`geostatic_stress`); :class:`RunContext` is what a material is told of the run
-it is built for; :class:`Tracking` names the
+state, :func:`geostatic_stress`); :class:`RegionalMaterial` holds one material per region
+of the mesh (a layer, a fill) and answers as one; :class:`RunContext` is what a material is
+told of the run it is built for; :class:`Tracking` names the
 post-processors run on chosen Gauss points. :func:`default_settings` holds the Newton settings
 the commands use. The run loop that collects a run's tables and keeps its checkpoint is
 :func:`granular_material.runs.run_biaxial`.
@@ -52,6 +53,7 @@ from granular_material.fem.materials.protocol import (
     create_material,
     load_material,
 )
+from granular_material.fem.materials.regions import RegionalMaterial, point_regions
 from granular_material.fem.regularisation import (
     REGULARISATIONS,
     Regularisation,
@@ -103,6 +105,7 @@ __all__ = [
     "Pressure",
     "Problem",
     "QuadratureResponse",
+    "RegionalMaterial",
     "Regularisation",
     "RigidBody",
     "Roller",
@@ -125,6 +128,7 @@ __all__ = [
     "load_material",
     "load_postprocessor",
     "make_basis",
+    "point_regions",
     "read_mesh",
     "rectangle_mesh",
     "select_boundaries",

@@ -328,7 +328,9 @@ class FieldWriter:
     Cells: quad, quad8 or quad9, with every node of the element (midside and centre nodes
     of quad8 and quad9 included, see :meth:`BiaxialProblem.nodes`).
     Point data: ``displacement`` [m] (nnodes, 3). Cell data: element means of the
-    Gauss-point columns named in ``_CELL_FIELDS`` that the table holds. Time = axial strain.
+    Gauss-point columns named in ``_CELL_FIELDS`` that the table holds, and where it has a
+    ``region`` column (materials by region), each element's region numbered 0, 1, … in the
+    alphabetical order of the regions' names. Time = axial strain.
     """
 
     def __init__(self, path: str | Path, problem: BiaxialProblem) -> None:
@@ -361,6 +363,10 @@ class FieldWriter:
         disp = np.column_stack([ux, uy, np.zeros_like(ux)])
         means = points.groupby("element").mean(numeric_only=True)
         cell_data = {k: [means[k].to_numpy(dtype=float)] for k in _CELL_FIELDS if k in means}
+        if "region" in points:  # materials by region: numbered in their names' order
+            names = points.groupby("element")["region"].first().astype(str)
+            order = {name: k for k, name in enumerate(sorted(set(names)))}
+            cell_data["region"] = [names.map(order).to_numpy(dtype=float)]
         self._writer.write_data(float(time), point_data={"displacement": disp},
                                 cell_data=cell_data)
 

@@ -157,10 +157,16 @@ def loads(value: np.ndarray) -> Any:
 
 
 def frame_arrays(prefix: str, table: pd.DataFrame) -> dict[str, np.ndarray]:
-    """The columns of a table of numbers as arrays ``prefix.NAME`` plus their order."""
-    arrays = {f"{prefix}.{name}": table[name].to_numpy() for name in table.columns}
+    """The columns of a table of numbers (and text, e.g. a point's region, kept as fixed-width
+    strings: an .npz holds no Python objects) as arrays ``prefix.NAME`` plus their order."""
+    arrays = {f"{prefix}.{name}": _plain(table[name].to_numpy()) for name in table.columns}
     arrays[f"{prefix}.columns"] = dumps([str(c) for c in table.columns])
     return arrays
+
+
+def _plain(column: np.ndarray) -> np.ndarray:
+    """``column`` as an array an .npz stores without pickling: text objects as strings."""
+    return column.astype(str) if column.dtype == object else column
 
 
 def frame(prefix: str, npz: Any) -> pd.DataFrame:

@@ -12,7 +12,8 @@ Grammar (no ``eval``)::
 allow a tolerance of 10⁻³ of the shortest facet: ``x = 0`` holds within it, ``x <= 0.05``
 up to 0.05 + tol, ``x < 0.05`` below 0.05 − tol. A boundary facet is selected when both its
 end nodes satisfy the expression (for the half-planes and lines of this grammar its midside
-node then does too); interior facets are never selected.
+node then does too); interior facets are never selected. The same grammar chooses the
+elements of a region (:func:`select_elements`): those whose centroid satisfies it.
 """
 
 from __future__ import annotations
@@ -27,7 +28,7 @@ from granular_material.errors import ParameterError
 from granular_material.fem.boundary_value.meshes import MeshData
 from granular_material.typed_fields import conform
 
-__all__ = ["parse_predicate", "select_boundaries", "select_facets"]
+__all__ = ["parse_predicate", "select_boundaries", "select_elements", "select_facets"]
 
 _TOKEN = re.compile(r"\s*(<=|>=|==|=|<|>|[A-Za-z_]+|[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)")
 _OPERATORS = ("=", "==", "<=", ">=", "<", ">")
@@ -131,6 +132,26 @@ def select_facets(mesh: Mesh | MeshData, expr: str, name: str = "boundary") -> n
                                    f"{bounds[0, 0]:.6g} to {bounds[0, 1]:.6g}, y "
                                    f"{bounds[1, 0]:.6g} to {bounds[1, 1]:.6g} m)")
     return chosen
+
+
+def select_elements(mesh: Mesh | MeshData, expr: str, name: str = "region") -> np.ndarray:
+    """Elements [indices, ascending, int64] whose centroid (the mean of their corners)
+    satisfies ``expr`` (the grammar of the module docstring; ``left``, ``top``, … the mesh's
+    bounds); ParameterError naming the region ``name`` and the expression when none does."""
+    if isinstance(mesh, MeshData):
+        mesh = mesh.mesh
+    groups = parse_predicate(conform(name, expr, str), name)
+    p = mesh.p
+    bounds = np.stack([p.min(axis=1), p.max(axis=1)], axis=1)
+    centroids = p[:, mesh.t].mean(axis=1)
+    lengths = np.linalg.norm(p[:, mesh.facets[0]] - p[:, mesh.facets[1]], axis=0)
+    chosen = np.flatnonzero(_holds(centroids, groups, bounds, 1e-3 * float(lengths.min())))
+    if chosen.size == 0:
+        raise ParameterError(name, f"selects no element: {expr!r} holds at no element's "
+                                   f"centroid (the mesh spans x {bounds[0, 0]:.6g} to "
+                                   f"{bounds[0, 1]:.6g}, y {bounds[1, 0]:.6g} to "
+                                   f"{bounds[1, 1]:.6g} m)")
+    return chosen.astype(np.int64)
 
 
 def select_boundaries(mesh_data: MeshData, expressions: Mapping[str, str]) -> MeshData:

@@ -36,6 +36,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from skfem import Basis, FacetBasis, LinearForm
@@ -158,16 +159,27 @@ class Pressure:
 class Gravity:
     """Body force −γ e_y over the body: unit weight γ = ``unit_weight`` [N/m³] (>= 0) at
     λ = 0, linear in λ to ``end`` at λ = 1 (None: ``unit_weight`` throughout; gravity
-    switched on, or increased)."""
+    switched on, or increased); ``elements``: the element indices it acts on (a region's
+    own weight; None: the whole body). Gravities add up where they overlap."""
 
     unit_weight: float
     end: float | None = None
+    elements: np.ndarray | None = field(default=None, compare=False)
 
     def __post_init__(self) -> None:
-        conform_fields(self)
+        conform_fields(self, skip=("elements",))
         for name, weight in (("unit_weight", self.unit_weight), ("end", self.end)):
             if weight is not None and not weight >= 0:
                 raise ParameterError(name, f"must be >= 0 N/m³, got {weight!r}")
+        if self.elements is not None:
+            index = np.asarray(self.elements)
+            if index.dtype.kind not in "iu" or index.ndim != 1 or index.size == 0 \
+                    or index.min() < 0:
+                raise ParameterError("elements", "must be a 1-D array of element indices "
+                                                 f"(>= 0), got {self.elements!r}"[:200])
+            index = np.unique(index.astype(np.int64))
+            index.setflags(write=False)
+            object.__setattr__(self, "elements", index)
 
     @property
     def at_end(self) -> float:
@@ -362,11 +374,29 @@ def _external_loads(mesh_data: MeshData, basis: Basis, conditions: Sequence[Cond
     changes in λ)."""
     mesh = mesh_data.mesh
     degree = max(int(getattr(basis.elem, "maxdeg", 1)), 1)
-    weights = (sum(c.unit_weight for c in conditions if isinstance(c, Gravity)),
-               sum(c.at_end for c in conditions if isinstance(c, Gravity)))
-    exact = Basis(mesh, basis.elem, intorder=2 * degree) if any(weights) else None
-    bodies = [_body_force.assemble(exact, gamma=w) if w else np.zeros(basis.N)
-              for w in weights]
+    gravities = [c for c in conditions if isinstance(c, Gravity)]
+    if all(c.elements is None for c in gravities):  # one γ over the whole body
+        weights: tuple[Any, Any] = (sum(c.unit_weight for c in gravities),
+                                    sum(c.at_end for c in gravities))
+        exact = Basis(mesh, basis.elem, intorder=2 * degree) if any(weights) else None
+        bodies = [_body_force.assemble(exact, gamma=w) if w else np.zeros(basis.N)
+                  for w in weights]
+    else:  # γ by element (the regions' own weights)
+        per_element = np.zeros((2, mesh.t.shape[1]))
+        for c in gravities:
+            if c.elements is not None and c.elements.max() >= mesh.t.shape[1]:
+                raise ParameterError("elements", f"a Gravity names element "
+                                                 f"{int(c.elements.max())}; the mesh has "
+                                                 f"{mesh.t.shape[1]}")
+            where = slice(None) if c.elements is None else c.elements
+            per_element[0, where] += c.unit_weight
+            per_element[1, where] += c.at_end
+        exact = Basis(mesh, basis.elem, intorder=2 * degree)
+        nqp = exact.X.shape[-1]
+        bodies = [_body_force.assemble(exact, gamma=np.repeat(g[:, None], nqp, axis=1))
+                  if g.any() else np.zeros(basis.N) for g in per_element]
+        same = bool(np.array_equal(per_element[0], per_element[1]))
+        weights = (0.0, 0.0) if same else (0.0, 1.0)  # whether γ changes with λ
     force_start, force_end = bodies[0].copy(), bodies[1].copy()
     pressures: list[tuple[FacetBasis, float, float]] = []
     outer = set(mesh.boundary_facets().tolist())

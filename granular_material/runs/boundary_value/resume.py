@@ -51,9 +51,12 @@ def scene_record(spec: BoundaryValueSpec) -> dict[str, Any]:
 
 def run_files(spec: BoundaryValueSpec) -> dict[str, Path]:
     """The files a run of ``spec`` reads, by the scene key that names them: ``mesh.file`` and
-    the DEM material's ``material.parameters.rve`` (where given)."""
+    the DEM material's ``material.parameters.rve`` (where given; by region,
+    ``materials[k].parameters.rve``)."""
     files = {"mesh.file": spec.mesh.file,
              "material.parameters.rve": getattr(spec.material.parameters, "rve", None)}
+    for k, m in enumerate(spec.materials or ()):
+        files[f"materials[{k}].parameters.rve"] = getattr(m.material.parameters, "rve", None)
     return {name: Path(path) for name, path in files.items() if path is not None}
 
 

@@ -13,7 +13,9 @@ The run folder gets:
   also ``{name}_displacement`` [m] along its motion (a footing pushed down: its settlement,
   also as ``{name}_settlement``);
 - ``points.csv``: every Gauss point at every step (coordinates, stress [Pa], strain, shear
-  strain, mean pressure, the material's own fields such as the void ratio), appended a step
+  strain, mean pressure, the material's own fields such as the void ratio; with materials by
+  region, the point's ``region`` and NaN in a field its region's material does not report),
+  appended a step
   at a time before that step's ``steps.csv`` row (a killed run: read both with
   :func:`~granular_material.results.writers.read_run_tables`);
 - ``fields.xdmf``: the same for ParaView at every committed step (XML, no HDF5 needed);
@@ -47,11 +49,17 @@ from granular_material.fem.boundary_value.conditions import (
 )
 from granular_material.fem.boundary_value.initial_stress import geostatic_stress
 from granular_material.fem.boundary_value.meshes import MeshData, read_mesh, rectangle_mesh
+from granular_material.fem.materials.regions import RegionalMaterial
 from granular_material.multiscale.confinement import UNCONFINED_FRACTION
 from granular_material.results.bvp_plots import plot_load_displacement, plot_mechanism
 from granular_material.results.writers import FieldWriter, write_csv, write_json
 from granular_material.runs.boundary_value.checks import check_disk, check_memory, generated_size
-from granular_material.runs.boundary_value.material import material_for_problem, unit_weight_of
+from granular_material.runs.boundary_value.material import (
+    material_for_problem,
+    region_elements,
+    region_unit_weights,
+    unit_weight_of,
+)
 from granular_material.runs.boundary_value.resume import (
     open_bvp_checkpoint,
     remember,
@@ -161,7 +169,7 @@ class Built:
     mesh: MeshData
     problem: Any
     initial_stress: np.ndarray
-    unit_weight: float
+    unit_weight: float | None  # None: the regions' weights differ
     material: Any
     settings: Any
     moved: dict[str, np.ndarray]  # rigid body / displacement name -> unit direction
@@ -176,18 +184,22 @@ def build(spec: BoundaryValueSpec, allocate: bool = True) -> Built:
     mesh = _mesh(spec)
     check_memory(spec, mesh.n_elements, mesh.element)
     conditions = [_condition(c) for c in spec.conditions]
-    unit_weight = unit_weight_of(spec)
-    start, end = (f * unit_weight for f in spec.gravity_factor or (1.0, 1.0))
-    if start > 0 or end > 0:
-        conditions.append(Gravity(start, end=end))
+    f0, f1 = spec.gravity_factor or (1.0, 1.0)
+    if spec.materials is None:
+        unit_weight: float | None = unit_weight_of(spec)
+        start, end = f0 * unit_weight, f1 * unit_weight
+        if start > 0 or end > 0:
+            conditions.append(Gravity(start, end=end))
+    else:
+        unit_weight, start = _region_gravity(spec, mesh, conditions, f0, f1)
     problem = build_problem(mesh, conditions, spec.mesh.quadrature)
     xy = problem.points
     top = mesh.bounding_box[3]
     sigma0 = _initial_stress(spec, xy, start, top)  # in equilibrium with step 0's weight
     t0 = time.perf_counter()
-    material = material_for_problem(spec, xy.shape[0], sigma0, allocate)
+    material = material_for_problem(spec, xy.shape[0], sigma0, allocate, mesh)
     preparation = time.perf_counter() - t0
-    noisy = bool(getattr(type(material), "noisy", False))
+    noisy = bool(getattr(material, "noisy", False))
     settings = spec.newton.settings(noisy)
     stress_tol = spec.newton.stress_tolerance(noisy, spec.reference_pressure)
     if stress_tol > 0:
@@ -203,6 +215,27 @@ def build(spec: BoundaryValueSpec, allocate: bool = True) -> Built:
             moved[c.boundary] = direction
     return Built(spec, mesh, problem, sigma0, unit_weight, material, settings, moved,
                  preparation)
+
+
+def _region_gravity(spec: BoundaryValueSpec, mesh: MeshData, conditions: list[Any],
+                    f0: float, f1: float) -> tuple[float | None, float]:
+    """Each region's own gravity appended to ``conditions`` (factors ``f0``, ``f1``); the
+    regions' one unit weight [N/m³] (None where they differ) and γ at step 0 for the initial
+    state. SpecError for a geostatic start under regions of different weights."""
+    weights = region_unit_weights(spec)
+    elements = region_elements(spec, mesh)
+    for region, weight in weights.items():
+        if f0 * weight > 0 or f1 * weight > 0:
+            conditions.append(Gravity(f0 * weight, end=f1 * weight, elements=elements[region]))
+    values = set(weights.values())
+    common = values.pop() if len(values) == 1 else None
+    if common is None and spec.initial.state == "geostatic":
+        raise SpecError("initial.state", "a geostatic start takes one unit weight; the "
+                                         "regions have "
+                                         + ", ".join(f"{r} {w:g}" for r, w in weights.items())
+                                         + " N/m³ (give them one unit_weight, or start "
+                                           "uniform)")
+    return common, f0 * (common or 0.0)
 
 
 def _rows(b: Built, solver: NewtonSolver, record: StepRecord | None, p0: np.ndarray,
@@ -255,6 +288,8 @@ def _rows(b: Built, solver: NewtonSolver, record: StepRecord | None, p0: np.ndar
         "mean_pressure": pressure, "unconfined": unconfined.astype(np.int8),
         "failed": failed.astype(np.int8), **fields,
     })
+    if isinstance(b.material, RegionalMaterial):
+        points.insert(5, "region", b.material.regions.astype(str))
     return row, points
 
 
@@ -420,11 +455,19 @@ def _summary(b: Built, solver: NewtonSolver, steps: pd.DataFrame, points: pd.Dat
                      "force_y": last.get(f"{name}_force_y"),
                      "displacement": last.get(f"{name}_displacement")}
               for name in b.moved}
+    regions = None
+    if isinstance(b.material, RegionalMaterial):
+        weights = region_unit_weights(spec)
+        regions = {m.region: {"material": m.material.name, "unit_weight": weights[m.region],
+                              "gauss_points": int(b.material.points_of(m.region).size)}
+                   for m in spec.materials}
     return {
         "name": spec.name, "mesh": b.mesh.source, "element": b.mesh.element,
         "elements": int(b.problem.basis.nelems),
         "gauss_points": int(b.initial_stress.shape[0]),
-        "material": spec.material.name, "unit_weight": b.unit_weight,
+        "material": spec.material.name if regions is None else "regions",
+        **({} if regions is None else {"regions": regions}),
+        "unit_weight": b.unit_weight,
         "gravity_factor": list(spec.gravity_factor or (1.0, 1.0)),
         "initial_state": spec.initial.state, "initial_residual": initial,
         "steps": int(len(steps) - 1), "steps_planned": spec.steps, "error": error,

@@ -48,6 +48,16 @@ into a :class:`BoundaryValueSpec` by :func:`bvp_from_dict` (every key checked, a
     [material.parameters]
     phi = 30.0
 
+    # ... or materials by region, in place of [material]:
+    [regions]                       # name = predicate at each element's centroid, or a
+    fill = "y >= 0.2"               # physical group of the mesh file's cells
+    [[materials]]                   # one per region; a region not in [regions] is the
+    region = "fill"                 # mesh file's physical group of that name
+    name = "linear-elastic"
+    unit_weight = 18e3              # optional: this region's γ [N/m³] (else [gravity]'s)
+    [materials.parameters]
+    young = 80e6
+
     [newton]                        # NewtonSpec's fields
     [regularisation]                # past a peak: model = "second-gradient" (quad8, quad9,
     internal_length = 0.005         # tri6), ℓ [m]; default model = "none"
@@ -69,7 +79,7 @@ from granular_material.vocabulary import RenamedWarning, key_of, user_stacklevel
 
 __all__ = ["CONDITION_KEYS", "CONDITION_TYPES", "INITIAL_KEYS", "INITIAL_STATES", "SCENE_KEYS",
            "BoundaryValueSpec", "ConditionSpec", "InitialStateSpec", "MeshSpec",
-           "bvp_from_dict"]
+           "RegionMaterialSpec", "bvp_from_dict"]
 
 #: the conditions a boundary may carry
 CONDITION_TYPES = ("fixed", "roller", "displacement", "rigid", "pressure")
@@ -290,6 +300,36 @@ class InitialStateSpec:
 
 
 @dataclass(frozen=True, kw_only=True)
+class RegionMaterialSpec:
+    """The material of one region (a ``[[materials]]`` entry).
+
+    Attributes:
+        region: the region's name: a key of the scene's ``[regions]``, or a physical group
+            of the mesh file's two-dimensional cells.
+        material: the region's material (as a run specification's ``[material]``).
+        unit_weight: the region's γ [N/m³] (>= 0), or "rve" (from its RVEs); None: the
+            scene's ``[gravity] unit_weight``.
+    """
+
+    region: str
+    material: MaterialSpec
+    unit_weight: float | str | None = None
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.region, str) or not self.region.strip():
+            raise SpecError("materials.region", f"must name a region (text), got "
+                                                f"{self.region!r}")
+        if not isinstance(self.material, MaterialSpec):
+            raise SpecError("materials", f"must hold a MaterialSpec, got "
+                                         f"{type(self.material).__name__}")
+        if self.unit_weight is not None and self.unit_weight != "rve":
+            weight = conform("materials.unit_weight", self.unit_weight, float, SpecError)
+            if not weight >= 0:
+                raise SpecError("materials.unit_weight", f"must be >= 0 N/m³, got {weight:g}")
+            object.__setattr__(self, "unit_weight", weight)
+
+
+@dataclass(frozen=True, kw_only=True)
 class BoundaryValueSpec:
     """One boundary-value problem run (see the module docstring for its file form).
 
@@ -305,7 +345,13 @@ class BoundaryValueSpec:
             None: γ throughout.
         initial: the initial state.
         steps: load steps.
-        material: the material (as in a run specification).
+        material: the material (as in a run specification); with ``materials``, left at
+            its default.
+        regions: name → predicate at each element's centroid (``"y >= 0.2"``) or the name
+            of a physical group of the mesh file's cells; None: no regions of its own (the
+            materials' regions are then the file's physical groups).
+        materials: one :class:`RegionMaterialSpec` per region, in place of ``material``
+            (None: ``material`` everywhere). Every element must lie in exactly one region.
         newton: the Newton solver.
         regularisation: the FEM's regularisation (``[regularisation]``: ``model``,
             ``internal_length`` [m]; none by default).
@@ -325,6 +371,8 @@ class BoundaryValueSpec:
         pressure=100e3))
     steps: int = 10
     material: MaterialSpec = field(default_factory=lambda: MaterialSpec(name="linear-elastic"))
+    regions: dict[str, str] | None = None
+    materials: tuple[RegionMaterialSpec, ...] | None = None
     newton: NewtonSpec = field(default_factory=NewtonSpec)
     regularisation: RegularisationSpec = field(default_factory=RegularisationSpec)
     out: Path | None = None
@@ -358,16 +406,73 @@ class BoundaryValueSpec:
             if weight < 0:
                 raise SpecError("gravity.unit_weight", f"must be >= 0 N/m³, got {weight:g}")
             object.__setattr__(self, "unit_weight", weight)
+        self._check_regions()
         if self.gravity_factor is not None:
             factor = conform("gravity.factor", self.gravity_factor, tuple[float, float],
                              SpecError)
             if min(factor) < 0:
                 raise SpecError("gravity.factor", f"must be >= 0, got {list(factor)}")
-            if self.unit_weight == 0.0:
+            if self.unit_weight == 0.0 and not any(
+                    m.unit_weight not in (None, 0.0) for m in self.materials or ()):
                 raise SpecError("gravity.factor", "multiplies a unit weight of 0 N/m³, so it "
                                                   "does nothing and is refused (set "
                                                   "gravity.unit_weight)")
             object.__setattr__(self, "gravity_factor", factor)
+
+    def _check_regions(self) -> None:
+        """SpecError naming what is wrong with ``regions`` and ``materials`` (each checked
+        against the mesh when the run is built)."""
+        regions, materials = self.regions, self.materials
+        if regions is not None:
+            if not isinstance(regions, Mapping) or not all(
+                    isinstance(k, str) and isinstance(v, str) for k, v in regions.items()):
+                raise SpecError("regions", f"must map names to predicates or physical groups "
+                                           f"(text), got {regions!r}"[:200])
+            object.__setattr__(self, "regions", dict(regions))
+        if materials is None:
+            if regions is not None:
+                raise SpecError("regions", "names regions, but no [[materials]] gives them "
+                                           "a material, so it is refused")
+            return
+        if isinstance(materials, str | bytes | Mapping) or not isinstance(materials,
+                                                                           Iterable):
+            raise SpecError("materials", f"must be a sequence of RegionMaterialSpec, got "
+                                         f"{type(materials).__name__}")
+        materials = tuple(materials)
+        if not materials:
+            raise SpecError("materials", "must give at least one region's material")
+        for k, m in enumerate(materials):
+            if not isinstance(m, RegionMaterialSpec):
+                raise SpecError("materials", f"must be RegionMaterialSpec objects; entry {k} "
+                                             f"is a {type(m).__name__}")
+        named = [m.region for m in materials]
+        twice = sorted({r for r in named if named.count(r) > 1})
+        if twice:
+            raise SpecError("materials.region", f"{twice[0]!r} is given two materials: give "
+                                                "each region one")
+        if self.material != MaterialSpec(name="linear-elastic"):
+            raise SpecError("material", "is given beside [[materials]]: give either one "
+                                        "[material] or a material per region")
+        unused = sorted(set(regions or {}) - set(named))
+        if unused:
+            raise SpecError(f"regions.{unused[0]}", "is given no material by [[materials]], "
+                                                    "so it is refused (every element belongs "
+                                                    "to one region with a material)")
+        if self.mesh.file is None:
+            loose = [r for r in named if r not in (regions or {})]
+            if loose:
+                raise SpecError("materials.region", f"{loose[0]!r} is no region of "
+                                                    "[regions] (a generated mesh has no "
+                                                    "physical groups)")
+        object.__setattr__(self, "materials", materials)
+
+    @property
+    def noisy(self) -> bool:
+        """Whether any material of the problem is noisy (DEM RVEs): the Newton defaults of
+        noisy materials apply."""
+        if self.materials is None:
+            return self.material.noisy
+        return any(m.material.noisy for m in self.materials)
 
     def _check_sections(self) -> None:
         """SpecError naming the first section that is not of its class (a table given where
@@ -406,7 +511,7 @@ class BoundaryValueSpec:
 #: the fields of BoundaryValueSpec that are sections, each checked by its own class (or,
 #: ``unit_weight``, a number or "rve")
 _SECTIONS = ("mesh", "boundaries", "conditions", "unit_weight", "gravity_factor", "initial",
-             "material", "newton", "regularisation")
+             "material", "regions", "materials", "newton", "regularisation")
 #: the sides every generated rectangle names
 _GENERATED_SIDES = frozenset({"left", "right", "bottom", "top"})
 
@@ -439,6 +544,35 @@ def _condition_of(entry: Any, index: int) -> ConditionSpec:
         value=entry.get("value"), end=entry.get("end"),
         displacement=entry.get("displacement"),
         rough=entry.get("rough", True)))
+
+
+def _region_material(entry: Any, index: int) -> RegionMaterialSpec:
+    """The ``index``-th [[materials]] table; a SpecError it raises carries
+    ``entry = ("materials", index)`` (for the line of its key)."""
+    try:
+        entry = _table(f"materials[{index}]", entry)
+        _unknown("materials", entry, SCENE_KEYS["materials"])
+        if "region" not in entry:
+            raise SpecError("materials.region", "each [[materials]] entry names its region")
+        if "name" not in entry:
+            raise SpecError("materials.name", "each [[materials]] entry names its material "
+                                              "(e.g. \"linear-elastic\", \"mohr-coulomb\", "
+                                              "\"dem\")")
+        try:
+            material = MaterialSpec(name=entry["name"], parameters=_table(
+                "materials.parameters", entry.get("parameters")))
+        except SpecError as exc:
+            field_ = exc.field
+            if field_ == "material":
+                field_ = "materials.name"
+            elif not field_.startswith("materials."):
+                field_ = f"materials.parameters.{field_}"
+            raise SpecError(field_, exc.message) from None
+        return RegionMaterialSpec(region=entry["region"], material=material,
+                                  unit_weight=entry.get("unit_weight"))
+    except SpecError as exc:
+        exc.entry = ("materials", index)
+        raise
 
 
 def _mesh(table: dict[str, Any], folder: Path) -> MeshSpec:
@@ -488,8 +622,8 @@ def _initial(table: dict[str, Any]) -> InitialStateSpec:
 #: NewtonSpec's fields, [material.parameters] the material's own, [boundaries] free names)
 SCENE_KEYS: dict[str, frozenset[str]] = {
     "": frozenset({"test", "steps", "name", "out", "mesh", "boundaries", "conditions",
-                   "gravity", "initial", "material", "newton", "output",
-                   "regularisation"}),
+                   "gravity", "initial", "material", "regions", "materials", "newton",
+                   "output", "regularisation"}),
     "mesh": frozenset({"file", "size", "elements", "element", "grading", "quadrature",
                        "align_x", "align_y"}),
     "conditions": frozenset({"type", "boundary", "component", "value", "end", "displacement",
@@ -497,6 +631,7 @@ SCENE_KEYS: dict[str, frozenset[str]] = {
     "gravity": frozenset({"unit_weight", "factor"}),
     "initial": frozenset({"state", "pressure", "k0", "surcharge", "surface"}),
     "material": frozenset({"name", "parameters"}),
+    "materials": frozenset({"region", "name", "parameters", "unit_weight"}),
     "regularisation": frozenset({"model", "internal_length"}),
     "output": frozenset({"out", "device", "shards", "progress", "fields"}),
 }
@@ -527,6 +662,21 @@ def bvp_from_dict(data: Mapping[str, Any], folder: Path | str = ".") -> Boundary
     _unknown("gravity", gravity, SCENE_KEYS["gravity"])
     material = _table("material", data.get("material"))
     _unknown("material", material, SCENE_KEYS["material"])
+    regions = data.get("regions")
+    if regions is not None:
+        regions = _table("regions", regions)
+        for name, value in regions.items():
+            if not isinstance(value, str) or not value.strip():
+                raise SpecError(f"regions.{name}", f"must be a predicate (e.g. \"y >= 0.2\") "
+                                                   f"or a physical group's name, got {value!r}")
+    materials = data.get("materials")
+    if materials is not None:
+        if not isinstance(materials, list):
+            raise SpecError("materials", "must be an array of tables ([[materials]])")
+        if "material" in data:
+            raise SpecError("material", "is given beside [[materials]]: give either one "
+                                        "[material] or a material per region")
+        materials = tuple(_region_material(m, k) for k, m in enumerate(materials))
     newton = _table("newton", data.get("newton"))
     regularisation = _table("regularisation", data.get("regularisation"))
     _unknown("regularisation", regularisation, SCENE_KEYS["regularisation"])
@@ -550,6 +700,8 @@ def bvp_from_dict(data: Mapping[str, Any], folder: Path | str = ".") -> Boundary
     try:
         return BoundaryValueSpec(
             **sections, boundaries={str(k): v for k, v in boundaries.items()},
+            regions=None if regions is None else {str(k): v for k, v in regions.items()},
+            materials=materials,
             unit_weight=gravity.get("unit_weight", 0.0),
             gravity_factor=gravity.get("factor"), steps=data.get("steps", 10),
             newton=newton_spec, out=output.get("out", data.get("out")),
