@@ -21,10 +21,10 @@ material's tangent in its initial state (the median over the Gauss points of the
 D_xyxy, D_yxyx, D_xyyx and D_yxxy: the shear modulus G of an isotropic elastic material).
 ℓ is ten times the gradient-elasticity length √(D/G₀) of Mindlin's theory, so that it is of
 the order of the band's width: in a one-dimensional shear layer whose material softens with
-tangent modulus A < 0 the band the model admits is w = 2π √(D/|A|) = 0.63 ℓ √(G₀/|A|) wide.
-The Mohr–Coulomb softening specimen of docs/validation/regularisation (G₀ = 23 MPa,
-|A| ≈ 1.5 MPa) puts w ≈ 2.5 ℓ; the study measures the widths. ℓ itself is chosen from the
-grains (docs/guide/regularisation.md).
+tangent modulus A < 0 the band the model admits is w = 2π √(−D/A) = 0.63 ℓ √(−G₀/A) wide.
+On the Mohr–Coulomb softening specimen of docs/validation/regularisation (G₀ = 23 MPa, A of
+the order of −1.5 MPa: the mobilised shear stress's drop over the softening strain) that is
+w ≈ 2.5 ℓ; the study measures the widths. How to choose ℓ: docs/guide/regularisation.md.
 
 The second-gradient terms are linear and written on the reference configuration: their
 blocks of Newton's tangent are constant, so the material's own tangent alone decides how
