@@ -336,7 +336,8 @@ class RegionalMaterial(ScikitFemInterface):
         with tempfile.TemporaryDirectory(prefix="regions-") as folder:
             for k, material in enumerate(self._materials.values()):
                 own = Path(folder) / f"region_{k}.npz"
-                own.write_bytes(states[k].tobytes())
+                data_k = states[k].tobytes()
+                write_whole(own, lambda tmp, data_k=data_k: tmp.write_bytes(data_k))
                 material.restore(own)
         for name, material in self._materials.items():
             if material.n_points != self._index[name].size:
