@@ -19,12 +19,11 @@ one modulus D [N]:
 where ℓ is the internal length [m] a user chooses and G₀ [Pa] the shear modulus of the
 material's tangent in its initial state (the median over the Gauss points of the average of
 D_xyxy, D_yxyx, D_xyyx and D_yxxy: the shear modulus G of an isotropic elastic material).
-ℓ is ten times the gradient-elasticity length √(D/G₀) of Mindlin's theory, so that it is of
-the order of the band's width: in a one-dimensional shear layer whose material softens with
-tangent modulus A < 0 the band the model admits is w = 2π √(−D/A) = 0.63 ℓ √(−G₀/A) wide.
-On the Mohr–Coulomb softening specimen of docs/validation/regularisation (G₀ = 23 MPa, A of
-the order of −1.5 MPa: the mobilised shear stress's drop over the softening strain) that is
-w ≈ 2.5 ℓ; the study measures the widths. How to choose ℓ: docs/guide/regularisation.md.
+ℓ is ten times the gradient-elasticity length √(D/G₀) of Mindlin's theory: in a
+one-dimensional shear layer whose material softens with tangent modulus A < 0 the band the
+model admits is w = 2π √(−D/A) = 0.63 ℓ √(−G₀/A) wide. On the Mohr–Coulomb softening
+specimen of docs/validation/regularisation (G₀ = 23 MPa) the bands measured 7–8 ℓ wide, the
+same on two meshes. How to choose ℓ: docs/guide/regularisation.md.
 
 The second-gradient terms are linear and written on the reference configuration: their
 blocks of Newton's tangent are constant, so the material's own tangent alone decides how
