@@ -1,8 +1,13 @@
 """Helpers shared by the FEM tests: test materials' committed strain, a unit element loaded
 on top, a stop at a load step, tables without their clock times, the scene text of a block
-pressed on top."""
+pressed on top, a benchmark script imported as a module."""
 
 from __future__ import annotations
+
+import importlib.util
+import sys
+from pathlib import Path
+from types import ModuleType
 
 import numpy as np
 import pandas as pd
@@ -96,3 +101,19 @@ def top_loaded_element(q: float) -> tuple[Basis, Loading]:
                      intorder=2)
     force = _pressure.assemble(top, q=q)
     return basis, Loading(dofs, np.zeros(dofs.size), np.zeros(basis.N), force)
+
+
+#: the benchmark scripts' folder
+BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
+
+
+def benchmark_module(name: str) -> ModuleType:
+    """``benchmarks/NAME.py`` imported as the module ``NAME`` (its folder on sys.path, for the
+    modules beside it that it imports)."""
+    if str(BENCHMARKS) not in sys.path:
+        sys.path.insert(0, str(BENCHMARKS))
+    spec = importlib.util.spec_from_file_location(name, BENCHMARKS / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module
+    spec.loader.exec_module(module)
+    return module

@@ -3,7 +3,6 @@ stages at smoke size."""
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import math
 import sys
@@ -12,26 +11,15 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+from run_helpers import benchmark_module
 
 if sys.version_info >= (3, 11):
     import tomllib
 else:  # Python 3.10
     import tomli as tomllib
 
-BENCH = Path(__file__).resolve().parents[1] / "benchmarks"
-
-
-def _module(name: str):
-    sys.path.insert(0, str(BENCH))
-    spec = importlib.util.spec_from_file_location(name, BENCH / f"{name}.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[name] = module
-    spec.loader.exec_module(module)
-    return module
-
-
-mc = _module("material_comparison")
-measures = _module("material_comparison_measures")
+mc = benchmark_module("material_comparison")
+measures = benchmark_module("material_comparison_measures")
 
 
 def test_prandtl_nq_closed_form() -> None:
