@@ -67,6 +67,14 @@ def test_a_stopped_run_exits_with_the_signals_code_and_how_to_resume(tmp_path, m
     pd.testing.assert_frame_equal(a, b, check_exact=True)
 
 
+def _signals_as_at_a_terminal() -> None:
+    """The child's stop signals at their defaults: a suite run under ``nohup`` or as a shell's
+    background job ignores SIGHUP or SIGINT, and a command keeps a signal ignored at its
+    start (as it should), which would leave these runs unstoppable."""
+    for name in SIGNALS:
+        signal.signal(getattr(signal, name), signal.SIG_DFL)
+
+
 @pytest.mark.skipif(os.name != "posix", reason="POSIX signals")
 @pytest.mark.parametrize("name", list(SIGNALS))
 def test_a_real_signal_stops_a_boundary_value_run(tmp_path, name):
@@ -76,7 +84,8 @@ def test_a_real_signal_stops_a_boundary_value_run(tmp_path, name):
     out = tmp_path / "run"
     process = subprocess.Popen([sys.executable, "-m", "granular_material.cli", "run",
                                 str(scene), "--out", str(out)],
-                               stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                               preexec_fn=_signals_as_at_a_terminal)
     deadline = time.monotonic() + 120
     while not ((out / "steps.csv").is_file()
                and len((out / "steps.csv").read_text().splitlines()) >= 3):
