@@ -39,6 +39,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from granular_material.results.band_measures import value_at
+
 if sys.version_info >= (3, 11):
     import tomllib
 else:  # Python 3.10
@@ -136,12 +138,6 @@ def bands_of(folder: Path, step: int | None = None) -> list[dict[str, float]]:
     return [b.as_dict() for b in find_bands(points, step, **WIDE_BANDS)]
 
 
-def _at(strain: np.ndarray, values: np.ndarray, target: float) -> float:
-    if strain.size == 0 or target > strain.max() * (1 + 1e-9):
-        return math.nan
-    return float(np.interp(target, strain, values))
-
-
 def specimen_row(folder: Path, summary: dict[str, Any]) -> dict[str, Any]:
     """The measures of one biaxial run."""
     steps = pd.read_csv(folder / "steps.csv")
@@ -154,7 +150,7 @@ def specimen_row(folder: Path, summary: dict[str, Any]) -> dict[str, Any]:
         "peak_ratio": float(np.nanmax(ratio[1:])) if len(ratio) > 1 else math.nan,
         "peak_strain": float(strain[int(np.nanargmax(ratio[1:])) + 1]) if len(ratio) > 1
         else math.nan,
-        "ratio_5": _at(strain, ratio, 0.05), "ratio_10": _at(strain, ratio, 0.10),
+        "ratio_5": value_at(strain, ratio, 0.05), "ratio_10": value_at(strain, ratio, 0.10),
         "iterations": float(summary.get("newton_iterations_mean", math.nan)),
         "cutbacks": int(summary.get("cutbacks", 0)),
         "time_s": float(summary.get("timing_s", {}).get("total", math.nan)),

@@ -66,6 +66,7 @@ __all__ = [
     "Regularisation",
     "SecondGradient",
     "check_element",
+    "check_element_name",
     "initial_shear_modulus",
     "second_gradient_modulus",
 ]
@@ -107,7 +108,7 @@ class Regularisation:
             if not (isinstance(length, (int, float)) and math.isfinite(length) and length > 0):
                 raise ParameterError("internal_length", "the second gradient needs an internal "
                                      f"length > 0 [m], got {length!r}")
-        elif length not in (0, 0.0, None):
+        elif length not in (0, None):
             raise ParameterError("internal_length", "is the second gradient's: give it with "
                                  "regularisation 'second-gradient'")
 
@@ -159,14 +160,24 @@ def _gradient_component(i: int, j: int) -> BilinearForm:
     return form
 
 
+def _refuse_element(name: str) -> None:
+    raise ParameterError("regularisation", f"the second gradient needs quadratic "
+                         f"displacement elements ({', '.join(SECOND_GRADIENT_ELEMENTS)}), "
+                         f"not {name}")
+
+
+def check_element_name(element: str) -> None:
+    """ParameterError unless the run's element ``element`` (quad4, quad8, …) is one the
+    second gradient runs on (:data:`SECOND_GRADIENT_ELEMENTS`)."""
+    if element not in SECOND_GRADIENT_ELEMENTS:
+        _refuse_element(element)
+
+
 def check_element(basis: Basis, element: str | None = None) -> None:
     """ParameterError unless ``basis`` is one the second gradient runs on (quad8, quad9,
     tri6); ``element`` names the run's element in the message."""
     if _scalar_element(basis) not in _FIELDS:
-        name = element or _scalar_element(basis).__name__
-        raise ParameterError("regularisation", f"the second gradient needs quadratic "
-                             f"displacement elements ({', '.join(SECOND_GRADIENT_ELEMENTS)}), "
-                             f"not {name}")
+        _refuse_element(element or _scalar_element(basis).__name__)
 
 
 class SecondGradient:
@@ -205,7 +216,6 @@ class SecondGradient:
             blocks[1 + k + c][0] = -gradients[c]
             blocks[1 + k + c][1 + c] = coupling
         self.matrix = bmat(blocks, format="csr")
-        self._v_basis = v_basis
 
     @property
     def n_extra(self) -> int:
@@ -244,5 +254,5 @@ def add_second_gradient(terms: SecondGradient, stiffness: csr_matrix, residual: 
     ``condense(K, -R, D=D)`` with the displacement's Dirichlet dofs ``D`` (v and λ are free)
     and add the correction's first ndofs entries to u, the rest to ``extra``.
     """
-    return terms.augment(stiffness), np.concatenate([residual, np.zeros(terms.n_extra)]) + \
-        terms.residual(u, extra)
+    bordered = np.concatenate([residual, np.zeros(terms.n_extra)])
+    return terms.augment(stiffness), bordered + terms.residual(u, extra)

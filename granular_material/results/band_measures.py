@@ -31,7 +31,7 @@ from granular_material.results.bands import find_bands
 from granular_material.results.localization import shear_band
 
 __all__ = ["MEASURE_STRAINS", "ONSET_RATIO", "SOFTENING_STRAINS", "band_measures",
-           "band_onset", "localisation_history"]
+           "band_onset", "localisation_history", "value_at"]
 
 #: γmax/γmean at which a band is said to have formed [-]: a uniform specimen stays near 1.1–1.3
 #: (the RVEs' own scatter); Guo & Zhao's band and Wu et al.'s specimen pass 2 within a few
@@ -75,8 +75,9 @@ def band_onset(history: pd.DataFrame, threshold: float = ONSET_RATIO) -> float:
     return float(strain[i - 1] + (threshold - r0) / (r1 - r0) * (strain[i] - strain[i - 1]))
 
 
-def _at(strain: np.ndarray, values: np.ndarray, target: float) -> float:
-    """``values`` at axial strain ``target`` (linear; NaN beyond the run's last strain)."""
+def value_at(strain: np.ndarray, values: np.ndarray, target: float) -> float:
+    """``values`` at axial strain ``target`` [-] of a run's ``strain`` [-] (linear between
+    steps; NaN beyond the run's last strain)."""
     if strain.size == 0 or target > strain.max() * (1 + 1e-9):
         return math.nan
     return float(np.interp(target, strain, values))
@@ -115,7 +116,7 @@ def band_measures(steps: pd.DataFrame, points: pd.DataFrame, height: float,
     strain = history["axial_strain"].to_numpy(dtype=float)
     measures: dict[str, Any] = {"onset": band_onset(history, threshold)}
     for e in strains:
-        measures[f"ratio_{100 * e:g}"] = _at(strain, history["ratio"].to_numpy(), e)
+        measures[f"ratio_{100 * e:g}"] = value_at(strain, history["ratio"].to_numpy(), e)
     band = shear_band(points)
     angle = math.radians(band.inclination_deg)
     crossing = (band.centre_x + (height / 2 - band.centre_y) / math.tan(angle)
@@ -131,8 +132,8 @@ def band_measures(steps: pd.DataFrame, points: pd.DataFrame, height: float,
                      "band_2_inclination_deg": inclinations[1]})
     run_strain = steps["axial_strain"].to_numpy(dtype=float)
     for e in softening:
-        measures[f"stress_ratio_{100 * e:g}"] = _at(
+        measures[f"stress_ratio_{100 * e:g}"] = value_at(
             run_strain, steps["stress_ratio"].to_numpy(dtype=float), e)
-        measures[f"volumetric_strain_{100 * e:g}"] = _at(
+        measures[f"volumetric_strain_{100 * e:g}"] = value_at(
             run_strain, steps["volumetric_strain"].to_numpy(dtype=float), e)
     return measures

@@ -13,7 +13,7 @@ from typing import Any
 
 from granular_material.errors import ParameterError
 from granular_material.fem.boundary_value.biaxial import BiaxialSetup
-from granular_material.fem.regularisation import SECOND_GRADIENT_ELEMENTS, Regularisation
+from granular_material.fem.regularisation import Regularisation, check_element_name
 from granular_material.fem.solver.defaults import COMMAND_DEFAULTS
 from granular_material.fem.solver.newton import NewtonSettings
 from granular_material.procedures.element_tests import DEFAULT_AXIAL_STRAIN
@@ -331,9 +331,11 @@ class RegularisationSpec:
 
     def check_element(self, element: str) -> None:
         """SpecError when the run's ``element`` cannot carry the regularisation."""
-        if self.model == "second-gradient" and element not in SECOND_GRADIENT_ELEMENTS:
-            raise SpecError("model", f"the second gradient needs quadratic elements "
-                                     f"({', '.join(SECOND_GRADIENT_ELEMENTS)}), not {element}")
+        if self.model == "second-gradient":
+            try:
+                check_element_name(element)
+            except ParameterError as exc:
+                raise SpecError("model", exc.message) from None
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -392,8 +392,9 @@ def run_boundary_value(spec: BoundaryValueSpec, out: Path | None = None,
     summary = _summary(b, solver, steps, last.get("points", pd.DataFrame()), error,
                        initial_residual, t_initial, time.perf_counter() - t_start)
     summary["resumed_from_step"] = None if saved is None else saved.step
-    if solver.regularisation_summary() is not None:
-        summary["regularisation"] = solver.regularisation_summary()
+    regularisation = solver.regularisation_summary()
+    if regularisation is not None:
+        summary["regularisation"] = regularisation
     if checkpoint is not None and error is None:
         checkpoint.remove()  # finished: nothing to resume
     if out is not None:
