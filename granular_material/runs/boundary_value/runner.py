@@ -48,6 +48,7 @@ from granular_material.fem.boundary_value.conditions import (
     build_problem,
 )
 from granular_material.fem.boundary_value.initial_stress import geostatic_stress
+from granular_material.fem.forms import gauss_points_grad
 from granular_material.fem.boundary_value.meshes import MeshData, read_mesh, rectangle_mesh
 from granular_material.fem.materials.regions import RegionalMaterial
 from granular_material.multiscale.confinement import UNCONFINED_FRACTION
@@ -59,6 +60,13 @@ from granular_material.runs.boundary_value.material import (
     region_elements,
     region_unit_weights,
     unit_weight_of,
+)
+from granular_material.runs.boundary_value.phases import (
+    PhasePlan,
+    phase_of_step,
+    phase_start_residual,
+    phase_view,
+    reported_gradient,
 )
 from granular_material.runs.boundary_value.resume import (
     open_bvp_checkpoint,
@@ -174,15 +182,64 @@ class Built:
     settings: Any
     moved: dict[str, np.ndarray]  # rigid body / displacement name -> unit direction
     preparation_s: float = 0.0  # seconds to build and allocate the material
+    # a phased run (:mod:`~granular_material.runs.boundary_value.phases`): its phases, the
+    # one stepping, and the displacement [m] its reported ones are measured from
+    plans: list[PhasePlan] = field(default_factory=list)
+    phase: int = 0
+    offset: np.ndarray | None = None
+    start_residuals: dict[int, float] = field(default_factory=dict)  # by phase, relative
+
+    def reported_boundaries(self) -> list[tuple[str, bool]]:
+        """(name, loaded) of every boundary whose force and displacement the steps table
+        reports (those with a condition; of a phased run, in any phase), ``loaded`` where a
+        pressure acts on it (its force is the load's, else the supports' reaction)."""
+        if not self.plans:
+            conditions = self.spec.conditions
+            return [(name, any(c.boundary == name and c.type == "pressure"
+                               for c in conditions))
+                    for name in sorted({c.boundary for c in conditions})]
+        named = {c.boundary for plan in self.plans for c in plan.view.conditions}
+        now = self.plans[self.phase].view.conditions
+        return [(name, any(c.boundary == name and c.type == "pressure" for c in now))
+                for name in sorted(named)]
+
+    def reported(self, u: np.ndarray) -> np.ndarray:
+        """The displacement [m] reported for the solver's ``u`` (from the last reset of a
+        phased run; ``u`` itself otherwise)."""
+        return u if self.offset is None else u - self.offset
 
 
 def build(spec: BoundaryValueSpec, allocate: bool = True) -> Built:
     """Mesh, problem, initial stress and material of ``spec`` (no step taken; the material
-    not allocated, its RVEs not prepared, unless ``allocate``)."""
+    not allocated, its RVEs not prepared, unless ``allocate``). A phased ``spec``: those of
+    its first phase, and every phase's problem (:attr:`Built.plans`), each checked."""
+    phased = spec
+    spec = phase_view(phased, 0) if phased.phases else phased
     if spec.mesh.file is None:  # a generated mesh: checked before it is made
         check_memory(spec, *generated_size(spec))
     mesh = _mesh(spec)
     check_memory(spec, mesh.n_elements, mesh.element)
+    problem, unit_weight, start = _problem(spec, mesh)
+    xy = problem.points
+    top = mesh.bounding_box[3]
+    sigma0 = _initial_stress(spec, xy, start, top)  # in equilibrium with step 0's weight
+    t0 = time.perf_counter()
+    material = material_for_problem(spec, xy.shape[0], sigma0, allocate, mesh)
+    preparation = time.perf_counter() - t0
+    noisy = bool(getattr(material, "noisy", False))
+    settings = _settings(spec, problem, noisy)
+    b = Built(spec, mesh, problem, sigma0, unit_weight, material, settings, _moved(spec),
+              preparation)
+    if phased.phases:
+        b.plans = _plans(phased, b, noisy)
+        for plan in reversed(b.plans):  # a body moved in any phase, along its first motion
+            b.moved.update(_moved(plan.view))
+    return b
+
+
+def _problem(spec: BoundaryValueSpec, mesh: MeshData) -> tuple[Any, float | None, float]:
+    """The problem of ``spec``'s conditions and gravity on ``mesh``; the unit weight [N/m³]
+    (None: the regions' differ) and γ at step 0 for the initial state."""
     conditions = [_condition(c) for c in spec.conditions]
     f0, f1 = spec.gravity_factor or (1.0, 1.0)
     if spec.materials is None:
@@ -192,18 +249,20 @@ def build(spec: BoundaryValueSpec, allocate: bool = True) -> Built:
             conditions.append(Gravity(start, end=end))
     else:
         unit_weight, start = _region_gravity(spec, mesh, conditions, f0, f1)
-    problem = build_problem(mesh, conditions, spec.mesh.quadrature)
-    xy = problem.points
-    top = mesh.bounding_box[3]
-    sigma0 = _initial_stress(spec, xy, start, top)  # in equilibrium with step 0's weight
-    t0 = time.perf_counter()
-    material = material_for_problem(spec, xy.shape[0], sigma0, allocate, mesh)
-    preparation = time.perf_counter() - t0
-    noisy = bool(getattr(material, "noisy", False))
+    return build_problem(mesh, conditions, spec.mesh.quadrature), unit_weight, start
+
+
+def _settings(spec: BoundaryValueSpec, problem: Any, noisy: bool) -> Any:
+    """Newton's settings for ``problem`` (the force tolerance from its free dofs)."""
     settings = spec.newton.settings(noisy)
     stress_tol = spec.newton.stress_tolerance(noisy, spec.reference_pressure)
     if stress_tol > 0:
         settings = replace(settings, atol=problem.force_tolerance(stress_tol))
+    return settings
+
+
+def _moved(spec: BoundaryValueSpec) -> dict[str, np.ndarray]:
+    """The unit direction of every boundary a condition moves (rigid, displacement)."""
     moved = {}
     for c in spec.conditions:
         if c.type == "rigid":
@@ -213,8 +272,29 @@ def build(spec: BoundaryValueSpec, allocate: bool = True) -> Built:
             direction = np.zeros(2)
             direction[c.component] = math.copysign(1.0, c.value) if c.value else 1.0
             moved[c.boundary] = direction
-    return Built(spec, mesh, problem, sigma0, unit_weight, material, settings, moved,
-                 preparation)
+    return moved
+
+
+def _plans(spec: BoundaryValueSpec, b: Built, noisy: bool) -> list[PhasePlan]:
+    """Every phase of the phased ``spec``, its problem built on ``b``'s mesh (the first's
+    is ``b``'s own); a phase whose conditions leave the body free is refused naming it."""
+    plans = []
+    first = 0
+    for k, phase in enumerate(spec.phases):
+        view = phase_view(spec, k)
+        if k == 0:
+            problem, settings = b.problem, b.settings
+        else:
+            try:
+                problem = _problem(view, b.mesh)[0]
+            except ParameterError as exc:
+                raise SpecError("phases.conditions", f"of phase {k + 1} ({phase.name!r}) "
+                                                     f"{exc.field}: {exc.message}") from None
+            settings = _settings(view, problem, noisy)
+        plans.append(PhasePlan(k, phase.name, phase.steps, first, problem, settings, view,
+                               phase.reset_displacements and k > 0))
+        first += phase.steps
+    return plans
 
 
 def _region_gravity(spec: BoundaryValueSpec, mesh: MeshData, conditions: list[Any],
@@ -243,6 +323,9 @@ def _rows(b: Built, solver: NewtonSolver, record: StepRecord | None, p0: np.ndar
     problem = b.problem
     kin = solver.kinematics
     grad = solver.grad_u()
+    if b.offset is not None:  # a phase reset the reported displacement
+        grad = reported_gradient(kin, grad, gauss_points_grad(problem.basis, b.offset))
+    u = b.reported(solver.u)
     strain = kin.strain(grad)
     stress = solver.response.stress
     pressure = -0.5 * np.trace(stress, axis1=1, axis2=2)
@@ -262,10 +345,9 @@ def _rows(b: Built, solver: NewtonSolver, record: StepRecord | None, p0: np.ndar
         # the material's costs (step 0: none spent, under the names its evaluations use)
         **(dict(record.costs) if record else dict.fromkeys(solver.response.costs, 0)),
     }
-    for name in sorted({c.boundary for c in b.spec.conditions}):
-        loaded = any(c.boundary == name and c.type == "pressure" for c in b.spec.conditions)
+    for name, loaded in b.reported_boundaries():
         fx, fy = problem.boundary_force(name, f_ext if loaded else reaction)
-        ux, uy = problem.boundary_displacement(name, solver.u)
+        ux, uy = problem.boundary_displacement(name, u)
         row.update({f"{name}_force_x": fx, f"{name}_force_y": fy,
                     f"{name}_displacement_x": ux, f"{name}_displacement_y": uy})
         if name in b.moved:
@@ -354,11 +436,15 @@ def run_boundary_value(spec: BoundaryValueSpec, out: Path | None = None,
 
     def collect(s: NewtonSolver, record: StepRecord | None) -> None:
         row, points = _rows(b, s, record, p0)
-        keep(row, points, s.u)
+        if b.plans:
+            row, points = _with_phase(b, row, points)
+        u = b.reported(s.u)
+        keep(row, points, u)
         if checkpoint is not None:
-            checkpoint.save_step(row, points, s.u, None)
-            if checkpoint.due(int(row["step"]), spec.steps):
-                checkpoint.save_state(int(row["step"]), solver, b.material)
+            checkpoint.save_step(row, points, u, None)
+            step = int(row["step"])
+            if checkpoint.due(step, spec.steps) or _ends_phase(b, step):
+                checkpoint.save_state(step, solver, b.material)
 
     t_initial = time.perf_counter()
     if saved is None:
@@ -372,11 +458,16 @@ def run_boundary_value(spec: BoundaryValueSpec, out: Path | None = None,
     error = None
     interrupt = None
     try:
-        solver.run(spec.steps, on_step=collect, progress=spec.progress,
-                   description=f"{spec.name} ({problem.basis.nelems} elements)",
-                   done=0 if saved is None else saved.step)
+        if b.plans:
+            _run_phases(b, solver, collect, checkpoint, None if saved is None else saved.step)
+        else:
+            solver.run(spec.steps, on_step=collect, progress=spec.progress,
+                       description=f"{spec.name} ({problem.basis.nelems} elements)",
+                       done=0 if saved is None else saved.step)
     except NewtonError as exc:
         error = str(exc)
+        if b.plans:
+            error = f"phase {b.phase + 1} ({b.plans[b.phase].name!r}): {error}"
         relative = initial_residual.get("relative", 0.0)
         if relative > OUT_OF_EQUILIBRIUM and initial_residual.get("norm", 0.0) > b.settings.atol:
             error += (f" (the initial state was not in equilibrium with the loads: its "
@@ -392,6 +483,8 @@ def run_boundary_value(spec: BoundaryValueSpec, out: Path | None = None,
     summary = _summary(b, solver, steps, last.get("points", pd.DataFrame()), error,
                        initial_residual, t_initial, time.perf_counter() - t_start)
     summary["resumed_from_step"] = None if saved is None else saved.step
+    if b.plans:
+        summary.update(_phases_summary(b, solver, steps, error, interrupt is not None))
     regularisation = solver.regularisation_summary()
     if regularisation is not None:
         summary["regularisation"] = regularisation
@@ -403,6 +496,121 @@ def run_boundary_value(spec: BoundaryValueSpec, out: Path | None = None,
         write_json(summary, out / "summary.json")
     return BVPOutcome(steps, summary, error, last.get("points", pd.DataFrame()),
                       last.get("u", np.zeros(0)), interrupt)
+
+
+def _with_phase(b: Built, row: dict[str, Any], points: pd.DataFrame,
+                ) -> tuple[dict[str, Any], pd.DataFrame]:
+    """``row`` and ``points`` with the stepping phase's name after ``step``."""
+    name = b.plans[b.phase].name
+    row = {"step": row["step"], "phase": name, **row}
+    points.insert(1, "phase", name)
+    return row, points
+
+
+def _ends_phase(b: Built, step: int) -> bool:
+    """Whether ``step`` is the last of a phase (its state is saved: a resume there starts
+    the next phase as an uninterrupted run does)."""
+    return any(step == plan.last_step for plan in b.plans)
+
+
+def _enter_phase(b: Built, solver: NewtonSolver, plan: PhasePlan,
+                 checkpoint: Any) -> None:
+    """Start ``plan`` from the solver's committed state: its prescribed displacements from
+    where the state holds them, its reported displacement reset where it asks, and what a
+    resume needs kept in ``checkpoint`` (the start and the reset displacement)."""
+    u_start = solver.u.copy()
+    loading = replace(plan.problem.loading,
+                      dirichlet_start=u_start[plan.problem.loading.dirichlet_dofs])
+    if plan.reset:
+        b.offset = u_start.copy()
+    solver.start_phase(loading, plan.settings)
+    b.phase = plan.index
+    residual = phase_start_residual(solver)
+    b.start_residuals[plan.index] = residual
+    if checkpoint is not None:
+        offset = np.zeros_like(u_start) if b.offset is None else b.offset
+        checkpoint.save_table(f"phase_{plan.index}", pd.DataFrame({"u_start": u_start,
+                                                                    "offset": offset}))
+        remember(checkpoint, f"phase_{plan.index}_start",
+                 {"index": plan.index, "first_step": plan.first_step,
+                  "start_residual": residual, "offset": float(b.offset is not None)})
+
+
+def _saved_phase(b: Built, checkpoint: Any, index: int) -> np.ndarray:
+    """The displacement [m] phase ``index`` started from, as its start kept it; the reset
+    displacement in force from it set on ``b`` (SpecError: the checkpoint lacks them)."""
+    table = None if checkpoint is None else checkpoint.load_table(f"phase_{index}")
+    start = remember(checkpoint, f"phase_{index}_start")
+    if table is None or not start:
+        raise SpecError("out", f"cannot resume: the checkpoint lacks the start of phase "
+                               f"{index + 1} ({b.plans[index].name!r}) (nothing in the "
+                               "folder was changed)")
+    b.offset = table["offset"].to_numpy(dtype=float).copy() if start["offset"] else None
+    b.start_residuals[index] = start["start_residual"]
+    return table["u_start"].to_numpy(dtype=float).copy()
+
+
+def _run_phases(b: Built, solver: NewtonSolver, collect: Any, checkpoint: Any,
+                resumed: int | None) -> None:
+    """Step every phase of ``b`` in turn from the state the one before committed; a run
+    ``resumed`` after its committed step goes on inside the phase that step belongs to
+    (NewtonError: the phase ``b.phase`` failed, the earlier ones' steps kept)."""
+    spec = b.spec
+    first, done = (0, 0) if resumed is None else phase_of_step(
+        [plan.steps for plan in b.plans], resumed)
+    for index in range(1, first):  # the phases before: their resets and start residuals
+        _saved_phase(b, checkpoint, index)
+    b.phase = first
+    if first > 0 and done > 0:  # inside a later phase: its loading from where it started
+        plan = b.plans[first]
+        u_start = _saved_phase(b, checkpoint, first)
+        loading = replace(plan.problem.loading,
+                          dirichlet_start=u_start[plan.problem.loading.dirichlet_dofs])
+        solver.start_phase(loading, plan.settings, restart=False)
+    for plan in b.plans[first:]:
+        steps_done = done if plan.index == first else 0
+        if plan.index > 0 and steps_done == 0:
+            _enter_phase(b, solver, plan, checkpoint)
+        b.phase = plan.index
+        solver.run(plan.steps, on_step=collect, progress=spec.progress,
+                   description=f"{spec.name}: {plan.name} ({plan.problem.basis.nelems} "
+                               "elements)", done=steps_done)
+
+
+def _phases_summary(b: Built, solver: NewtonSolver, steps: pd.DataFrame, error: str | None,
+                    interrupted: bool) -> dict[str, Any]:
+    """A phased run's summary: every phase with its status ("completed", "failed",
+    "stopped" by an interrupt, or "not started"), its steps and the load factor it reached
+    (of a failed one, the last committed, perhaps between steps after cut-backs); the phase
+    that failed."""
+    phases = []
+    failed = None
+    for plan in b.plans:
+        rows = steps[(steps["step"] > 0) & (steps["phase"] == plan.name)] if len(steps) \
+            else steps
+        reached = float(rows["load_factor"].iloc[-1]) if len(rows) else 0.0
+        status = "not started"
+        if len(rows) == plan.steps:
+            status = "completed"
+        elif error is not None and plan.index == b.phase:
+            status = "stopped" if interrupted else "failed"
+            if not interrupted:
+                reached = max(reached, float(solver.load_factor))
+                failed = plan.name
+        entry: dict[str, Any] = {
+            "name": plan.name, "status": status, "steps": plan.steps,
+            "steps_done": int(len(rows)), "first_step": plan.first_step + 1,
+            "load_factor": reached,
+            "gravity_factor": (None if plan.view.gravity_factor is None
+                               else list(plan.view.gravity_factor)),
+            "reset_displacements": plan.reset,
+            "start_residual": b.start_residuals.get(plan.index),
+        }
+        if status in ("failed", "stopped"):
+            entry["error"] = error
+        phases.append(entry)
+    return {"phases": phases, "failed_phase": failed, "gravity_factor": None,
+            "steps_planned": sum(plan.steps for plan in b.plans)}
 
 
 class OutOfEquilibriumWarning(UserWarning):
