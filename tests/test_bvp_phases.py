@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import copy
 import json
+import sys
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -20,6 +22,11 @@ from granular_material.runs.boundary_value.runner import build, run_boundary_val
 from granular_material.runs.boundary_value.spec import SCENE_KEYS, bvp_from_dict
 from granular_material.runs.checkpoint import RunCheckpoint
 from granular_material.runs.spec import SpecError
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # Python 3.10
+    import tomli as tomllib
 
 ELASTIC = {"name": "linear-elastic", "parameters": {"young": 20e6, "poisson": 0.3}}
 MOHR_COULOMB = {"name": "mohr-coulomb",
@@ -98,6 +105,8 @@ def test_a_reset_reports_from_the_phase_start_and_changes_nothing_else():
         runs[reset] = run_boundary_value(bvp_from_dict(scene), out=None)
     kept, reset = runs[False], runs[True]
     assert kept.error is None and reset.error is None
+    # the follower pressures go on where the first phase left them: the start is in balance
+    assert reset.summary["phases"][1]["start_residual"] < 1e-9
     for column in ("sxx", "syy", "sxy", "mean_pressure"):
         np.testing.assert_array_equal(kept.points[column], reset.points[column])
     start = kept.steps.iloc[2]  # the end of the first phase
@@ -244,3 +253,19 @@ def test_every_phase_key_acts():
     assert set(changes["gravity"]) == SCENE_KEYS["phases.gravity"]
     for key, value in changes.items():
         assert bvp_from_dict(_phase(_scene(), 1, **{key: value})) != base, key
+
+
+def test_the_example_scene_runs_its_two_phases(tmp_path):
+    examples = Path(__file__).parents[1] / "examples" / "scenes"
+    text = (examples / "phases-footing.toml").read_text()
+    outcome = run_boundary_value(bvp_from_dict(tomllib.loads(text), examples),
+                                 out=tmp_path / "run")
+    assert outcome.error is None
+    assert [p["status"] for p in outcome.summary["phases"]] == ["completed", "completed"]
+    steps = outcome.steps
+    strip = steps[steps["phase"] == "strip"]
+    assert strip["strip_pressure"].iloc[-1] == pytest.approx(150e3)
+    assert (steps[steps["phase"] == "gravity"]["strip_pressure"] == 0).all()
+    # the strip settles under its load, measured from the phase's start
+    assert 0 < strip["strip_displacement"].iloc[0] < strip["strip_displacement"].iloc[-1]
+    assert (tmp_path / "run" / "load_displacement.png").is_file()

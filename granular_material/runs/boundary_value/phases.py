@@ -23,16 +23,17 @@ the strain of the deformation since then (:func:`reported_gradient`).
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
 
+from granular_material.fem.boundary_value.meshes import MeshData
 from granular_material.fem.kinematics import Kinematics
 from granular_material.runs.boundary_value.spec import BoundaryValueSpec, ConditionSpec
 
-__all__ = ["PhasePlan", "phase_of_step", "phase_start_residual", "phase_view",
-           "pressure_totals", "reported_gradient"]
+__all__ = ["PhasePlan", "inward_direction", "phase_of_step", "phase_pressures",
+           "phase_start_residual", "phase_view", "pressure_totals", "reported_gradient"]
 
 
 def pressure_totals(spec: BoundaryValueSpec, index: int) -> dict[str, float]:
@@ -91,6 +92,34 @@ def phase_of_step(steps: Sequence[int], step: int) -> tuple[int, int]:
     raise ValueError("a phased run has at least one phase")
 
 
+def phase_pressures(view: BoundaryValueSpec) -> dict[str, tuple[float, float]]:
+    """The pressure [Pa] on each boundary of a phase (:func:`phase_view`) at its start and
+    at its end (pressures on one boundary add up)."""
+    out: dict[str, tuple[float, float]] = {}
+    for c in view.conditions:
+        if c.type == "pressure":
+            start, end = out.get(c.boundary, (0.0, 0.0))
+            out[c.boundary] = (start + float(c.value),
+                               end + float(c.value if c.end is None else c.end))
+    return out
+
+
+def inward_direction(mesh: MeshData, name: str) -> np.ndarray:
+    """The unit vector (2,) into the body across the boundary ``name`` (the mean of its
+    facets' inward normals, weighted by their lengths): the direction a pressure on it
+    pushes."""
+    m = mesh.mesh
+    facets = mesh.boundaries[name]
+    ends = m.p[:, m.facets[:, facets]]  # (2, 2 ends, n)
+    tangent = ends[:, 1] - ends[:, 0]
+    normal = np.array([tangent[1], -tangent[0]])  # length-weighted, either way round
+    element = m.f2t[0, facets]
+    centre = m.p[:, m.t[:, element]].mean(axis=1)
+    inward = np.sign(np.einsum("in,in->n", normal, centre - ends.mean(axis=1)))
+    total = (normal * inward).sum(axis=1)
+    return total / max(float(np.linalg.norm(total)), 1e-300)
+
+
 @dataclass
 class PhasePlan:
     """One phase as the runner steps it.
@@ -106,6 +135,7 @@ class PhasePlan:
         settings: Newton's settings for it (the force tolerance follows its free dofs).
         view: the phase as a problem without phases (:func:`phase_view`).
         reset: report displacement and strain from the phase's start.
+        pressures: the pressure [Pa] on each loaded boundary at the phase's start and end.
     """
 
     index: int
@@ -116,6 +146,7 @@ class PhasePlan:
     settings: Any
     view: BoundaryValueSpec
     reset: bool = False
+    pressures: dict[str, tuple[float, float]] = field(default_factory=dict)
 
     @property
     def last_step(self) -> int:

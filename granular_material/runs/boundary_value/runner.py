@@ -48,11 +48,15 @@ from granular_material.fem.boundary_value.conditions import (
     build_problem,
 )
 from granular_material.fem.boundary_value.initial_stress import geostatic_stress
-from granular_material.fem.forms import gauss_points_grad
 from granular_material.fem.boundary_value.meshes import MeshData, read_mesh, rectangle_mesh
+from granular_material.fem.forms import gauss_points_grad
 from granular_material.fem.materials.regions import RegionalMaterial
 from granular_material.multiscale.confinement import UNCONFINED_FRACTION
-from granular_material.results.bvp_plots import plot_load_displacement, plot_mechanism
+from granular_material.results.bvp_plots import (
+    plot_load_displacement,
+    plot_mechanism,
+    plot_phased_load_displacement,
+)
 from granular_material.results.writers import FieldWriter, write_csv, write_json
 from granular_material.runs.boundary_value.checks import check_disk, check_memory, generated_size
 from granular_material.runs.boundary_value.material import (
@@ -63,7 +67,9 @@ from granular_material.runs.boundary_value.material import (
 )
 from granular_material.runs.boundary_value.phases import (
     PhasePlan,
+    inward_direction,
     phase_of_step,
+    phase_pressures,
     phase_start_residual,
     phase_view,
     reported_gradient,
@@ -188,6 +194,7 @@ class Built:
     phase: int = 0
     offset: np.ndarray | None = None
     start_residuals: dict[int, float] = field(default_factory=dict)  # by phase, relative
+    pressed: dict[str, np.ndarray] = field(default_factory=dict)  # name -> inward direction
 
     def reported_boundaries(self) -> list[tuple[str, bool]]:
         """(name, loaded) of every boundary whose force and displacement the steps table
@@ -234,6 +241,8 @@ def build(spec: BoundaryValueSpec, allocate: bool = True) -> Built:
         b.plans = _plans(phased, b, noisy)
         for plan in reversed(b.plans):  # a body moved in any phase, along its first motion
             b.moved.update(_moved(plan.view))
+        loaded = dict.fromkeys(name for plan in b.plans for name in plan.pressures)
+        b.pressed = {name: inward_direction(mesh, name) for name in loaded}
     return b
 
 
@@ -292,7 +301,7 @@ def _plans(spec: BoundaryValueSpec, b: Built, noisy: bool) -> list[PhasePlan]:
                                                      f"{exc.field}: {exc.message}") from None
             settings = _settings(view, problem, noisy)
         plans.append(PhasePlan(k, phase.name, phase.steps, first, problem, settings, view,
-                               phase.reset_displacements and k > 0))
+                               phase.reset_displacements and k > 0, phase_pressures(view)))
         first += phase.steps
     return plans
 
@@ -455,6 +464,8 @@ def run_boundary_value(spec: BoundaryValueSpec, out: Path | None = None,
             keep(step.row, step.points, step.u)
         initial_residual = remember(checkpoint, "initial_residual")
     t_initial = time.perf_counter() - t_initial
+    if b.plans:
+        b.start_residuals[0] = initial_residual.get("relative")
     error = None
     interrupt = None
     try:
@@ -500,10 +511,21 @@ def run_boundary_value(spec: BoundaryValueSpec, out: Path | None = None,
 
 def _with_phase(b: Built, row: dict[str, Any], points: pd.DataFrame,
                 ) -> tuple[dict[str, Any], pd.DataFrame]:
-    """``row`` and ``points`` with the stepping phase's name after ``step``."""
-    name = b.plans[b.phase].name
-    row = {"step": row["step"], "phase": name, **row}
-    points.insert(1, "phase", name)
+    """``row`` and ``points`` with the stepping phase's name after ``step``; in ``row``,
+    for every boundary a pressure acts on in any phase, the pressure [Pa] on it
+    ``{name}_pressure`` and (unless a condition moves it) its mean displacement along the
+    pressure ``{name}_displacement`` [m] (into the body)."""
+    plan = b.plans[b.phase]
+    row = {"step": row["step"], "phase": plan.name, **row}
+    lam = float(row["load_factor"])
+    for name, inward in b.pressed.items():
+        start, end = plan.pressures.get(name, (0.0, 0.0))
+        row[f"{name}_pressure"] = (1.0 - lam) * start + lam * end
+        if name not in b.moved:
+            row[f"{name}_displacement"] = float(
+                inward @ np.array([row[f"{name}_displacement_x"],
+                                   row[f"{name}_displacement_y"]]))
+    points.insert(1, "phase", plan.name)
     return row, points
 
 
@@ -599,7 +621,7 @@ def _phases_summary(b: Built, solver: NewtonSolver, steps: pd.DataFrame, error: 
                 failed = plan.name
         entry: dict[str, Any] = {
             "name": plan.name, "status": status, "steps": plan.steps,
-            "steps_done": int(len(rows)), "first_step": plan.first_step + 1,
+            "steps_done": len(rows), "first_step": plan.first_step + 1,
             "load_factor": reached,
             "gravity_factor": (None if plan.view.gravity_factor is None
                                else list(plan.view.gravity_factor)),
@@ -696,13 +718,34 @@ def _figures(b: Built, steps: pd.DataFrame, last: dict[str, Any], out: Path) -> 
     for name, direction in b.moved.items():
         axis = "y" if abs(direction[1]) >= abs(direction[0]) else "x"
         bodies.append((name, axis, boundary_length(b.mesh, name)))
-    if bodies:
+    if b.plans:
+        _phased_figure(b, steps, bodies, out)
+    elif bodies:
         plot_load_displacement(steps, bodies, out / "load_displacement.png")
     xy, cells, kind, dofs = b.problem.nodes()
     u = last["u"]
     gamma = last["points"].groupby("element")["shear_strain"].mean().to_numpy()
     plot_mechanism(xy, cells, kind, u[dofs[0]], u[dofs[1]], gamma, out / "mechanism.png",
                    title=f"{b.spec.name}: shear strain at step {int(steps['step'].iloc[-1])}")
+
+
+def _phased_figure(b: Built, steps: pd.DataFrame, bodies: list[tuple[str, str, float]],
+                   out: Path) -> None:
+    """load_displacement.png of a phased run: every moved body's mean pressure (force over
+    its length) and every pressure's value against the displacement along them, each phase
+    a line."""
+    frame = steps.copy()
+    curves = []
+    for name, axis, width in bodies:
+        force = frame[f"{name}_force_{axis}"].to_numpy(dtype=float)
+        sign = -1.0 if np.nanmean(force[1:]) < 0 else 1.0
+        frame[f"{name}_mean_pressure"] = sign * force / width
+        curves.append((name, f"{name}_mean_pressure", f"{name}_displacement"))
+    curves += [(name, f"{name}_pressure", f"{name}_displacement") for name in b.pressed
+               if name not in b.moved]
+    if curves:
+        plot_phased_load_displacement(frame, curves, out / "load_displacement.png",
+                                      resets={plan.name for plan in b.plans if plan.reset})
 
 
 def boundary_length(mesh: MeshData, name: str) -> float:
