@@ -106,7 +106,8 @@ def test_a_reset_reports_from_the_phase_start_and_changes_nothing_else():
     kept, reset = runs[False], runs[True]
     assert kept.error is None and reset.error is None
     # the follower pressures go on where the first phase left them: the start is in balance
-    assert reset.summary["phases"][1]["start_residual"] < 1e-9
+    # but for the first phase's last converged residual (a jump in the load would be O(1))
+    assert reset.summary["phases"][1]["start_residual"] < 1e-5
     for column in ("sxx", "syy", "sxy", "mean_pressure"):
         np.testing.assert_array_equal(kept.points[column], reset.points[column])
     start = kept.steps.iloc[2]  # the end of the first phase
