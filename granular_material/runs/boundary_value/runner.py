@@ -52,11 +52,7 @@ from granular_material.fem.boundary_value.meshes import MeshData, read_mesh, rec
 from granular_material.fem.forms import gauss_points_grad
 from granular_material.fem.materials.regions import RegionalMaterial
 from granular_material.multiscale.confinement import UNCONFINED_FRACTION
-from granular_material.results.bvp_plots import (
-    plot_load_displacement,
-    plot_mechanism,
-    plot_phased_load_displacement,
-)
+from granular_material.results.bvp_plots import plot_load_displacement, plot_mechanism
 from granular_material.results.writers import FieldWriter, write_csv, write_json
 from granular_material.runs.boundary_value.checks import check_disk, check_memory, generated_size
 from granular_material.runs.boundary_value.material import (
@@ -67,12 +63,15 @@ from granular_material.runs.boundary_value.material import (
 )
 from granular_material.runs.boundary_value.phases import (
     PhasePlan,
+    ends_phase,
     inward_direction,
-    phase_of_step,
     phase_pressures,
-    phase_start_residual,
     phase_view,
+    phased_figure,
+    phases_summary,
     reported_gradient,
+    run_phases,
+    with_phase,
 )
 from granular_material.runs.boundary_value.resume import (
     open_bvp_checkpoint,
@@ -446,13 +445,13 @@ def run_boundary_value(spec: BoundaryValueSpec, out: Path | None = None,
     def collect(s: NewtonSolver, record: StepRecord | None) -> None:
         row, points = _rows(b, s, record, p0)
         if b.plans:
-            row, points = _with_phase(b, row, points)
+            row, points = with_phase(b, row, points)
         u = b.reported(s.u)
         keep(row, points, u)
         if checkpoint is not None:
             checkpoint.save_step(row, points, u, None)
             step = int(row["step"])
-            if checkpoint.due(step, spec.steps) or _ends_phase(b, step):
+            if checkpoint.due(step, spec.steps) or ends_phase(b, step):
                 checkpoint.save_state(step, solver, b.material)
 
     t_initial = time.perf_counter()
@@ -470,7 +469,7 @@ def run_boundary_value(spec: BoundaryValueSpec, out: Path | None = None,
     interrupt = None
     try:
         if b.plans:
-            _run_phases(b, solver, collect, checkpoint, None if saved is None else saved.step)
+            run_phases(b, solver, collect, checkpoint, None if saved is None else saved.step)
         else:
             solver.run(spec.steps, on_step=collect, progress=spec.progress,
                        description=f"{spec.name} ({problem.basis.nelems} elements)",
@@ -495,7 +494,7 @@ def run_boundary_value(spec: BoundaryValueSpec, out: Path | None = None,
                        initial_residual, t_initial, time.perf_counter() - t_start)
     summary["resumed_from_step"] = None if saved is None else saved.step
     if b.plans:
-        summary.update(_phases_summary(b, solver, steps, error, interrupt is not None))
+        summary.update(phases_summary(b, solver, steps, error, interrupt is not None))
     regularisation = solver.regularisation_summary()
     if regularisation is not None:
         summary["regularisation"] = regularisation
@@ -507,132 +506,6 @@ def run_boundary_value(spec: BoundaryValueSpec, out: Path | None = None,
         write_json(summary, out / "summary.json")
     return BVPOutcome(steps, summary, error, last.get("points", pd.DataFrame()),
                       last.get("u", np.zeros(0)), interrupt)
-
-
-def _with_phase(b: Built, row: dict[str, Any], points: pd.DataFrame,
-                ) -> tuple[dict[str, Any], pd.DataFrame]:
-    """``row`` and ``points`` with the stepping phase's name after ``step``; in ``row``,
-    for every boundary a pressure acts on in any phase, the pressure [Pa] on it
-    ``{name}_pressure`` and (unless a condition moves it) its mean displacement along the
-    pressure ``{name}_displacement`` [m] (into the body)."""
-    plan = b.plans[b.phase]
-    row = {"step": row["step"], "phase": plan.name, **row}
-    lam = float(row["load_factor"])
-    for name, inward in b.pressed.items():
-        start, end = plan.pressures.get(name, (0.0, 0.0))
-        row[f"{name}_pressure"] = (1.0 - lam) * start + lam * end
-        if name not in b.moved:
-            row[f"{name}_displacement"] = float(
-                inward @ np.array([row[f"{name}_displacement_x"],
-                                   row[f"{name}_displacement_y"]]))
-    points.insert(1, "phase", plan.name)
-    return row, points
-
-
-def _ends_phase(b: Built, step: int) -> bool:
-    """Whether ``step`` is the last of a phase (its state is saved: a resume there starts
-    the next phase as an uninterrupted run does)."""
-    return any(step == plan.last_step for plan in b.plans)
-
-
-def _enter_phase(b: Built, solver: NewtonSolver, plan: PhasePlan,
-                 checkpoint: Any) -> None:
-    """Start ``plan`` from the solver's committed state: its prescribed displacements from
-    where the state holds them, its reported displacement reset where it asks, and what a
-    resume needs kept in ``checkpoint`` (the start and the reset displacement)."""
-    u_start = solver.u.copy()
-    loading = replace(plan.problem.loading,
-                      dirichlet_start=u_start[plan.problem.loading.dirichlet_dofs])
-    if plan.reset:
-        b.offset = u_start.copy()
-    solver.start_phase(loading, plan.settings)
-    b.phase = plan.index
-    residual = phase_start_residual(solver)
-    b.start_residuals[plan.index] = residual
-    if checkpoint is not None:
-        offset = np.zeros_like(u_start) if b.offset is None else b.offset
-        checkpoint.save_table(f"phase_{plan.index}", pd.DataFrame({"u_start": u_start,
-                                                                    "offset": offset}))
-        remember(checkpoint, f"phase_{plan.index}_start",
-                 {"index": plan.index, "first_step": plan.first_step,
-                  "start_residual": residual, "offset": float(b.offset is not None)})
-
-
-def _saved_phase(b: Built, checkpoint: Any, index: int) -> np.ndarray:
-    """The displacement [m] phase ``index`` started from, as its start kept it; the reset
-    displacement in force from it set on ``b`` (SpecError: the checkpoint lacks them)."""
-    table = None if checkpoint is None else checkpoint.load_table(f"phase_{index}")
-    start = remember(checkpoint, f"phase_{index}_start")
-    if table is None or not start:
-        raise SpecError("out", f"cannot resume: the checkpoint lacks the start of phase "
-                               f"{index + 1} ({b.plans[index].name!r}) (nothing in the "
-                               "folder was changed)")
-    b.offset = table["offset"].to_numpy(dtype=float).copy() if start["offset"] else None
-    b.start_residuals[index] = start["start_residual"]
-    return table["u_start"].to_numpy(dtype=float).copy()
-
-
-def _run_phases(b: Built, solver: NewtonSolver, collect: Any, checkpoint: Any,
-                resumed: int | None) -> None:
-    """Step every phase of ``b`` in turn from the state the one before committed; a run
-    ``resumed`` after its committed step goes on inside the phase that step belongs to
-    (NewtonError: the phase ``b.phase`` failed, the earlier ones' steps kept)."""
-    spec = b.spec
-    first, done = (0, 0) if resumed is None else phase_of_step(
-        [plan.steps for plan in b.plans], resumed)
-    for index in range(1, first):  # the phases before: their resets and start residuals
-        _saved_phase(b, checkpoint, index)
-    b.phase = first
-    if first > 0 and done > 0:  # inside a later phase: its loading from where it started
-        plan = b.plans[first]
-        u_start = _saved_phase(b, checkpoint, first)
-        loading = replace(plan.problem.loading,
-                          dirichlet_start=u_start[plan.problem.loading.dirichlet_dofs])
-        solver.start_phase(loading, plan.settings, restart=False)
-    for plan in b.plans[first:]:
-        steps_done = done if plan.index == first else 0
-        if plan.index > 0 and steps_done == 0:
-            _enter_phase(b, solver, plan, checkpoint)
-        b.phase = plan.index
-        solver.run(plan.steps, on_step=collect, progress=spec.progress,
-                   description=f"{spec.name}: {plan.name} ({plan.problem.basis.nelems} "
-                               "elements)", done=steps_done)
-
-
-def _phases_summary(b: Built, solver: NewtonSolver, steps: pd.DataFrame, error: str | None,
-                    interrupted: bool) -> dict[str, Any]:
-    """A phased run's summary: every phase with its status ("completed", "failed",
-    "stopped" by an interrupt, or "not started"), its steps and the load factor it reached
-    (of a failed one, the last committed, perhaps between steps after cut-backs); the phase
-    that failed."""
-    phases = []
-    failed = None
-    for plan in b.plans:
-        rows = steps[(steps["step"] > 0) & (steps["phase"] == plan.name)] if len(steps) \
-            else steps
-        reached = float(rows["load_factor"].iloc[-1]) if len(rows) else 0.0
-        status = "not started"
-        if len(rows) == plan.steps:
-            status = "completed"
-        elif error is not None and plan.index == b.phase:
-            status = "stopped" if interrupted else "failed"
-            if not interrupted:
-                reached = max(reached, float(solver.load_factor))
-                failed = plan.name
-        entry: dict[str, Any] = {
-            "name": plan.name, "status": status, "steps": plan.steps,
-            "steps_done": len(rows), "first_step": plan.first_step + 1,
-            "load_factor": reached,
-            "gravity_factor": (None if plan.view.gravity_factor is None
-                               else list(plan.view.gravity_factor)),
-            "reset_displacements": plan.reset,
-            "start_residual": b.start_residuals.get(plan.index),
-        }
-        if status in ("failed", "stopped"):
-            entry["error"] = error
-        phases.append(entry)
-    return {"phases": phases, "failed_phase": failed, "gravity_factor": None,
-            "steps_planned": sum(plan.steps for plan in b.plans)}
 
 
 class OutOfEquilibriumWarning(UserWarning):
@@ -719,7 +592,7 @@ def _figures(b: Built, steps: pd.DataFrame, last: dict[str, Any], out: Path) -> 
         axis = "y" if abs(direction[1]) >= abs(direction[0]) else "x"
         bodies.append((name, axis, boundary_length(b.mesh, name)))
     if b.plans:
-        _phased_figure(b, steps, bodies, out)
+        phased_figure(b, steps, bodies, out)
     elif bodies:
         plot_load_displacement(steps, bodies, out / "load_displacement.png")
     xy, cells, kind, dofs = b.problem.nodes()
@@ -727,25 +600,6 @@ def _figures(b: Built, steps: pd.DataFrame, last: dict[str, Any], out: Path) -> 
     gamma = last["points"].groupby("element")["shear_strain"].mean().to_numpy()
     plot_mechanism(xy, cells, kind, u[dofs[0]], u[dofs[1]], gamma, out / "mechanism.png",
                    title=f"{b.spec.name}: shear strain at step {int(steps['step'].iloc[-1])}")
-
-
-def _phased_figure(b: Built, steps: pd.DataFrame, bodies: list[tuple[str, str, float]],
-                   out: Path) -> None:
-    """load_displacement.png of a phased run: every moved body's mean pressure (force over
-    its length) and every pressure's value against the displacement along them, each phase
-    a line."""
-    frame = steps.copy()
-    curves = []
-    for name, axis, width in bodies:
-        force = frame[f"{name}_force_{axis}"].to_numpy(dtype=float)
-        sign = -1.0 if np.nanmean(force[1:]) < 0 else 1.0
-        frame[f"{name}_mean_pressure"] = sign * force / width
-        curves.append((name, f"{name}_mean_pressure", f"{name}_displacement"))
-    curves += [(name, f"{name}_pressure", f"{name}_displacement") for name in b.pressed
-               if name not in b.moved]
-    if curves:
-        plot_phased_load_displacement(frame, curves, out / "load_displacement.png",
-                                      resets={plan.name for plan in b.plans if plan.reset})
 
 
 def boundary_length(mesh: MeshData, name: str) -> float:
