@@ -270,3 +270,34 @@ def test_the_example_scene_runs_its_two_phases(tmp_path):
     # the strip settles under its load, measured from the phase's start
     assert 0 < strip["strip_displacement"].iloc[0] < strip["strip_displacement"].iloc[-1]
     assert (tmp_path / "run" / "load_displacement.png").is_file()
+
+
+def test_a_support_dropped_is_released_and_one_added_holds_where_the_phase_finds_it():
+    scene = _scene()
+    scene["phases"][0]["conditions"] = [{"type": "roller", "boundary": "right",
+                                         "component": "x"}]
+    scene["phases"][1]["conditions"] = [{"type": "fixed", "boundary": "top"}]
+    outcome = run_boundary_value(bvp_from_dict(scene), out=None)
+    assert outcome.error is None
+    steps = outcome.steps
+    first, second = steps[steps["step"] <= 2], steps[steps["step"] >= 2]
+    assert (first["right_displacement_x"].abs() < 1e-15).all()  # held by its roller
+    top = first["top_displacement_y"].iloc[-1]
+    assert top < -1e-6  # it settled under the weight, then is held there
+    np.testing.assert_allclose(second["top_displacement_y"], top, rtol=1e-12)
+    assert abs(second["right_displacement_x"].iloc[-1]) > 1e-7  # released: it moves
+    assert outcome.summary["phases"][1]["start_residual"] > 0.01  # the released reaction
+
+
+def test_the_command_line_names_the_line_of_a_bad_key_in_a_phase(tmp_path, capsys):
+    from granular_material.cli import main
+
+    examples = Path(__file__).parents[1] / "examples" / "scenes"
+    lines = (examples / "phases-footing.toml").read_text().splitlines()
+    at = next(k for k, line in enumerate(lines) if line.startswith("value = 150e3"))
+    lines.insert(at + 1, "end = 200e3")
+    scene = tmp_path / "bad.toml"
+    scene.write_text("\n".join(lines) + "\n")
+    assert main(["run", str(scene), "--check"]) == 2
+    err = capsys.readouterr().err
+    assert f"line {at + 2}: phases.conditions.end of phase 2 ('strip')" in err
