@@ -95,12 +95,14 @@ def test_two_linear_elastic_phases_end_where_one_phase_of_the_summed_loads_does(
     assert summary["phases"][1]["start_residual"] < 1e-9  # continuous loads: in balance
 
 
-def test_a_reset_reports_from_the_phase_start_and_changes_nothing_else():
-    """Updated-Lagrangian: the configuration is where the first phase left it; only what
-    is reported starts again from zero (the stress is the same bit for bit)."""
+@pytest.mark.parametrize("formulation", ["updated-lagrangian", "small-strain"])
+def test_a_reset_reports_from_the_phase_start_and_changes_nothing_else(formulation, tmp_path):
+    """The configuration is where the first phase left it (updated-Lagrangian: x = X + u
+    with the total u); only what is reported starts again from zero (the stress is the
+    same bit for bit)."""
     runs = {}
     for reset in (False, True):
-        scene = _scene(formulation="updated-lagrangian")
+        scene = _scene(formulation=formulation)
         scene["phases"][1]["reset_displacements"] = reset
         runs[reset] = run_boundary_value(bvp_from_dict(scene), out=None)
     kept, reset = runs[False], runs[True]
@@ -118,6 +120,16 @@ def test_a_reset_reports_from_the_phase_start_and_changes_nothing_else():
         assert reset.steps[column].iloc[2] == kept.steps[column].iloc[2]  # before the reset
     # the strain reported is the deformation's since the reset: smaller than the total
     assert reset.points["shear_strain"].abs().max() < kept.points["shear_strain"].abs().max()
+    if formulation == "small-strain":  # then exactly the total less the strain at the reset
+        with_steps = run_boundary_value(bvp_from_dict(_scene(formulation=formulation)),
+                                        out=tmp_path / "run")
+        points = pd.read_csv(tmp_path / "run" / "points.csv")
+        at_reset = points[points["step"] == 2].reset_index(drop=True)
+        for column in ("exx", "eyy", "exy"):
+            np.testing.assert_allclose(reset.points[column].to_numpy(),
+                                       (kept.points[column] - at_reset[column]).to_numpy(),
+                                       rtol=0, atol=1e-15)
+        assert with_steps.error is None
 
 
 def test_a_failing_phase_keeps_the_earlier_phases_results(tmp_path, monkeypatch):
@@ -301,3 +313,19 @@ def test_the_command_line_names_the_line_of_a_bad_key_in_a_phase(tmp_path, capsy
     assert main(["run", str(scene), "--check"]) == 2
     err = capsys.readouterr().err
     assert f"line {at + 2}: phases.conditions.end of phase 2 ('strip')" in err
+
+
+def test_the_reported_gradient_after_a_reset_is_the_deformation_since():
+    from granular_material.fem.kinematics import Kinematics
+    from granular_material.runs.boundary_value.phases import reported_gradient
+
+    rng = np.random.default_rng(3)
+    grad_r = 0.1 * rng.standard_normal((5, 2, 2))  # at the reset
+    grad_u = grad_r + 0.05 * rng.standard_normal((5, 2, 2))  # now
+    eye = np.eye(2)
+    finite = reported_gradient(Kinematics("updated-lagrangian"), grad_u, grad_r)
+    np.testing.assert_allclose(eye + finite, (eye + grad_u) @ np.linalg.inv(eye + grad_r),
+                               rtol=0, atol=1e-14)
+    small = reported_gradient(Kinematics("small-strain"), grad_u, grad_r)
+    np.testing.assert_array_equal(small, grad_u - grad_r)
+    assert reported_gradient(Kinematics(), grad_u, None) is grad_u
