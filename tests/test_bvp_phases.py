@@ -235,6 +235,7 @@ BAD = [
     ("phases.name", lambda s: _without_name(s, 1)),
     ("phases.steps", lambda s: _phase(s, 1, steps=0)),
     ("phases.reset_displacements", lambda s: _phase(s, 1, reset_displacements="yes")),
+    ("phases.reset_displacements", lambda s: _phase(s, 0, reset_displacements=True)),
     ("conditions.end", lambda s: dict(s, conditions=[
         *ROLLERS, {"type": "pressure", "boundary": "top", "value": 0.0, "end": 1e3}])),
     ("phases", lambda s: dict(s, phases=[])),

@@ -300,7 +300,7 @@ def _plans(spec: BoundaryValueSpec, b: Built, noisy: bool) -> list[PhasePlan]:
                                                      f"{exc.field}: {exc.message}") from None
             settings = _settings(view, problem, noisy)
         plans.append(PhasePlan(k, phase.name, phase.steps, first, problem, settings, view,
-                               phase.reset_displacements and k > 0, phase_pressures(view)))
+                               phase.reset_displacements, phase_pressures(view)))
         first += phase.steps
     return plans
 

@@ -373,7 +373,7 @@ class PhaseSpec:
             ended). None: γ as it stood (the first phase: 1).
         reset_displacements: the displacement (and strain) reported from this phase on is
             measured from the phase's start; the stress, the material state and the
-            configuration are kept.
+            configuration are kept (refused in the first phase, which starts from zero).
     """
 
     name: str
@@ -864,6 +864,11 @@ def _check_phases(spec: BoundaryValueSpec) -> None:
             raise SpecError("phases.gravity.factor", f"of {where} multiplies a unit weight of "
                                                      "0 N/m³, so it does nothing and is "
                                                      "refused (set gravity.unit_weight)")
+        if k == 0 and p.reset_displacements:
+            raise SpecError("phases.reset_displacements", f"of {where}: the first phase "
+                                                          "starts from zero displacement, so "
+                                                          "a reset there does nothing and is "
+                                                          "refused")
         if k > 0 and isinstance(p.gravity_factor, tuple):
             raise SpecError("phases.gravity.factor", f"of {where}: a later phase's gravity "
                                                      "starts where the phase before ended; "
