@@ -41,7 +41,10 @@ from granular_material.runs.spec import SpecError
 
 if TYPE_CHECKING:
     from granular_material.fem import NewtonSolver, StepRecord
-    from granular_material.runs.boundary_value.runner import Built
+
+#: the runner's :class:`~granular_material.runs.boundary_value.runner.Built` (its plans, the
+#: phase stepping, the reset displacement; not imported: the runner imports this module)
+Built = Any
 
 __all__ = ["PhasePlan", "ends_phase", "inward_direction", "phase_of_step", "phase_pressures",
            "phase_start_residual", "phase_view", "phased_figure", "phases_summary",
