@@ -395,6 +395,8 @@ def run_boundary_value(spec: BoundaryValueSpec, out: Path | None = None,
     regularisation = solver.regularisation_summary()
     if regularisation is not None:
         summary["regularisation"] = regularisation
+    if b.settings.continuation == "arc-length":
+        summary["continuation"] = _continuation_summary(spec, solver, error)
     if checkpoint is not None and error is None:
         checkpoint.remove()  # finished: nothing to resume
     if out is not None:
@@ -403,6 +405,26 @@ def run_boundary_value(spec: BoundaryValueSpec, out: Path | None = None,
         write_json(summary, out / "summary.json")
     return BVPOutcome(steps, summary, error, last.get("points", pd.DataFrame()),
                       last.get("u", np.zeros(0)), interrupt)
+
+
+def _continuation_summary(spec: BoundaryValueSpec, solver: NewtonSolver,
+                          error: str | None) -> dict[str, Any]:
+    """An arc-length run's path: why it stopped, its peak load factor (and step), the
+    collapse it found (None: none) and, with a gravity factor, the gravity factor at the
+    peak (the gravity-increase factor where the run collapsed)."""
+    path = solver.continuation
+    stopped = "failed" if error is not None else (solver.stopped_by or "stopped")
+    peak = path.peak if path.values else solver.load_factor
+    out: dict[str, Any] = {
+        "model": "arc-length", "stopped_by": stopped, "peak_load_factor": peak,
+        "peak_step": path.peak_step, "collapse": path.collapse}
+    if spec.gravity_factor is not None:
+        f0, f1 = spec.gravity_factor
+        at = path.collapse["value"] if path.collapse is not None else peak
+        out["gravity_factor_at_peak"] = f0 + (f1 - f0) * at
+        out["gravity_factor_at_collapse"] = (None if path.collapse is None
+                                             else f0 + (f1 - f0) * path.collapse["value"])
+    return out
 
 
 class OutOfEquilibriumWarning(UserWarning):
