@@ -14,6 +14,14 @@ import pytest
 
 import granular_material.fem.materials.mohr_coulomb as mc_module
 from granular_material.errors import ParameterError
+from granular_material.fem import (
+    Fixed,
+    RigidBody,
+    Roller,
+    build_problem,
+    rectangle_mesh,
+    select_boundaries,
+)
 from granular_material.fem.boundary_value.biaxial import BiaxialSetup, build_biaxial
 from granular_material.fem.materials.linear_elastic import LinearElastic, isotropic_tangent
 from granular_material.fem.materials.mohr_coulomb import (
@@ -596,3 +604,25 @@ def test_tresca_return_lands_on_the_prism_without_an_apex():
                                atol=1e-12 * scale.max())
     np.testing.assert_allclose(s.sum(axis=1), trial.sum(axis=1), rtol=0,
                                atol=1e-12 * scale.max())
+
+
+def test_tresca_strip_footing_from_a_stress_free_start_near_prandtl():
+    """A smooth rigid strip footing (half of it, B = 1 m) on weightless Tresca clay in small
+    strain, from a stress-free start: the pressure levels off a little above Prandtl's
+    (2 + π) c (measured 1.090 on this 10 × 6 quad8 mesh, 1.047 on 20 × 12)."""
+    c, half = 10e3, 0.5
+    data = select_boundaries(rectangle_mesh(2.5, 1.5, 10, 6, "quad8", grading=(1.0, 0.3),
+                                            origin=(0.0, -1.5)),
+                             {"footing": f"y = top and x <= {half}"})
+    problem = build_problem(data, [Fixed("bottom"), Roller("left", 0), Roller("right", 0),
+                                   RigidBody("footing", (0.0, -0.05), rough=False)])
+    assert problem.boundaries["footing"].locations[0].max() == pytest.approx(half)
+    material = MohrCoulomb(young=10e6, poisson=0.3, friction_angle=0.0, cohesion=c)
+    solver = NewtonSolver(problem.basis, material, problem.loading,
+                          NewtonSettings(formulation="small-strain", rtol=1e-8))
+    q: list[float] = []
+    solver.run(10, on_step=lambda s, r: q.append(
+        -problem.boundary_force("footing", s.reaction)[1] / half))
+    ratio = q[-1] / ((2 + math.pi) * c)
+    assert 1.0 < ratio < 1.15, ratio
+    assert q[-1] - q[-2] < 0.002 * q[-1]  # a plateau
