@@ -12,7 +12,7 @@ import pandas as pd
 import pytest
 
 from granular_material.cli import main
-from granular_material.runs.boundary_value.runner import run_boundary_value
+from granular_material.runs.boundary_value.runner import build, run_boundary_value
 from granular_material.runs.boundary_value.spec import bvp_from_dict
 
 FOOTING = """
@@ -246,3 +246,24 @@ def test_a_value_of_the_wrong_type_or_range_is_refused_naming_its_key(section, k
     with pytest.raises(SpecError) as refused:
         bvp_from_dict(scene, EXAMPLES)
     assert refused.value.field == field
+
+
+def test_steps_record_the_displacement_of_every_named_boundary(tmp_path):
+    """A [boundaries] name without a condition gets its mean displacement in steps.csv; a
+    generated side no condition uses gets none; the other columns are as without it."""
+    text = FOOTING.format(steps=2, elements="[8, 6]", settlement=-0.001, material=ELASTIC)
+    plain = run_boundary_value(bvp_from_dict(__import__("tomllib").loads(text)))
+    marked = text.replace("[boundaries]\n", '[boundaries]\ncorner = "y = top and x >= 0.3"\n')
+    spec = bvp_from_dict(__import__("tomllib").loads(marked))
+    outcome = run_boundary_value(spec)
+    steps = outcome.steps
+    assert "top_displacement_y" not in steps and "corner_force_y" not in steps
+    assert list(steps.columns) == [*plain.steps.columns, "corner_displacement_x",
+                                   "corner_displacement_y"]
+    pd.testing.assert_frame_equal(steps[plain.steps.columns].drop(columns="wall_time"),
+                                  plain.steps.drop(columns="wall_time"))
+    problem = build(spec, allocate=False).problem
+    ux, uy = problem.boundary_displacement("corner", outcome.u)
+    assert steps["corner_displacement_y"].iloc[-1] == uy and uy != 0.0
+    assert steps["corner_displacement_x"].iloc[-1] == ux
+    assert steps["corner_displacement_y"].iloc[0] == 0.0
