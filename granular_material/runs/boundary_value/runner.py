@@ -524,8 +524,10 @@ def _figures(b: Built, steps: pd.DataFrame, last: dict[str, Any], out: Path) -> 
     for name, direction in b.moved.items():
         axis = "y" if abs(direction[1]) >= abs(direction[0]) else "x"
         bodies.append((name, axis, boundary_length(b.mesh, name)))
+    x0, x1, y0, y1 = b.mesh.bounding_box
     if bodies:
-        plot_load_displacement(steps, bodies, out / "load_displacement.png")
+        plot_load_displacement(steps, bodies, out / "load_displacement.png",
+                               size=max(x1 - x0, y1 - y0))
     xy, cells, kind, dofs = b.problem.nodes()
     u = last["u"]
     gamma = last["points"].groupby("element")["shear_strain"].mean().to_numpy()
