@@ -70,8 +70,6 @@ def test_reduce_strength_returns_the_committed_stress_onto_the_reduced_surface()
     assert material.strength_factor == 2.0 and material.parameters == original
     reduced = original.reduced(2.0)
     assert _f(material.stress, material.stress_zz, reduced)[0] > 30e3  # now outside
-    with pytest.raises(RuntimeError):  # the evaluation before the reduction is dropped
-        material.commit()
     np.testing.assert_array_equal(material.stress, INSIDE[None])  # committed state kept
     assert material.plastic_shear_strain[0] == 0.0
     after = material.evaluate(np.zeros((1, 2, 2)))
@@ -153,3 +151,36 @@ def test_regional_material_reduces_every_mohr_coulomb_region(tmp_path):
     with pytest.raises(ParameterError, match="no region's material") as info:
         elastic.reduce_strength(1.5)
     assert info.value.field == "factor" and elastic.strength_factor == 1.0
+
+
+def test_strength_reduction_of_a_strip_load_on_clay_finds_prandtls_factor():
+    """The driver's strength reduction (fem.solver.strength_reduction) on this material: a
+    strip load q = 3c on weightless Tresca clay (half of it, B = 1 m) stands until
+    F ≈ (2 + π) c / q (measured 1.008 × that on this 10 × 6 quad8 mesh)."""
+    from granular_material.fem import (
+        Fixed,
+        NewtonSettings,
+        NewtonSolver,
+        Pressure,
+        Roller,
+        build_problem,
+        rectangle_mesh,
+        select_boundaries,
+    )
+    from granular_material.fem.solver.strength_reduction import strength_reduction
+
+    c, q = 10e3, 30e3
+    data = select_boundaries(rectangle_mesh(2.5, 1.5, 10, 6, "quad8", grading=(1.0, 0.3),
+                                            origin=(0.0, -1.5)),
+                             {"footing": "y = top and x <= 0.5"})
+    problem = build_problem(data, [Fixed("bottom"), Roller("left", 0), Roller("right", 0),
+                                   Pressure("footing", q)])
+    material = MohrCoulomb(young=10e6, poisson=0.3, friction_angle=0.0, cohesion=c)
+    solver = NewtonSolver(problem.basis, material, problem.loading,
+                          NewtonSettings(formulation="small-strain", rtol=1e-8))
+    solver.run(4)
+    result = strength_reduction(solver, factor_end=3.0, steps=20)
+    assert result.stopped_by == "collapse" and result.error is None
+    ratio = result.factor_of_safety / ((2 + math.pi) * c / q)
+    assert 1.0 < ratio < 1.1, ratio
+    assert material.strength_factor == pytest.approx(result.factors[-1])

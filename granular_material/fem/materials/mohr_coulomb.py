@@ -221,15 +221,15 @@ class MohrCoulomb(ScikitFemInterface):
         """Make every later :meth:`evaluate` use the strength of
         ``parameters.reduced(factor)`` (c/F, tan φ/F, tan φcs/F, tan ψ/F; F > 0, finite,
         relative to :attr:`parameters`, not to the factor before). The committed stress and
-        plastic strain are kept; an evaluation not yet committed is dropped, so the next
-        :meth:`evaluate` starts from the committed state and returns its trial onto the
-        reduced surface. :attr:`parameters` stay the unreduced ones; ``friction_angle_now``
-        and the ``friction_angle`` field are the reduced angle. ParameterError naming
-        ``factor`` for a factor that is not > 0 and finite."""
+        plastic strain are kept, so the next :meth:`evaluate` starts from the committed
+        state and returns its trial onto the reduced surface; an evaluation not yet
+        committed is kept as it was made (a driver that sets the factor it converged at
+        commits it). :attr:`parameters` stay the unreduced ones; ``friction_angle_now`` and
+        the ``friction_angle`` field are the reduced angle. ParameterError naming ``factor``
+        for a factor that is not > 0 and finite."""
         reduced = self.parameters.reduced(factor)
         self._strength = reduced.strength()
         self._factor = float(factor)
-        self._trial = None
 
     # -- protocol --------------------------------------------------------------------
     def allocate(self, n_points: int) -> None:

@@ -313,7 +313,6 @@ class RegionalMaterial(ScikitFemInterface):
                                            f"{factor!r}")
         for material in reducible:
             material.reduce_strength(factor)  # type: ignore[attr-defined]
-        self._last = None
 
     def hold_tangent(self, hold: bool) -> None:
         """Pass ``hold`` to every region's material that offers ``hold_tangent`` (the
