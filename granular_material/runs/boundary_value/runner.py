@@ -11,7 +11,9 @@ The run folder gets:
   ``{name}_force_y`` [N/m] (the reaction of the supports on the body, or the load a pressure
   puts on it) and its mean displacement ``{name}_displacement_x``, ``_y`` [m]; a rigid body
   also ``{name}_displacement`` [m] along its motion (a footing pushed down: its settlement,
-  also as ``{name}_settlement``);
+  also as ``{name}_settlement``); then the mean displacement ``{name}_displacement_x``,
+  ``_y`` [m] of every other named boundary (each name of ``[boundaries]``, and every
+  boundary group of a mesh file: a crest, a slope face);
 - ``points.csv``: every Gauss point at every step (coordinates, stress [Pa], strain, shear
   strain, mean pressure, the material's own fields such as the void ratio; with materials by
   region, the point's ``region`` and NaN in a field its region's material does not report),
@@ -273,6 +275,9 @@ def _rows(b: Built, solver: NewtonSolver, record: StepRecord | None, p0: np.ndar
             row[f"{name}_displacement"] = along
             if b.moved[name][1] < -0.5:
                 row[f"{name}_settlement"] = along
+    for name in _free_boundaries(b):
+        ux, uy = problem.boundary_displacement(name, solver.u)
+        row.update({f"{name}_displacement_x": ux, f"{name}_displacement_y": uy})
     xy = problem.points
     nqp = problem.basis.X.shape[-1]
     fields = {k: np.asarray(v, dtype=float) for k, v in solver.response.fields.items()}
@@ -291,6 +296,15 @@ def _rows(b: Built, solver: NewtonSolver, record: StepRecord | None, p0: np.ndar
     if isinstance(b.material, RegionalMaterial):
         points.insert(5, "region", b.material.regions.astype(str))
     return row, points
+
+
+def _free_boundaries(b: Built) -> list[str]:
+    """The named boundaries that carry no condition, sorted: every [boundaries] name, and
+    with a mesh file every physical group of its boundary facets (a generated mesh's sides
+    only where a condition or a name uses them)."""
+    conditioned = {c.boundary for c in b.spec.conditions}
+    named = set(b.mesh.boundaries) if b.spec.mesh.file is not None else set(b.spec.boundaries)
+    return sorted(n for n in named - conditioned if n in b.problem.boundaries)
 
 
 def _where(points: pd.DataFrame, column: str) -> str:
@@ -510,8 +524,10 @@ def _figures(b: Built, steps: pd.DataFrame, last: dict[str, Any], out: Path) -> 
     for name, direction in b.moved.items():
         axis = "y" if abs(direction[1]) >= abs(direction[0]) else "x"
         bodies.append((name, axis, boundary_length(b.mesh, name)))
+    x0, x1, y0, y1 = b.mesh.bounding_box
     if bodies:
-        plot_load_displacement(steps, bodies, out / "load_displacement.png")
+        plot_load_displacement(steps, bodies, out / "load_displacement.png",
+                               size=max(x1 - x0, y1 - y0))
     xy, cells, kind, dofs = b.problem.nodes()
     u = last["u"]
     gamma = last["points"].groupby("element")["shear_strain"].mean().to_numpy()

@@ -261,7 +261,8 @@ class InitialStateSpec:
     Attributes:
         state: "uniform" (isotropic ``pressure`` [Pa]) or "geostatic" (σv = surcharge +
             γ·(surface − y), σh = k0·σv, γ the problem's unit weight).
-        pressure: the uniform state's pressure [Pa], > 0.
+        pressure: the uniform state's pressure [Pa], >= 0 (0: a stress-free start, for a
+            continuum material such as a cohesive Mohr–Coulomb soil; DEM RVEs need > 0).
         k0: the geostatic ratio σh/σv [-], > 0.
         surcharge: the stress on the surface [Pa], >= 0.
         surface: y of the free surface [m]; None: the top of the mesh.
@@ -282,9 +283,10 @@ class InitialStateSpec:
                  "surcharge": self.surcharge != 0.0, "surface": self.surface is not None}
         _not_acting("initial", {k for k, on in given.items() if on}, INITIAL_KEYS[self.state],
                     f"a {self.state} initial state")
-        if self.state == "uniform" and (self.pressure is None or self.pressure <= 0):
+        if self.state == "uniform" and (self.pressure is None or self.pressure < 0):
             raise SpecError("initial.pressure", "a uniform initial state needs a pressure "
-                                                f"> 0 Pa, got {self.pressure!r}")
+                                                ">= 0 Pa (0: stress-free, for a continuum "
+                                                f"material), got {self.pressure!r}")
         if self.k0 <= 0:
             raise SpecError("initial.k0", f"must be > 0, got {self.k0:g}")
         if self.surcharge < 0:
@@ -293,10 +295,9 @@ class InitialStateSpec:
     @property
     def reference_pressure(self) -> float:
         """A representative pressure [Pa] (for the material's and Newton's scales): the
-        uniform pressure, else the surcharge (or 1 kPa where there is none)."""
-        if self.state == "uniform":
-            return float(self.pressure)
-        return float(self.surcharge) if self.surcharge > 0 else 1e3
+        uniform pressure, else the surcharge (1 kPa where either is 0)."""
+        value = float(self.pressure if self.state == "uniform" else self.surcharge)
+        return value if value > 0 else 1e3
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -407,6 +408,11 @@ class BoundaryValueSpec:
                 raise SpecError("gravity.unit_weight", f"must be >= 0 N/m³, got {weight:g}")
             object.__setattr__(self, "unit_weight", weight)
         self._check_regions()
+        if self.initial.state == "uniform" and self.initial.pressure == 0 and self.noisy:
+            raise SpecError("initial.pressure", "a uniform start of a DEM material needs a "
+                                                "pressure > 0 Pa (its RVEs are prepared at "
+                                                "it), got 0 (a stress-free start is for a "
+                                                "continuum material)")
         if self.gravity_factor is not None:
             factor = conform("gravity.factor", self.gravity_factor, tuple[float, float],
                              SpecError)
