@@ -253,11 +253,16 @@ def equilibrium_correction(basis: Basis, stress: np.ndarray, force: np.ndarray,
 def lift_to_floor(stress: np.ndarray, floor: float | np.ndarray,
                   ) -> tuple[np.ndarray, np.ndarray]:
     """``stress`` [Pa] (n, 2, 2) with every point whose least principal compression is below
-    its ``floor`` p_min [Pa] (>= 0, one or one per point) lifted by an isotropic pressure to
-    it (to within 1e-9 above: a preparation's own floor then leaves it alone), its deviator
-    kept; and the indices of the lifted points."""
+    its ``floor`` p_min [Pa] (>= 0, one or one per point; −inf: none at that point) lifted
+    by an isotropic pressure to it (to within 1e-9 above: a preparation's own floor then
+    leaves it alone), its deviator kept; and the indices of the lifted points."""
     sigma = np.asarray(stress, dtype=np.float64)
-    floor = _per("minimum_pressure", floor, sigma.shape[0], "point")
+    floor = np.asarray(floor, dtype=np.float64)
+    none = np.isneginf(floor)
+    floor = np.where(none, 0.0, floor)
+    floor = _per("minimum_pressure", floor if floor.ndim else float(floor), sigma.shape[0],
+                 "point")
+    floor = np.where(np.broadcast_to(none, floor.shape), -np.inf, floor)
     least = -np.linalg.eigvalsh(sigma)[:, 1]  # the least principal compression
     lifted = np.flatnonzero(least < floor)
     out = sigma.copy()

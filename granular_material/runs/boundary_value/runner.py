@@ -182,7 +182,9 @@ def _initial_stress(spec: BoundaryValueSpec, problem: Any, f0: float,
         sigma = ground.stress
         info.update(level=ground.level, column_residual=ground.residual_column,
                     corrected_residual=ground.residual, correction=ground.correction)
-    sigma, lifted = lift_to_floor(sigma, floor)
+    lifted = np.zeros(0, dtype=np.int64)
+    if np.isfinite(floor).any():  # a continuum's points without a floor are left alone
+        sigma, lifted = lift_to_floor(sigma, np.where(np.isfinite(floor), floor, -np.inf))
     info.update(minimum_pressure=floors, lifted_points=int(lifted.size))
     return sigma, info
 
@@ -190,7 +192,9 @@ def _initial_stress(spec: BoundaryValueSpec, problem: Any, f0: float,
 def _ground_of_regions(spec: BoundaryValueSpec, mesh: MeshData, nqp: int, f0: float,
                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray, Any]:
     """γ at step 0 [N/m³] of every element, K0 [-] and the floor [Pa] of every Gauss point,
-    and the floor as the summary gives it (one number, or one per region). SpecError for an
+    and the floor as the summary gives it (one number, or one per region; None, and −inf
+    per point, where there is none: a continuum's points may start at zero stress or in
+    tension). SpecError for an
     ``initial.minimum_pressure`` below what a DEM region's RVEs are prepared at."""
     s = spec.initial
     n = mesh.n_elements * nqp
@@ -198,7 +202,7 @@ def _ground_of_regions(spec: BoundaryValueSpec, mesh: MeshData, nqp: int, f0: fl
         gamma = np.full(mesh.n_elements, f0 * unit_weight_of(spec))
         lowest = _lowest_pressure(spec.material, "material")
         floor = _floor(s.minimum_pressure, lowest, None)
-        return gamma, np.full(n, s.k0), np.full(n, floor), floor
+        return gamma, np.full(n, s.k0), np.full(n, -np.inf if floor is None else floor), floor
     weights = region_unit_weights(spec)
     elements = region_elements(spec, mesh)
     gamma = np.zeros(mesh.n_elements)
@@ -212,7 +216,7 @@ def _ground_of_regions(spec: BoundaryValueSpec, mesh: MeshData, nqp: int, f0: fl
         floors[m.region] = _floor(s.minimum_pressure, _lowest_pressure(m.material,
                                                                         "materials.name"),
                                   m.region)
-        floor[index] = floors[m.region]
+        floor[index] = -np.inf if floors[m.region] is None else floors[m.region]
     return gamma, np.repeat(k0, nqp), np.repeat(floor, nqp), floors
 
 
@@ -228,11 +232,11 @@ def _lowest_pressure(material: Any, field_: str) -> float | None:
         raise SpecError(f"{field_}.{exc.field}", exc.message) from None
 
 
-def _floor(given: float | None, lowest: float | None, region: str | None) -> float:
+def _floor(given: float | None, lowest: float | None, region: str | None) -> float | None:
     """The floor [Pa] of a material's points: ``initial.minimum_pressure`` where given (not
-    below ``lowest``, the RVEs'), else the RVEs' lowest, else 0."""
+    below ``lowest``, the RVEs'), else the RVEs' lowest, else None (none)."""
     if given is None:
-        return 0.0 if lowest is None else lowest
+        return lowest
     if lowest is not None and given < lowest:
         where = "" if region is None else f" of region {region!r}"
         raise SpecError("initial.minimum_pressure", f"{given:g} Pa is below the lowest "
@@ -280,7 +284,15 @@ def build(spec: BoundaryValueSpec, allocate: bool = True) -> Built:
     xy = problem.points
     sigma0, initial = _initial_stress(spec, problem, f0)  # with step 0's weight
     t0 = time.perf_counter()
-    material = material_for_problem(spec, xy.shape[0], sigma0, allocate, mesh)
+    try:
+        material = material_for_problem(spec, xy.shape[0], sigma0, allocate, mesh)
+    except RuntimeError as exc:  # RVEs that did not reach their points' stresses
+        if spec.initial.state != "geostatic" or "did not reach" not in str(exc):
+            raise
+        raise RuntimeError(f"{exc}. Near a free face the geostatic start may ask more of an "
+                           "RVE than its friction holds: initial.minimum_pressure [Pa] lifts "
+                           "every point below it by an isotropic pressure, which lowers its "
+                           "stress ratio") from exc
     preparation = time.perf_counter() - t0
     noisy = bool(getattr(material, "noisy", False))
     settings = spec.newton.settings(noisy)
@@ -309,17 +321,17 @@ def _equilibrium_hint(spec: BoundaryValueSpec, problem: Any, start: float,
         weighed = start > 0 or any(
             g.unit_weight > 0 for g in problem.conditions if isinstance(g, Gravity))
         if weighed:
-            return ("gravity acts in full from step 0 on a uniform start: ramp it on with "
+            return ("Gravity acts in full from step 0 on this uniform start: ramp it on with "
                     "[gravity] factor = [0.0, 1.0], or start geostatic (initial.state = "
                     "\"geostatic\": each point at the weight of the ground above it, under a "
                     "slope or layers too)")
-        return ("the uniform pressure is not what the boundaries carry at step 0: make "
+        return ("The uniform pressure is not what the boundaries carry at step 0: make "
                 "initial.pressure their pressure, or ramp the loads from it with their end "
                 "values")
     if initial.get("lifted_points"):
         lifted = (f"{initial['lifted_points']} points were lifted to "
                   "initial.minimum_pressure, above the weight of the ground over them: "
-                  "lower it if the lift is what unbalances the start; ")
+                  "lower it if the lift is what unbalances the start. ")
     else:
         lifted = ""
     if s.surface is not None:
@@ -328,15 +340,20 @@ def _equilibrium_hint(spec: BoundaryValueSpec, problem: Any, start: float,
         except ParameterError:
             tops = np.array([s.surface])
         if np.ptp(tops) > 1e-9 * max(1.0, abs(s.surface)):
-            return (f"{lifted}initial.surface sets a level surface at y = {s.surface:g} m, "
+            return (f"{lifted}The scene's initial.surface sets a level surface at y = "
+                    f"{s.surface:g} m, "
                     f"but the ground's surface is not level (from {tops.min():.4g} to "
                     f"{tops.max():.4g} m): leave initial.surface out, so that each point's "
                     "overburden is found from the mesh and the start is brought into "
                     "equilibrium")
-    return (f"{lifted}the geostatic state does not match the loads at step 0: "
-            "initial.surcharge should be the pressure on the ground surface, the sides "
-            "rollers (a pressure on a side must be K0 times σv), and [gravity]'s unit weight "
-            "at step 0 the weight the start carries")
+    if initial.get("level") is False:  # corrected into equilibrium: the rest is the material's
+        return (f"{lifted}The geostatic state was in equilibrium with the loads to "
+                f"{initial['corrected_residual']:.1g} of them; what remains is how near the "
+                "material starts to it (an RVE meets its target stress within about 1 %)")
+    return (f"{lifted}The geostatic state does not match the loads at step 0: make "
+            "initial.surcharge the pressure on the ground surface and the sides rollers (a "
+            "pressure on a side must be K0 times σv); [gravity]'s unit weight at step 0 is "
+            "the weight the start carries")
 
 
 def _region_gravity(spec: BoundaryValueSpec, mesh: MeshData, conditions: list[Any],
@@ -555,8 +572,8 @@ def _initial_residual(solver: NewtonSolver, fix: str = "") -> dict[str, float]:
                       f"residual is {norm:.3g} N/m, {relative:.3g} times {against}; the first "
                       "load step brings it to equilibrium as well as applying its increment, "
                       "so its response holds both. "
-                      + (f"The fix: {fix}" if fix else "A geostatic start with the scene's "
-                                                        "unit weight starts in equilibrium"),
+                      + (fix or "A geostatic start with the scene's unit weight starts in "
+                                "equilibrium"),
                       OutOfEquilibriumWarning, stacklevel=3)
     return {"norm": norm, "relative": relative, "newton_atol": solver.settings.atol}
 
