@@ -325,9 +325,10 @@ def _equilibrium_hint(spec: BoundaryValueSpec, problem: Any, start: float,
                     "[gravity] factor = [0.0, 1.0], or start geostatic (initial.state = "
                     "\"geostatic\": each point at the weight of the ground above it, under a "
                     "slope or layers too)")
-        return ("The uniform pressure is not what the boundaries carry at step 0: make "
-                "initial.pressure their pressure, or ramp the loads from it with their end "
-                "values")
+        return ("The uniform pressure is not what the boundaries carry at step 0: give "
+                "each boundary that is not held a pressure of initial.pressure at step 0 (an "
+                "end value then ramps it), or start stress-free (initial.pressure = 0, a "
+                "continuum material) with the loads ramped from zero")
     if initial.get("lifted_points"):
         lifted = (f"{initial['lifted_points']} points were lifted to "
                   "initial.minimum_pressure, above the weight of the ground over them: "
