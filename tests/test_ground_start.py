@@ -264,6 +264,22 @@ def test_a_layered_slope_scene_starts_in_equilibrium_and_its_floor_is_counted(tm
     assert b.initial["minimum_pressure"] == {"base": 20e3, "fill": 20e3}
 
 
+def test_a_corrected_state_beyond_mohr_coulomb_names_the_stress_free_start(tmp_path):
+    # the elastic state of a slope near its limit exceeds the strength near its face
+    clay = {"name": "mohr-coulomb", "parameters": {"young": 30e6, "poisson": 0.3,
+                                                   "friction_angle": 20.0, "cohesion": 10e3}}
+    with pytest.raises(SpecError, match=r"outside the Mohr-Coulomb surface at \d+ of 360 "
+                                        r"points.*start stress-free") as info:
+        build(_scene(tmp_path, {"state": "geostatic"}, materials=None, regions=None,
+                     material=clay, gravity={"unit_weight": GAMMA_FILL}))
+    assert info.value.field == "initial.state"
+    # the fix it names: stress-free, gravity ramped on (measured 1-3 iterations a step)
+    outcome = run_boundary_value(_scene(
+        tmp_path, {"state": "uniform", "pressure": 0.0}, materials=None, regions=None,
+        material=clay, gravity={"unit_weight": GAMMA_FILL, "factor": [0.0, 1.0]}, steps=4))
+    assert outcome.error is None and max(outcome.summary["iterations"]) <= 10
+
+
 def test_a_start_out_of_equilibrium_names_the_fix(tmp_path):
     # gravity in full on a uniform start: ramp it, or start geostatic
     _, said = _residual(build(_scene(tmp_path, {"state": "uniform", "pressure": 50e3})))

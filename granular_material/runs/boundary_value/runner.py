@@ -286,6 +286,18 @@ def build(spec: BoundaryValueSpec, allocate: bool = True) -> Built:
     t0 = time.perf_counter()
     try:
         material = material_for_problem(spec, xy.shape[0], sigma0, allocate, mesh)
+    except ParameterError as exc:  # a continuum that refuses its point's stress
+        if spec.initial.state != "geostatic" or exc.field != "initial_stress" \
+                or initial.get("level", True):
+            raise
+        raise SpecError("initial.state", f"a geostatic start: the material's initial stress "
+                                         f"{exc.message}. Under a slope the start is an "
+                                         "elastic state brought into equilibrium, which "
+                                         "exceeds the strength where the slope is near its "
+                                         "limit: start stress-free (initial.state = "
+                                         "\"uniform\", pressure = 0) with gravity ramped on "
+                                         "([gravity] factor = [0.0, 1.0]), so that the "
+                                         "material finds its own state") from None
     except RuntimeError as exc:  # RVEs that did not reach their points' stresses
         if spec.initial.state != "geostatic" or "did not reach" not in str(exc):
             raise
