@@ -184,7 +184,7 @@ def _initial_stress(spec: BoundaryValueSpec, problem: Any, f0: float,
                     corrected_residual=ground.residual, correction=ground.correction)
     lifted = np.zeros(0, dtype=np.int64)
     if np.isfinite(floor).any():  # a continuum's points without a floor are left alone
-        sigma, lifted = lift_to_floor(sigma, np.where(np.isfinite(floor), floor, -np.inf))
+        sigma, lifted = lift_to_floor(sigma, floor)
     info.update(minimum_pressure=floors, lifted_points=int(lifted.size))
     return sigma, info
 

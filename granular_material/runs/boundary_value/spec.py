@@ -45,7 +45,7 @@ into a :class:`BoundaryValueSpec` by :func:`bvp_from_dict` (every key checked, a
     # region's f0 * unit_weight), sigma_h = k0 * sigma_v, corrected into equilibrium under a
     # slope, a step or layers (fem.boundary_value.ground); k0 = 0.5 (a region's own: k0 in
     # its [[materials]] entry), surcharge = 20e3, minimum_pressure = 1e3 [Pa] (default: a
-    # DEM region's RVE floor, 0 elsewhere), surface = 0.4 (a level surface at that y, one
+    # DEM region's RVE floor, none elsewhere), surface = 0.4 (a level surface at that y, one
     # unit weight and K0; default: found from the mesh)
 
     [material]                      # as a run specification's: name and parameters
