@@ -28,6 +28,7 @@ from granular_material.fem.solver.continuation import (
     next_length,
 )
 from granular_material.fem.solver.records import NewtonError
+from granular_material.fem.solver.strength_reduction import strength_reduction
 from granular_material.runs.boundary_value.runner import run_boundary_value
 
 P = 100e3  # confining pressure [Pa]
@@ -113,6 +114,20 @@ def test_arc_length_on_a_linear_body_ends_at_the_load_of_load_control() -> None:
     assert by_arc.stopped_by == "completed"
     assert by_arc.load_factor == 1.0
     assert np.allclose(by_arc.u, by_load.u, rtol=1e-5, atol=0)  # Newton's tolerance
+
+
+def test_strength_reduction_finds_the_mobilised_friction() -> None:
+    # σ1/σ3 = 2 under φ = 30°, c = 0: sin φ_mob = 1/3, so F = tan 30° / tan φ_mob = 1.633
+    material = MohrCoulomb(young=50e6, poisson=0.3, friction_angle=30.0,
+                           dilation_angle=0.0,
+                           initial_stress=np.broadcast_to(-P * np.eye(2), (4, 2, 2)).copy())
+    solver = _element(2 * P, material, "load")
+    solver.run(4)
+    result = strength_reduction(solver, factor_end=3.0, steps=20)
+    expected = math.tan(math.radians(30)) / math.tan(math.asin(1 / 3))
+    assert result.stopped_by == "collapse"
+    assert result.factor_of_safety == pytest.approx(expected, rel=0.01)
+    assert material.strength_factor == pytest.approx(result.factors[-1])
 
 
 def test_a_stopped_arc_length_footing_resumes_to_the_run_that_never_stopped(
