@@ -41,7 +41,7 @@ if TYPE_CHECKING:
 __all__ = ["DISC_BYTES", "MEMORY_LIMIT", "RVE_MATERIAL_DEFAULTS", "WordedError",
            "available_memory", "check_memory", "check_output_dir", "check_output_file",
            "cleanup_on_rejection", "make_parents", "packing_parameters", "rve_file_shape",
-           "rve_material_given"]
+           "rve_material_given", "rve_meta"]
 
 
 def _writable_folder(path: Path, field: str, given: Path) -> None:
@@ -247,6 +247,28 @@ def _packing_refusal(exc: ValueError, pressure_field: str, particles: int, press
     return WordedError(field, str(exc))
 
 
+def rve_meta(args: Any) -> RVEMeta:
+    """The contact law and material of the RVEs a run prepares, from the RVE material fields
+    (:data:`RVE_MATERIAL_DEFAULTS`) of ``args``, validated (a ParameterError naming the
+    field)."""
+    if args.law == "constant":
+        stiffness = {"law": "constant", "kn": args.kn, "kt": args.kt}
+    else:
+        stiffness = {"law": "frictmat", "young": args.contact_young,
+                     "kt_over_kn": args.kt_over_kn}
+    meta = RVEMeta(thickness=args.thickness, density=args.density,
+                   friction_angle=args.contact_friction_angle, damping=args.damping,
+                   stiffness=stiffness, seed=getattr(args, "seed", None))
+    try:
+        meta.validate()
+    except ValueError as exc:
+        key = _META_KEY.search(str(exc))
+        field = _META_FIELDS.get(key.group(1), key.group(1)) if key else "law"
+        raise WordedError(field, _META_KEY.sub(
+            lambda m: _named(_META_FIELDS.get(m.group(1), m.group(1))), str(exc))) from None
+    return meta
+
+
 def packing_parameters(args: Any, particles: int, pressure: float,
                        pressure_field: str = "pressure") -> PackingParameters:
     """The RVE material fields (:data:`RVE_MATERIAL_DEFAULTS`) of ``args`` as the parameters
@@ -270,21 +292,7 @@ def packing_parameters(args: Any, particles: int, pressure: float,
         check_radius_range(radius_range, names["radius_range"])
     except ValueError as exc:
         raise WordedError("radius_min", str(exc)) from None
-    if args.law == "constant":
-        stiffness = {"law": "constant", "kn": args.kn, "kt": args.kt}
-    else:
-        stiffness = {"law": "frictmat", "young": args.contact_young,
-                     "kt_over_kn": args.kt_over_kn}
-    meta = RVEMeta(thickness=args.thickness, density=args.density,
-                   friction_angle=args.contact_friction_angle, damping=args.damping,
-                   stiffness=stiffness, seed=getattr(args, "seed", None))
-    try:
-        meta.validate()
-    except ValueError as exc:
-        key = _META_KEY.search(str(exc))
-        field = _META_FIELDS.get(key.group(1), key.group(1)) if key else "law"
-        raise WordedError(field, _META_KEY.sub(
-            lambda m: _named(_META_FIELDS.get(m.group(1), m.group(1))), str(exc))) from None
+    meta = rve_meta(args)
     try:
         check_packing(particles, pressure, meta, radius_range, names=names)
     except ValueError as exc:

@@ -27,7 +27,7 @@ from granular_material.runs.spec import SpecError
 VALUES = {"type": '"fixed"', "boundary": '"bottom"', "component": '"x"', "value": "0.001",
           "end": "30e3", "displacement": "[0.0, -0.001]", "rough": "false",
           "state": '"uniform"', "pressure": "20e3", "k0": "0.6", "surcharge": "10e3",
-          "surface": "0.4"}
+          "surface": "0.4", "minimum_pressure": "1e3"}
 #: a complete condition of every type (the keys it needs)
 NEEDS = {"fixed": {}, "roller": {"component": '"y"'}, "displacement": {"component": '"y"',
                                                                           "value": "0.001"},
@@ -187,7 +187,7 @@ TABLES = ("mesh", "boundaries", "conditions", "gravity", "initial", "material", 
 #: changed value for every key of a [[materials]] entry (walked on the first of two)
 REGIONAL = {"regions": {"lower": "y <= 0.05"},
             "materials": {"region": "upper", "name": "mohr-coulomb",
-                          "parameters": {"young": 70e6}, "unit_weight": 18e3}}
+                          "parameters": {"young": 70e6}, "unit_weight": 18e3, "k0": 0.6}}
 
 
 def test_the_walk_reaches_every_key_of_every_table():

@@ -239,6 +239,7 @@ BAD = [
     ("conditions.end", lambda s: dict(s, conditions=[
         *ROLLERS, {"type": "pressure", "boundary": "top", "value": 0.0, "end": 1e3}])),
     ("phases", lambda s: dict(s, phases=[])),
+    ("newton.continuation", lambda s: dict(s, newton={"continuation": "arc-length"})),
 ]
 
 

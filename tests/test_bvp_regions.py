@@ -244,7 +244,7 @@ def test_a_gravity_on_elements_outside_the_mesh_is_refused():
         Gravity(1e4, elements=np.array([-1]))
 
 
-def test_an_unknown_physical_group_and_a_geostatic_start_of_two_weights_are_refused(
+def test_an_unknown_physical_group_is_refused_and_a_geostatic_start_of_two_weights_built(
         tmp_path):
     mesh = _layered_file(tmp_path / "column.msh")
     spec = _spec(_entry("clay", "linear-elastic", "") + _entry("rock", "linear-elastic", ""),
@@ -255,10 +255,12 @@ def test_an_unknown_physical_group_and_a_geostatic_start_of_two_weights_are_refu
         build(spec, allocate=False)
     spec = _spec(LAYERS + _entry("lower", "linear-elastic", "", "unit_weight = 2e4\n")
                  + _entry("upper", "linear-elastic", ""),
-                 initial={"state": "geostatic"})
-    with pytest.raises(SpecError, match="one unit weight") as info:
-        build(spec, allocate=False)
-    assert info.value.field == "initial.state"
+                 initial={"state": "geostatic", "surcharge": 20e3})
+    b = build(spec, allocate=False)  # each layer its own weight (the upper one 0 here)
+    xy = b.problem.points
+    sigma_v = 20e3 + 2e4 * np.maximum(0.25 - xy[:, 1], 0.0)
+    np.testing.assert_allclose(-b.initial_stress[:, 1, 1], sigma_v, rtol=1e-12)
+    assert b.initial["corrected_residual"] < 1e-12 and b.initial["lifted_points"] == 0
 
 
 def test_a_dem_region_beside_a_linear_elastic_one_runs_with_the_noisy_defaults(tmp_path):

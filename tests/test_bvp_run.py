@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 from pathlib import Path
 
 import numpy as np
@@ -12,7 +13,7 @@ import pandas as pd
 import pytest
 
 from granular_material.cli import main
-from granular_material.runs.boundary_value.runner import run_boundary_value
+from granular_material.runs.boundary_value.runner import build, run_boundary_value
 from granular_material.runs.boundary_value.spec import bvp_from_dict
 
 FOOTING = """
@@ -246,3 +247,89 @@ def test_a_value_of_the_wrong_type_or_range_is_refused_naming_its_key(section, k
     with pytest.raises(SpecError) as refused:
         bvp_from_dict(scene, EXAMPLES)
     assert refused.value.field == field
+
+
+def test_steps_record_the_displacement_of_every_named_boundary(tmp_path):
+    """A [boundaries] name without a condition gets its mean displacement in steps.csv; a
+    generated side no condition uses gets none; the other columns are as without it."""
+    text = FOOTING.format(steps=2, elements="[8, 6]", settlement=-0.001, material=ELASTIC)
+    plain = run_boundary_value(bvp_from_dict(__import__("tomllib").loads(text)))
+    marked = text.replace("[boundaries]\n", '[boundaries]\ncorner = "y = top and x >= 0.3"\n')
+    spec = bvp_from_dict(__import__("tomllib").loads(marked))
+    outcome = run_boundary_value(spec)
+    steps = outcome.steps
+    assert "top_displacement_y" not in steps and "corner_force_y" not in steps
+    assert list(steps.columns) == [*plain.steps.columns, "corner_displacement_x",
+                                   "corner_displacement_y"]
+    pd.testing.assert_frame_equal(steps[plain.steps.columns].drop(columns="wall_time"),
+                                  plain.steps.drop(columns="wall_time"))
+    problem = build(spec, allocate=False).problem
+    ux, uy = problem.boundary_displacement("corner", outcome.u)
+    assert steps["corner_displacement_y"].iloc[-1] == uy and uy != 0.0
+    assert steps["corner_displacement_x"].iloc[-1] == ux
+    assert steps["corner_displacement_y"].iloc[0] == 0.0
+
+
+def test_the_refusal_of_a_folder_says_what_fits_its_run(tmp_path, capsys):
+    """A rerun into the folder of a run that failed is told it cannot be resumed (another
+    folder, or its checkpoint deleted); of a run stopped part-way, to --resume it; a folder
+    whose summary is older than its checkpoint (an earlier run's) counts as stopped."""
+    material = ('[material]\nname = "mohr-coulomb"\n[material.parameters]\nyoung = 60e6\n'
+                'poisson = 0.3\nfriction_angle = 0.0\ncohesion = 5e3\n[newton]\n'
+                'formulation = "small-strain"\nmax_iterations = 2\nmax_cutbacks = 0\n')
+    scene = _scene(tmp_path, FOOTING.format(steps=4, elements="[8, 6]", settlement=-0.02,
+                                            material=material))
+    out = tmp_path / "run"
+    assert main(["run", str(scene), "--out", str(out)]) == 1  # Newton fails: a failed run
+    summary = json.loads((out / "summary.json").read_text())
+    assert "did not converge" in summary["error"]
+    assert (out / "checkpoint" / "state.npz").is_file()
+    capsys.readouterr()
+    before = {p: p.read_bytes() for p in sorted(out.rglob("*")) if p.is_file()}
+    assert main(["run", str(scene), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "failed (load step" in err and "cannot be resumed" in err
+    assert "another folder" in err and "--resume" not in err
+    assert {p: p.read_bytes() for p in sorted(out.rglob("*")) if p.is_file()} == before
+    # the same folder had the run been stopped by Ctrl-C: resume it
+    summary["error"] = "interrupted after load step 1 of 4"
+    (out / "summary.json").write_text(json.dumps(summary))
+    assert main(["run", str(scene), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "stopped after load step" in err and "--resume" in err and "failed" not in err
+    # a failed run's summary older than the checkpoint's state: a later run was killed
+    summary["error"] = "load step 2 (load factor 0.25 -> 0.5) did not converge"
+    (out / "summary.json").write_text(json.dumps(summary))
+    state = (out / "checkpoint" / "state.npz").stat().st_mtime_ns
+    os.utime(out / "summary.json", ns=(state - 10**9, state - 10**9))
+    assert main(["run", str(scene), "--out", str(out)]) == 2
+    assert "--resume" in capsys.readouterr().err
+
+
+def test_a_cohesive_soil_starts_stress_free_and_dem_is_refused_that_start(tmp_path):
+    """initial.pressure = 0: a Tresca clay footing starts stress-free (no residual, few
+    iterations a step) and levels off above Prandtl's (2 + π) c; a DEM material needs a
+    pressure > 0 to prepare its RVEs, refused naming the key."""
+    import tomllib
+
+    from granular_material.runs.spec import SpecError
+
+    material = ('[material]\nname = "mohr-coulomb"\n[material.parameters]\nyoung = 10e6\n'
+                'poisson = 0.3\nfriction_angle = 0.0\ncohesion = 10e3\n[newton]\n'
+                'formulation = "small-strain"\n')
+    text = FOOTING.format(steps=6, elements="[12, 8]", settlement=-0.004, material=material)
+    text = text.replace("pressure = 20e3", "pressure = 0.0").replace("value = 20e3",
+                                                                      "value = 0.0")
+    outcome = run_boundary_value(bvp_from_dict(tomllib.loads(text)))
+    assert outcome.error is None
+    assert outcome.summary["initial_residual"]["norm"] == 0.0
+    q = -outcome.steps["footing_force_y"].to_numpy() / 0.05
+    assert q[0] == 0.0
+    # measured: 1.14 × (2 + π) c on this 12 × 8 tri6 mesh
+    assert 1.0 < q[-1] / ((2 + math.pi) * 10e3) < 1.25
+    assert max(outcome.summary["iterations"]) <= 20  # measured: 16 (one cut-back), then 3-5
+    scene = tomllib.loads((EXAMPLES / "footing-gz2016-cpu.toml").read_text())
+    scene["initial"]["pressure"] = 0.0
+    with pytest.raises(SpecError, match="DEM material needs a pressure > 0") as refused:
+        bvp_from_dict(scene, EXAMPLES)
+    assert refused.value.field == "initial.pressure"

@@ -20,6 +20,7 @@ from run_helpers import StopAtStep, without_clock
 
 from granular_material.cli import main
 from granular_material.dem import save_rve
+from granular_material.errors import ParameterError
 from granular_material.fem import (
     BiaxialSetup,
     create_material,
@@ -28,6 +29,8 @@ from granular_material.fem import (
 )
 from granular_material.procedures import prepare_packing
 from granular_material.runs import CheckpointError, RunCheckpoint, run_biaxial
+from granular_material.runs.execute import run as execute_run
+from granular_material.runs.serial import from_dict
 
 SETUP = BiaxialSetup(width=1.0, height=1.0, nx=1, ny=1, confining=100e3, axial_strain=0.003)
 #: columns that hold a clock time [s], the only ones a resumed run may change
@@ -306,3 +309,36 @@ def test_a_fresh_run_is_refused_over_a_stopped_runs_checkpoint(tmp_path, capsys)
     err = capsys.readouterr().err
     assert "stopped after load step 4 of 8" in err and "--resume" in err
     assert {p: p.read_bytes() for p in sorted(out.rglob("*")) if p.is_file()} == before
+
+
+def test_the_refusal_over_a_failed_runs_checkpoint_says_it_cannot_be_resumed(tmp_path,
+                                                                             capsys):
+    """A run that failed (its summary's error, written after its last saved state) is not
+    offered --resume: another folder, or its checkpoint removed; a summary older than the
+    state (an earlier run's) leaves the folder a stopped run's."""
+    out = tmp_path / "le"
+    argv = ["single-element", "--material", "linear-elastic", "--steps", "4",
+            "--axial-strain", "0.004", "--device", "cpu", "--no-progress", "--json",
+            "--out", str(out)]
+    assert main(argv) == 0
+    capsys.readouterr()
+    options = out / "checkpoint" / "options.json"
+    record = json.loads(options.read_text())
+    record["spec"]["problem"]["steps"] = 8  # as if it had failed at step 5 of 8
+    options.write_text(json.dumps(record))
+    summary = json.loads((out / "summary.json").read_text())
+    summary["error"] = "load step 5 (load factor 0.5 -> 0.625) did not converge"
+    (out / "summary.json").write_text(json.dumps(summary))
+    before = {p: p.read_bytes() for p in sorted(out.rglob("*")) if p.is_file()}
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert "a run that failed (load step 5" in err and "cannot be resumed" in err
+    assert "another folder" in err and "--resume" not in err
+    assert {p: p.read_bytes() for p in sorted(out.rglob("*")) if p.is_file()} == before
+    with pytest.raises(ParameterError, match=r"cannot be resumed.*run\(spec, fresh=True\)"):
+        execute_run(from_dict(record["spec"]))
+    state = (out / "checkpoint" / "state.npz").stat().st_mtime_ns
+    os.utime(out / "summary.json", ns=(state - 10**9, state - 10**9))
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert "stopped after load step 4 of 8" in err and "--resume" in err

@@ -73,3 +73,18 @@ def test_a_material_file_with_an_unknown_key_is_refused(tmp_path, capsys):
     assert code == 2
     assert "'friction_angel' is no parameter of --material mohr-coulomb" in \
         capsys.readouterr().err
+
+
+def test_single_element_tresca_and_its_refusal(tmp_path, capsys):
+    """--friction-angle 0 is Tresca: σ1 − σ3 peaks at 2c (a ratio 1 + 2c/p); without a
+    cohesion it is refused naming the cohesion."""
+    code, summary = _run(["single-element", "--material", "mohr-coulomb", "--friction-angle",
+                          "0", "--cohesion", "20e3", "--confining", "100e3", "--axial-strain",
+                          "0.01", "--steps", "10", "--formulation", "small-strain", "--out",
+                          str(tmp_path / "se")], capsys)
+    assert code == 0
+    assert summary["peak_stress_ratio"] == pytest.approx(1.4, rel=1e-6)
+    code = main(["single-element", "--material", "mohr-coulomb", "--friction-angle", "0",
+                 "--out", str(tmp_path / "x")])
+    assert code == 2
+    assert "cohesion" in capsys.readouterr().err and not (tmp_path / "x").exists()

@@ -14,6 +14,14 @@ import pytest
 
 import granular_material.fem.materials.mohr_coulomb as mc_module
 from granular_material.errors import ParameterError
+from granular_material.fem import (
+    Fixed,
+    RigidBody,
+    Roller,
+    build_problem,
+    rectangle_mesh,
+    select_boundaries,
+)
 from granular_material.fem.boundary_value.biaxial import BiaxialSetup, build_biaxial
 from granular_material.fem.materials.linear_elastic import LinearElastic, isotropic_tangent
 from granular_material.fem.materials.mohr_coulomb import (
@@ -385,7 +393,10 @@ def test_initial_stress_shapes_and_refusals():
 @pytest.mark.parametrize(("field", "kwargs"), [
     ("young", {"young": -1.0}),
     ("poisson", {"poisson": 0.5}),
-    ("friction_angle", {"friction_angle": 0.0}),
+    ("friction_angle", {"friction_angle": -1.0}),
+    ("cohesion", {"friction_angle": 0.0}),
+    ("critical_friction_angle", {"friction_angle": 0.0, "cohesion": 10e3,
+                                 "critical_friction_angle": 0.0, "softening_strain": 0.1}),
     ("friction_angle", {"friction_angle": 90.0}),
     ("dilation_angle", {"dilation_angle": 31.0}),
     ("dilation_angle", {"dilation_angle": -1.0}),
@@ -512,3 +523,106 @@ def test_return_lands_on_the_surface_in_order(phi, psi, c, phi_cs, gs):
     np.testing.assert_allclose(drop, factor[:, None] * expected, rtol=1e-9,
                                atol=1e-9 * scale[face].max())
     np.testing.assert_allclose(result.gamma[face] - gamma_n[face], 2 * factor, rtol=1e-9)
+
+
+# -- Tresca: φ = 0 (undrained clay) ----------------------------------------------------------
+def test_tresca_yields_at_twice_the_cohesion():
+    """φ = 0: a plane-strain biaxial path yields where σ1 − σ3 = 2c, whatever the pressure,
+    with no plastic volume change (ψ = 0)."""
+    c = 30e3
+    for p in (50e3, 200e3):
+        material = MohrCoulomb(friction_angle=0.0, cohesion=c, initial_stress=-p)
+        material.allocate(1)
+        rec = drive_biaxial(material, 60, p=p)
+        plastic = rec["yielding"]
+        assert plastic.any() and not plastic[0]
+        deviator = rec["sxx"] - rec["syy"]
+        assert deviator.max() == pytest.approx(2 * c, rel=1e-10)
+        np.testing.assert_allclose(deviator[plastic], 2 * c, rtol=1e-10)
+        assert np.all(deviator[~plastic] < 2 * c)
+        assert np.all(rec["phi"] == 0.0)
+        assert rec["gamma"][-1] > 0
+
+
+def test_tresca_single_element_with_newton_solver():
+    """One quad4 element under the Newton driver: the axial stress reaches p + 2c."""
+    c = 25e3
+    problem = build_biaxial(BiaxialSetup(width=1.0, height=1.0, nx=1, ny=1, confining=P,
+                                         axial_strain=0.01))
+    material = MohrCoulomb(friction_angle=0.0, cohesion=c, initial_stress=-P)
+    solver = NewtonSolver(problem.basis, material, problem.loading, NewtonSettings(rtol=1e-9))
+    axial = []
+    records = solver.run(8, on_step=lambda s, r: axial.append(problem.axial_stress(s.reaction)))
+    assert all(r.iterations <= 5 and r.cutbacks == 0 for r in records)
+    assert material.yielding.all()
+    assert axial[-1] == pytest.approx(P + 2 * c, rel=1e-8)
+
+
+def _tresca_cases(rotation: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[int]]:
+    """Initial stresses, σzz and increments that land in each region of Tresca (c = 20 kPa)."""
+    init = np.array([np.diag([-100e3, -100e3]), np.diag([-100e3, -130e3]),
+                     np.diag([-100e3, -100e3]), [[-100e3, 1e3], [1e3, -100e3]],
+                     np.diag([-100e3, -135e3])])
+    zz = np.array([-100e3, -115e3, -135e3, -135e3, -135e3])
+    grad = np.array([[[1e-5, 2e-6], [0.0, -1e-5]], [[2e-4, 3e-5], [-1e-5, -4e-4]],
+                     [[5e-4, 0.0], [0.0, 5e-4]], [[5e-4, 1e-5], [-3e-5, 5e-4]],
+                     [[2e-3, 0.0], [0.0, -1e-3]]])
+    if rotation:
+        grad = grad + np.array([[0.0, 4e-3], [-4e-3, 0.0]])
+    return init, zz, grad, [ELASTIC, FACE, EDGE_MAJOR, EDGE_MAJOR, EDGE_MINOR]
+
+
+@pytest.mark.parametrize("rotation", [False, True])
+def test_tresca_tangent_matches_finite_differences_in_every_region(rotation):
+    init, zz, grad, regions = _tresca_cases(rotation)
+    material = MohrCoulomb(friction_angle=0.0, cohesion=20e3, initial_stress=init,
+                           initial_stress_zz=zz, apex_tangent=0.0)
+    material.allocate(len(init))
+    response = material.evaluate(grad)
+    assert response.ok
+    assert response.fields["return_region"].astype(int).tolist() == regions
+    assert np.isfinite(response.tangent).all()
+    assert _fd_errors(material, grad).max() < 1e-5
+
+
+def test_tresca_return_lands_on_the_prism_without_an_apex():
+    """Random trials, φ = 0: no apex, every returned state has σ1 − σ3 ≤ 2c (= 2c where it
+    yielded) in order, and the return keeps the mean stress (ψ = 0: no plastic volume)."""
+    c = 20e3
+    strength = MohrCoulombParameters(friction_angle=0.0, cohesion=c).strength()
+    rng = np.random.default_rng(5)
+    trial = rng.normal(scale=300e3, size=(20000, 3)) + rng.uniform(-300e3, 300e3, (20000, 1))
+    trial = -np.sort(-trial, axis=1)
+    result = principal_return(trial, np.zeros(20000), strength)
+    assert result.converged.all() and np.isfinite(result.stress).all()
+    assert set(np.unique(result.region)) == {ELASTIC, FACE, EDGE_MAJOR, EDGE_MINOR}
+    s = result.stress
+    scale = np.abs(trial).max(axis=1) + c
+    assert np.all(np.diff(s, axis=1) <= 1e-12 * scale[:, None])
+    plastic = result.region != ELASTIC
+    np.testing.assert_allclose((s[:, 0] - s[:, 2])[plastic], 2 * c, rtol=0,
+                               atol=1e-12 * scale.max())
+    np.testing.assert_allclose(s.sum(axis=1), trial.sum(axis=1), rtol=0,
+                               atol=1e-12 * scale.max())
+
+
+def test_tresca_strip_footing_from_a_stress_free_start_near_prandtl():
+    """A smooth rigid strip footing (half of it, B = 1 m) on weightless Tresca clay in small
+    strain, from a stress-free start: the pressure levels off a little above Prandtl's
+    (2 + π) c (measured 1.090 on this 10 × 6 quad8 mesh, 1.047 on 20 × 12)."""
+    c, half = 10e3, 0.5
+    data = select_boundaries(rectangle_mesh(2.5, 1.5, 10, 6, "quad8", grading=(1.0, 0.3),
+                                            origin=(0.0, -1.5)),
+                             {"footing": f"y = top and x <= {half}"})
+    problem = build_problem(data, [Fixed("bottom"), Roller("left", 0), Roller("right", 0),
+                                   RigidBody("footing", (0.0, -0.05), rough=False)])
+    assert problem.boundaries["footing"].locations[0].max() == pytest.approx(half)
+    material = MohrCoulomb(young=10e6, poisson=0.3, friction_angle=0.0, cohesion=c)
+    solver = NewtonSolver(problem.basis, material, problem.loading,
+                          NewtonSettings(formulation="small-strain", rtol=1e-8))
+    q: list[float] = []
+    solver.run(10, on_step=lambda s, r: q.append(
+        -problem.boundary_force("footing", s.reaction)[1] / half))
+    ratio = q[-1] / ((2 + math.pi) * c)
+    assert 1.0 < ratio < 1.15, ratio
+    assert q[-1] - q[-2] < 0.002 * q[-1]  # a plateau

@@ -108,12 +108,12 @@ def run_bvp_scene(path: Path, text: str, data: dict[str, Any],
         write_whole(folder / "scene.toml", lambda tmp: tmp.write_text(text, encoding="utf-8"))
 
     with FolderLock(folder), when_starting(copy_scene):
+        if not resume:
+            try:
+                check_not_stopped(spec, folder)
+            except SpecError as exc:  # `resume` is the run command's --resume
+                raise UsageError(as_flags(f"{path}: {exc.message}")) from None
         try:
-            if not resume:
-                try:
-                    check_not_stopped(spec, folder)
-                except SpecError as exc:  # `resume` is the run command's --resume
-                    raise UsageError(as_flags(f"{path}: {exc}")) from None
             outcome = run_boundary_value(spec, out=folder, resume=resume)
         except ValueError as exc:
             raise _refusal(path, text, exc) from exc

@@ -7,7 +7,8 @@ the :class:`NewtonSolver` drives it on a scikit-fem basis, on the drained biaxia
 :func:`build_problem` (a mesh from a file, :func:`read_mesh`, or :func:`rectangle_mesh`; named
 boundaries, :func:`select_boundaries`; the conditions :class:`Fixed`, :class:`Roller`,
 :class:`Displacement`, :class:`RigidBody`, :class:`Pressure`, :class:`Gravity`; an initial
-state, :func:`geostatic_stress`); :class:`RegionalMaterial` holds one material per region
+state, :func:`geostatic_stress`, or under sloping and layered ground :func:`ground_stress`);
+:class:`RegionalMaterial` holds one material per region
 of the mesh (a layer, a fill) and answers as one; :class:`RunContext` is what a material is
 told of the run it is built for; :class:`Tracking` names the
 post-processors run on chosen Gauss points. :func:`default_settings` holds the Newton settings
@@ -27,6 +28,12 @@ from granular_material.fem.boundary_value.conditions import (
     RigidBody,
     Roller,
     build_problem,
+)
+from granular_material.fem.boundary_value.ground import (
+    GroundState,
+    ground_stress,
+    lift_to_floor,
+    overburden,
 )
 from granular_material.fem.boundary_value.initial_stress import geostatic_stress, uniform_stress
 from granular_material.fem.boundary_value.loading import Loading
@@ -89,6 +96,7 @@ __all__ = [
     "FailureReason",
     "Fixed",
     "Gravity",
+    "GroundState",
     "Layout",
     "LinearElastic",
     "LinearElasticParameters",
@@ -125,9 +133,12 @@ __all__ = [
     "default_stress_tol",
     "geostatic_stress",
     "grad_points",
+    "ground_stress",
+    "lift_to_floor",
     "load_material",
     "load_postprocessor",
     "make_basis",
+    "overburden",
     "point_regions",
     "read_mesh",
     "rectangle_mesh",

@@ -61,6 +61,7 @@ from granular_material.multiscale.responses import measured_response, response_o
 from granular_material.multiscale.run_hooks import (
     DEMParameters,
     check_run,
+    lowest_pressure,
     material_keywords,
     problem_keywords,
     run_summary,
@@ -111,6 +112,7 @@ class DEMMaterial(ScikitFemInterface):
     check_run = staticmethod(check_run)
     run_summary = staticmethod(run_summary)
     unit_weight = staticmethod(unit_weight)
+    lowest_pressure = staticmethod(lowest_pressure)
 
     def __init__(self, parameters: DEMMaterialParameters | str | Path | None = None, *,
                  progress: bool = False, pressure: float | None = None,

@@ -16,6 +16,7 @@ from granular_material.checks import (
     packing_parameters,
     rve_file_shape,
     rve_material_given,
+    rve_meta,
 )
 from granular_material.dem.tangents import TANGENTS
 from granular_material.errors import ParameterError
@@ -27,8 +28,8 @@ if TYPE_CHECKING:
     from granular_material.fem.materials.run_context import RunContext
     from granular_material.procedures.packing import PackingParameters
 
-__all__ = ["RUN_TANGENT", "SHARE_TOLERANCE", "DEMParameters", "check_run", "material_keywords",
-           "problem_keywords", "run_summary", "unit_weight"]
+__all__ = ["RUN_TANGENT", "SHARE_TOLERANCE", "DEMParameters", "check_run", "lowest_pressure",
+           "material_keywords", "problem_keywords", "run_summary", "unit_weight"]
 
 #: a boundary-value problem's default: points whose initial stresses agree within this
 #: fraction of their σv share one prepared RVE. Measured on a 96-point geostatic footing
@@ -221,3 +222,23 @@ def unit_weight(p: DEMParameters, gravity: float) -> float:
         return float(data.meta.density * gravity / (1.0 + e))
     e = p.target_void_ratio if p.target_void_ratio is not None else 0.2
     return float(p.density * gravity / (1.0 + e))
+
+
+def lowest_pressure(p: DEMParameters) -> float:
+    """The lowest least principal compression [Pa] an RVE of ``p`` starts at: that of
+    :func:`~granular_material.procedures.anisotropic.lowest_target_pressure` (2 % of the
+    consolidation floor of the contact law, measured: 15 Pa for kn = 3e6 N/m and a 0.1 m
+    thickness), of the RVE file's contact law and radii, else of the packings the run
+    prepares. A packing of discs carries stress only while confined: below this it is not
+    prepared."""
+    from granular_material.procedures.anisotropic import lowest_target_pressure
+    from granular_material.procedures.packing import PackingParameters
+
+    if p.rve is not None:
+        from granular_material.dem import load_rve
+
+        data = load_rve(p.rve)
+        meta, radii = data.meta, (float(data.radius.min()), float(data.radius.max()))
+    else:
+        meta, radii = rve_meta(p), (p.radius_min, p.radius_max)
+    return float(lowest_target_pressure(PackingParameters(meta=meta, radius_range=radii)))

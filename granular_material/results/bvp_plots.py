@@ -11,20 +11,31 @@ import pandas as pd
 
 from granular_material.results.plots import deformed_triangles, pyplot, save_figure
 
-__all__ = ["plot_load_displacement", "plot_mechanism", "plot_phased_load_displacement"]
+__all__ = ["length_unit", "plot_load_displacement", "plot_mechanism",
+           "plot_phased_load_displacement"]
+
+
+def length_unit(size: float) -> tuple[str, float]:
+    """The unit a figure gives lengths in for a domain of ``size`` [m] (its larger extent):
+    ("mm", 1e3) below 1 m (a laboratory specimen, a model footing), ("m", 1.0) from 1 m (a
+    slope, an embankment); the second is the factor from metres."""
+    return ("mm", 1e3) if size < 1.0 else ("m", 1.0)
 
 
 def plot_load_displacement(steps: pd.DataFrame, bodies: Sequence[tuple[str, str, float]],
                            path: str | Path,
-                           references: Sequence[tuple[str, float]] = ()) -> Path:
+                           references: Sequence[tuple[str, float]] = (),
+                           size: float = 0.0) -> Path:
     """One panel per moved boundary: its mean pressure against its displacement.
 
     ``bodies``: (name, axis "x" | "y", width [m]) of each moved boundary; the curve is
-    −F/width [kPa] (compression positive) against the displacement along its motion [mm],
+    −F/width [kPa] (compression positive) against the displacement along its motion,
     read from the ``steps`` columns ``{name}_force_{axis}`` [N/m] and
     ``{name}_displacement`` [m]. ``references``: horizontal lines (label, pressure [Pa]),
-    e.g. Prandtl's q·N_q.
+    e.g. Prandtl's q·N_q. ``size``: the domain's larger extent [m], which sets the unit of
+    the displacement and the width (:func:`length_unit`; 0: mm).
     """
+    unit, factor = length_unit(size)
     plt = pyplot()
     n = max(len(bodies), 1)
     fig, axes = plt.subplots(1, n, figsize=(5.5 * n, 4.2), constrained_layout=True,
@@ -33,13 +44,13 @@ def plot_load_displacement(steps: pd.DataFrame, bodies: Sequence[tuple[str, str,
         force = steps[f"{name}_force_{axis}"].to_numpy(dtype=float)
         moved = steps[f"{name}_displacement"].to_numpy(dtype=float)
         sign = -1.0 if np.nanmean(force[1:] if force.size > 1 else force) < 0 else 1.0
-        ax.plot(1e3 * moved, sign * force / width / 1e3, "o-", ms=3, label=name)
+        ax.plot(factor * moved, sign * force / width / 1e3, "o-", ms=3, label=name)
         for label, value in references:
             ax.axhline(value / 1e3, ls="--", lw=1, color="0.4")
             ax.annotate(label, (0.02, value / 1e3), xycoords=("axes fraction", "data"),
                         va="bottom", fontsize=8, color="0.3")
-        ax.set_xlabel(f"{name} displacement [mm]")
-        ax.set_ylabel(f"{name} mean pressure [kPa] (force / {1e3 * width:g} mm)")
+        ax.set_xlabel(f"{name} displacement [{unit}]")
+        ax.set_ylabel(f"{name} mean pressure [kPa] (force / {factor * width:g} {unit})")
         ax.grid(alpha=0.3)
         ax.set_title(name)
     try:
@@ -53,13 +64,16 @@ def plot_mechanism(xy: np.ndarray, cells: np.ndarray, kind: str, ux: np.ndarray,
                    title: str = "", scale: float = 1.0) -> Path:
     """The mechanism: shear strain γ [%] of every element (``shear_strain``, (nelems,)) on
     the mesh displaced by ``scale`` × (ux, uy) [m] (nodal, meshio order of ``cells``), with
-    the nodes' displacement as arrows (the longest a twentieth of the mesh's width)."""
+    the nodes' displacement as arrows (the longest a twentieth of the mesh's width, its
+    length written beside). Lengths in mm for a mesh under 1 m, else in m
+    (:func:`length_unit`)."""
     plt = pyplot()
     from matplotlib.tri import Triangulation
 
     x, y, dx, dy, triangles, element = deformed_triangles(xy, cells, kind, scale * ux,
                                                           scale * uy)
-    tri = Triangulation(1e3 * x, 1e3 * y, triangles)
+    unit, f = length_unit(max(float(np.ptp(xy[:, 0])), float(np.ptp(xy[:, 1]))))
+    tri = Triangulation(f * x, f * y, triangles)
     gamma = 100 * np.asarray(shear_strain, dtype=float)
     width = np.ptp(x) / max(np.ptp(y), 1e-12)
     fig, ax = plt.subplots(figsize=(4 + 4 * min(width, 2.5), 5), constrained_layout=True)
@@ -70,12 +84,14 @@ def plot_mechanism(xy: np.ndarray, cells: np.ndarray, kind: str, ux: np.ndarray,
     every = max(n // 400, 1)
     longest = float(np.hypot(dx[:n], dy[:n]).max())
     if longest > 0:  # the longest arrow a twentieth of the mesh's width
-        ax.quiver(1e3 * x[:n:every], 1e3 * y[:n:every], 1e3 * dx[:n:every],
-                  1e3 * dy[:n:every], color="cyan", alpha=0.6, width=0.002, angles="xy",
-                  scale_units="xy", scale=1e3 * longest / (0.05 * 1e3 * np.ptp(x)))
+        ax.quiver(f * x[:n:every], f * y[:n:every], f * dx[:n:every],
+                  f * dy[:n:every], color="cyan", alpha=0.6, width=0.002, angles="xy",
+                  scale_units="xy", scale=f * longest / (0.05 * f * np.ptp(x)))
+        ax.annotate(f"arrows: displacement, the longest {f * longest / scale:.3g} {unit}",
+                    (0.01, 0.01), xycoords="axes fraction", fontsize=8, color="0.3")
     ax.set_aspect("equal")
-    ax.set_xlabel("x [mm]")
-    ax.set_ylabel("y [mm]")
+    ax.set_xlabel(f"x [{unit}]")
+    ax.set_ylabel(f"y [{unit}]")
     ax.set_title(title)
     try:
         return save_figure(fig, path)
@@ -85,14 +101,17 @@ def plot_mechanism(xy: np.ndarray, cells: np.ndarray, kind: str, ux: np.ndarray,
 
 def plot_phased_load_displacement(steps: pd.DataFrame,
                                   curves: Sequence[tuple[str, str, str]],
-                                  path: str | Path, resets: Collection[str] = ()) -> Path:
+                                  path: str | Path, resets: Collection[str] = (),
+                                  size: float = 0.0) -> Path:
     """The load–displacement curves of a run in phases: one panel per curve, each phase's
     rows a line of its own, from where the phase before ended (at zero displacement for
     the phases of ``resets``, whose displacement is measured from their start).
 
     ``curves``: (name, load column [Pa], displacement column [m]) of each; ``steps`` must
-    have a ``phase`` column.
+    have a ``phase`` column. ``size``: the domain's larger extent [m], which sets the unit
+    of the displacement (:func:`length_unit`; 0: mm).
     """
+    unit, factor = length_unit(size)
     plt = pyplot()
     n = max(len(curves), 1)
     fig, axes = plt.subplots(1, n, figsize=(5.5 * n, 4.2), constrained_layout=True,
@@ -110,8 +129,8 @@ def plot_phased_load_displacement(steps: pd.DataFrame,
                 y = np.concatenate([[p[before]], p[rows]])
             else:
                 x, y = d[rows], p[rows]
-            ax.plot(1e3 * x, y / 1e3, "o-", ms=3, label=str(label))
-        ax.set_xlabel(f"{name} displacement [mm]")
+            ax.plot(factor * x, y / 1e3, "o-", ms=3, label=str(label))
+        ax.set_xlabel(f"{name} displacement [{unit}]")
         ax.set_ylabel(f"{name} load [kPa]")
         ax.grid(alpha=0.3)
         ax.set_title(name)

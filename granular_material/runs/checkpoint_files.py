@@ -332,6 +332,7 @@ def state_arrays(step: int, material: str, state: CommittedState,
             "second_gradient": state.second_gradient,
             "second_gradient_modulus": np.array(state.second_gradient_modulus)}),
         **({} if state.f_int is None else {"f_int": np.asarray(state.f_int, dtype=np.float64)}),
+        **({} if state.continuation is None else {"continuation": dumps(state.continuation)}),
     }
 
 
@@ -387,10 +388,14 @@ def read_state(path: Path) -> tuple[int, str, CommittedState, dict[str, Any] | N
         if f_int is not None and (f_int.shape != u.shape or f_int.dtype.kind != "f"):
             raise CheckpointError(f"{path}: its internal force is not a vector of numbers "
                                   "like its displacement")
+        continuation = loads(npz["continuation"]) if "continuation" in npz else None
+        if continuation is not None and not isinstance(continuation, dict):
+            raise CheckpointError(f"{path}: its arc-length path is damaged")
         state = CommittedState(
             u=u, load_factor=float(npz["load_factor"]),
             run_start=float(npz["run_start"]), last_increment=last,
             records=[_record(path, r) for r in records], response=response, f_int=f_int,
             second_gradient=second_gradient, second_gradient_modulus=modulus,
+            continuation=continuation,
         )
     return step, material, state, manifest

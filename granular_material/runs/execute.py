@@ -42,7 +42,12 @@ from granular_material.results.lock import FolderLock
 from granular_material.runs.checkpoint import RunCheckpoint
 from granular_material.runs.dem import DemOutcome, DemPlan, DemSpec, is_dem, run_dem
 from granular_material.runs.dem import check as check_dem
-from granular_material.runs.resume import StoppedRunError, open_checkpoint, start_checkpoint
+from granular_material.runs.resume import (
+    FailedRunError,
+    StoppedRunError,
+    open_checkpoint,
+    start_checkpoint,
+)
 from granular_material.runs.run_folder import starting
 from granular_material.runs.runner import RunObserver, run_biaxial
 from granular_material.runs.spec import (
@@ -253,6 +258,9 @@ def run(spec: RunSpec | DemSpec, observer: RunObserver | None = None, *,
     with _locked(out):
         try:
             checkpoint, saved = open_checkpoint(spec, resume, keep_stopped=not fresh)
+        except FailedRunError as exc:
+            raise FailedRunError(exc.field, f"{exc.message} (from Python: run(spec, "
+                                            "fresh=True) starts afresh over it)") from None
         except StoppedRunError as exc:
             raise StoppedRunError(exc.field, f"{exc.message} (from Python: run(spec, "
                                              "resume=True) continues it, run(spec, "

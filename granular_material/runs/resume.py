@@ -15,17 +15,24 @@ from typing import Any
 from granular_material.checks import RVE_MATERIAL_DEFAULTS
 from granular_material.errors import ParameterError
 from granular_material.runs.checkpoint import CheckpointError, RunCheckpoint
+from granular_material.runs.run_folder import failed_error
 from granular_material.runs.serial import from_dict, from_flat, to_dict, to_flat
 from granular_material.runs.spec import RunSpec
 from granular_material.vocabulary import RenamedWarning, renamed
 
-__all__ = ["StoppedRunError", "differences_from_saved", "open_checkpoint", "resolved_newton",
-           "spec_differences", "start_checkpoint"]
+__all__ = ["FailedRunError", "StoppedRunError", "differences_from_saved", "open_checkpoint",
+           "resolved_newton", "spec_differences", "start_checkpoint"]
 
 
 class StoppedRunError(ParameterError):
     """A fresh run refused over the checkpoint of a run stopped before its last load step
     (``field``: ``out``), whose work a resume would continue; nothing was changed."""
+
+
+class FailedRunError(StoppedRunError):
+    """A fresh run refused over the checkpoint of a run that failed before its last load
+    step (``field``: ``out``): it cannot be resumed, only started afresh; nothing was
+    changed."""
 
 #: fields that may differ between a run and its resume: where it writes, how it reports and
 #: how often it saves, the CPU threads and the backend (neither changes a result)
@@ -159,6 +166,13 @@ def _refuse_over_stopped_run(checkpoint: RunCheckpoint, out: Path) -> None:
         return
     if step >= planned:
         return
+    error = failed_error(out, checkpoint.folder)
+    if error is not None:
+        raise FailedRunError("out", f"{out} holds the checkpoint of a run that failed "
+                                    f"({error}); a failed run cannot be resumed (its failed "
+                                    "step would fail again): write to another folder, or "
+                                    f"remove {checkpoint.folder} to run it afresh there; "
+                                    "nothing in the folder was changed")
     raise StoppedRunError("out", f"{out} holds the checkpoint of a run stopped after load "
                                  f"step {step} of {planned}: continue it with `resume` (and "
                                  "the options it was started with), or remove "

@@ -17,9 +17,10 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
-from granular_material.runs.checkpoint_files import OPTIONS
+from granular_material.runs.checkpoint_files import OPTIONS, STATE
 
-__all__ = ["ended_summary", "interrupted_error", "resumable", "starting", "when_starting"]
+__all__ = ["ended_summary", "failed_error", "interrupted_error", "resumable", "starting",
+           "when_starting"]
 
 #: what is to be done when the run in hand starts writing (see :func:`when_starting`)
 _ON_START: contextvars.ContextVar[list[Callable[[], None]] | None] = contextvars.ContextVar(
@@ -73,3 +74,20 @@ def ended_summary(folder: Path) -> dict[str, Any] | None:
 def resumable(folder: Path) -> bool:
     """Whether ``folder`` holds the checkpoint of a run that ``resume`` continues."""
     return (Path(folder) / "checkpoint" / OPTIONS).is_file()
+
+
+def failed_error(folder: Path, checkpoint: Path) -> str | None:
+    """The error of the run in ``folder`` where it ended by failing (a load step that did not
+    converge: its ``summary.json`` says why) after it last saved its state in the checkpoint
+    folder ``checkpoint``; None where it finished, was stopped or killed part-way (its work
+    continues with ``resume``), or where the summary is older than that state (an earlier
+    run's, left by a run killed since). A failed run is not resumed: its failed step would
+    fail again."""
+    summary = ended_summary(folder)
+    if summary is None or not summary.get("error"):
+        return None
+    state = Path(checkpoint) / STATE
+    if state.is_file() and ((Path(folder) / "summary.json").stat().st_mtime_ns
+                            < state.stat().st_mtime_ns):
+        return None
+    return str(summary["error"])

@@ -178,7 +178,10 @@ class NewtonSpec:
             residual-displacement for a noisy material, force otherwise
             (:func:`~granular_material.fem.solver.defaults.default_settings`).
         stall_window, max_iterations, max_cutbacks, predictor, formulation,
-        secant_min_change: as :class:`~granular_material.fem.NewtonSettings`.
+        secant_min_change, continuation, arc_length_steps: as
+            :class:`~granular_material.fem.NewtonSettings` (``continuation = "arc-length"``
+            follows the path past limit points; see
+            :mod:`granular_material.fem.solver.continuation`).
     """
 
     rtol: float | None = None
@@ -194,6 +197,8 @@ class NewtonSpec:
     relaxation: str | None = None
     tangent_update: str | None = None
     secant_min_change: float = _newton_default("secant_min_change")
+    continuation: str = _newton_default("continuation")
+    arc_length_steps: float = _newton_default("arc_length_steps")
 
     def __post_init__(self) -> None:
         _typed(self)

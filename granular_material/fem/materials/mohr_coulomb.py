@@ -88,6 +88,10 @@ class MohrCoulomb(ScikitFemInterface):
     Newton matrix stays regular where a region of points reaches the apex; the stress, and so
     the converged answer, is the same. ``apex_tangent=0`` gives the exact tangent everywhere.
 
+    Strength reduction: :meth:`reduce_strength` (F) makes the later evaluations use
+    ``parameters.reduced(F)`` from the committed state; :attr:`strength_factor` is F (1.0
+    by default), kept by :meth:`checkpoint` and :meth:`restore`.
+
     Failures: a non-finite ∇u fails its point (``non_finite_input``), a local Newton that
     does not converge fails it (``failed``); a failed point answers its committed stress and
     the elastic tangent, never NaN. :meth:`commit` refuses an evaluation with failed points
@@ -127,6 +131,7 @@ class MohrCoulomb(ScikitFemInterface):
             old.get("young", young), old.get("poisson", poisson), friction_angle,
             dilation_angle, cohesion, critical_friction_angle, softening_strain)
         self._strength = self.parameters.strength()
+        self._factor = 1.0
         self.apex_tangent = number("apex_tangent", apex_tangent)
         if not self.apex_tangent >= 0:
             raise ParameterError("apex_tangent", "must be a fraction >= 0 of the elastic "
@@ -204,6 +209,27 @@ class MohrCoulomb(ScikitFemInterface):
     def friction_angle_now(self) -> np.ndarray:
         """Friction angle after softening at the committed γp [°], (n,)."""
         return np.degrees(self._strength.angles(self._gamma)[0])
+
+    # -- strength reduction ------------------------------------------------------------
+    @property
+    def strength_factor(self) -> float:
+        """The factor F [-] the strength is divided by (:meth:`reduce_strength`; 1.0: the
+        parameters' own strength)."""
+        return self._factor
+
+    def reduce_strength(self, factor: float) -> None:
+        """Make every later :meth:`evaluate` use the strength of
+        ``parameters.reduced(factor)`` (c/F, tan φ/F, tan φcs/F, tan ψ/F; F > 0, finite,
+        relative to :attr:`parameters`, not to the factor before). The committed stress and
+        plastic strain are kept, so the next :meth:`evaluate` starts from the committed
+        state and returns its trial onto the reduced surface; an evaluation not yet
+        committed is kept as it was made (a driver that sets the factor it converged at
+        commits it). :attr:`parameters` stay the unreduced ones; ``friction_angle_now`` and
+        the ``friction_angle`` field are the reduced angle. ParameterError naming ``factor``
+        for a factor that is not > 0 and finite."""
+        reduced = self.parameters.reduced(factor)
+        self._strength = reduced.strength()
+        self._factor = float(factor)
 
     # -- protocol --------------------------------------------------------------------
     def allocate(self, n_points: int) -> None:
@@ -318,14 +344,16 @@ class MohrCoulomb(ScikitFemInterface):
         self._track_revert()
 
     def checkpoint(self, path: str | Path) -> None:
-        """Write the committed state (stress, σzz, γp, yielding, total ∇u) and the
-        parameters to ``path`` (.npz), whole or not at all (a temporary file renamed)."""
+        """Write the committed state (stress, σzz, γp, yielding, total ∇u), the
+        parameters and the :attr:`strength_factor` to ``path`` (.npz), whole or not at all
+        (a temporary file renamed)."""
         p = asdict(self.parameters)
         p["critical_friction_angle"] = (np.nan if p["critical_friction_angle"] is None
                                         else p["critical_friction_angle"])
         arrays = {"material": np.array(_NAME), "stress": self._stress, "stress_zz": self._zz,
                   "gamma": self._gamma, "yielding": self._yielding,
-                  "grad_u": self.committed_grad_u, **{f"p_{k}": v for k, v in p.items()}}
+                  "grad_u": self.committed_grad_u, "strength_factor": np.array(self._factor),
+                  **{f"p_{k}": v for k, v in p.items()}}
 
         def write(tmp: Path) -> None:
             with open(tmp, "wb") as fh:
@@ -333,8 +361,10 @@ class MohrCoulomb(ScikitFemInterface):
         write_whole(path, write)
 
     def restore(self, path: str | Path) -> None:
-        """Read a :meth:`checkpoint`; ValueError for another material's checkpoint or other
-        parameters (the initial stress is not compared: the state holds the stress)."""
+        """Read a :meth:`checkpoint`, its strength factor included (1 for a checkpoint
+        written before strength reduction existed); ValueError for another material's
+        checkpoint or other parameters (the initial stress is not compared: the state holds
+        the stress)."""
         with checkpoint_archive(path, _NAME, ("material", "stress", "stress_zz", "gamma",
                                               "yielding", "grad_u")) as data:
             kw = {k[2:]: float(data[k]) for k in data.files if k.startswith("p_")}
@@ -353,6 +383,8 @@ class MohrCoulomb(ScikitFemInterface):
                      np.array(data["gamma"], dtype=np.float64),
                      np.array(data["yielding"], dtype=bool))
             grad = np.array(data["grad_u"], dtype=np.float64)
+            factor = (float(data["strength_factor"]) if "strength_factor" in data.files
+                      else 1.0)
         shapes = [(n, 2, 2), (n,), (n,), (n,)]
         if [a.shape for a in state] != shapes or grad.shape != (n, 2, 2) or not all(
                 np.isfinite(a).all() for a in (*state[:3], grad)):
@@ -360,7 +392,12 @@ class MohrCoulomb(ScikitFemInterface):
         if self.n_points and self.n_points != n:
             raise ValueError(f"{path} holds {n} points; this material is allocated for "
                              f"{self.n_points}")
+        try:
+            reduced = self.parameters.reduced(factor)
+        except ParameterError as exc:
+            raise ValueError(f"{path}: unreadable strength factor ({exc})") from None
         self._stress, self._zz, self._gamma, self._yielding = state
+        self._strength, self._factor = reduced.strength(), factor
         self._track_allocate(n)
         self._committed_grad = grad
         self._trial = None

@@ -5,7 +5,7 @@ degrees, stresses in Pa) and the material of a run specification
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 from granular_material.errors import ParameterError
@@ -36,10 +36,12 @@ class MohrCoulombParameters:
     Attributes:
         young: Young's modulus E [Pa], > 0.
         poisson: Poisson's ratio ν [-], in (−1, 0.5).
-        friction_angle: peak friction angle φ [°], in (0, 90).
+        friction_angle: peak friction angle φ [°], in [0, 90); 0 is Tresca (undrained
+            clay: strength c whatever the pressure), which needs c > 0.
         dilation_angle: peak dilation angle ψ [°], 0 ≤ ψ ≤ φ.
-        cohesion: c [Pa], ≥ 0.
-        critical_friction_angle: φcs [°], 0 < φcs ≤ φ, or None (no softening).
+        cohesion: c [Pa], ≥ 0; > 0 when φ = 0.
+        critical_friction_angle: φcs [°], 0 < φcs ≤ φ, or None (no softening; always None
+            when φ = 0).
         softening_strain: plastic shear strain γp [-] over which φ falls linearly to φcs and
             ψ to 0 (constant after); > 0 when φcs is given.
     """
@@ -60,20 +62,29 @@ class MohrCoulombParameters:
             raise ParameterError("young", f"must be a positive number of Pa, got {self.young!r}")
         if not -1.0 < self.poisson < 0.5:
             raise ParameterError("poisson", f"must lie in (-1, 0.5), got {self.poisson!r}")
-        if not 0 < self.friction_angle < 90:
-            raise ParameterError("friction_angle", "must lie in (0, 90) degrees, got "
+        if not 0 <= self.friction_angle < 90:
+            raise ParameterError("friction_angle", "must lie in [0, 90) degrees, got "
                                                    f"{self.friction_angle!r}")
         if not 0 <= self.dilation_angle <= self.friction_angle:
             raise ParameterError("dilation_angle", "must lie in [0, friction_angle] degrees, "
                                                    f"got {self.dilation_angle!r}")
         if self.cohesion < 0:
             raise ParameterError("cohesion", f"must be >= 0 Pa, got {self.cohesion!r}")
+        if self.friction_angle == 0 and self.cohesion <= 0:
+            raise ParameterError("cohesion", "must be > 0 Pa when friction_angle is 0 "
+                                             "(Tresca: the cohesion is all the strength, so "
+                                             "the material would carry no shear stress), got "
+                                             f"{self.cohesion!r}")
         if self.softening_strain < 0:
             raise ParameterError("softening_strain", "must be >= 0, got "
                                                      f"{self.softening_strain!r}")
         if self.critical_friction_angle is not None:
             phi_cs = number("critical_friction_angle", self.critical_friction_angle)
             object.__setattr__(self, "critical_friction_angle", phi_cs)
+            if self.friction_angle == 0:
+                raise ParameterError("critical_friction_angle", "must be left out when "
+                                     "friction_angle is 0 (Tresca: there is no friction to "
+                                     f"soften), got {phi_cs!r}")
             if not 0 < phi_cs <= self.friction_angle:
                 raise ParameterError("critical_friction_angle", "must lie in (0, "
                                      f"friction_angle] degrees, got {phi_cs!r}")
@@ -87,6 +98,29 @@ class MohrCoulombParameters:
         """Lamé constants (λ, μ) [Pa]."""
         e, nu = self.young, self.poisson
         return e * nu / ((1 + nu) * (1 - 2 * nu)), e / (2 * (1 + nu))
+
+    def reduced(self, factor: float) -> MohrCoulombParameters:
+        """These parameters with the strength divided by ``factor`` F (> 0, finite; the
+        strength reduction of a factor of safety): c/F, and each angle a (φ, φcs, ψ) turned
+        into atan(tan a / F), so that ψ_F ≤ φ_F; E, ν and the softening strain unchanged.
+        F = 1 gives these parameters themselves. ParameterError naming ``factor``
+        otherwise."""
+        factor = number("factor", factor)
+        if not factor > 0:
+            raise ParameterError("factor", "must be a strength reduction factor > 0, got "
+                                           f"{factor!r}")
+        if factor == 1.0:
+            return self
+
+        def angle(degrees: float) -> float:
+            return math.degrees(math.atan(math.tan(math.radians(degrees)) / factor))
+
+        phi = angle(self.friction_angle)
+        phi_cs = (None if self.critical_friction_angle is None
+                  else min(angle(self.critical_friction_angle), phi))
+        return replace(self, friction_angle=phi,
+                       dilation_angle=min(angle(self.dilation_angle), phi),
+                       cohesion=self.cohesion / factor, critical_friction_angle=phi_cs)
 
     def strength(self) -> Strength:
         """The constants of the return mapping (radians)."""

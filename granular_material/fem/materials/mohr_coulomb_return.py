@@ -12,7 +12,9 @@ directions; it lands on one of four regions (:data:`REGIONS`): the smooth face f
 σ1 = σ2 (planes 13 and 23, the "right" corner of de Souza Neto, Perić & Owen, Computational
 Methods for Plasticity, 2008, §8.2), the edge σ2 = σ3 (planes 13 and 12, the "left" corner)
 or the apex σ1 = σ2 = σ3 = c cot φ. With c = 0 the apex is the origin: the point is
-stress-free there and has no strength.
+stress-free there and has no strength. With φ = 0 (Tresca, f_ij = σ_i − σ_j − 2c) the
+surface is a prism along the hydrostatic axis with no apex: every return lands on the face or
+an edge (no division by sin φ or tan φ is made on the way).
 
 Hardening variable: the plastic shear strain γp, whose increment is 2 Σ Δγ^i over the
 active planes' multipliers (de Souza Neto et al., §8.2, take 2 cos φ Σ Δγ^i; the factor
@@ -246,7 +248,9 @@ def principal_return(trial: np.ndarray, gamma_n: np.ndarray, st: Strength,
 
     Regions are tried in turn: the face; where its result breaks σ1 ≥ σ2 ≥ σ3, the edge of
     the pair that crossed (σ2 > σ1: edge σ1 = σ2; else edge σ2 = σ3); where the edge's
-    multipliers turn negative or σ1 < σ3, the apex.
+    multipliers turn negative or σ1 < σ3, the apex. Tresca (φ = 0 throughout) has no apex:
+    there the edge's return is always admissible (its multipliers are ≥ 0 whenever the face's
+    return crossed that edge), so it is taken whatever rounding says.
     """
     trial = np.asarray(trial, dtype=np.float64)
     gamma_n = np.asarray(gamma_n, dtype=np.float64)
@@ -258,6 +262,7 @@ def principal_return(trial: np.ndarray, gamma_n: np.ndarray, st: Strength,
     scale = np.abs(trial).max(axis=1) + st.cohesion + 1e-300
     tol = 1e-12 * scale
     phi_n = st.angles(gamma_n)[0]
+    tresca = st.phi == 0 and (st.phi_cs == 0 or not st.softening)
     todo = np.flatnonzero(yield_function(trial, phi_n, st.cohesion) > tol)
     iterations = 0
 
@@ -284,10 +289,10 @@ def principal_return(trial: np.ndarray, gamma_n: np.ndarray, st: Strength,
             sol, theta, ok, its = _return_onto(trial[idx], gamma_n[idx], code, st,
                                                max_iterations)
             iterations += its
-            good = (ok & (sol.multipliers >= -1e-12 * np.abs(sol.multipliers).max(axis=1,
-                                                                                 keepdims=True)
-                          ).all(axis=1)
-                    & (sol.stress[:, 0] >= sol.stress[:, 2] - tol[idx]))
+            good = ok if tresca else (
+                ok & (sol.multipliers >= -1e-12 * np.abs(sol.multipliers).max(
+                    axis=1, keepdims=True)).all(axis=1)
+                & (sol.stress[:, 0] >= sol.stress[:, 2] - tol[idx]))
             accept(idx[good], _take(sol, good), theta[good], code)
             converged[idx[~ok]] = False
             apex.append(idx[~good & ok])

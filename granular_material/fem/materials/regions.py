@@ -52,6 +52,7 @@ from granular_material.fem.materials.checks import (
     check_grad,
     checkpoint_archive,
 )
+from granular_material.fem.materials.mohr_coulomb_parameters import number
 from granular_material.fem.materials.protocol import (
     FailureReason,
     Material,
@@ -280,6 +281,38 @@ class RegionalMaterial(ScikitFemInterface):
             material.revert()
         self._track_revert()
         self._last = None
+
+    # -- strength reduction ----------------------------------------------------------------
+    def _reducible(self) -> list[Material]:
+        return [m for m in self._materials.values()
+                if callable(getattr(m, "reduce_strength", None))]
+
+    @property
+    def strength_factor(self) -> float:
+        """The strength reduction factor F [-] of the regions whose material can be
+        reduced (the first such region's; :meth:`reduce_strength` sets them all alike), 1.0
+        when none can."""
+        reducible = self._reducible()
+        return float(getattr(reducible[0], "strength_factor", 1.0)) if reducible else 1.0
+
+    def reduce_strength(self, factor: float) -> None:
+        """Divide the strength of every region whose material offers ``reduce_strength``
+        (Mohr–Coulomb: c and tan φ) by ``factor`` F from the committed state; the other
+        regions (linear-elastic, DEM) keep theirs. ParameterError naming ``factor`` for a
+        factor that is not > 0 and finite, or when no region's material can be reduced
+        (nothing would change)."""
+        reducible = self._reducible()
+        if not reducible:
+            kinds = ", ".join(f"{name!r} ({type(m).__name__})"
+                              for name, m in self._materials.items())
+            raise ParameterError("factor", "no region's material can have its strength "
+                                           f"reduced: {kinds}")
+        factor = number("factor", factor)
+        if not factor > 0:
+            raise ParameterError("factor", "must be a strength reduction factor > 0, got "
+                                           f"{factor!r}")
+        for material in reducible:
+            material.reduce_strength(factor)  # type: ignore[attr-defined]
 
     def hold_tangent(self, hold: bool) -> None:
         """Pass ``hold`` to every region's material that offers ``hold_tangent`` (the

@@ -25,6 +25,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 
 import numpy as np
+from scipy.sparse.linalg import factorized
 from skfem import Basis, BilinearForm, condense, solve
 
 from granular_material.fem.boundary_value.loading import Loading
@@ -39,6 +40,13 @@ from granular_material.fem.regularisation import (
     second_gradient_modulus,
 )
 from granular_material.fem.solver.acceleration import AitkenRelaxation, SecantTangent
+from granular_material.fem.solver.continuation import (
+    ContinuationState,
+    LoadParameter,
+    Parameter,
+    arc_roots,
+    next_length,
+)
 from granular_material.fem.solver.convergence import (
     RULES,
     IterationState,
@@ -145,6 +153,10 @@ class NewtonSolver:
         self.extra = np.zeros(0)
         if self.regularisation.active:
             check_element(basis)  # linear elements are refused before any evaluation
+        # the arc-length continuation's path (fem.solver.continuation): its next length,
+        # peak and collapse; why its last run stopped ("completed", "collapse", "steps")
+        self.continuation = ContinuationState()
+        self.stopped_by = ""
 
     @property
     def second_gradient(self) -> SecondGradient | None:
@@ -240,7 +252,9 @@ class NewtonSolver:
         return CommittedState(self.u.copy(), self.load_factor, self._run_start, last,
                               list(self.records), self.response, self.f_int.copy(),
                               None if sg is None else self.extra.copy(),
-                              None if sg is None else sg.modulus)
+                              None if sg is None else sg.modulus,
+                              self.continuation.as_dict() if self.continuation.values
+                              else None)
 
     def resume(self, state: CommittedState) -> None:
         """Continue from ``state`` (from :meth:`committed_state`, perhaps of another process):
@@ -257,6 +271,8 @@ class NewtonSolver:
         self._last = state.last_increment
         self.records = list(state.records)
         self.response = state.response
+        self.continuation = (ContinuationState() if state.continuation is None
+                             else ContinuationState.from_dict(state.continuation))
         self._grad_committed = gauss_points_grad(self.basis, self.u)
         saved = state.second_gradient is not None
         if saved != self.regularisation.active:
@@ -286,8 +302,9 @@ class NewtonSolver:
         """Go on from the committed state under ``loading`` (the next phase of a staged run):
         the displacement, the material's state, the internal force and the step records are
         kept; the load factor starts again at 0, and the last increment is forgotten (the
-        extrapolating predictor starts afresh). ``settings``: the phase's (e.g. its force
-        tolerance; the formulation must stay the one the solver was made with).
+        extrapolating predictor and an arc-length path start afresh). ``settings``: the
+        phase's (e.g. its force tolerance; the formulation must stay the one the solver was
+        made with).
         ``restart`` False: a phase resumed part-way (:meth:`resume` has set its load factor
         and last increment), only the loading and settings are set."""
         if loading.force_start.shape != self.loading.force_start.shape:
@@ -303,6 +320,8 @@ class NewtonSolver:
             self.load_factor = 0.0
             self._run_start = 0.0
             self._last = None
+            self.continuation = ContinuationState()  # an arc-length path starts afresh
+            self.stopped_by = ""
 
     @property
     def reaction(self) -> np.ndarray:
@@ -434,6 +453,202 @@ class NewtonSolver:
             du = proposed
         raise AssertionError("unreachable: the rules end every increment")
 
+    def _inner(self, x: np.ndarray, y: np.ndarray) -> float:
+        """∫ x·y dV [m² · m] of two nodal displacement fields (their u rows)."""
+        self.l2_norm(x)  # the mass matrix, made once
+        n = self.basis.N
+        return float(x[:n] @ (self._mass_matrix @ y[:n]))
+
+    def _pad(self, f: np.ndarray) -> np.ndarray:
+        """``f`` (ndofs,) with zeros for a regularised run's v and λ rows."""
+        sg = self.second_gradient
+        return f if sg is None else np.concatenate([f, np.zeros(sg.n_extra)])
+
+    def _directional(self, K, parameter: Parameter, value: float, u: np.ndarray,
+                     stress: np.ndarray, factor: Callable[[np.ndarray], np.ndarray] | None = None,
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray,
+                                Callable[[np.ndarray], np.ndarray]]:
+        """(δu_t, the condensed load q, the interior dofs, the factorised condensed ``K``):
+        the displacement [m] of a unit change of the parameter from ``value`` at ``u`` under
+        the tangent ``K``; q [N/m] is the unbalanced force a unit change brings (its norm sets
+        an increment's R₀). ``factor``: ``K``'s condensed factorisation, if made already."""
+        D = self.loading.dirichlet_dofs
+        du_d, f_t = parameter.derivative(value, u, stress)
+        x = np.zeros(K.shape[0])
+        x[D] = du_d
+        A, b, x, interior = condense(K, self._pad(f_t), x=x, D=D)
+        if factor is None:
+            factor = factorized(A.tocsc())
+        x[interior] = factor(b)
+        return x, b, interior, factor
+
+    def _arc_increment(self, parameter: Parameter, start: float, length: float, most: float,
+                       end: float, times: PhaseTimes) -> tuple[_Attempt, float, float]:
+        """One arc-length increment from the committed state at parameter ``start``: its
+        length in displacement at most ``length`` [m], its change of the parameter at most
+        ``most``, never past ``end`` (an increment that would pass it goes to ``end`` with
+        the parameter held). Returns the attempt, the parameter's change and the length
+        used [m] (see :mod:`granular_material.fem.solver.continuation`)."""
+        s, D, kin = self.settings, self.loading.dirichlet_dofs, self.kinematics
+        grad_n = self._grad_committed
+        response = self.response
+        sg, n = self.second_gradient, self.basis.N
+        with times.phase("assembly"):
+            K = stiffness(self.basis, kin.assembled_tangent(response.tangent, response.stress,
+                                                            grad_n, grad_n),
+                          **self._assembly)
+            if sg is not None:
+                K = sg.augment(K)
+        with times.phase("linear_solve"):
+            du_t, q, interior, _ = self._directional(K, parameter, start, self.u,
+                                                     response.stress)
+        forces = interior if sg is None else interior[interior < n]
+        norm_t = self.l2_norm(du_t)
+        sign = 1.0
+        if self.continuation.values and self._last is not None:
+            sign = -1.0 if self._inner(self._last[1], du_t) < 0 else 1.0
+        change = most if norm_t == 0 else min(length / norm_t, most)
+        held = norm_t == 0  # the parameter moves nothing: it is held at its new value
+        if sign > 0 and start + change >= end - 1e-12 * max(abs(end), 1.0):
+            change, held = end - start, True
+        change *= sign
+        used = abs(change) * norm_t
+        du = change * du_t
+        # R₀: the force a load-controlled increment of this change would bring, or the
+        # committed state's own residual (accepted before) where that is smaller
+        r_n = float(np.linalg.norm((self.f_int - parameter.external(start, self.u)[1])
+                                   [forces]))
+        r0 = max(abs(change) * float(np.linalg.norm(q[interior < n])), r_n / s.rtol)
+        value = start + change
+        history: list[float] = []
+        corrections: list[float] = []
+        cost: dict[str, int | float] = {}
+        rules = RULES[s.convergence]
+        tangent_of = self._tangents()
+        for it in itertools.count(1):
+            parameter.apply(value)
+            grad_step = gauss_points_grad(self.basis, du[:n])
+            grad_u = kin.material_gradient(grad_n, grad_step)
+            with times.phase("material"):
+                response = self.material.evaluate(grad_u)
+            times.add_all(response.timings)
+            _add_costs(cost, response.costs)
+            if not response.ok:
+                counts = response.failure_counts()
+                why = ", ".join(f"{name}: {k}" for name, k in counts.items())
+                bad = response.failed_points()
+                return (_Attempt(Verdict(Outcome.FAILED, reason=f"material failed at points "
+                                         f"{bad[:8].tolist()} ({why})"), du, response, None,
+                                 history, [], it, cost, failures=counts), change, used)
+            grad_total = grad_n + grad_step
+            with times.phase("assembly"):
+                f_int = internal_force(self.basis, kin.assembled_stress(response.stress,
+                                                                        grad_total))
+                f_ext = parameter.external(value, self.u + du[:n])[1]
+                if sg is not None:
+                    f_int = self._with_second_gradient(f_int, self.u + du[:n],
+                                                       self.extra + du[n:])
+            residual = f_int - self._pad(f_ext)
+            r = float(np.linalg.norm(residual[forces]))
+            history.append(r / r0 if r0 > 0 else r)
+            state = IterationState(it, r0, r, tuple(history), tuple(corrections), used)
+            verdict = judge(rules.evaluated, state, s)
+            if verdict.outcome is not Outcome.GO_ON:
+                return (_Attempt(verdict, du, response, f_int[:n], history, corrections, it,
+                                 cost), change, used)
+            tangent = tangent_of(grad_u, response)
+            with times.phase("assembly"):
+                K = stiffness(self.basis, kin.assembled_tangent(tangent, response.stress,
+                                                                grad_n, grad_total),
+                              **self._assembly)
+                if sg is not None:
+                    K = sg.augment(K)
+                A, b, x, free = condense(K, -residual, D=D)
+            with times.phase("linear_solve"):  # one factorisation for both right-hand sides
+                factor = factorized(A.tocsc())
+                du_r = x
+                du_r[free] = factor(b)
+                if held:
+                    du_t = np.zeros_like(du_r)
+                else:
+                    du_t = self._directional(K, parameter, value, self.u + du[:n],
+                                             response.stress, factor)[0]
+            step_change = 0.0
+            if not held:  # the root of ‖Δu + δu_r + δλ δu_t‖ = Δl nearest the path so far
+                base = du + du_r
+                roots = arc_roots(self._inner(du_t, du_t), 2 * self._inner(du_t, base),
+                                  self._inner(base, base) - used * used)
+                if not roots:
+                    return (_Attempt(Verdict(Outcome.FAILED, reason="the arc misses the "
+                                             "linearised path (no real root)"), du, response,
+                                     f_int[:n], history, corrections, it, cost), change, used)
+                step_change = max(roots, key=lambda d: self._inner(base + d * du_t, du))
+            proposed = du + du_r + step_change * du_t
+            step_norm = self.l2_norm(proposed)
+            moved = self.l2_norm(proposed - du)
+            corrections.append(moved / step_norm if step_norm > 0 else 0.0)
+            state = replace(state, corrections=tuple(corrections), step_norm=step_norm)
+            verdict = judge(rules.corrected, state, s)
+            if verdict.outcome is not Outcome.GO_ON:
+                return (_Attempt(verdict, du, response, f_int[:n], history, corrections, it,
+                                 cost), change, used)
+            du, change, value = proposed, change + step_change, value + step_change
+        raise AssertionError("unreachable: the rules end every increment")
+
+    def arc_step(self, parameter: Parameter, start: float, step: int, most: float,
+                 end: float = 1.0) -> tuple[StepRecord, float]:
+        """One arc-length step from the committed state at parameter ``start``: the
+        record (its ``load_factor`` the parameter reached) and the parameter's new value.
+        Its change is at most ``most`` and stops at ``end``; a failed increment is retried
+        at half the length, down to 2**-max_cutbacks of the first try, then
+        :class:`NewtonError` (the committed state is kept)."""
+        t0 = time.perf_counter()
+        record = StepRecord(step=step, load_factor=start)
+        times = PhaseTimes()
+        path = self.continuation
+        length = math.inf if path.length is None else path.length
+        while True:
+            attempt, change, used = self._arc_increment(parameter, start, length, most, end,
+                                                        times)
+            record.iterations += attempt.iterations
+            _add_costs(record.costs, attempt.cost)
+            _add_costs(record.failures, attempt.failures)  # type: ignore[arg-type]
+            record.residual_history.append(attempt.history)
+            record.correction_history.append(attempt.corrections)
+            if attempt.verdict.accepted:
+                break
+            self.material.revert()
+            record.cutbacks += 1
+            if record.cutbacks > self.settings.max_cutbacks or (used == 0 and change == 0):
+                record.wall_time = time.perf_counter() - t0
+                record.timings = times.as_dict()
+                raise NewtonError(
+                    f"arc-length step {step} (from {parameter.name} {start:.6g}) did not "
+                    f"converge ({attempt.verdict.reason}) even with its length halved "
+                    f"{self.settings.max_cutbacks} times; the state committed at "
+                    f"{parameter.name} {start:.6g} is kept", [*self.records, record])
+            length, most = used / 2, abs(change) / 2
+        record.converged_by.append(attempt.verdict.by)
+        record.stalled += int(attempt.verdict.stalled)
+        parameter.apply(start + change)
+        self.material.commit()
+        self.u = self.u + attempt.du[:self.basis.N]
+        if self._second_gradient is not None:
+            self.extra = self.extra + attempt.du[self.basis.N:]
+        self._grad_committed = gauss_points_grad(self.basis, self.u)
+        self.response, self.f_int = attempt.response, attempt.f_int
+        self._last = (change, attempt.du)
+        if used > 0:
+            if path.largest is None:
+                path.largest = 10.0 * used
+            path.length = next_length(used, attempt.iterations, path.largest)
+        record.load_factor = start + change
+        path.commit(step, record.load_factor, change, used)
+        record.wall_time = time.perf_counter() - t0
+        record.timings = times.as_dict()
+        self.records.append(record)
+        return record, start + change
+
     def step(self, target: float, step: int) -> StepRecord:
         """Advance the committed state to load factor ``target``, cutting back as needed.
 
@@ -501,6 +716,8 @@ class NewtonSolver:
         """
         if n_steps < 1:
             raise ValueError(f"n_steps must be >= 1, got {n_steps}")
+        if self.settings.continuation == "arc-length":
+            return self._run_arc(n_steps, on_step, progress, description, done)
         if not 0 <= done <= n_steps:
             raise ValueError(f"done must lie in [0, {n_steps}], got {done}")
         if done == 0:
@@ -518,4 +735,49 @@ class NewtonSolver:
                 bar.set_postfix({"it": record.iterations, "cut": record.cutbacks,
                                  "res": f"{last:.2g}", **record.costs})
                 bar.update()
+        return self.records
+
+    def arc_length_budget(self, n_steps: int) -> int:
+        """The most steps an arc-length run of ``n_steps`` nominal steps takes."""
+        return math.ceil(self.settings.arc_length_steps * n_steps)
+
+    def _run_arc(self, n_steps: int, on_step: Callable[[NewtonSolver, StepRecord], None] | None,
+                 progress: bool, description: str, done: int) -> list[StepRecord]:
+        """:meth:`run` by arc length: steps of the load factor at most (1 − start)/n_steps
+        each, until it reaches 1, the path collapses (see
+        :class:`~granular_material.fem.solver.continuation.ContinuationState`) or
+        :meth:`arc_length_budget` steps are spent; ``stopped_by`` says which."""
+        budget = self.arc_length_budget(n_steps)
+        if not 0 <= done <= budget:
+            raise ValueError(f"done must lie in [0, {budget}], got {done}")
+        if done == 0:
+            self._run_start = self.load_factor
+        most = (1.0 - self._run_start) / n_steps
+        parameter = LoadParameter(self.loading.at, self.kinematics.finite)
+        first = len(self.records) + 1 - done
+        self.stopped_by = ""
+        with progress_bar(n_steps, description, progress) as bar:
+            shown = min(round((self.load_factor - self._run_start) / most), n_steps)
+            bar.update(max(shown, 0))
+            for k in range(done, budget):
+                if self.load_factor >= 1.0 - 1e-12:
+                    self.stopped_by = "completed"
+                    break
+                if self.continuation.collapse is not None:
+                    self.stopped_by = "collapse"
+                    break
+                record, self.load_factor = self.arc_step(parameter, self.load_factor,
+                                                         first + k, most)
+                if on_step is not None:
+                    on_step(self, record)
+                now = max(min(round((self.load_factor - self._run_start) / most),
+                              n_steps), 0)
+                bar.set_postfix({"λ": f"{self.load_factor:.4g}", "it": record.iterations,
+                                 "cut": record.cutbacks, **record.costs})
+                bar.update(now - shown)
+                shown = now
+            else:
+                self.stopped_by = ("completed" if self.load_factor >= 1.0 - 1e-12 else
+                                   "collapse" if self.continuation.collapse is not None
+                                   else "steps")
         return self.records

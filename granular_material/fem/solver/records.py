@@ -88,6 +88,9 @@ class CommittedState:
             (:mod:`granular_material.fem.regularisation`): its unknowns v [-] and λ [Pa] of
             the committed state, shape (extra,); None for a run without it.
         second_gradient_modulus: its modulus D [N] (None without it).
+        continuation: an arc-length run's path so far
+            (:meth:`~granular_material.fem.solver.continuation.ContinuationState.as_dict`);
+            None for a run stepped by load.
     """
 
     u: np.ndarray
@@ -99,6 +102,7 @@ class CommittedState:
     f_int: np.ndarray | None = None
     second_gradient: np.ndarray | None = None
     second_gradient_modulus: float | None = None
+    continuation: dict[str, object] | None = None
 
 
 class NewtonError(RuntimeError):

@@ -9,6 +9,7 @@ from dataclasses import dataclass
 
 from granular_material.errors import ParameterError
 from granular_material.fem.kinematics import FORMULATIONS
+from granular_material.fem.solver.continuation import CONTINUATIONS
 
 __all__ = [
     "CONVERGENCE_TESTS",
@@ -98,6 +99,13 @@ class NewtonSettings:
             DEM stress noise of its RVEs does not fall when the increment is halved (it
             shrinks R₀, not the noise). Counted in ``StepRecord.stalled``, converged_by
             "correction".
+        continuation: "load" (each step prescribes the load factor: today's stepping) or
+            "arc-length" (each step prescribes the length of its increment and the load
+            factor follows, past limit points and snap-backs; see
+            :mod:`granular_material.fem.solver.continuation`).
+        arc_length_steps: the most arc-length steps of a run, as a multiple of its
+            nominal steps (its path may be longer than the load's range: back and forth
+            through a snap-back, or on along a collapse).
     """
 
     rtol: float = 0.005
@@ -116,6 +124,8 @@ class NewtonSettings:
     formulation: str = "small-strain"
     geometric_stiffness: bool = True
     accept_correction: float = 0.0
+    continuation: str = "load"
+    arc_length_steps: float = 5.0
 
     def __post_init__(self) -> None:
         if self.formulation not in FORMULATIONS:
@@ -124,7 +134,11 @@ class NewtonSettings:
         if not (0 <= self.accept_correction < 1):
             raise ParameterError("accept_correction", "must be 0 (off) or lie in (0, 1), "
                                                       f"got {self.accept_correction!r}")
+        if not (self.arc_length_steps >= 1 and math.isfinite(self.arc_length_steps)):
+            raise ParameterError("arc_length_steps", "must be a finite number >= 1, got "
+                                                     f"{self.arc_length_steps!r}")
         for name, choices in (("convergence", CONVERGENCE_TESTS), ("predictor", PREDICTORS),
+                              ("continuation", CONTINUATIONS),
                               ("relaxation", RELAXATIONS), ("tangent_update", TANGENT_UPDATES)):
             if getattr(self, name) not in choices:
                 raise ParameterError(name, f"must be one of {', '.join(choices)}, got "

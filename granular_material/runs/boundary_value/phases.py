@@ -322,10 +322,10 @@ def phases_summary(b: Built, solver: NewtonSolver, steps: pd.DataFrame, error: s
 
 
 def phased_figure(b: Built, steps: pd.DataFrame, bodies: list[tuple[str, str, float]],
-                   out: Path) -> None:
+                  out: Path, size: float = 0.0) -> None:
     """load_displacement.png of a phased run: every moved body's mean pressure (force over
     its length) and every pressure's value against the displacement along them, each phase
-    a line."""
+    a line (``size``: the domain's larger extent [m], for the unit of length)."""
     frame = steps.copy()
     curves = []
     for name, axis, width in bodies:
@@ -337,4 +337,5 @@ def phased_figure(b: Built, steps: pd.DataFrame, bodies: list[tuple[str, str, fl
                if name not in b.moved]
     if curves:
         plot_phased_load_displacement(frame, curves, out / "load_displacement.png",
-                                      resets={plan.name for plan in b.plans if plan.reset})
+                                      resets={plan.name for plan in b.plans if plan.reset},
+                                      size=size)

@@ -32,6 +32,7 @@ import pandas as pd
 from granular_material.runs.boundary_value.spec import BoundaryValueSpec
 from granular_material.runs.checkpoint import CheckpointError, RunCheckpoint, SavedRun
 from granular_material.runs.checkpoint_files import file_sha256
+from granular_material.runs.run_folder import failed_error
 from granular_material.runs.spec import SpecError
 
 __all__ = ["RESUME_FREE", "check_not_stopped", "open_bvp_checkpoint", "remember", "run_files",
@@ -109,10 +110,18 @@ def _checkpoint(out: Path) -> RunCheckpoint:
 
 def check_not_stopped(spec: BoundaryValueSpec, out: Path) -> None:
     """:class:`SpecError` on ``out`` when it holds the checkpoint of a stopped run (a fresh
-    run there would throw it away)."""
+    run there would throw it away): continue it with ``resume``; or of a run that failed,
+    which cannot be resumed: another folder, or its checkpoint deleted."""
     checkpoint = _checkpoint(out)
     if checkpoint.has_state():
         step = checkpoint.saved_step()
+        error = failed_error(out, checkpoint.folder)
+        if error is not None:
+            raise SpecError("out", f"{out} holds a boundary-value run that failed "
+                                   f"({error}); a failed run cannot be resumed (its failed "
+                                   "step would fail again): write to another folder, or "
+                                   f"delete its checkpoint folder ({checkpoint.folder}) to "
+                                   "run it afresh there")
         raise SpecError("out", f"{out} holds a boundary-value run stopped after load step "
                                f"{step} of {spec.steps} (its checkpoint): continue it with "
                                "`resume`, or write to another folder (delete its checkpoint "

@@ -11,7 +11,9 @@ The run folder gets:
   ``{name}_force_y`` [N/m] (the reaction of the supports on the body, or the load a pressure
   puts on it) and its mean displacement ``{name}_displacement_x``, ``_y`` [m]; a rigid body
   also ``{name}_displacement`` [m] along its motion (a footing pushed down: its settlement,
-  also as ``{name}_settlement``);
+  also as ``{name}_settlement``); then the mean displacement ``{name}_displacement_x``,
+  ``_y`` [m] of every other named boundary (each name of ``[boundaries]``, and every
+  boundary group of a mesh file: a crest, a slope face);
 - ``points.csv``: every Gauss point at every step (coordinates, stress [Pa], strain, shear
   strain, mean pressure, the material's own fields such as the void ratio; with materials by
   region, the point's ``region`` and NaN in a field its region's material does not report),
@@ -47,6 +49,7 @@ from granular_material.fem.boundary_value.conditions import (
     Roller,
     build_problem,
 )
+from granular_material.fem.boundary_value.ground import ground_stress, lift_to_floor, overburden
 from granular_material.fem.boundary_value.initial_stress import geostatic_stress
 from granular_material.fem.boundary_value.meshes import MeshData, read_mesh, rectangle_mesh
 from granular_material.fem.forms import gauss_points_grad
@@ -164,14 +167,99 @@ def _condition(c: ConditionSpec) -> Any:
     return Pressure(c.boundary, c.value, c.end)
 
 
-def _initial_stress(spec: BoundaryValueSpec, xy: np.ndarray, unit_weight: float,
-                    top: float) -> np.ndarray:
-    """The initial Cauchy stress [Pa] (n, 2, 2), tension positive."""
+def _initial_stress(spec: BoundaryValueSpec, problem: Any, f0: float,
+                    ) -> tuple[np.ndarray, dict[str, Any]]:
+    """The initial Cauchy stress [Pa] (n, 2, 2), tension positive, in equilibrium with
+    step 0's weight (``f0`` times each region's), and what the summary says of it: a
+    geostatic start's column and correction
+    (:func:`~granular_material.fem.boundary_value.ground.ground_stress`) and its floor."""
     s = spec.initial
+    xy = problem.points
     if s.state == "uniform":
-        return np.broadcast_to(-s.pressure * np.eye(2), (xy.shape[0], 2, 2)).copy()
-    surface = top if s.surface is None else s.surface
-    return geostatic_stress(xy, surface, unit_weight, s.surcharge, s.k0)
+        return np.broadcast_to(-s.pressure * np.eye(2), (xy.shape[0], 2, 2)).copy(), {}
+    mesh = problem.mesh_data
+    nqp = xy.shape[0] // mesh.n_elements
+    gamma, k0, floor, floors = _ground_of_regions(spec, mesh, nqp, f0)
+    info: dict[str, Any] = {}
+    if s.surface is not None:  # a level surface at the given height (as before regions)
+        if np.ptp(gamma) > 0 or np.ptp(k0) > 0:
+            raise SpecError("initial.surface", "sets one level surface for one unit weight "
+                                               "and one K0; the regions differ (leave it out: "
+                                               "each point's overburden is then found from "
+                                               "the mesh)")
+        sigma = geostatic_stress(xy, s.surface, float(gamma[0]), s.surcharge, float(k0[0]))
+        info["surface"] = s.surface
+    else:
+        try:
+            ground = ground_stress(problem, gamma, k0, s.surcharge)
+        except ParameterError as exc:
+            raise SpecError("initial.state", f"a geostatic start: {exc.message}") from None
+        sigma = ground.stress
+        info.update(level=ground.level, column_residual=ground.residual_column,
+                    corrected_residual=ground.residual, correction=ground.correction)
+    lifted = np.zeros(0, dtype=np.int64)
+    if np.isfinite(floor).any():  # a continuum's points without a floor are left alone
+        sigma, lifted = lift_to_floor(sigma, floor)
+    info.update(minimum_pressure=floors, lifted_points=int(lifted.size))
+    return sigma, info
+
+
+def _ground_of_regions(spec: BoundaryValueSpec, mesh: MeshData, nqp: int, f0: float,
+                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray, Any]:
+    """γ at step 0 [N/m³] of every element, K0 [-] and the floor [Pa] of every Gauss point,
+    and the floor as the summary gives it (one number, or one per region; None, and −inf
+    per point, where there is none: a continuum's points may start at zero stress or in
+    tension). SpecError for an
+    ``initial.minimum_pressure`` below what a DEM region's RVEs are prepared at."""
+    s = spec.initial
+    n = mesh.n_elements * nqp
+    if spec.materials is None:
+        gamma = np.full(mesh.n_elements, f0 * unit_weight_of(spec))
+        lowest = _lowest_pressure(spec.material, "material")
+        floor = _floor(s.minimum_pressure, lowest, None)
+        return gamma, np.full(n, s.k0), np.full(n, -np.inf if floor is None else floor), floor
+    weights = region_unit_weights(spec)
+    elements = region_elements(spec, mesh)
+    gamma = np.zeros(mesh.n_elements)
+    k0 = np.zeros(mesh.n_elements)
+    floor = np.zeros(mesh.n_elements)
+    floors = {}
+    for m in spec.materials:
+        index = elements[m.region]
+        gamma[index] = f0 * weights[m.region]
+        k0[index] = s.k0 if m.k0 is None else m.k0
+        floors[m.region] = _floor(s.minimum_pressure, _lowest_pressure(m.material,
+                                                                        "materials.name"),
+                                  m.region)
+        floor[index] = -np.inf if floors[m.region] is None else floors[m.region]
+    return gamma, np.repeat(k0, nqp), np.repeat(floor, nqp), floors
+
+
+def _lowest_pressure(material: Any, field_: str) -> float | None:
+    """The lowest stress [Pa] the material's points can start at (its class's
+    ``lowest_pressure`` hook: DEM RVEs), None for a material without one (a continuum)."""
+    hook = getattr(material.cls, "lowest_pressure", None)
+    if hook is None:
+        return None
+    try:
+        return float(hook(material.parameters))
+    except ParameterError as exc:
+        raise SpecError(f"{field_}.{exc.field}", exc.message) from None
+
+
+def _floor(given: float | None, lowest: float | None, region: str | None) -> float | None:
+    """The floor [Pa] of a material's points: ``initial.minimum_pressure`` where given (not
+    below ``lowest``, the RVEs'), else the RVEs' lowest, else None (none)."""
+    if given is None:
+        return lowest
+    if lowest is not None and given < lowest:
+        where = "" if region is None else f" of region {region!r}"
+        raise SpecError("initial.minimum_pressure", f"{given:g} Pa is below the lowest "
+                                                    f"stress the RVEs{where} are prepared at, "
+                                                    f"{lowest:.4g} Pa (a packing of discs "
+                                                    "carries stress only while confined); "
+                                                    f"give at least that, or leave it out")
+    return float(given)
 
 
 @dataclass
@@ -187,6 +275,8 @@ class Built:
     settings: Any
     moved: dict[str, np.ndarray]  # rigid body / displacement name -> unit direction
     preparation_s: float = 0.0  # seconds to build and allocate the material
+    initial: dict[str, Any] = field(default_factory=dict)  # how the initial state was made
+    hint: str = ""  # the fix a start out of equilibrium would need
     # a phased run (:mod:`~granular_material.runs.boundary_value.phases`): its phases, the
     # one stepping, and the displacement [m] its reported ones are measured from
     plans: list[PhasePlan] = field(default_factory=list)
@@ -226,16 +316,36 @@ def build(spec: BoundaryValueSpec, allocate: bool = True) -> Built:
     mesh = _mesh(spec)
     check_memory(spec, mesh.n_elements, mesh.element)
     problem, unit_weight, start = _problem(spec, mesh)
+    f0 = (spec.gravity_factor or (1.0, 1.0))[0]
     xy = problem.points
-    top = mesh.bounding_box[3]
-    sigma0 = _initial_stress(spec, xy, start, top)  # in equilibrium with step 0's weight
+    sigma0, initial = _initial_stress(spec, problem, f0)  # with step 0's weight
     t0 = time.perf_counter()
-    material = material_for_problem(phased, xy.shape[0], sigma0, allocate, mesh)
+    try:
+        material = material_for_problem(phased, xy.shape[0], sigma0, allocate, mesh)
+    except ParameterError as exc:  # a continuum that refuses its point's stress
+        if spec.initial.state != "geostatic" or exc.field != "initial_stress" \
+                or initial.get("level", True):
+            raise
+        raise SpecError("initial.state", f"a geostatic start: the material's initial stress "
+                                         f"{exc.message}. Under a slope the start is an "
+                                         "elastic state brought into equilibrium, which "
+                                         "exceeds the strength where the slope is near its "
+                                         "limit: start stress-free (initial.state = "
+                                         "\"uniform\", pressure = 0) with gravity ramped on "
+                                         "([gravity] factor = [0.0, 1.0]), so that the "
+                                         "material finds its own state") from None
+    except RuntimeError as exc:  # RVEs that did not reach their points' stresses
+        if spec.initial.state != "geostatic" or "did not reach" not in str(exc):
+            raise
+        raise RuntimeError(f"{exc}. Near a free face the geostatic start may ask more of an "
+                           "RVE than its friction holds: initial.minimum_pressure [Pa] lifts "
+                           "every point below it by an isotropic pressure, which lowers its "
+                           "stress ratio") from exc
     preparation = time.perf_counter() - t0
     noisy = bool(getattr(material, "noisy", False))
     settings = _settings(spec, problem, noisy)
     b = Built(spec, mesh, problem, sigma0, unit_weight, material, settings, _moved(spec),
-              preparation)
+              preparation, initial, _equilibrium_hint(spec, problem, start, initial))
     if phased.phases:
         b.plans = _plans(phased, b, noisy)
         for plan in reversed(b.plans):  # a body moved in any phase, along its first motion
@@ -247,7 +357,7 @@ def build(spec: BoundaryValueSpec, allocate: bool = True) -> Built:
 
 def _problem(spec: BoundaryValueSpec, mesh: MeshData) -> tuple[Any, float | None, float]:
     """The problem of ``spec``'s conditions and gravity on ``mesh``; the unit weight [N/m³]
-    (None: the regions' differ) and γ at step 0 for the initial state."""
+    (None: the regions' differ) and γ at step 0."""
     conditions = [_condition(c) for c in spec.conditions]
     f0, f1 = spec.gravity_factor or (1.0, 1.0)
     if spec.materials is None:
@@ -305,11 +415,56 @@ def _plans(spec: BoundaryValueSpec, b: Built, noisy: bool) -> list[PhasePlan]:
     return plans
 
 
+def _equilibrium_hint(spec: BoundaryValueSpec, problem: Any, start: float,
+                      initial: dict[str, Any]) -> str:
+    """The fix that fits a start out of equilibrium with its loads (what the
+    :class:`OutOfEquilibriumWarning` names)."""
+    s = spec.initial
+    if s.state == "uniform":
+        weighed = start > 0 or any(
+            g.unit_weight > 0 for g in problem.conditions if isinstance(g, Gravity))
+        if weighed:
+            return ("Gravity acts in full from step 0 on this uniform start: ramp it on with "
+                    "[gravity] factor = [0.0, 1.0], or start geostatic (initial.state = "
+                    "\"geostatic\": each point at the weight of the ground above it, under a "
+                    "slope or layers too)")
+        return ("The uniform pressure is not what the boundaries carry at step 0: give "
+                "each boundary that is not held a pressure of initial.pressure at step 0 (an "
+                "end value then ramps it), or start stress-free (initial.pressure = 0, a "
+                "continuum material) with the loads ramped from zero")
+    if initial.get("lifted_points"):
+        lifted = (f"{initial['lifted_points']} points were lifted to "
+                  "initial.minimum_pressure, above the weight of the ground over them: "
+                  "lower it if the lift is what unbalances the start. ")
+    else:
+        lifted = ""
+    if s.surface is not None:
+        try:
+            tops = overburden(problem.mesh_data.mesh, problem.points, 0.0).surface
+        except ParameterError:
+            tops = np.array([s.surface])
+        if np.ptp(tops) > 1e-9 * max(1.0, abs(s.surface)):
+            return (f"{lifted}The scene's initial.surface sets a level surface at y = "
+                    f"{s.surface:g} m, "
+                    f"but the ground's surface is not level (from {tops.min():.4g} to "
+                    f"{tops.max():.4g} m): leave initial.surface out, so that each point's "
+                    "overburden is found from the mesh and the start is brought into "
+                    "equilibrium")
+    if initial.get("level") is False:  # corrected into equilibrium: the rest is the material's
+        return (f"{lifted}The geostatic state was in equilibrium with the loads to "
+                f"{initial['corrected_residual']:.1g} of them; what remains is how near the "
+                "material starts to it (an RVE meets its target stress within about 1 %)")
+    return (f"{lifted}The geostatic state does not match the loads at step 0: make "
+            "initial.surcharge the pressure on the ground surface and the sides rollers (a "
+            "pressure on a side must be K0 times σv); [gravity]'s unit weight at step 0 is "
+            "the weight the start carries")
+
+
 def _region_gravity(spec: BoundaryValueSpec, mesh: MeshData, conditions: list[Any],
                     f0: float, f1: float) -> tuple[float | None, float]:
     """Each region's own gravity appended to ``conditions`` (factors ``f0``, ``f1``); the
-    regions' one unit weight [N/m³] (None where they differ) and γ at step 0 for the initial
-    state. SpecError for a geostatic start under regions of different weights."""
+    regions' one unit weight [N/m³] (None where they differ) and γ at step 0 (the largest
+    region's, where they differ)."""
     weights = region_unit_weights(spec)
     elements = region_elements(spec, mesh)
     for region, weight in weights.items():
@@ -317,13 +472,7 @@ def _region_gravity(spec: BoundaryValueSpec, mesh: MeshData, conditions: list[An
             conditions.append(Gravity(f0 * weight, end=f1 * weight, elements=elements[region]))
     values = set(weights.values())
     common = values.pop() if len(values) == 1 else None
-    if common is None and spec.initial.state == "geostatic":
-        raise SpecError("initial.state", "a geostatic start takes one unit weight; the "
-                                         "regions have "
-                                         + ", ".join(f"{r} {w:g}" for r, w in weights.items())
-                                         + " N/m³ (give them one unit_weight, or start "
-                                           "uniform)")
-    return common, f0 * (common or 0.0)
+    return common, f0 * (common if common is not None else max(weights.values()))
 
 
 def _rows(b: Built, solver: NewtonSolver, record: StepRecord | None, p0: np.ndarray,
@@ -363,6 +512,9 @@ def _rows(b: Built, solver: NewtonSolver, record: StepRecord | None, p0: np.ndar
             row[f"{name}_displacement"] = along
             if b.moved[name][1] < -0.5:
                 row[f"{name}_settlement"] = along
+    for name in _free_boundaries(b):
+        ux, uy = problem.boundary_displacement(name, u)
+        row.update({f"{name}_displacement_x": ux, f"{name}_displacement_y": uy})
     xy = problem.points
     nqp = problem.basis.X.shape[-1]
     fields = {k: np.asarray(v, dtype=float) for k, v in solver.response.fields.items()}
@@ -381,6 +533,15 @@ def _rows(b: Built, solver: NewtonSolver, record: StepRecord | None, p0: np.ndar
     if isinstance(b.material, RegionalMaterial):
         points.insert(5, "region", b.material.regions.astype(str))
     return row, points
+
+
+def _free_boundaries(b: Built) -> list[str]:
+    """The named boundaries that carry no condition, sorted: every [boundaries] name, and
+    with a mesh file every physical group of its boundary facets (a generated mesh's sides
+    only where a condition or a name uses them)."""
+    conditioned = {name for name, _ in b.reported_boundaries()}
+    named = set(b.mesh.boundaries) if b.spec.mesh.file is not None else set(b.spec.boundaries)
+    return sorted(n for n in named - conditioned if n in b.problem.boundaries)
 
 
 def _where(points: pd.DataFrame, column: str) -> str:
@@ -457,7 +618,8 @@ def run_boundary_value(spec: BoundaryValueSpec, out: Path | None = None,
     t_initial = time.perf_counter()
     if saved is None:
         collect(solver, None)
-        initial_residual = remember(checkpoint, "initial_residual", _initial_residual(solver))
+        initial_residual = remember(checkpoint, "initial_residual",
+                                    _initial_residual(solver, b.hint))
     else:
         for step in saved.steps:
             keep(step.row, step.points, step.u)
@@ -498,6 +660,8 @@ def run_boundary_value(spec: BoundaryValueSpec, out: Path | None = None,
     regularisation = solver.regularisation_summary()
     if regularisation is not None:
         summary["regularisation"] = regularisation
+    if b.settings.continuation == "arc-length":
+        summary["continuation"] = _continuation_summary(spec, solver, error)
     if checkpoint is not None and error is None:
         checkpoint.remove()  # finished: nothing to resume
     if out is not None:
@@ -506,6 +670,26 @@ def run_boundary_value(spec: BoundaryValueSpec, out: Path | None = None,
         write_json(summary, out / "summary.json")
     return BVPOutcome(steps, summary, error, last.get("points", pd.DataFrame()),
                       last.get("u", np.zeros(0)), interrupt)
+
+
+def _continuation_summary(spec: BoundaryValueSpec, solver: NewtonSolver,
+                          error: str | None) -> dict[str, Any]:
+    """An arc-length run's path: why it stopped, its peak load factor (and step), the
+    collapse it found (None: none) and, with a gravity factor, the gravity factor at the
+    peak (the gravity-increase factor where the run collapsed)."""
+    path = solver.continuation
+    stopped = "failed" if error is not None else (solver.stopped_by or "stopped")
+    peak = path.peak if path.values else solver.load_factor
+    out: dict[str, Any] = {
+        "model": "arc-length", "stopped_by": stopped, "peak_load_factor": peak,
+        "peak_step": path.peak_step, "collapse": path.collapse}
+    if spec.gravity_factor is not None:
+        f0, f1 = spec.gravity_factor
+        at = path.collapse["value"] if path.collapse is not None else peak
+        out["gravity_factor_at_peak"] = f0 + (f1 - f0) * at
+        out["gravity_factor_at_collapse"] = (None if path.collapse is None
+                                             else f0 + (f1 - f0) * path.collapse["value"])
+    return out
 
 
 class OutOfEquilibriumWarning(UserWarning):
@@ -519,12 +703,12 @@ class OutOfEquilibriumWarning(UserWarning):
 OUT_OF_EQUILIBRIUM = 0.01
 
 
-def _initial_residual(solver: NewtonSolver) -> dict[str, float]:
+def _initial_residual(solver: NewtonSolver, fix: str = "") -> dict[str, float]:
     """‖R‖ [N/m] of the initial state at λ = 0 over the free dofs, against ‖f_ext‖ there (the
     load; where none acts on the free dofs, ‖f_int‖ over all dofs, the forces the initial
     stress puts on the supports): zero when the initial stress is in equilibrium with the
     loads (a geostatic start). One out of equilibrium (:data:`OUT_OF_EQUILIBRIUM`) is said
-    with an :class:`OutOfEquilibriumWarning`."""
+    with an :class:`OutOfEquilibriumWarning` naming ``fix``, the fix that fits the run."""
     _, f_ext = solver.loading.at(0.0, solver.u if solver.kinematics.finite else None)
     residual = solver.f_int - f_ext
     free = np.ones(residual.size, dtype=bool)
@@ -540,8 +724,10 @@ def _initial_residual(solver: NewtonSolver) -> dict[str, float]:
         warnings.warn(f"the initial state is not in equilibrium with the loads at step 0: its "
                       f"residual is {norm:.3g} N/m, {relative:.3g} times {against}; the first "
                       "load step brings it to equilibrium as well as applying its increment, "
-                      "so its response holds both (a geostatic start with the scene's unit "
-                      "weight starts in equilibrium)", OutOfEquilibriumWarning, stacklevel=3)
+                      "so its response holds both. "
+                      + (fix or "A geostatic start with the scene's unit weight starts in "
+                                "equilibrium"),
+                      OutOfEquilibriumWarning, stacklevel=3)
     return {"norm": norm, "relative": relative, "newton_atol": solver.settings.atol}
 
 
@@ -574,6 +760,7 @@ def _summary(b: Built, solver: NewtonSolver, steps: pd.DataFrame, points: pd.Dat
         "unit_weight": b.unit_weight,
         "gravity_factor": list(spec.gravity_factor or (1.0, 1.0)),
         "initial_state": spec.initial.state, "initial_residual": initial,
+        **({"initial": b.initial} if b.initial else {}),
         "steps": int(len(steps) - 1), "steps_planned": spec.steps, "error": error,
         "iterations": [int(i) for i in steps["iterations"].iloc[1:]],
         "failed_points_last": int(last.get("failed_points", 0)),
@@ -591,10 +778,12 @@ def _figures(b: Built, steps: pd.DataFrame, last: dict[str, Any], out: Path) -> 
     for name, direction in b.moved.items():
         axis = "y" if abs(direction[1]) >= abs(direction[0]) else "x"
         bodies.append((name, axis, boundary_length(b.mesh, name)))
+    x0, x1, y0, y1 = b.mesh.bounding_box
     if b.plans:
-        phased_figure(b, steps, bodies, out)
+        phased_figure(b, steps, bodies, out, size=max(x1 - x0, y1 - y0))
     elif bodies:
-        plot_load_displacement(steps, bodies, out / "load_displacement.png")
+        plot_load_displacement(steps, bodies, out / "load_displacement.png",
+                               size=max(x1 - x0, y1 - y0))
     xy, cells, kind, dofs = b.problem.nodes()
     u = last["u"]
     gamma = last["points"].groupby("element")["shear_strain"].mean().to_numpy()

@@ -39,9 +39,14 @@ into a :class:`BoundaryValueSpec` by :func:`bvp_from_dict` (every key checked, a
 
     [initial]
     state = "uniform"               # or "geostatic"
-    pressure = 20e3                 # uniform: isotropic stress [Pa], compression positive
-    # geostatic: sigma_v = surcharge + f0 * unit_weight * depth, sigma_h = k0 * sigma_v
-    # k0 = 0.5, surcharge = 20e3, surface = 0.4 (default: the top of the mesh)
+    pressure = 20e3                 # uniform: isotropic stress [Pa], compression positive;
+                                    # 0: stress-free (a continuum material only)
+    # geostatic: sigma_v = surcharge + the weight of the column above each point (each
+    # region's f0 * unit_weight), sigma_h = k0 * sigma_v, corrected into equilibrium under a
+    # slope, a step or layers (fem.boundary_value.ground); k0 = 0.5 (a region's own: k0 in
+    # its [[materials]] entry), surcharge = 20e3, minimum_pressure = 1e3 [Pa] (default: a
+    # DEM region's RVE floor, none elsewhere), surface = 0.4 (a level surface at that y, one
+    # unit weight and K0; default: found from the mesh)
 
     [material]                      # as a run specification's: name and parameters
     name = "mohr-coulomb"
@@ -55,6 +60,7 @@ into a :class:`BoundaryValueSpec` by :func:`bvp_from_dict` (every key checked, a
     region = "fill"                 # mesh file's physical group of that name
     name = "linear-elastic"
     unit_weight = 18e3              # optional: this region's γ [N/m³] (else [gravity]'s)
+    k0 = 0.6                        # optional, geostatic: this region's K0 (else [initial]'s)
     [materials.parameters]
     young = 80e6
 
@@ -113,7 +119,7 @@ CONDITION_KEYS: dict[str, frozenset[str]] = {
 #: the keys each initial state acts on (any other is refused, not ignored)
 INITIAL_KEYS: dict[str, frozenset[str]] = {
     "uniform": frozenset({"state", "pressure"}),
-    "geostatic": frozenset({"state", "k0", "surcharge", "surface"}),
+    "geostatic": frozenset({"state", "k0", "surcharge", "surface", "minimum_pressure"}),
 }
 #: the keys of [mesh] that only a generated rectangle acts on
 _GENERATED_KEYS = frozenset({"size", "elements", "element", "grading", "align_x", "align_y"})
@@ -276,12 +282,23 @@ class InitialStateSpec:
     """The stress every Gauss point starts from (compression positive here).
 
     Attributes:
-        state: "uniform" (isotropic ``pressure`` [Pa]) or "geostatic" (σv = surcharge +
-            γ·(surface − y), σh = k0·σv, γ the problem's unit weight).
-        pressure: the uniform state's pressure [Pa], > 0.
-        k0: the geostatic ratio σh/σv [-], > 0.
+        state: "uniform" (isotropic ``pressure`` [Pa]) or "geostatic" (σv = surcharge + the
+            weight of the column above each point, each region's own unit weight; σh =
+            k0·σv; corrected into discrete equilibrium where the surface is not level or the
+            regions differ: :mod:`~granular_material.fem.boundary_value.ground`).
+        pressure: the uniform state's pressure [Pa], >= 0; 0 is a stress-free start (a
+            continuum material's: an RVE needs confinement, so a DEM material refuses it).
+        k0: the geostatic ratio σh/σv [-], > 0 (a region's own ``k0`` in its
+            ``[[materials]]`` entry overrides it there).
         surcharge: the stress on the surface [Pa], >= 0.
-        surface: y of the free surface [m]; None: the top of the mesh.
+        surface: y of a level free surface [m] (one unit weight and one K0); None: the
+            surface above each point, found from the mesh.
+        minimum_pressure: the floor [Pa] of every point's least principal compression:
+            points below it (at the free surface, or in tension near a steep face after the
+            correction) are lifted to it by an isotropic pressure
+            (:func:`~granular_material.fem.boundary_value.ground.lift_to_floor`); None: the
+            lowest stress an RVE is prepared at in a DEM region (15 Pa for the default
+            contact law), none elsewhere.
     """
 
     state: str = "uniform"
@@ -289,6 +306,7 @@ class InitialStateSpec:
     k0: float = 0.5
     surcharge: float = 0.0
     surface: float | None = None
+    minimum_pressure: float | None = None
 
     def __post_init__(self) -> None:
         conform_fields(self, error=SpecError)
@@ -296,22 +314,28 @@ class InitialStateSpec:
             raise SpecError("initial.state", f"must be one of {', '.join(INITIAL_STATES)}, "
                                              f"got {self.state!r}")
         given = {"pressure": self.pressure is not None, "k0": self.k0 != 0.5,
-                 "surcharge": self.surcharge != 0.0, "surface": self.surface is not None}
+                 "surcharge": self.surcharge != 0.0, "surface": self.surface is not None,
+                 "minimum_pressure": self.minimum_pressure is not None}
         _not_acting("initial", {k for k, on in given.items() if on}, INITIAL_KEYS[self.state],
                     f"a {self.state} initial state")
-        if self.state == "uniform" and (self.pressure is None or self.pressure <= 0):
+        if self.state == "uniform" and (self.pressure is None or not self.pressure >= 0):
             raise SpecError("initial.pressure", "a uniform initial state needs a pressure "
-                                                f"> 0 Pa, got {self.pressure!r}")
+                                                f">= 0 Pa (0: stress-free), got "
+                                                f"{self.pressure!r}")
         if self.k0 <= 0:
             raise SpecError("initial.k0", f"must be > 0, got {self.k0:g}")
         if self.surcharge < 0:
             raise SpecError("initial.surcharge", f"must be >= 0 Pa, got {self.surcharge:g}")
+        if self.minimum_pressure is not None and not self.minimum_pressure >= 0:
+            raise SpecError("initial.minimum_pressure", f"must be >= 0 Pa, got "
+                                                        f"{self.minimum_pressure:g}")
 
     @property
     def reference_pressure(self) -> float:
         """A representative pressure [Pa] (for the material's and Newton's scales): the
-        uniform pressure, else the surcharge (or 1 kPa where there is none)."""
-        if self.state == "uniform":
+        uniform pressure, else the surcharge (or 1 kPa where there is none: a stress-free
+        start, a geostatic one without surcharge)."""
+        if self.state == "uniform" and self.pressure > 0:
             return float(self.pressure)
         return float(self.surcharge) if self.surcharge > 0 else 1e3
 
@@ -326,11 +350,14 @@ class RegionMaterialSpec:
         material: the region's material (as a run specification's ``[material]``).
         unit_weight: the region's γ [N/m³] (>= 0), or "rve" (from its RVEs); None: the
             scene's ``[gravity] unit_weight``.
+        k0: the region's K0 = σh/σv [-] (> 0) of a geostatic start; None: the scene's
+            ``[initial] k0``.
     """
 
     region: str
     material: MaterialSpec
     unit_weight: float | str | None = None
+    k0: float | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.region, str) or not self.region.strip():
@@ -344,6 +371,11 @@ class RegionMaterialSpec:
             if not weight >= 0:
                 raise SpecError("materials.unit_weight", f"must be >= 0 N/m³, got {weight:g}")
             object.__setattr__(self, "unit_weight", weight)
+        if self.k0 is not None:
+            k0 = conform("materials.k0", self.k0, float, SpecError)
+            if not k0 > 0:
+                raise SpecError("materials.k0", f"must be > 0, got {k0:g}")
+            object.__setattr__(self, "k0", k0)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -511,6 +543,7 @@ class BoundaryValueSpec:
                 raise SpecError("gravity.unit_weight", f"must be >= 0 N/m³, got {weight:g}")
             object.__setattr__(self, "unit_weight", weight)
         self._check_regions()
+        self._check_start()
         if self.gravity_factor is not None:
             factor = conform("gravity.factor", self.gravity_factor, tuple[float, float],
                              SpecError)
@@ -569,6 +602,30 @@ class BoundaryValueSpec:
                                                     "[regions] (a generated mesh has no "
                                                     "physical groups)")
         object.__setattr__(self, "materials", materials)
+
+    def _check_start(self) -> None:
+        """SpecError for a region's k0 that a uniform start ignores, and for a stress-free
+        start of a material that needs confinement (DEM RVEs)."""
+        initial = self.initial
+        if initial.state != "geostatic":
+            given = [m.region for m in self.materials or () if m.k0 is not None]
+            if given:
+                raise SpecError("materials.k0", f"(region {given[0]!r}) does nothing for a "
+                                                f"{initial.state} initial state, so it is "
+                                                "refused (it is a geostatic start's K0)")
+        if initial.state == "uniform" and initial.pressure == 0:
+            pairs = ([(m.region, m.material) for m in self.materials]
+                     if self.materials is not None else [(None, self.material)])
+            for region, material in pairs:
+                if hasattr(material.cls, "lowest_pressure"):
+                    where = "" if region is None else f" (region {region!r})"
+                    raise SpecError("initial.pressure", f"0 Pa, a stress-free start, cannot "
+                                                        f"start {material.name}{where}: an "
+                                                        "RVE is a packing of discs, which "
+                                                        "carries stress only while it is "
+                                                        "confined, so it cannot be prepared "
+                                                        "at zero pressure; give a pressure "
+                                                        "> 0, or start geostatic")
 
     @property
     def noisy(self) -> bool:
@@ -673,7 +730,7 @@ def _region_material(entry: Any, index: int) -> RegionMaterialSpec:
                 field_ = f"materials.parameters.{field_}"
             raise SpecError(field_, exc.message) from None
         return RegionMaterialSpec(region=entry["region"], material=material,
-                                  unit_weight=entry.get("unit_weight"))
+                                  unit_weight=entry.get("unit_weight"), k0=entry.get("k0"))
     except SpecError as exc:
         exc.entry = ("materials", index)
         raise
@@ -716,6 +773,10 @@ def _snake_case(section: str, table: dict[str, Any]) -> dict[str, Any]:
 
 def _initial(table: dict[str, Any]) -> InitialStateSpec:
     _unknown("initial", table, SCENE_KEYS["initial"])
+    if isinstance(table.get("k0"), Mapping):
+        raise SpecError("initial.k0", "is one number; a K0 per region is given in each "
+                                      "region's [[materials]] entry (k0 = 0.6 beside its "
+                                      "unit_weight), not as a table in [initial]")
     state = table.get("state", "uniform")
     if state in INITIAL_KEYS:
         _not_acting("initial", table, INITIAL_KEYS[state], f"a {state} initial state")
@@ -733,9 +794,10 @@ SCENE_KEYS: dict[str, frozenset[str]] = {
     "conditions": frozenset({"type", "boundary", "component", "value", "end", "displacement",
                              "rough"}),
     "gravity": frozenset({"unit_weight", "factor"}),
-    "initial": frozenset({"state", "pressure", "k0", "surcharge", "surface"}),
+    "initial": frozenset({"state", "pressure", "k0", "surcharge", "surface",
+                          "minimum_pressure"}),
     "material": frozenset({"name", "parameters"}),
-    "materials": frozenset({"region", "name", "parameters", "unit_weight"}),
+    "materials": frozenset({"region", "name", "parameters", "unit_weight", "k0"}),
     "regularisation": frozenset({"model", "internal_length"}),
     "output": frozenset({"out", "device", "shards", "progress", "fields"}),
     "phases": frozenset({"name", "steps", "conditions", "gravity", "reset_displacements"}),
@@ -847,6 +909,12 @@ def _check_phases(spec: BoundaryValueSpec) -> None:
         raise SpecError("steps", "a phased problem's steps are its phases' (each phase's "
                                  "steps), so the problem's own is refused")
     object.__setattr__(spec, "steps", total)
+    if spec.newton.continuation == "arc-length":
+        raise SpecError("newton.continuation", "arc-length continuation takes as many steps "
+                                               "as its path needs, and a phase as many as "
+                                               "it gives, so the two are refused together "
+                                               "(run the phase to collapse as a scene of its "
+                                               "own)")
     if spec.gravity_factor is not None:
         raise SpecError("gravity.factor", "a phased problem gives each phase its own gravity "
                                           "factor ([phases.gravity] factor), so [gravity]'s "
