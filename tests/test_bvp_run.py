@@ -330,6 +330,6 @@ def test_a_cohesive_soil_starts_stress_free_and_dem_is_refused_that_start(tmp_pa
     assert max(outcome.summary["iterations"]) <= 20  # measured: 16 (one cut-back), then 3-5
     scene = tomllib.loads((EXAMPLES / "footing-gz2016-cpu.toml").read_text())
     scene["initial"]["pressure"] = 0.0
-    with pytest.raises(SpecError, match="DEM material needs a pressure > 0") as refused:
+    with pytest.raises(SpecError, match="cannot start dem: an RVE") as refused:
         bvp_from_dict(scene, EXAMPLES)
     assert refused.value.field == "initial.pressure"
