@@ -182,7 +182,7 @@ CHANGED = {
     "regularisation": {"model": "second-gradient", "internal_length": 0.01},
 }
 TABLES = ("mesh", "boundaries", "conditions", "gravity", "initial", "material", "newton",
-          "output", "regularisation", "regions", "materials")
+          "output", "regularisation", "regions", "materials", "phases")
 #: the materials by region: [regions] (free names, walked by changing a predicate) and a
 #: changed value for every key of a [[materials]] entry (walked on the first of two)
 REGIONAL = {"regions": {"lower": "y <= 0.05"},

@@ -41,7 +41,8 @@ def _line_of(text: str, key: str, entry: tuple[str, int] | None = None) -> int |
         if entry[1] >= len(starts):
             return None
         lines = lines[starts[entry[1]] + 1:]
-        own = re.compile(rf"^\s*\[\s*{re.escape(entry[0])}\.")  # its sub-table (parameters)
+        # its sub-tables ([materials.parameters], [phases.gravity], [[phases.conditions]])
+        own = re.compile(rf"^\s*\[\[?\s*{re.escape(entry[0])}\.")
         ends = [k for k, (_, line) in enumerate(lines)
                 if line.lstrip().startswith("[") and not own.match(line)]
         lines = lines[:ends[0]] if ends else lines
@@ -92,7 +93,11 @@ def run_bvp_scene(path: Path, text: str, data: dict[str, Any],
             what = (f"material {spec.material.name}" if spec.materials is None else
                     "materials " + ", ".join(f"{m.region}: {m.material.name}"
                                              for m in spec.materials))
-            print(f"{path}: a boundary-value problem of {spec.steps} steps, {what}: checked")
+            phases = (f" in {len(spec.phases)} phases ("
+                      + ", ".join(f"{p.name}: {p.steps}" for p in spec.phases) + ")"
+                      if spec.phases else "")
+            print(f"{path}: a boundary-value problem of {spec.steps} steps{phases}, {what}: "
+                  "checked")
             return 0
     except ValueError as exc:
         raise _refusal(path, text, exc) from exc

@@ -3,7 +3,7 @@ and the map of the failure mechanism (shear strain on the deformed mesh)."""
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -11,7 +11,8 @@ import pandas as pd
 
 from granular_material.results.plots import deformed_triangles, pyplot, save_figure
 
-__all__ = ["length_unit", "plot_load_displacement", "plot_mechanism"]
+__all__ = ["length_unit", "plot_load_displacement", "plot_mechanism",
+           "plot_phased_load_displacement"]
 
 
 def length_unit(size: float) -> tuple[str, float]:
@@ -92,6 +93,48 @@ def plot_mechanism(xy: np.ndarray, cells: np.ndarray, kind: str, ux: np.ndarray,
     ax.set_xlabel(f"x [{unit}]")
     ax.set_ylabel(f"y [{unit}]")
     ax.set_title(title)
+    try:
+        return save_figure(fig, path)
+    finally:
+        plt.close(fig)
+
+
+def plot_phased_load_displacement(steps: pd.DataFrame,
+                                  curves: Sequence[tuple[str, str, str]],
+                                  path: str | Path, resets: Collection[str] = (),
+                                  size: float = 0.0) -> Path:
+    """The load–displacement curves of a run in phases: one panel per curve, each phase's
+    rows a line of its own, from where the phase before ended (at zero displacement for
+    the phases of ``resets``, whose displacement is measured from their start).
+
+    ``curves``: (name, load column [Pa], displacement column [m]) of each; ``steps`` must
+    have a ``phase`` column. ``size``: the domain's larger extent [m], which sets the unit
+    of the displacement (:func:`length_unit`; 0: mm).
+    """
+    unit, factor = length_unit(size)
+    plt = pyplot()
+    n = max(len(curves), 1)
+    fig, axes = plt.subplots(1, n, figsize=(5.5 * n, 4.2), constrained_layout=True,
+                             squeeze=False)
+    order = list(dict.fromkeys(steps["phase"]))
+    for ax, (name, load, moved) in zip(axes[0], curves, strict=False):
+        p = steps[load].to_numpy(dtype=float)
+        d = steps[moved].to_numpy(dtype=float)
+        phase = steps["phase"].to_numpy()
+        for k, label in enumerate(order):
+            rows = np.flatnonzero(phase == label)
+            if k > 0 and rows.size and rows[0] > 0:
+                before = rows[0] - 1  # the phase starts where the one before ended
+                x = np.concatenate([[0.0 if label in resets else d[before]], d[rows]])
+                y = np.concatenate([[p[before]], p[rows]])
+            else:
+                x, y = d[rows], p[rows]
+            ax.plot(factor * x, y / 1e3, "o-", ms=3, label=str(label))
+        ax.set_xlabel(f"{name} displacement [{unit}]")
+        ax.set_ylabel(f"{name} load [kPa]")
+        ax.grid(alpha=0.3)
+        ax.set_title(name)
+        ax.legend(title="phase", fontsize=8)
     try:
         return save_figure(fig, path)
     finally:

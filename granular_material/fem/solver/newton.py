@@ -297,6 +297,32 @@ class NewtonSolver:
                 self.response.stress, self._grad_committed))
             self.f_int = self._with_second_gradient(f_int, self.u, self.extra)[: self.basis.N]
 
+    def start_phase(self, loading: Loading, settings: NewtonSettings | None = None,
+                    restart: bool = True) -> None:
+        """Go on from the committed state under ``loading`` (the next phase of a staged run):
+        the displacement, the material's state, the internal force and the step records are
+        kept; the load factor starts again at 0, and the last increment is forgotten (the
+        extrapolating predictor and an arc-length path start afresh). ``settings``: the
+        phase's (e.g. its force tolerance; the formulation must stay the one the solver was
+        made with).
+        ``restart`` False: a phase resumed part-way (:meth:`resume` has set its load factor
+        and last increment), only the loading and settings are set."""
+        if loading.force_start.shape != self.loading.force_start.shape:
+            raise ValueError(f"the phase's loading has {loading.force_start.size} dofs, the "
+                             f"solver {self.loading.force_start.size}")
+        if settings is not None:
+            if settings.formulation != self.settings.formulation:
+                raise ValueError("a phase cannot change the formulation "
+                                 f"({self.settings.formulation} to {settings.formulation})")
+            self.settings = settings
+        self.loading = loading
+        if restart:
+            self.load_factor = 0.0
+            self._run_start = 0.0
+            self._last = None
+            self.continuation = ContinuationState()  # an arc-length path starts afresh
+            self.stopped_by = ""
+
     @property
     def reaction(self) -> np.ndarray:
         """f_int − f_ext [N/m] at the committed state, shape (ndofs,); nonzero at D only."""

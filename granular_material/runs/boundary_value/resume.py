@@ -46,8 +46,12 @@ SAVE_MINUTES = 10.0
 
 
 def scene_record(spec: BoundaryValueSpec) -> dict[str, Any]:
-    """``spec`` as JSON values (paths as text), as a checkpoint records and compares it."""
-    return json.loads(json.dumps(asdict(spec), default=str))
+    """``spec`` as JSON values (paths as text), as a checkpoint records and compares it (a
+    scene without phases: no ``phases``, as it was recorded before they were added)."""
+    record = json.loads(json.dumps(asdict(spec), default=str))
+    if not record.get("phases"):
+        record.pop("phases", None)
+    return record
 
 
 def run_files(spec: BoundaryValueSpec) -> dict[str, Path]:

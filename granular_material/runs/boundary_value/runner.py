@@ -52,6 +52,7 @@ from granular_material.fem.boundary_value.conditions import (
 from granular_material.fem.boundary_value.ground import ground_stress, lift_to_floor, overburden
 from granular_material.fem.boundary_value.initial_stress import geostatic_stress
 from granular_material.fem.boundary_value.meshes import MeshData, read_mesh, rectangle_mesh
+from granular_material.fem.forms import gauss_points_grad
 from granular_material.fem.materials.regions import RegionalMaterial
 from granular_material.multiscale.confinement import UNCONFINED_FRACTION
 from granular_material.results.bvp_plots import plot_load_displacement, plot_mechanism
@@ -62,6 +63,18 @@ from granular_material.runs.boundary_value.material import (
     region_elements,
     region_unit_weights,
     unit_weight_of,
+)
+from granular_material.runs.boundary_value.phases import (
+    PhasePlan,
+    ends_phase,
+    inward_direction,
+    phase_pressures,
+    phase_view,
+    phased_figure,
+    phases_summary,
+    reported_gradient,
+    run_phases,
+    with_phase,
 )
 from granular_material.runs.boundary_value.resume import (
     open_bvp_checkpoint,
@@ -264,30 +277,51 @@ class Built:
     preparation_s: float = 0.0  # seconds to build and allocate the material
     initial: dict[str, Any] = field(default_factory=dict)  # how the initial state was made
     hint: str = ""  # the fix a start out of equilibrium would need
+    # a phased run (:mod:`~granular_material.runs.boundary_value.phases`): its phases, the
+    # one stepping, and the displacement [m] its reported ones are measured from
+    plans: list[PhasePlan] = field(default_factory=list)
+    phase: int = 0
+    offset: np.ndarray | None = None
+    start_residuals: dict[int, float] = field(default_factory=dict)  # by phase, relative
+    pressed: dict[str, np.ndarray] = field(default_factory=dict)  # name -> inward direction
+
+    def reported_boundaries(self) -> list[tuple[str, bool]]:
+        """(name, loaded) of every boundary whose force and displacement the steps table
+        reports (those with a condition; of a phased run, in any phase), ``loaded`` where a
+        pressure acts on it (its force is the load's, else the supports' reaction)."""
+        if not self.plans:
+            conditions = self.spec.conditions
+            return [(name, any(c.boundary == name and c.type == "pressure"
+                               for c in conditions))
+                    for name in sorted({c.boundary for c in conditions})]
+        named = {c.boundary for plan in self.plans for c in plan.view.conditions}
+        now = self.plans[self.phase].view.conditions
+        return [(name, any(c.boundary == name and c.type == "pressure" for c in now))
+                for name in sorted(named)]
+
+    def reported(self, u: np.ndarray) -> np.ndarray:
+        """The displacement [m] reported for the solver's ``u`` (from the last reset of a
+        phased run; ``u`` itself otherwise)."""
+        return u if self.offset is None else u - self.offset
 
 
 def build(spec: BoundaryValueSpec, allocate: bool = True) -> Built:
     """Mesh, problem, initial stress and material of ``spec`` (no step taken; the material
-    not allocated, its RVEs not prepared, unless ``allocate``)."""
+    not allocated, its RVEs not prepared, unless ``allocate``). A phased ``spec``: those of
+    its first phase, and every phase's problem (:attr:`Built.plans`), each checked."""
+    phased = spec
+    spec = phase_view(phased, 0) if phased.phases else phased
     if spec.mesh.file is None:  # a generated mesh: checked before it is made
         check_memory(spec, *generated_size(spec))
     mesh = _mesh(spec)
     check_memory(spec, mesh.n_elements, mesh.element)
-    conditions = [_condition(c) for c in spec.conditions]
-    f0, f1 = spec.gravity_factor or (1.0, 1.0)
-    if spec.materials is None:
-        unit_weight: float | None = unit_weight_of(spec)
-        start, end = f0 * unit_weight, f1 * unit_weight
-        if start > 0 or end > 0:
-            conditions.append(Gravity(start, end=end))
-    else:
-        unit_weight, start = _region_gravity(spec, mesh, conditions, f0, f1)
-    problem = build_problem(mesh, conditions, spec.mesh.quadrature)
+    problem, unit_weight, start = _problem(spec, mesh)
+    f0 = (spec.gravity_factor or (1.0, 1.0))[0]
     xy = problem.points
     sigma0, initial = _initial_stress(spec, problem, f0)  # with step 0's weight
     t0 = time.perf_counter()
     try:
-        material = material_for_problem(spec, xy.shape[0], sigma0, allocate, mesh)
+        material = material_for_problem(phased, xy.shape[0], sigma0, allocate, mesh)
     except ParameterError as exc:  # a continuum that refuses its point's stress
         if spec.initial.state != "geostatic" or exc.field != "initial_stress" \
                 or initial.get("level", True):
@@ -309,10 +343,44 @@ def build(spec: BoundaryValueSpec, allocate: bool = True) -> Built:
                            "stress ratio") from exc
     preparation = time.perf_counter() - t0
     noisy = bool(getattr(material, "noisy", False))
+    settings = _settings(spec, problem, noisy)
+    b = Built(spec, mesh, problem, sigma0, unit_weight, material, settings, _moved(spec),
+              preparation, initial, _equilibrium_hint(spec, problem, start, initial))
+    if phased.phases:
+        b.plans = _plans(phased, b, noisy)
+        for plan in reversed(b.plans):  # a body moved in any phase, along its first motion
+            b.moved.update(_moved(plan.view))
+        loaded = dict.fromkeys(name for plan in b.plans for name in plan.pressures)
+        b.pressed = {name: inward_direction(mesh, name) for name in loaded}
+    return b
+
+
+def _problem(spec: BoundaryValueSpec, mesh: MeshData) -> tuple[Any, float | None, float]:
+    """The problem of ``spec``'s conditions and gravity on ``mesh``; the unit weight [N/m³]
+    (None: the regions' differ) and γ at step 0."""
+    conditions = [_condition(c) for c in spec.conditions]
+    f0, f1 = spec.gravity_factor or (1.0, 1.0)
+    if spec.materials is None:
+        unit_weight: float | None = unit_weight_of(spec)
+        start, end = f0 * unit_weight, f1 * unit_weight
+        if start > 0 or end > 0:
+            conditions.append(Gravity(start, end=end))
+    else:
+        unit_weight, start = _region_gravity(spec, mesh, conditions, f0, f1)
+    return build_problem(mesh, conditions, spec.mesh.quadrature), unit_weight, start
+
+
+def _settings(spec: BoundaryValueSpec, problem: Any, noisy: bool) -> Any:
+    """Newton's settings for ``problem`` (the force tolerance from its free dofs)."""
     settings = spec.newton.settings(noisy)
     stress_tol = spec.newton.stress_tolerance(noisy, spec.reference_pressure)
     if stress_tol > 0:
         settings = replace(settings, atol=problem.force_tolerance(stress_tol))
+    return settings
+
+
+def _moved(spec: BoundaryValueSpec) -> dict[str, np.ndarray]:
+    """The unit direction of every boundary a condition moves (rigid, displacement)."""
     moved = {}
     for c in spec.conditions:
         if c.type == "rigid":
@@ -322,8 +390,29 @@ def build(spec: BoundaryValueSpec, allocate: bool = True) -> Built:
             direction = np.zeros(2)
             direction[c.component] = math.copysign(1.0, c.value) if c.value else 1.0
             moved[c.boundary] = direction
-    return Built(spec, mesh, problem, sigma0, unit_weight, material, settings, moved,
-                 preparation, initial, _equilibrium_hint(spec, problem, start, initial))
+    return moved
+
+
+def _plans(spec: BoundaryValueSpec, b: Built, noisy: bool) -> list[PhasePlan]:
+    """Every phase of the phased ``spec``, its problem built on ``b``'s mesh (the first's
+    is ``b``'s own); a phase whose conditions leave the body free is refused naming it."""
+    plans = []
+    first = 0
+    for k, phase in enumerate(spec.phases):
+        view = phase_view(spec, k)
+        if k == 0:
+            problem, settings = b.problem, b.settings
+        else:
+            try:
+                problem = _problem(view, b.mesh)[0]
+            except ParameterError as exc:
+                raise SpecError("phases.conditions", f"of phase {k + 1} ({phase.name!r}) "
+                                                     f"{exc.field}: {exc.message}") from None
+            settings = _settings(view, problem, noisy)
+        plans.append(PhasePlan(k, phase.name, phase.steps, first, problem, settings, view,
+                               phase.reset_displacements, phase_pressures(view)))
+        first += phase.steps
+    return plans
 
 
 def _equilibrium_hint(spec: BoundaryValueSpec, problem: Any, start: float,
@@ -391,6 +480,9 @@ def _rows(b: Built, solver: NewtonSolver, record: StepRecord | None, p0: np.ndar
     problem = b.problem
     kin = solver.kinematics
     grad = solver.grad_u()
+    if b.offset is not None:  # a phase reset the reported displacement
+        grad = reported_gradient(kin, grad, gauss_points_grad(problem.basis, b.offset))
+    u = b.reported(solver.u)
     strain = kin.strain(grad)
     stress = solver.response.stress
     pressure = -0.5 * np.trace(stress, axis1=1, axis2=2)
@@ -410,10 +502,9 @@ def _rows(b: Built, solver: NewtonSolver, record: StepRecord | None, p0: np.ndar
         # the material's costs (step 0: none spent, under the names its evaluations use)
         **(dict(record.costs) if record else dict.fromkeys(solver.response.costs, 0)),
     }
-    for name in sorted({c.boundary for c in b.spec.conditions}):
-        loaded = any(c.boundary == name and c.type == "pressure" for c in b.spec.conditions)
+    for name, loaded in b.reported_boundaries():
         fx, fy = problem.boundary_force(name, f_ext if loaded else reaction)
-        ux, uy = problem.boundary_displacement(name, solver.u)
+        ux, uy = problem.boundary_displacement(name, u)
         row.update({f"{name}_force_x": fx, f"{name}_force_y": fy,
                     f"{name}_displacement_x": ux, f"{name}_displacement_y": uy})
         if name in b.moved:
@@ -422,7 +513,7 @@ def _rows(b: Built, solver: NewtonSolver, record: StepRecord | None, p0: np.ndar
             if b.moved[name][1] < -0.5:
                 row[f"{name}_settlement"] = along
     for name in _free_boundaries(b):
-        ux, uy = problem.boundary_displacement(name, solver.u)
+        ux, uy = problem.boundary_displacement(name, u)
         row.update({f"{name}_displacement_x": ux, f"{name}_displacement_y": uy})
     xy = problem.points
     nqp = problem.basis.X.shape[-1]
@@ -448,7 +539,7 @@ def _free_boundaries(b: Built) -> list[str]:
     """The named boundaries that carry no condition, sorted: every [boundaries] name, and
     with a mesh file every physical group of its boundary facets (a generated mesh's sides
     only where a condition or a name uses them)."""
-    conditioned = {c.boundary for c in b.spec.conditions}
+    conditioned = {name for name, _ in b.reported_boundaries()}
     named = set(b.mesh.boundaries) if b.spec.mesh.file is not None else set(b.spec.boundaries)
     return sorted(n for n in named - conditioned if n in b.problem.boundaries)
 
@@ -514,11 +605,15 @@ def run_boundary_value(spec: BoundaryValueSpec, out: Path | None = None,
 
     def collect(s: NewtonSolver, record: StepRecord | None) -> None:
         row, points = _rows(b, s, record, p0)
-        keep(row, points, s.u)
+        if b.plans:
+            row, points = with_phase(b, row, points)
+        u = b.reported(s.u)
+        keep(row, points, u)
         if checkpoint is not None:
-            checkpoint.save_step(row, points, s.u, None)
-            if checkpoint.due(int(row["step"]), spec.steps):
-                checkpoint.save_state(int(row["step"]), solver, b.material)
+            checkpoint.save_step(row, points, u, None)
+            step = int(row["step"])
+            if checkpoint.due(step, spec.steps) or ends_phase(b, step):
+                checkpoint.save_state(step, solver, b.material)
 
     t_initial = time.perf_counter()
     if saved is None:
@@ -530,14 +625,21 @@ def run_boundary_value(spec: BoundaryValueSpec, out: Path | None = None,
             keep(step.row, step.points, step.u)
         initial_residual = remember(checkpoint, "initial_residual")
     t_initial = time.perf_counter() - t_initial
+    if b.plans:
+        b.start_residuals[0] = initial_residual.get("relative")
     error = None
     interrupt = None
     try:
-        solver.run(spec.steps, on_step=collect, progress=spec.progress,
-                   description=f"{spec.name} ({problem.basis.nelems} elements)",
-                   done=0 if saved is None else saved.step)
+        if b.plans:
+            run_phases(b, solver, collect, checkpoint, None if saved is None else saved.step)
+        else:
+            solver.run(spec.steps, on_step=collect, progress=spec.progress,
+                       description=f"{spec.name} ({problem.basis.nelems} elements)",
+                       done=0 if saved is None else saved.step)
     except NewtonError as exc:
         error = str(exc)
+        if b.plans:
+            error = f"phase {b.phase + 1} ({b.plans[b.phase].name!r}): {error}"
         relative = initial_residual.get("relative", 0.0)
         if relative > OUT_OF_EQUILIBRIUM and initial_residual.get("norm", 0.0) > b.settings.atol:
             error += (f" (the initial state was not in equilibrium with the loads: its "
@@ -553,6 +655,8 @@ def run_boundary_value(spec: BoundaryValueSpec, out: Path | None = None,
     summary = _summary(b, solver, steps, last.get("points", pd.DataFrame()), error,
                        initial_residual, t_initial, time.perf_counter() - t_start)
     summary["resumed_from_step"] = None if saved is None else saved.step
+    if b.plans:
+        summary.update(phases_summary(b, solver, steps, error, interrupt is not None))
     regularisation = solver.regularisation_summary()
     if regularisation is not None:
         summary["regularisation"] = regularisation
@@ -675,7 +779,9 @@ def _figures(b: Built, steps: pd.DataFrame, last: dict[str, Any], out: Path) -> 
         axis = "y" if abs(direction[1]) >= abs(direction[0]) else "x"
         bodies.append((name, axis, boundary_length(b.mesh, name)))
     x0, x1, y0, y1 = b.mesh.bounding_box
-    if bodies:
+    if b.plans:
+        phased_figure(b, steps, bodies, out, size=max(x1 - x0, y1 - y0))
+    elif bodies:
         plot_load_displacement(steps, bodies, out / "load_displacement.png",
                                size=max(x1 - x0, y1 - y0))
     xy, cells, kind, dofs = b.problem.nodes()

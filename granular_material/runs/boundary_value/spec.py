@@ -64,6 +64,23 @@ into a :class:`BoundaryValueSpec` by :func:`bvp_from_dict` (every key checked, a
     [materials.parameters]
     young = 80e6
 
+    # ... or the loading in phases (each from the state the previous one committed), in
+    # place of the scene's steps and [gravity] factor; [[conditions]] are then common to
+    # every phase (a phase's own come after them and win on a shared degree of freedom)
+    [[phases]]
+    name = "gravity"
+    steps = 4
+    [phases.gravity]
+    factor = [0.0, 1.0]             # first phase: at its start and end; later: its end
+    [[phases.conditions]]           # as [[conditions]]; loads are totals at the phase's
+    type = "pressure"               # end, prescribed displacements increments over it
+    boundary = "top"
+    value = 10e3
+    [[phases]]
+    name = "strip"
+    steps = 6
+    reset_displacements = true      # report displacement (and strain) from this phase's start
+
     [newton]                        # NewtonSpec's fields
     [regularisation]                # past a peak: model = "second-gradient" (quad8, quad9,
     internal_length = 0.005         # tri6), ℓ [m]; default model = "none"
@@ -84,7 +101,7 @@ from granular_material.typed_fields import conform, conform_fields
 from granular_material.vocabulary import RenamedWarning, key_of, user_stacklevel
 
 __all__ = ["CONDITION_KEYS", "CONDITION_TYPES", "INITIAL_KEYS", "INITIAL_STATES", "SCENE_KEYS",
-           "BoundaryValueSpec", "ConditionSpec", "InitialStateSpec", "MeshSpec",
+           "BoundaryValueSpec", "ConditionSpec", "InitialStateSpec", "MeshSpec", "PhaseSpec",
            "RegionMaterialSpec", "bvp_from_dict"]
 
 #: the conditions a boundary may carry
@@ -362,6 +379,85 @@ class RegionMaterialSpec:
 
 
 @dataclass(frozen=True, kw_only=True)
+class PhaseSpec:
+    """One phase of a staged loading (a ``[[phases]]`` entry).
+
+    A phase starts from the state the one before committed (stress, material state,
+    displacement) and steps its load factor λ from 0 to 1:
+
+    - its loads (pressures, gravity) are totals at its end, ramped linearly from what acted
+      at its start (the first phase: from their ``value`` and the first gravity factor, as
+      a scene without phases); a load of the phase before that the phase does not give is
+      ramped off to zero;
+    - its prescribed displacements are increments from where the phase starts (a fixed or
+      roller boundary is held where it is at the start); a boundary held in the phase before
+      and not in this one is free from the phase's first step (its reaction is released at
+      once).
+
+    Attributes:
+        name: the phase's name (in the tables' ``phase`` column and the summary).
+        steps: its load steps, >= 1.
+        conditions: its own conditions (after the scene's common ones, so that a phase's
+            own wins on a shared degree of freedom). A pressure's ``value`` is its total at
+            the phase's end; ``end`` is the first phase's only (from ``value`` at step 0).
+        gravity_factor: γ's multiple: the first phase's (f0, f1) at its start and its end,
+            or f (constant); a later phase's f at its end (from where the phase before
+            ended). None: γ as it stood (the first phase: 1).
+        reset_displacements: the displacement (and strain) reported from this phase on is
+            measured from the phase's start; the stress, the material state and the
+            configuration are kept (refused in the first phase, which starts from zero).
+    """
+
+    name: str
+    steps: int
+    conditions: tuple[ConditionSpec, ...] = ()
+    gravity_factor: float | tuple[float, float] | None = None
+    reset_displacements: bool = False
+
+    def __post_init__(self) -> None:
+        _within("phases", lambda: conform_fields(self, error=SpecError,
+                                                 skip=("conditions", "gravity_factor")))
+        if not self.name.strip():
+            raise SpecError("phases.name", "must name the phase (text), got an empty name")
+        if self.steps < 1:
+            raise SpecError("phases.steps", f"must be an integer >= 1, got {self.steps!r}")
+        conditions = self.conditions
+        if isinstance(conditions, str | bytes | Mapping) or not isinstance(conditions,
+                                                                            Iterable):
+            raise SpecError("phases.conditions", f"must be a sequence of ConditionSpec, got "
+                                                 f"{type(conditions).__name__}")
+        conditions = tuple(conditions)
+        for k, c in enumerate(conditions):
+            if not isinstance(c, ConditionSpec):
+                raise SpecError("phases.conditions", f"must be ConditionSpec objects; "
+                                                     f"condition {k} is a "
+                                                     f"{type(c).__name__}")
+        object.__setattr__(self, "conditions", conditions)
+        factor = self.gravity_factor
+        if factor is not None:
+            if isinstance(factor, list | tuple):
+                factor = conform("phases.gravity.factor", factor, tuple[float, float],
+                                 SpecError)
+                low = min(factor)
+            else:
+                factor = conform("phases.gravity.factor", factor, float, SpecError)
+                low = factor
+            if not low >= 0:
+                raise SpecError("phases.gravity.factor", f"must be >= 0, got {factor!r}")
+            object.__setattr__(self, "gravity_factor", factor)
+
+    def factors(self, before: float | None) -> tuple[float, float]:
+        """γ's multiples (at the phase's start, at its end), given the one the phase before
+        ended with (``before``; None: this is the first phase)."""
+        f = self.gravity_factor
+        if isinstance(f, tuple):
+            return f
+        if before is None:  # the first phase: constant, 1 where none is given
+            return (1.0, 1.0) if f is None else (f, f)
+        return before, before if f is None else f
+
+
+@dataclass(frozen=True, kw_only=True)
 class BoundaryValueSpec:
     """One boundary-value problem run (see the module docstring for its file form).
 
@@ -392,6 +488,11 @@ class BoundaryValueSpec:
             CPU shards; progress: progress bars.
         fields: write the ParaView fields (fields.xdmf) at every committed step.
         name: the problem's name (tables and figures).
+        phases: the loading in stages (:class:`PhaseSpec`), each from the state the one
+            before committed; empty: one phase, ``conditions``, ``gravity_factor`` and
+            ``steps`` as given. With phases, ``conditions`` are common to every phase (a
+            load among them constant), ``gravity_factor`` is the phases' own and ``steps``
+            becomes their sum.
     """
 
     mesh: MeshSpec
@@ -413,10 +514,13 @@ class BoundaryValueSpec:
     progress: bool = False
     fields: bool = True
     name: str = "problem"
+    phases: tuple[PhaseSpec, ...] = ()
 
     def __post_init__(self) -> None:
         self._check_sections()
         conform_fields(self, error=SpecError, skip=_SECTIONS)
+        if self.phases:
+            _check_phases(self)
         if self.shards is not None and not 1 <= self.shards <= MAX_SHARDS:
             raise SpecError("shards", f"must be an integer from 1 to {MAX_SHARDS} (a CPU "
                                       f"thread each), got {self.shards!r}")
@@ -425,7 +529,7 @@ class BoundaryValueSpec:
                 self.mesh.element))
         if self.steps < 1:
             raise SpecError("steps", f"must be an integer >= 1, got {self.steps!r}")
-        if not self.conditions:
+        if not self.conditions and not self.phases:
             raise SpecError("conditions", "a problem needs at least one condition")
         named = {c.boundary for c in self.conditions}
         missing = sorted(named - set(self.boundaries) - _GENERATED_SIDES
@@ -568,7 +672,7 @@ class BoundaryValueSpec:
 #: the fields of BoundaryValueSpec that are sections, each checked by its own class (or,
 #: ``unit_weight``, a number or "rve")
 _SECTIONS = ("mesh", "boundaries", "conditions", "unit_weight", "gravity_factor", "initial",
-             "material", "regions", "materials", "newton", "regularisation")
+             "material", "regions", "materials", "newton", "regularisation", "phases")
 #: the sides every generated rectangle names
 _GENERATED_SIDES = frozenset({"left", "right", "bottom", "top"})
 
@@ -684,7 +788,7 @@ def _initial(table: dict[str, Any]) -> InitialStateSpec:
 SCENE_KEYS: dict[str, frozenset[str]] = {
     "": frozenset({"test", "steps", "name", "out", "mesh", "boundaries", "conditions",
                    "gravity", "initial", "material", "regions", "materials", "newton",
-                   "output", "regularisation"}),
+                   "output", "regularisation", "phases"}),
     "mesh": frozenset({"file", "size", "elements", "element", "grading", "quadrature",
                        "align_x", "align_y"}),
     "conditions": frozenset({"type", "boundary", "component", "value", "end", "displacement",
@@ -696,6 +800,8 @@ SCENE_KEYS: dict[str, frozenset[str]] = {
     "materials": frozenset({"region", "name", "parameters", "unit_weight", "k0"}),
     "regularisation": frozenset({"model", "internal_length"}),
     "output": frozenset({"out", "device", "shards", "progress", "fields"}),
+    "phases": frozenset({"name", "steps", "conditions", "gravity", "reset_displacements"}),
+    "phases.gravity": frozenset({"factor"}),
 }
 _SCENE_KEYS = SCENE_KEYS[""]
 _OUTPUT_KEYS = SCENE_KEYS["output"]
@@ -722,6 +828,7 @@ def bvp_from_dict(data: Mapping[str, Any], folder: Path | str = ".") -> Boundary
         raise SpecError("conditions", "must be an array of tables ([[conditions]])")
     gravity = _table("gravity", data.get("gravity"))
     _unknown("gravity", gravity, SCENE_KEYS["gravity"])
+    phases = _phases(data, gravity)
     material = _table("material", data.get("material"))
     _unknown("material", material, SCENE_KEYS["material"])
     regions = data.get("regions")
@@ -765,14 +872,137 @@ def bvp_from_dict(data: Mapping[str, Any], folder: Path | str = ".") -> Boundary
             regions=None if regions is None else {str(k): v for k, v in regions.items()},
             materials=materials,
             unit_weight=gravity.get("unit_weight", 0.0),
-            gravity_factor=gravity.get("factor"), steps=data.get("steps", 10),
+            gravity_factor=gravity.get("factor"),
+            steps=data.get("steps", sum(p.steps for p in phases) if phases else 10),
             newton=newton_spec, out=output.get("out", data.get("out")),
             regularisation=_within("regularisation",
                                    lambda: RegularisationSpec(**regularisation)),
             device=output.get("device"), shards=output.get("shards"),
             progress=output.get("progress", False), fields=output.get("fields", True),
-            name=data.get("name", "problem"))
+            name=data.get("name", "problem"), phases=phases)
     except SpecError as exc:
         if exc.field in _OUTPUT_KEYS:  # the [output] table's, named within it
             raise SpecError(f"output.{exc.field}", exc.message) from None
+        raise
+
+
+def _check_phases(spec: BoundaryValueSpec) -> None:
+    """SpecError naming what is wrong with the phases of ``spec`` (each phase's own fields
+    are checked by :class:`PhaseSpec`); ``steps`` made their sum."""
+    phases = spec.phases
+    if isinstance(phases, str | bytes | Mapping) or not isinstance(phases, Iterable):
+        raise SpecError("phases", f"must be a sequence of PhaseSpec, got "
+                                  f"{type(phases).__name__}")
+    phases = tuple(phases)
+    for k, p in enumerate(phases):
+        if not isinstance(p, PhaseSpec):
+            raise SpecError("phases", f"must be PhaseSpec objects; phase {k} is a "
+                                      f"{type(p).__name__} (a scene's tables are read by "
+                                      "bvp_from_dict)")
+    object.__setattr__(spec, "phases", phases)
+    names = [p.name for p in phases]
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:
+        raise SpecError("phases.name", f"{twice[0]!r} names two phases: give each its own")
+    total = sum(p.steps for p in phases)
+    if spec.steps not in (10, total):  # 10: the field's default, not given
+        raise SpecError("steps", "a phased problem's steps are its phases' (each phase's "
+                                 "steps), so the problem's own is refused")
+    object.__setattr__(spec, "steps", total)
+    if spec.newton.continuation == "arc-length":
+        raise SpecError("newton.continuation", "arc-length continuation takes as many steps "
+                                               "as its path needs, and a phase as many as "
+                                               "it gives, so the two are refused together "
+                                               "(run the phase to collapse as a scene of its "
+                                               "own)")
+    if spec.gravity_factor is not None:
+        raise SpecError("gravity.factor", "a phased problem gives each phase its own gravity "
+                                          "factor ([phases.gravity] factor), so [gravity]'s "
+                                          "is refused")
+    for c in spec.conditions:
+        if c.type == "pressure" and c.end is not None:
+            raise SpecError("conditions.end", "a condition common to every phase is constant; "
+                                              "a load that changes belongs to a phase's "
+                                              "[[phases.conditions]]")
+    weighted = spec.unit_weight != 0.0 or any(m.unit_weight not in (None, 0.0)
+                                              for m in spec.materials or ())
+    for k, p in enumerate(phases):
+        where = f"phase {k + 1} ({p.name!r})"
+        if p.gravity_factor is not None and not weighted:
+            raise SpecError("phases.gravity.factor", f"of {where} multiplies a unit weight of "
+                                                     "0 N/m³, so it does nothing and is "
+                                                     "refused (set gravity.unit_weight)")
+        if k == 0 and p.reset_displacements:
+            raise SpecError("phases.reset_displacements", f"of {where}: the first phase "
+                                                          "starts from zero displacement, so "
+                                                          "a reset there does nothing and is "
+                                                          "refused")
+        if k > 0 and isinstance(p.gravity_factor, tuple):
+            raise SpecError("phases.gravity.factor", f"of {where}: a later phase's gravity "
+                                                     "starts where the phase before ended; "
+                                                     "give its factor at the phase's end (a "
+                                                     "number)")
+        for c in p.conditions:
+            if k > 0 and c.type == "pressure" and c.end is not None:
+                raise SpecError("phases.conditions.end", f"of {where}: a later phase's "
+                                                         "pressure starts from what acted at "
+                                                         "the end of the phase before; give "
+                                                         "its total at this phase's end as "
+                                                         "value")
+        if not spec.conditions and not p.conditions:
+            raise SpecError("phases.conditions", f"{where} has no condition (and the problem "
+                                                 "has no common [[conditions]])")
+        if spec.mesh.file is None:
+            missing = sorted({c.boundary for c in p.conditions} - set(spec.boundaries)
+                             - _GENERATED_SIDES)
+            if missing:
+                raise SpecError("phases.conditions.boundary",
+                                f"{missing[0]!r} of {where} is no boundary of [boundaries] "
+                                "nor a side of the mesh")
+
+
+def _phases(data: Mapping[str, Any], gravity: Mapping[str, Any]) -> tuple[PhaseSpec, ...]:
+    """The [[phases]] of a scene's table ``data`` (() where it has none); the scene's own
+    ``steps`` and [gravity] ``factor`` beside them are refused."""
+    phases = data.get("phases")
+    if phases is None:
+        return ()
+    if not isinstance(phases, list) or not phases:
+        raise SpecError("phases", "must be an array of tables ([[phases]]), at least one")
+    if "steps" in data:
+        raise SpecError("steps", "a phased scene gives each phase its steps ([[phases]] "
+                                 "steps), so the scene's own is refused")
+    if "factor" in gravity:
+        raise SpecError("gravity.factor", "a phased scene gives each phase its own gravity "
+                                          "factor ([phases.gravity] factor), so [gravity]'s "
+                                          "is refused")
+    return tuple(_phase(p, k) for k, p in enumerate(phases))
+
+
+def _phase(entry: Any, index: int) -> PhaseSpec:
+    """The ``index``-th [[phases]] table; a SpecError it raises carries
+    ``entry = ("phases", index)`` (for the line of its key)."""
+    try:
+        entry = _table(f"phases[{index}]", entry)
+        _unknown("phases", entry, SCENE_KEYS["phases"])
+        for key in ("name", "steps"):
+            if key not in entry:
+                raise SpecError(f"phases.{key}", f"each [[phases]] entry gives its {key}")
+        gravity = _table("phases.gravity", entry.get("gravity"))
+        _unknown("phases.gravity", gravity, SCENE_KEYS["phases.gravity"])
+        conditions = entry.get("conditions", [])
+        if not isinstance(conditions, list):
+            raise SpecError("phases.conditions", "must be an array of tables "
+                                                 "([[phases.conditions]])")
+        own = []
+        for k, c in enumerate(conditions):
+            try:
+                own.append(_condition_of(c, k))
+            except SpecError as exc:
+                raise SpecError(f"phases.{exc.field}", exc.message) from None
+        return PhaseSpec(name=entry["name"], steps=entry["steps"], conditions=tuple(own),
+                         gravity_factor=gravity.get("factor"),
+                         reset_displacements=entry.get("reset_displacements", False))
+    except SpecError as exc:
+        exc.entry = ("phases", index)
         raise
