@@ -26,7 +26,7 @@ COARSE, FINE = 1.5, 0.75
 
 def build(path: Path) -> int:
     """Mesh the embankment into ``path`` (gmsh format 2.2); returns the number of tri6."""
-    gmsh.initialize()
+    gmsh.initialize(interruptible=False)  # leave the process's signal handlers alone
     try:
         gmsh.option.setNumber("General.Terminal", 0)
         gmsh.model.add("embankment")

@@ -28,7 +28,7 @@ EDGE, NEAR, FAR = 0.1, 0.25, 0.6
 def build(path: Path) -> int:
     """Mesh the layered ground into ``path`` (gmsh format 2.2); returns the number of
     tri6."""
-    gmsh.initialize()
+    gmsh.initialize(interruptible=False)  # leave the process's signal handlers alone
     try:
         gmsh.option.setNumber("General.Terminal", 0)
         gmsh.model.add("footing-layered")
