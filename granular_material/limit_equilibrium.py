@@ -32,15 +32,20 @@ Edge cases, each handled one documented way:
 - m_α ≤ 0.2: near the toe of a steep exit, where α < 0 and tan φ / F is large, m_α tends to 0
   and the slice's resistance (c b + W tan φ)/m_α grows without bound, an artefact of the
   method's assumed interslice forces (Whitman & Bailey 1967 advise distrusting a circle with
-  m_α < 0.2). The usual guard is applied: m_α is held at ``m_alpha_min`` (0.2 by default), which
+  m_α < 0.2); where the circle enters the ground steeply (α near 90°, small φ) m_α tends to
+  cos α. The usual guard is applied: m_α is held at ``m_alpha_min`` (0.2 by default), which
   caps such a slice's resistance (conservative); :class:`BishopResult` counts the slices held.
 - Tension cracks are ignored (the slip surface is the circle up to the ground surface), as is
   any tension at a slice's base (a negative normal force is used as it comes).
 
-Validated (tests/test_limit_equilibrium.py) against Bishop & Morgenstern's chart value for
-Griffiths & Lane's (1999, Géotechnique 49(3) 387–403) Example 1 (a 2:1 slope, φ' = 20°,
-c'/(γH) = 0.05: F = 1.380) and Taylor's (1937) stability number of a vertical cut in
-undrained clay (φ = 0: γH/c = 3.83 at F = 1).
+Validated (tests/test_limit_equilibrium.py) against published factors of safety:
+Griffiths & Lane (1999, Géotechnique 49(3) 387–403) Example 1, a 2:1 slope with φ' = 20°,
+c'/(γH) = 0.05, F = 1.380 from Bishop & Morgenstern's charts (here 1.369); code_aster's
+validation slope SSNP006 (4.5 m at 1:2, c = 5 kPa, φ = 20°, γ = 16 kN/m³), F = 1.534 by
+Bishop's method (here 1.542); Griffiths & Lane's clay slope on a foundation as code_aster's
+SSNP507 reports it, F = 2.032 on circles for a stronger foundation (here 2.023) and 1.448 for
+one soil (here 1.471, the exact circle of that geometry); and the closed form of a quarter
+circle through a vertical cut in clay (φ = 0).
 """
 
 from __future__ import annotations
@@ -181,6 +186,10 @@ class Ground:
         object.__setattr__(self, "surcharges", surcharges)
         if self.base is not None:
             object.__setattr__(self, "base", _finite("base", self.base))
+        if not points[:, 1].min() > self.floor:
+            raise ParameterError("base" if self.base is not None else "layers",
+                                 f"the floor (y = {self.floor:g} m) must lie below the whole "
+                                 f"surface (down to y = {points[:, 1].min():g} m)")
 
     @property
     def floor(self) -> float:
@@ -420,8 +429,9 @@ def critical_circle(ground: Ground, grid: np.ndarray | int = 16, slices: int = 1
     ``grid``: the circles to try first, an array (k, 3) of (xc, yc, R) [m], or n for the
     default grid of n × n centres (over the surface's x-range, from just above its highest
     point to 2.5 slope heights above) times n tangent levels (from the floor, or two slope
-    heights below the lowest surface point, up to the highest). The best of them is then
-    refined by Nelder–Mead over (xc, yc, R) (``refine``). ``slices``, ``m_alpha_min``,
+    heights below the lowest surface point, up to the highest). The best of them, from up to
+    three distinct centres, are then refined by Nelder–Mead over (xc, yc, yc − R)
+    (``refine``). ``slices``, ``m_alpha_min``,
     ``gravity``: as :func:`factor_of_safety`. A ParameterError naming ``grid`` if no circle
     of the grid is admissible."""
     _check_options(slices, m_alpha_min, gravity)
@@ -518,6 +528,8 @@ position, the root always bracketed) to ``tol`` relative; with the
     cohesionless slope whose F does not depend on its weight) or fails already at g → 0."""
     if not (math.isfinite(upper) and upper > 1):
         raise ParameterError("upper", f"must be a factor > 1, got {upper!r}")
+    if not 0 < tol < 0.1:
+        raise ParameterError("tol", f"must be a relative tolerance in (0, 0.1), got {tol!r}")
 
     first = critical_circle(ground, grid, slices, m_alpha_min)
     # the later searches start from the best circles of the first grid and the last answer

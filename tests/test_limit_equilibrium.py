@@ -175,6 +175,8 @@ def test_a_cohesionless_slope_has_no_gravity_factor_and_bad_input_is_refused():
             (lambda: Layer(-1, 0, 90, 1), "friction_angle"),
             (lambda: Layer(-1, -5, 30, 1), "cohesion"),
             (lambda: Surcharge(2, 1, 10), "end"),
+            (lambda: Ground(((0, 1), (1, -2)), (Layer(-1, 0, 30, 1),)), "layers"),
+            (lambda: gravity_increase_factor(sand, tol=0.5), "tol"),
             (lambda: critical_circle(sand, grid=np.zeros((2, 2))), "grid"),
             (lambda: factor_of_safety(sand, (0, 20), 25, slices=2), "slices")]:
         with pytest.raises(ParameterError) as info:
