@@ -12,6 +12,8 @@ import pandas as pd
 import pytest
 
 from granular_material.fem import (
+    Fixed,
+    Gravity,
     NewtonSolver,
     Pressure,
     Roller,
@@ -59,8 +61,8 @@ def test_a_plateau_is_a_collapse_and_its_value_the_peak_before_it() -> None:
     for k in range(5, 5 + PLATEAU_STEPS):  # the parameter stalls while the path runs on
         path.commit(k, 0.95 + 1e-4 * (k - 4), 1e-4, 1.0)
     assert path.collapse is not None
-    assert path.collapse["value"] == pytest.approx(0.9501)
-    assert path.collapse["step"] == 5
+    assert path.collapse["value"] == pytest.approx(0.9505)  # the peak when found
+    assert path.collapse["step"] == 4 + PLATEAU_STEPS
     again = ContinuationState.from_dict(path.as_dict())
     assert again == path
 
@@ -116,18 +118,53 @@ def test_arc_length_on_a_linear_body_ends_at_the_load_of_load_control() -> None:
     assert np.allclose(by_arc.u, by_load.u, rtol=1e-5, atol=0)  # Newton's tolerance
 
 
-def test_strength_reduction_finds_the_mobilised_friction() -> None:
-    # σ1/σ3 = 2 under φ = 30°, c = 0: sin φ_mob = 1/3, so F = tan 30° / tan φ_mob = 1.633
-    material = MohrCoulomb(young=50e6, poisson=0.3, friction_angle=30.0,
-                           dilation_angle=0.0,
-                           initial_stress=np.broadcast_to(-P * np.eye(2), (4, 2, 2)).copy())
-    solver = _element(2 * P, material, "load")
-    solver.run(4)
-    result = strength_reduction(solver, factor_end=3.0, steps=20)
-    expected = math.tan(math.radians(30)) / math.tan(math.asin(1 / 3))
-    assert result.stopped_by == "collapse"
-    assert result.factor_of_safety == pytest.approx(expected, rel=0.01)
-    assert material.strength_factor == pytest.approx(result.factors[-1])
+def _slope(gravity_end: float, continuation: str, cutbacks: int = 6) -> NewtonSolver:
+    """A slope 10 m high at 1:1.5 on a 5 m foundation (crest x ≤ 10 m, toe at x = 25 m),
+    16 × 4 quad8 mapped under the ground surface, Mohr–Coulomb c = 10 kPa, φ = 20°, ψ = 0,
+    from a stress-free start under gravity switched on to ``gravity_end`` [N/m³]."""
+    mesh = rectangle_mesh(40.0, 1.0, 16, 4, "quad8")
+    x = mesh.mesh.p[0]
+    mesh.mesh.p[1] *= np.where(x <= 10, 15.0, np.where(x >= 25, 5.0, 15.0 - (x - 10) / 1.5))
+    problem = build_problem(mesh, [Roller("left", 0), Roller("right", 0), Fixed("bottom"),
+                                   Gravity(0.0, end=gravity_end)])
+    n = problem.basis.nelems * problem.basis.X.shape[-1]
+    soil = MohrCoulomb(young=100e6, poisson=0.3, friction_angle=20.0, dilation_angle=0.0,
+                       cohesion=10e3, initial_stress=np.zeros((n, 2, 2)))
+    settings = replace(default_settings("mohr-coulomb"), formulation="small-strain",
+                       continuation=continuation, max_cutbacks=cutbacks)
+    return NewtonSolver(problem.basis, soil, problem.loading, settings)
+
+
+def _bishop_ground():
+    from granular_material.limit_equilibrium import Ground, Layer
+    return Ground(surface=((0, 15), (10, 15), (25, 5), (40, 5)),
+                  layers=(Layer(0.0, 10e3, 20.0, 20e3),), base=0.0)
+
+
+def test_strength_reduction_of_a_slope_finds_bishops_factor() -> None:
+    from granular_material.limit_equilibrium import critical_circle
+
+    bishop = critical_circle(_bishop_ground()).result.factor  # 1.143
+    found = []
+    for cutbacks in (6, 12):
+        solver = _slope(20e3, "load", cutbacks)
+        solver.run(4)
+        result = strength_reduction(solver, factor_end=2.0, steps=20)
+        assert result.stopped_by == "collapse"
+        assert solver.material.strength_factor == pytest.approx(result.factors[-1])
+        found.append(result.factor_of_safety)
+    assert found[0] == pytest.approx(bishop, rel=0.03)  # 1.15 on this coarse mesh
+    assert found[1] == found[0]  # the cut-backs allowed do not move it
+
+
+def test_the_gravity_increase_factor_of_a_slope_is_bishops() -> None:
+    from granular_material.limit_equilibrium import gravity_increase_factor
+
+    bishop = gravity_increase_factor(_bishop_ground(), grid=8)[0]  # 1.461
+    solver = _slope(2 * 20e3, "arc-length")
+    solver.run(10)
+    assert solver.stopped_by == "collapse"
+    assert 2 * solver.continuation.collapse["value"] == pytest.approx(bishop, rel=0.03)
 
 
 def test_a_stopped_arc_length_footing_resumes_to_the_run_that_never_stopped(
@@ -158,3 +195,104 @@ def test_a_stopped_arc_length_footing_resumes_to_the_run_that_never_stopped(
         pd.testing.assert_frame_equal(a, b, check_exact=True)
     np.testing.assert_array_equal(whole.u, resumed.u)
     assert resumed.summary["continuation"] == path
+
+
+ELEMENT_SCENE = """test = "boundary-value"
+steps = 4
+[mesh]
+size = [1.0, 1.0]
+elements = [1, 1]
+element = "quad4"
+[[conditions]]
+type = "roller"
+boundary = "left"
+component = "x"
+[[conditions]]
+type = "roller"
+boundary = "bottom"
+component = "y"
+[[conditions]]
+type = "pressure"
+boundary = "right"
+value = 100e3
+[[conditions]]
+type = "pressure"
+boundary = "top"
+value = 100e3
+end = 200e3
+[initial]
+state = "uniform"
+pressure = 100e3
+[material]
+name = "{material}"
+[material.parameters]
+young = 50e6
+poisson = 0.3
+{strength}
+[newton]
+{newton}
+[strength_reduction]
+factor_end = 3.0
+steps = 20
+"""
+MC = "friction_angle = 30.0\ndilation_angle = 0.0"
+
+
+def _scene(material: str = "mohr-coulomb", strength: str = MC, newton: str = ""):
+    import tomllib
+
+    from granular_material.runs.boundary_value.spec import bvp_from_dict
+    return bvp_from_dict(tomllib.loads(ELEMENT_SCENE.format(material=material,
+                                                            strength=strength,
+                                                            newton=newton)))
+
+
+def test_a_scene_reduces_the_strength_after_its_loading(tmp_path) -> None:
+    outcome = run_boundary_value(_scene(), out=tmp_path / "run")
+    assert outcome.error is None
+    found = outcome.summary["strength_reduction"]
+    expected = math.tan(math.radians(30)) / math.tan(math.asin(1 / 3))
+    # one homogeneous element yields everywhere at once: no path past it to follow, so
+    # the reduction ends on Newton's failure there (and says F is a bound)
+    assert found["stopped_by"] in ("collapse", "failed")
+    assert found["factor_of_safety"] == pytest.approx(expected, rel=0.01)
+    steps = outcome.steps
+    assert (steps.loc[steps["step"] <= 4, "strength_factor"] == 1.0).all()
+    assert steps["strength_factor"].iloc[-1] > 1.5
+    assert (tmp_path / "run" / "strength_reduction.png").exists()
+
+
+@pytest.mark.parametrize(("material", "strength", "newton", "field"), [
+    ("linear-elastic", "", "", "strength_reduction"),
+    ("mohr-coulomb", MC, 'continuation = "arc-length"', "newton.continuation"),
+])
+def test_a_strength_reduction_that_cannot_act_is_refused(material, strength, newton,
+                                                         field) -> None:
+    from granular_material.runs.spec import SpecError
+    with pytest.raises(SpecError) as info:
+        _scene(material, strength, newton)
+    assert info.value.field == field
+
+
+def test_a_strength_reduction_stopped_part_way_resumes_to_the_one_never_stopped(
+        tmp_path, monkeypatch) -> None:
+    from test_bvp_resume import _tables
+
+    whole = run_boundary_value(_scene(), out=tmp_path / "whole")
+    original = NewtonSolver.arc_step
+
+    def step_or_stop(self, parameter, start, step, most, end=1.0):
+        if step == 7:  # the third step of the reduction
+            raise KeyboardInterrupt
+        return original(self, parameter, start, step, most, end)
+
+    with monkeypatch.context() as m:
+        m.setattr(NewtonSolver, "arc_step", step_or_stop)
+        stopped = run_boundary_value(_scene(), out=tmp_path / "run")
+    assert "interrupted" in stopped.error
+    resumed = run_boundary_value(_scene(), out=tmp_path / "run", resume=True)
+    assert resumed.error is None
+    assert resumed.summary["resumed_from_step"] > 4  # inside the reduction
+    for a, b in zip(_tables(tmp_path / "whole"), _tables(tmp_path / "run"), strict=True):
+        pd.testing.assert_frame_equal(a, b, check_exact=True)
+    assert resumed.summary["strength_reduction"] == whole.summary["strength_reduction"]

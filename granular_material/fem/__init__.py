@@ -11,7 +11,10 @@ state, :func:`geostatic_stress`, or under sloping and layered ground :func:`grou
 :class:`RegionalMaterial` holds one material per region
 of the mesh (a layer, a fill) and answers as one; :class:`RunContext` is what a material is
 told of the run it is built for; :class:`Tracking` names the
-post-processors run on chosen Gauss points. :func:`default_settings` holds the Newton settings
+post-processors run on chosen Gauss points. ``NewtonSettings(continuation="arc-length")``
+follows a path past its limit points (:class:`ContinuationState` keeps it), and
+:func:`strength_reduction` finds a factor of safety by reducing the strength to the
+collapse. :func:`default_settings` holds the Newton settings
 the commands use. The run loop that collects a run's tables and keeps its checkpoint is
 :func:`granular_material.runs.run_biaxial`.
 """
@@ -67,6 +70,7 @@ from granular_material.fem.regularisation import (
     SecondGradient,
     add_second_gradient,
 )
+from granular_material.fem.solver.continuation import ContinuationState
 from granular_material.fem.solver.defaults import (
     default_settings,
     default_stress_tol,
@@ -77,6 +81,10 @@ from granular_material.fem.solver.newton import (
     NewtonSettings,
     NewtonSolver,
     StepRecord,
+)
+from granular_material.fem.solver.strength_reduction import (
+    StrengthReductionResult,
+    strength_reduction,
 )
 from granular_material.fem.tracking import (
     Tracking,
@@ -92,6 +100,7 @@ __all__ = [
     "BoundaryDofs",
     "CommittedState",
     "Condition",
+    "ContinuationState",
     "Displacement",
     "FailureReason",
     "Fixed",
@@ -121,6 +130,7 @@ __all__ = [
     "ScikitFemInterface",
     "SecondGradient",
     "StepRecord",
+    "StrengthReductionResult",
     "Tracking",
     "add_second_gradient",
     "available_materials",
@@ -144,6 +154,7 @@ __all__ = [
     "rectangle_mesh",
     "select_boundaries",
     "select_facets",
+    "strength_reduction",
     "to_points",
     "to_quadrature",
     "uniform_stress",

@@ -14,7 +14,9 @@ with the equilibrium f_int(u) = f_ext(λ) (and the prescribed displacements u_D(
 end. Each Newton correction solves the tangent system twice, for the residual (δu_r) and for
 a unit change of the parameter (δu_t: the prescribed displacements' and loads' derivatives
 in λ), and the change δλ of the parameter is the root of the quadratic constraint
-‖Δu + δu_r + δλ δu_t‖ = Δl that keeps the increment closest to its direction so far.
+‖Δu + δu_r + δλ δu_t‖ = Δl that keeps the increment closest to its direction so far (where
+the arc misses the linearised path, a negative discriminant, the δλ that comes nearest to
+it: Lam & Morley 1992, J. Eng. Mech. 118:1243).
 
 The parameter need not be the load factor: :class:`Parameter` names what it changes (the
 loads, or a strength factor that divides a material's tan φ and c) and how the residual
@@ -24,11 +26,14 @@ change of the parameter per step (so that away from a limit the steps are the lo
 load control), and is halved when an increment fails. The path's peak is kept. A *collapse*
 is a plateau: :data:`PLATEAU_STEPS` steps in a row whose change of the parameter per length
 of path is at most :data:`PLATEAU_STIFFNESS` of the first step's (Bergan's current stiffness
-parameter near 0: the parameter stalls while the displacement runs on); the collapse value
-is the path's peak up to the plateau's first step. On a Mohr–Coulomb slope (tri6, ψ = 0,
-strength reduction) the rate falls from 1 to below 0.01 as the mechanism forms and then
-creeps on at 0.002–0.003 of its first value, so a plateau at 1e-3 is never
-reached; at 0.01 the factor sits within 0.5 % of where the mechanism formed. Neither the
+parameter near 0: the parameter stalls while the displacement runs on): the tangent of
+the load–displacement path has fallen to 1 % of the elastic one. The collapse value is the
+path's peak when the plateau is found, the largest parameter at which equilibrium was
+found. Measured on the embankment of examples/scenes (929 tri6, Mohr–Coulomb c = 10 kPa,
+φ = 20°, ψ = 0): 1.141 by strength reduction and 1.427 by gravity increase, against
+Bishop's 1.143 and 1.461 (:mod:`granular_material.limit_equilibrium`); a threshold of 0.002
+moved them to 1.143 and 1.431, and on a coarse 16 × 4 quad8 slope, where the path rises
+again after its first plateau, the gravity factor from 1.485 to 1.515 (Bishop 1.461). Neither the
 plateau nor its value depends on the number of cut-backs, which only set how small a step
 may become: a step cut back to a tenth still measures the same rate. A path that comes down
 past a peak (a snap-back, or softening) is followed on; its peak is reported.
@@ -158,7 +163,7 @@ class ContinuationState:
         """Record the parameter ``value`` reached at ``step`` by a ``change`` over an arc of
         ``length`` [m]; a collapse once the current stiffness parameter has stayed within
         ±:data:`PLATEAU_STIFFNESS` for :data:`PLATEAU_STEPS` steps (the parameter stalls while
-        the displacement runs on); its value is the peak up to the plateau's first step."""
+        the displacement runs on); its value is the path's peak then."""
         self.values.append(float(value))
         if value > self.peak:
             self.peak, self.peak_step = float(value), step
@@ -170,10 +175,7 @@ class ContinuationState:
         window = self.rates[-PLATEAU_STEPS:]
         if (self.collapse is None and len(window) == PLATEAU_STEPS
                 and all(abs(r) <= PLATEAU_STIFFNESS for r in window)):
-            before = self.values[:len(self.values) - PLATEAU_STEPS + 1]
-            value = max(before)
-            self.collapse = {"value": value,
-                             "step": step - len(self.values) + 1 + before.index(value)}
+            self.collapse = {"value": self.peak, "step": self.peak_step}
 
     def as_dict(self) -> dict[str, object]:
         """The state as plain values (JSON)."""

@@ -500,19 +500,31 @@ class NewtonSolver:
             if sg is not None:
                 K = sg.augment(K)
         with times.phase("linear_solve"):
-            du_t, q, interior, _ = self._directional(K, parameter, start, self.u,
-                                                     response.stress)
+            try:
+                du_t, q, interior, _ = self._directional(K, parameter, start, self.u,
+                                                         response.stress)
+            except RuntimeError as exc:  # the committed tangent has no stiffness left
+                failed = Verdict(Outcome.FAILED, reason=f"the tangent is singular ({exc})")
+                return (_Attempt(failed, np.zeros(K.shape[0]), response, None, [], [], 0, {}),
+                        0.0, 0.0)
         forces = interior if sg is None else interior[interior < n]
         norm_t = self.l2_norm(du_t)
+        # a parameter that moves the body by less than round-off (a strength nothing
+        # mobilises yet) is held at its new value: an arc through it would be noise
+        held = norm_t == 0 or norm_t * most <= 1e-9 * self.l2_norm(self.u)
+        # the direction along the path: that of the increment before (its change of the
+        # parameter where the parameter moves nothing), forward at the path's start
         sign = 1.0
         if self.continuation.values and self._last is not None:
-            sign = -1.0 if self._inner(self._last[1], du_t) < 0 else 1.0
-        change = most if norm_t == 0 else min(length / norm_t, most)
-        held = norm_t == 0  # the parameter moves nothing: it is held at its new value
+            if held:
+                sign = -1.0 if self._last[0] < 0 else 1.0
+            else:
+                sign = -1.0 if self._inner(self._last[1], du_t) < 0 else 1.0
+        change = most if held else min(length / norm_t, most)
         if sign > 0 and start + change >= end - 1e-12 * max(abs(end), 1.0):
             change, held = end - start, True
         change *= sign
-        used = abs(change) * norm_t
+        used = 0.0 if held else abs(change) * norm_t
         du = change * du_t
         # R₀: the force a load-controlled increment of this change would bring, or the
         # committed state's own residual (accepted before) where that is smaller
@@ -565,7 +577,12 @@ class NewtonSolver:
                     K = sg.augment(K)
                 A, b, x, free = condense(K, -residual, D=D)
             with times.phase("linear_solve"):  # one factorisation for both right-hand sides
-                factor = factorized(A.tocsc())
+                try:
+                    factor = factorized(A.tocsc())
+                except RuntimeError as exc:  # a tangent with no stiffness left somewhere
+                    return (_Attempt(Verdict(Outcome.FAILED, reason=f"the tangent is singular "
+                                             f"({exc})"), du, response, f_int[:n], history,
+                                     corrections, it, cost), change, used)
                 du_r = x
                 du_r[free] = factor(b)
                 if held:
@@ -576,13 +593,18 @@ class NewtonSolver:
             step_change = 0.0
             if not held:  # the root of ‖Δu + δu_r + δλ δu_t‖ = Δl nearest the path so far
                 base = du + du_r
-                roots = arc_roots(self._inner(du_t, du_t), 2 * self._inner(du_t, base),
-                                  self._inner(base, base) - used * used)
-                if not roots:
-                    return (_Attempt(Verdict(Outcome.FAILED, reason="the arc misses the "
-                                             "linearised path (no real root)"), du, response,
-                                     f_int[:n], history, corrections, it, cost), change, used)
-                step_change = max(roots, key=lambda d: self._inner(base + d * du_t, du))
+                a, b2 = self._inner(du_t, du_t), 2 * self._inner(du_t, base)
+                roots = arc_roots(a, b2, self._inner(base, base) - used * used)
+                if roots:
+                    step_change = max(roots, key=lambda d: self._inner(base + d * du_t, du))
+                elif a > 0:  # the arc misses the linearised path: its nearest point
+                    step_change = -b2 / (2 * a)  # (Lam & Morley 1992)
+                if abs(change + step_change) > most:
+                    # where the parameter barely moves the body (δu_t ≈ 0: a strength
+                    # nothing mobilises yet) the arc asks for a change beyond the nominal
+                    # step: the parameter is held at the step's bound instead
+                    step_change = math.copysign(most, change + step_change) - change
+                    held = True
             proposed = du + du_r + step_change * du_t
             step_norm = self.l2_norm(proposed)
             moved = self.l2_norm(proposed - du)

@@ -87,6 +87,7 @@ class StrengthReductionResult:
             "steps" (the step budget spent), "failed" (Newton; ``error`` says why).
         factors: F after each step; records: their Newton records.
         error: the Newton failure's message, if any.
+        collapse_step: the step of the collapse's peak (None without a collapse).
     """
 
     factor_of_safety: float
@@ -94,11 +95,13 @@ class StrengthReductionResult:
     factors: list[float] = field(default_factory=list)
     records: list[StepRecord] = field(default_factory=list)
     error: str | None = None
+    collapse_step: int | None = None
 
 
 def strength_reduction(solver: NewtonSolver, factor_end: float = 3.0, steps: int = 20,
                        on_step: Callable[[NewtonSolver, StepRecord], None] | None = None,
-                       progress: bool = False) -> StrengthReductionResult:
+                       progress: bool = False, resume: bool = False,
+                       ) -> StrengthReductionResult:
     """Reduce the strength of ``solver``'s material from its committed state (F = 1, loads
     at the committed load factor) by arc length until the slope collapses.
 
@@ -110,6 +113,8 @@ def strength_reduction(solver: NewtonSolver, factor_end: float = 3.0, steps: int
             the path may take up to ``NewtonSettings.arc_length_steps`` times as many.
         on_step: called after every committed step with the solver and its record.
         progress: show a progress bar.
+        resume: go on with a reduction the solver (restored from a checkpoint) and its
+            material had begun: its path and F are theirs.
     """
     from granular_material.fem.solver.continuation import ContinuationState
     from granular_material.fem.solver.records import NewtonError
@@ -119,15 +124,19 @@ def strength_reduction(solver: NewtonSolver, factor_end: float = 3.0, steps: int
     if steps < 1:
         raise ParameterError("steps", f"must be an integer >= 1, got {steps!r}")
     parameter = StrengthParameter(solver)
-    solver.continuation = ContinuationState()
-    solver._last = None
+    if not resume:
+        solver.continuation = ContinuationState()
+        solver._last = None
     most = (factor_end - 1.0) / steps
     budget = solver.arc_length_budget(steps)
     factor = float(getattr(solver.material, "strength_factor", 1.0))
     first = len(solver.records) + 1
-    result = StrengthReductionResult(factor, "steps")
+    done = len(solver.continuation.values)
+    result = StrengthReductionResult(factor, "steps",
+                                     factors=list(solver.continuation.values))
     with progress_bar(budget, "strength reduction", progress) as bar:
-        for k in range(budget):
+        bar.update(done)
+        for k in range(budget - done):
             if factor >= factor_end - 1e-12:
                 result.stopped_by = "end"
                 break
@@ -153,4 +162,5 @@ def strength_reduction(solver: NewtonSolver, factor_end: float = 3.0, steps: int
     path = solver.continuation
     result.factor_of_safety = (float(path.collapse["value"]) if path.collapse is not None
                                else max(result.factors, default=factor))
+    result.collapse_step = None if path.collapse is None else int(path.collapse["step"])
     return result

@@ -76,6 +76,13 @@ from granular_material.runs.boundary_value.phases import (
     run_phases,
     with_phase,
 )
+from granular_material.runs.boundary_value.reduction import (
+    PHASE,
+    reduction_columns,
+    reduction_figure,
+    reduction_summary,
+    run_reduction,
+)
 from granular_material.runs.boundary_value.resume import (
     open_bvp_checkpoint,
     remember,
@@ -87,7 +94,8 @@ from granular_material.runs.spec import SpecError
 
 #: the files a run writes into its folder beside its tables (removed when a run starts, so
 #: that an earlier run's never stand beside this one's)
-_OUTPUTS = ("fields.xdmf", "load_displacement.png", "mechanism.png", "summary.json")
+_OUTPUTS = ("fields.xdmf", "load_displacement.png", "mechanism.png", "summary.json",
+            "strength_reduction.png")
 
 __all__ = [
     "OUT_OF_EQUILIBRIUM",
@@ -603,10 +611,17 @@ def run_boundary_value(spec: BoundaryValueSpec, out: Path | None = None,
             if writer is not None:
                 writer.write(float(row["load_factor"]), u, points)
 
+    reducing = saved is not None and saved.step > spec.steps  # in the strength reduction
+
     def collect(s: NewtonSolver, record: StepRecord | None) -> None:
         row, points = _rows(b, s, record, p0)
         if b.plans:
             row, points = with_phase(b, row, points)
+            if reducing:
+                row["phase"] = PHASE
+                points["phase"] = PHASE
+        if spec.strength_reduction is not None:
+            row.update(reduction_columns(s))
         u = b.reported(s.u)
         keep(row, points, u)
         if checkpoint is not None:
@@ -629,13 +644,19 @@ def run_boundary_value(spec: BoundaryValueSpec, out: Path | None = None,
         b.start_residuals[0] = initial_residual.get("relative")
     error = None
     interrupt = None
+    reduction = None
+    loaded = None if saved is None else min(saved.step, spec.steps)
     try:
         if b.plans:
-            run_phases(b, solver, collect, checkpoint, None if saved is None else saved.step)
+            run_phases(b, solver, collect, checkpoint, loaded)
         else:
             solver.run(spec.steps, on_step=collect, progress=spec.progress,
                        description=f"{spec.name} ({problem.basis.nelems} elements)",
-                       done=0 if saved is None else saved.step)
+                       done=0 if loaded is None else loaded)
+        if spec.strength_reduction is not None:
+            resumed = reducing
+            reducing = True
+            reduction = run_reduction(spec, solver, collect, resumed)
     except NewtonError as exc:
         error = str(exc)
         if b.plans:
@@ -662,10 +683,15 @@ def run_boundary_value(spec: BoundaryValueSpec, out: Path | None = None,
         summary["regularisation"] = regularisation
     if b.settings.continuation == "arc-length":
         summary["continuation"] = _continuation_summary(spec, solver, error)
+    if spec.strength_reduction is not None:
+        summary["strength_reduction"] = reduction_summary(reduction, spec)
     if checkpoint is not None and error is None:
         checkpoint.remove()  # finished: nothing to resume
     if out is not None:
         _figures(b, steps, last, out)
+        if reduction is not None:
+            reduction_figure(steps[steps["step"] > spec.steps], summary["strength_reduction"],
+                             out)
         summary["out"] = str(out)
         write_json(summary, out / "summary.json")
     return BVPOutcome(steps, summary, error, last.get("points", pd.DataFrame()),

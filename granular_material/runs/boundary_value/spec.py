@@ -81,6 +81,10 @@ into a :class:`BoundaryValueSpec` by :func:`bvp_from_dict` (every key checked, a
     steps = 6
     reset_displacements = true      # report displacement (and strain) from this phase's start
 
+    [strength_reduction]            # after the loading: tan φ and c of the Mohr–Coulomb
+    factor_end = 3.0                # regions divided by F, followed by arc length to the
+    steps = 20                      # collapse (the factor of safety)
+
     [newton]                        # NewtonSpec's fields
     [regularisation]                # past a peak: model = "second-gradient" (quad8, quad9,
     internal_length = 0.005         # tri6), ℓ [m]; default model = "none"
@@ -102,7 +106,7 @@ from granular_material.vocabulary import RenamedWarning, key_of, user_stacklevel
 
 __all__ = ["CONDITION_KEYS", "CONDITION_TYPES", "INITIAL_KEYS", "INITIAL_STATES", "SCENE_KEYS",
            "BoundaryValueSpec", "ConditionSpec", "InitialStateSpec", "MeshSpec", "PhaseSpec",
-           "RegionMaterialSpec", "bvp_from_dict"]
+           "RegionMaterialSpec", "StrengthReductionSpec", "bvp_from_dict"]
 
 #: the conditions a boundary may carry
 CONDITION_TYPES = ("fixed", "roller", "displacement", "rigid", "pressure")
@@ -458,6 +462,31 @@ class PhaseSpec:
 
 
 @dataclass(frozen=True, kw_only=True)
+class StrengthReductionSpec:
+    """The factor of safety by strength reduction, after the loading
+    (:func:`~granular_material.fem.solver.strength_reduction.strength_reduction`): tan φ and
+    c of every Mohr–Coulomb region divided by F, F followed by arc length to the collapse.
+
+    Attributes:
+        factor_end: the largest F tried (> 1); a slope that stands at it has F ≥ it.
+        steps: nominal steps from F = 1 to ``factor_end`` (the largest change of F a step;
+            the path may take up to ``[newton] arc_length_steps`` times as many).
+    """
+
+    factor_end: float = 3.0
+    steps: int = 20
+
+    def __post_init__(self) -> None:
+        conform_fields(self, error=SpecError)
+        if not self.factor_end > 1:
+            raise SpecError("strength_reduction.factor_end",
+                            f"must be > 1 (F = 1 is the loading's end), got {self.factor_end!r}")
+        if self.steps < 1:
+            raise SpecError("strength_reduction.steps", f"must be an integer >= 1, got "
+                                                        f"{self.steps!r}")
+
+
+@dataclass(frozen=True, kw_only=True)
 class BoundaryValueSpec:
     """One boundary-value problem run (see the module docstring for its file form).
 
@@ -493,6 +522,8 @@ class BoundaryValueSpec:
             ``steps`` as given. With phases, ``conditions`` are common to every phase (a
             load among them constant), ``gravity_factor`` is the phases' own and ``steps``
             becomes their sum.
+        strength_reduction: the factor of safety by strength reduction after the loading
+            (``[strength_reduction]``), or None.
     """
 
     mesh: MeshSpec
@@ -515,9 +546,11 @@ class BoundaryValueSpec:
     fields: bool = True
     name: str = "problem"
     phases: tuple[PhaseSpec, ...] = ()
+    strength_reduction: StrengthReductionSpec | None = None
 
     def __post_init__(self) -> None:
         self._check_sections()
+        self._check_strength_reduction()
         conform_fields(self, error=SpecError, skip=_SECTIONS)
         if self.phases:
             _check_phases(self)
@@ -627,6 +660,30 @@ class BoundaryValueSpec:
                                                         "at zero pressure; give a pressure "
                                                         "> 0, or start geostatic")
 
+    def _check_strength_reduction(self) -> None:
+        """SpecError for a strength reduction that cannot act: one whose materials have no
+        strength to reduce (no Mohr–Coulomb region), or beside an arc-length loading."""
+        sr = self.strength_reduction
+        if sr is None:
+            return
+        if not isinstance(sr, StrengthReductionSpec):
+            raise SpecError("strength_reduction", f"must be a StrengthReductionSpec, got "
+                                                  f"{type(sr).__name__}")
+        names = ([m.material.name for m in self.materials] if self.materials is not None
+                 else [self.material.name])
+        if "mohr-coulomb" not in names:
+            raise SpecError("strength_reduction", f"divides tan φ and c of Mohr–Coulomb "
+                                                  f"materials, and this problem has none "
+                                                  f"({', '.join(sorted(set(names)))}); a "
+                                                  "gravity-increase factor (a [gravity] "
+                                                  "factor with [newton] continuation = "
+                                                  '"arc-length") serves every material')
+        if self.newton.continuation != "load":
+            raise SpecError("newton.continuation", "must be \"load\" with "
+                                                   "[strength_reduction]: the loading before "
+                                                   "it is stepped by load, the reduction by "
+                                                   "its own arc length")
+
     @property
     def noisy(self) -> bool:
         """Whether any material of the problem is noisy (DEM RVEs): the Newton defaults of
@@ -672,7 +729,8 @@ class BoundaryValueSpec:
 #: the fields of BoundaryValueSpec that are sections, each checked by its own class (or,
 #: ``unit_weight``, a number or "rve")
 _SECTIONS = ("mesh", "boundaries", "conditions", "unit_weight", "gravity_factor", "initial",
-             "material", "regions", "materials", "newton", "regularisation", "phases")
+             "material", "regions", "materials", "newton", "regularisation", "phases",
+             "strength_reduction")
 #: the sides every generated rectangle names
 _GENERATED_SIDES = frozenset({"left", "right", "bottom", "top"})
 
@@ -788,7 +846,7 @@ def _initial(table: dict[str, Any]) -> InitialStateSpec:
 SCENE_KEYS: dict[str, frozenset[str]] = {
     "": frozenset({"test", "steps", "name", "out", "mesh", "boundaries", "conditions",
                    "gravity", "initial", "material", "regions", "materials", "newton",
-                   "output", "regularisation", "phases"}),
+                   "output", "regularisation", "phases", "strength_reduction"}),
     "mesh": frozenset({"file", "size", "elements", "element", "grading", "quadrature",
                        "align_x", "align_y"}),
     "conditions": frozenset({"type", "boundary", "component", "value", "end", "displacement",
@@ -799,6 +857,7 @@ SCENE_KEYS: dict[str, frozenset[str]] = {
     "material": frozenset({"name", "parameters"}),
     "materials": frozenset({"region", "name", "parameters", "unit_weight", "k0"}),
     "regularisation": frozenset({"model", "internal_length"}),
+    "strength_reduction": frozenset({"factor_end", "steps"}),
     "output": frozenset({"out", "device", "shards", "progress", "fields"}),
     "phases": frozenset({"name", "steps", "conditions", "gravity", "reset_displacements"}),
     "phases.gravity": frozenset({"factor"}),
@@ -849,6 +908,11 @@ def bvp_from_dict(data: Mapping[str, Any], folder: Path | str = ".") -> Boundary
     newton = _table("newton", data.get("newton"))
     regularisation = _table("regularisation", data.get("regularisation"))
     _unknown("regularisation", regularisation, SCENE_KEYS["regularisation"])
+    reduction = data.get("strength_reduction")
+    if reduction is not None:
+        reduction = _table("strength_reduction", reduction)
+        _unknown("strength_reduction", reduction, SCENE_KEYS["strength_reduction"])
+        reduction = _within("strength_reduction", lambda: StrengthReductionSpec(**reduction))
     output = _table("output", data.get("output"))
     _unknown("output", output, _OUTPUT_KEYS)
     if "out" in output and "out" in data:
@@ -879,7 +943,7 @@ def bvp_from_dict(data: Mapping[str, Any], folder: Path | str = ".") -> Boundary
                                    lambda: RegularisationSpec(**regularisation)),
             device=output.get("device"), shards=output.get("shards"),
             progress=output.get("progress", False), fields=output.get("fields", True),
-            name=data.get("name", "problem"), phases=phases)
+            name=data.get("name", "problem"), phases=phases, strength_reduction=reduction)
     except SpecError as exc:
         if exc.field in _OUTPUT_KEYS:  # the [output] table's, named within it
             raise SpecError(f"output.{exc.field}", exc.message) from None
