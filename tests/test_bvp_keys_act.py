@@ -180,9 +180,10 @@ CHANGED = {
     "output": {"out": "elsewhere", "device": "cpu", "shards": 2, "progress": True,
                "fields": False},
     "regularisation": {"model": "second-gradient", "internal_length": 0.01},
+    "strength_reduction": {"factor_end": 2.5, "steps": 5},
 }
 TABLES = ("mesh", "boundaries", "conditions", "gravity", "initial", "material", "newton",
-          "output", "regularisation", "regions", "materials", "phases")
+          "output", "regularisation", "regions", "materials", "phases", "strength_reduction")
 #: the materials by region: [regions] (free names, walked by changing a predicate) and a
 #: changed value for every key of a [[materials]] entry (walked on the first of two)
 REGIONAL = {"regions": {"lower": "y <= 0.05"},
@@ -192,7 +193,8 @@ REGIONAL = {"regions": {"lower": "y <= 0.05"},
 
 def test_the_walk_reaches_every_key_of_every_table():
     assert set(CHANGED[""]) | set(TABLES) == SCENE_KEYS[""]
-    for table in ("mesh", "gravity", "material", "output", "regularisation"):
+    for table in ("mesh", "gravity", "material", "output", "regularisation",
+                  "strength_reduction"):
         assert set(CHANGED[table]) == SCENE_KEYS[table], table
     assert set(REGIONAL["materials"]) == SCENE_KEYS["materials"]
 

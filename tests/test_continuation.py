@@ -296,3 +296,20 @@ def test_a_strength_reduction_stopped_part_way_resumes_to_the_one_never_stopped(
     for a, b in zip(_tables(tmp_path / "whole"), _tables(tmp_path / "run"), strict=True):
         pd.testing.assert_frame_equal(a, b, check_exact=True)
     assert resumed.summary["strength_reduction"] == whole.summary["strength_reduction"]
+
+
+@pytest.mark.parametrize(("key", "value"), [("factor_end", 1.0), ("steps", 0),
+                                            ("factor", 2.0)])
+def test_a_strength_reduction_key_out_of_bounds_or_unknown_is_refused_naming_it(key, value
+                                                                                 ) -> None:
+    import tomllib
+
+    from granular_material.runs.boundary_value.spec import bvp_from_dict
+    from granular_material.runs.spec import SpecError
+    data = tomllib.loads(ELEMENT_SCENE.format(material="mohr-coulomb", strength=MC,
+                                              newton=""))
+    data["strength_reduction"][key] = value
+    with pytest.raises(SpecError) as info:
+        bvp_from_dict(data)
+    assert info.value.field.startswith("strength_reduction")
+    assert key in str(info.value)
