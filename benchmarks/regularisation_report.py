@@ -125,9 +125,15 @@ def dem_figure(out: Path, rows: list[dict[str, Any]]) -> list[str]:
 
 def footing_figure(out: Path, rows: list[dict[str, Any]]) -> list[str]:
     table = pd.DataFrame(rows)
-    fig, axes = plt.subplots(1, 2, figsize=(9, 3.8), sharey=True)
-    for ax, kind in zip(axes, ("mc", "dem"), strict=True):
-        rows = table[table["material"] == kind]
+    if "continuation" not in table:
+        table["continuation"] = "load"
+    panels = [("mc", "load", "softening Mohr–Coulomb twin"), ("dem", "load", "DEM RVEs"),
+              ("mc", "arc-length", "the twin by arc length")]
+    panels = [p for p in panels if p[1] == "load"
+              or (table["continuation"] == "arc-length").any()]
+    fig, axes = plt.subplots(1, len(panels), figsize=(4.5 * len(panels), 3.8), sharey=True)
+    for ax, (kind, continuation, title) in zip(axes, panels, strict=True):
+        rows = table[(table["material"] == kind) & (table["continuation"] == continuation)]
         meshes = list(dict.fromkeys(rows["mesh"]))
         lengths = sorted(rows["internal_length"].unique())
         styles = dict(zip(lengths, ("--", "-", "-.", ":"), strict=False))
@@ -137,8 +143,7 @@ def footing_figure(out: Path, rows: list[dict[str, Any]]) -> list[str]:
                     -steps["footing_force_y"] / 0.05 / 1e3, styles[row["internal_length"]],
                     color=f"C{meshes.index(row['mesh'])}",
                     label=f"{row['mesh']}, {_label(row['internal_length'])}")
-        ax.set_title("softening Mohr–Coulomb twin" if kind == "mc" else "DEM RVEs",
-                     fontsize=10)
+        ax.set_title(title, fontsize=10)
         ax.set_xlabel("settlement [mm]")
         ax.grid(alpha=0.3)
         if ax.lines:
@@ -199,13 +204,14 @@ def write_report(out: Path, results: dict[str, Any]) -> None:
     if results.get("footing"):
         footing_figure(out, results["footing"])
         lines += ["## Footing", "",
-                  "| material | mesh | ℓ [mm] | steps | settlement reached [mm] | "
+                  "| material | mesh | ℓ [mm] | stepping | steps | settlement reached [mm] | "
                   "peak pressure [kPa] | at [mm] | pressure at the end [kPa] | "
                   "iterations / step | time [s] |",
-                  "|---|---|---|---|---|---|---|---|---|---|"]
+                  "|---|---|---|---|---|---|---|---|---|---|---|"]
         for r in results["footing"]:
             lines.append(
                 f"| {r['material']} | {r['mesh']} | {r['internal_length'] * 1e3:g} | "
+                f"{r.get('continuation', 'load')} | "
                 f"{r['steps_completed']} | {_mm(r['settlement_reached'])} | "
                 f"{_f(r['peak_pressure'] / 1e3, 0)} | {_mm(r['peak_settlement'])} | "
                 f"{_f(r['final_pressure'] / 1e3, 0)} | {_f(r['iterations'], 1)} | "

@@ -313,3 +313,14 @@ def test_a_strength_reduction_key_out_of_bounds_or_unknown_is_refused_naming_it(
         bvp_from_dict(data)
     assert info.value.field.startswith("strength_reduction")
     assert key in str(info.value)
+
+
+def test_a_collapse_sought_in_finite_strain_warns_and_in_small_strain_does_not(
+        recwarn) -> None:
+    from granular_material.runs.boundary_value.runner import FiniteStrainCollapseWarning
+    with pytest.warns(FiniteStrainCollapseWarning, match="small-strain"):
+        run_boundary_value(_scene(), out=None)  # the commands' default: updated-Lagrangian
+    recwarn.clear()
+    run_boundary_value(_scene(newton='formulation = "small-strain"\nmax_cutbacks = 2'),
+                       out=None)
+    assert not [w for w in recwarn if w.category is FiniteStrainCollapseWarning]

@@ -101,6 +101,7 @@ __all__ = [
     "OUT_OF_EQUILIBRIUM",
     "BVPOutcome",
     "Built",
+    "FiniteStrainCollapseWarning",
     "OutOfEquilibriumWarning",
     "boundary_length",
     "build",
@@ -580,6 +581,7 @@ def run_boundary_value(spec: BoundaryValueSpec, out: Path | None = None,
     if saved is not None:
         b.material.restore(saved.material_path)  # refused (an older one) before any write
     problem = b.problem
+    _collapse_formulation(spec, b.settings)
     try:
         solver = NewtonSolver(problem.basis, b.material, problem.loading, b.settings,
                               spec.regularisation.regularisation())
@@ -716,6 +718,27 @@ def _continuation_summary(spec: BoundaryValueSpec, solver: NewtonSolver,
         out["gravity_factor_at_collapse"] = (None if path.collapse is None
                                              else f0 + (f1 - f0) * path.collapse["value"])
     return out
+
+
+class FiniteStrainCollapseWarning(UserWarning):
+    """A collapse sought (a strength reduction, or a gravity factor followed by arc length)
+    in the updated-Lagrangian formulation, whose changing geometry can keep a slope gaining
+    load at strains past any collapse: factors of safety are small-strain notions."""
+
+
+def _collapse_formulation(spec: BoundaryValueSpec, settings: Any) -> None:
+    """Warn (:class:`FiniteStrainCollapseWarning`) where ``spec`` seeks a collapse in finite
+    strain."""
+    seeks = spec.strength_reduction is not None or (
+        settings.continuation == "arc-length" and spec.gravity_factor is not None)
+    if seeks and settings.formulation == "updated-lagrangian":
+        warnings.warn("a collapse load (strength reduction, or gravity increased by arc "
+                      "length) in the updated-Lagrangian formulation follows the changing "
+                      "geometry: a slope can keep gaining load at strains far past its "
+                      "collapse (a user's gravity ramp went on to 2.24 at shear strains "
+                      "above 100 %, against 1.458 in small strain); set [newton] "
+                      'formulation = "small-strain" for a factor of safety',
+                      FiniteStrainCollapseWarning, stacklevel=3)
 
 
 class OutOfEquilibriumWarning(UserWarning):
