@@ -354,6 +354,58 @@ class NewtonSolver:
             return lambda grad_u, response: secant.update(grad_u, response.stress)
         return lambda grad_u, response: response.tangent
 
+    def _evaluate_at(self, du: np.ndarray, grad_n: np.ndarray, times: PhaseTimes,
+                     cost: dict[str, int | float],
+                     ) -> tuple[MaterialResponse, np.ndarray, np.ndarray,
+                                tuple[str, dict[str, int]] | None]:
+        """The material at the iterate ``du`` [m] from the committed ∇u ``grad_n``: its
+        response, the ∇u that drove it, the total ∇u [-], and where it failed (the reason
+        and the failed points by cause) or None; its seconds and costs added up."""
+        grad_step = gauss_points_grad(self.basis, du[:self.basis.N])
+        grad_u = self.kinematics.material_gradient(grad_n, grad_step)
+        with times.phase("material"):
+            response = self.material.evaluate(grad_u)
+        times.add_all(response.timings)
+        _add_costs(cost, response.costs)
+        failure = None
+        if not response.ok:
+            causes = response.failure_causes()  # not the points aborted with them
+            bad = causes if causes.size else response.failed_points()
+            counts = response.failure_counts()
+            why = ", ".join(f"{name}: {k}" for name, k in counts.items())
+            failure = (f"material failed at points {bad[:8].tolist()} ({why})", counts)
+        return response, grad_u, grad_n + grad_step, failure
+
+    def _internal_at(self, response: MaterialResponse, grad_total: np.ndarray,
+                     du: np.ndarray) -> np.ndarray:
+        """f_int [N/m] of the iterate ``du`` whose material answered ``response`` (with a
+        regularised run's rows of v and λ)."""
+        n = self.basis.N
+        f_int = internal_force(self.basis, self.kinematics.assembled_stress(response.stress,
+                                                                             grad_total))
+        if self.second_gradient is not None:
+            f_int = self._with_second_gradient(f_int, self.u + du[:n], self.extra + du[n:])
+        return f_int
+
+    def _tangent_at(self, tangent: np.ndarray, response: MaterialResponse,
+                    grad_n: np.ndarray, grad_total: np.ndarray):
+        """The assembled tangent of an iterate (bordered by the second gradient's blocks)."""
+        K = stiffness(self.basis, self.kinematics.assembled_tangent(tangent, response.stress,
+                                                                    grad_n, grad_total),
+                      **self._assembly)
+        sg = self.second_gradient
+        return K if sg is None else sg.augment(K)
+
+    def _corrected(self, proposed: np.ndarray, du: np.ndarray, state: IterationState,
+                   corrections: list[float]) -> Verdict:
+        """The verdict of the rules that judge a correction from ``du`` to ``proposed``
+        (its ‖δu‖/‖Δu‖ appended to ``corrections``)."""
+        step_norm = self.l2_norm(proposed)
+        moved = self.l2_norm(proposed - du)
+        corrections.append(moved / step_norm if step_norm > 0 else 0.0)
+        state = replace(state, corrections=tuple(corrections), step_norm=step_norm)
+        return judge(RULES[self.settings.convergence].corrected, state, self.settings)
+
     def _increment(self, target: float, times: PhaseTimes) -> _Attempt:
         """One increment to load factor ``target`` from the committed state, ended by the
         first verdict of the convergence rules (:mod:`granular_material.fem.solver.convergence`);
@@ -366,12 +418,9 @@ class NewtonSolver:
             u_d, f_ext = self._external(target, self.u)
             du = np.zeros(n + (0 if sg is None else sg.n_extra))
             du[D] = u_d - self.u[D]
-            K = stiffness(self.basis, kin.assembled_tangent(response.tangent, response.stress,
-                                                            grad_n, grad_n),
-                          **self._assembly)
+            K = self._tangent_at(response.tangent, response, grad_n, grad_n)
             rhs = f_ext - self.f_int
             if sg is not None:  # v and λ's rows (zero at a committed state, to round-off)
-                K = sg.augment(K)
                 rhs = np.concatenate([rhs, -sg.residual(self.u, self.extra)[n:]])
             A, b, x, interior = condense(K, rhs, x=du, D=D)
         # the residual's norm is that of the forces: the rows of v and λ are linear and
@@ -397,30 +446,15 @@ class NewtonSolver:
         aitken = AitkenRelaxation() if s.relaxation == "aitken" else None
         tangent_of = self._tangents()
         for it in itertools.count(1):  # the rule ``spent`` ends it at max_iterations
-            grad_step = gauss_points_grad(self.basis, du[:n])
-            grad_u = kin.material_gradient(grad_n, grad_step)
-            with times.phase("material"):
-                response = self.material.evaluate(grad_u)
-            times.add_all(response.timings)
-            _add_costs(cost, response.costs)
-            if not response.ok:
-                causes = response.failure_causes()  # not the points aborted with them
-                bad = causes if causes.size else response.failed_points()
-                counts = response.failure_counts()
-                why = ", ".join(f"{name}: {k}" for name, k in counts.items())
-                reason = f"material failed at points {bad[:8].tolist()} ({why})"
+            response, grad_u, grad_total, failure = self._evaluate_at(du, grad_n, times, cost)
+            if failure is not None:
                 # as before, the corrections of an attempt the material failed are not kept
-                return _Attempt(Verdict(Outcome.FAILED, reason=reason), du, response, None,
-                                history, [], it, cost, failures=counts)
-            grad_total = grad_n + grad_step
+                return _Attempt(Verdict(Outcome.FAILED, reason=failure[0]), du, response,
+                                None, history, [], it, cost, failures=failure[1])
             with times.phase("assembly"):
-                f_int = internal_force(self.basis, kin.assembled_stress(response.stress,
-                                                                        grad_total))
+                f_int = self._internal_at(response, grad_total, du)
                 if kin.finite:
                     f_ext = self._external(target, self.u + du[:n])[1]
-                if sg is not None:
-                    f_int = self._with_second_gradient(f_int, self.u + du[:n],
-                                                       self.extra + du[n:])
             residual = f_int - (f_ext if sg is None else
                                 np.concatenate([f_ext, np.zeros(sg.n_extra)]))
             r = float(np.linalg.norm(residual[forces]))
@@ -433,20 +467,12 @@ class NewtonSolver:
                                 cost)
             tangent = tangent_of(grad_u, response)
             with times.phase("assembly"):
-                K = stiffness(self.basis, kin.assembled_tangent(tangent, response.stress,
-                                                                grad_n, grad_total),
-                              **self._assembly)
-                if sg is not None:
-                    K = sg.augment(K)
+                K = self._tangent_at(tangent, response, grad_n, grad_total)
                 A, b, x, interior = condense(K, -residual, D=D)
             with times.phase("linear_solve"):
                 correction = solve(A, b, x, interior)
             proposed = du + correction if aitken is None else aitken.update(du, correction)
-            step_norm = self.l2_norm(proposed)
-            change = self.l2_norm(proposed - du)
-            corrections.append(change / step_norm if step_norm > 0 else 0.0)
-            state = replace(state, corrections=tuple(corrections), step_norm=step_norm)
-            verdict = judge(rules.corrected, state, s)
+            verdict = self._corrected(proposed, du, state, corrections)
             if verdict.outcome is not Outcome.GO_ON:
                 return _Attempt(verdict, du, response, f_int[:n], history, corrections, it,
                                 cost)
@@ -489,16 +515,12 @@ class NewtonSolver:
         ``most``, never past ``end`` (an increment that would pass it goes to ``end`` with
         the parameter held). Returns the attempt, the parameter's change and the length
         used [m] (see :mod:`granular_material.fem.solver.continuation`)."""
-        s, D, kin = self.settings, self.loading.dirichlet_dofs, self.kinematics
+        s, D = self.settings, self.loading.dirichlet_dofs
         grad_n = self._grad_committed
         response = self.response
         sg, n = self.second_gradient, self.basis.N
         with times.phase("assembly"):
-            K = stiffness(self.basis, kin.assembled_tangent(response.tangent, response.stress,
-                                                            grad_n, grad_n),
-                          **self._assembly)
-            if sg is not None:
-                K = sg.augment(K)
+            K = self._tangent_at(response.tangent, response, grad_n, grad_n)
         with times.phase("linear_solve"):
             try:
                 du_t, q, interior, _ = self._directional(K, parameter, start, self.u,
@@ -539,27 +561,14 @@ class NewtonSolver:
         tangent_of = self._tangents()
         for it in itertools.count(1):
             parameter.apply(value)
-            grad_step = gauss_points_grad(self.basis, du[:n])
-            grad_u = kin.material_gradient(grad_n, grad_step)
-            with times.phase("material"):
-                response = self.material.evaluate(grad_u)
-            times.add_all(response.timings)
-            _add_costs(cost, response.costs)
-            if not response.ok:
-                counts = response.failure_counts()
-                why = ", ".join(f"{name}: {k}" for name, k in counts.items())
-                bad = response.failed_points()
-                return (_Attempt(Verdict(Outcome.FAILED, reason=f"material failed at points "
-                                         f"{bad[:8].tolist()} ({why})"), du, response, None,
-                                 history, [], it, cost, failures=counts), change, used)
-            grad_total = grad_n + grad_step
+            response, grad_u, grad_total, failure = self._evaluate_at(du, grad_n, times, cost)
+            if failure is not None:
+                return (_Attempt(Verdict(Outcome.FAILED, reason=failure[0]), du, response,
+                                 None, history, [], it, cost, failures=failure[1]),
+                        change, used)
             with times.phase("assembly"):
-                f_int = internal_force(self.basis, kin.assembled_stress(response.stress,
-                                                                        grad_total))
+                f_int = self._internal_at(response, grad_total, du)
                 f_ext = parameter.external(value, self.u + du[:n])[1]
-                if sg is not None:
-                    f_int = self._with_second_gradient(f_int, self.u + du[:n],
-                                                       self.extra + du[n:])
             residual = f_int - self._pad(f_ext)
             r = float(np.linalg.norm(residual[forces]))
             history.append(r / r0 if r0 > 0 else r)
@@ -570,11 +579,7 @@ class NewtonSolver:
                                  cost), change, used)
             tangent = tangent_of(grad_u, response)
             with times.phase("assembly"):
-                K = stiffness(self.basis, kin.assembled_tangent(tangent, response.stress,
-                                                                grad_n, grad_total),
-                              **self._assembly)
-                if sg is not None:
-                    K = sg.augment(K)
+                K = self._tangent_at(tangent, response, grad_n, grad_total)
                 A, b, x, free = condense(K, -residual, D=D)
             with times.phase("linear_solve"):  # one factorisation for both right-hand sides
                 try:
@@ -606,11 +611,7 @@ class NewtonSolver:
                     step_change = math.copysign(most, change + step_change) - change
                     held = True
             proposed = du + du_r + step_change * du_t
-            step_norm = self.l2_norm(proposed)
-            moved = self.l2_norm(proposed - du)
-            corrections.append(moved / step_norm if step_norm > 0 else 0.0)
-            state = replace(state, corrections=tuple(corrections), step_norm=step_norm)
-            verdict = judge(rules.corrected, state, s)
+            verdict = self._corrected(proposed, du, state, corrections)
             if verdict.outcome is not Outcome.GO_ON:
                 return (_Attempt(verdict, du, response, f_int[:n], history, corrections, it,
                                  cost), change, used)

@@ -142,6 +142,21 @@ def _within(section: str, build: Callable[[], Any]) -> Any:
         raise SpecError(f"{section}.{exc.field}", exc.message) from None
 
 
+def _conditions(conditions: Any, field_name: str) -> tuple[ConditionSpec, ...]:
+    """``conditions`` as a tuple of ConditionSpec; SpecError naming ``field_name`` for
+    anything else (a table given where a spec object belongs)."""
+    if isinstance(conditions, str | bytes | Mapping) or not isinstance(conditions, Iterable):
+        raise SpecError(field_name, f"must be a sequence of ConditionSpec, got "
+                                    f"{type(conditions).__name__}")
+    conditions = tuple(conditions)
+    for k, c in enumerate(conditions):
+        if not isinstance(c, ConditionSpec):
+            raise SpecError(field_name, f"must be ConditionSpec objects; condition {k} is a "
+                                        f"{type(c).__name__} (a scene's tables are read by "
+                                        "bvp_from_dict)")
+    return conditions
+
+
 def _table(name: str, value: Any) -> dict[str, Any]:
     if value is None:
         return {}
@@ -425,18 +440,8 @@ class PhaseSpec:
             raise SpecError("phases.name", "must name the phase (text), got an empty name")
         if self.steps < 1:
             raise SpecError("phases.steps", f"must be an integer >= 1, got {self.steps!r}")
-        conditions = self.conditions
-        if isinstance(conditions, str | bytes | Mapping) or not isinstance(conditions,
-                                                                            Iterable):
-            raise SpecError("phases.conditions", f"must be a sequence of ConditionSpec, got "
-                                                 f"{type(conditions).__name__}")
-        conditions = tuple(conditions)
-        for k, c in enumerate(conditions):
-            if not isinstance(c, ConditionSpec):
-                raise SpecError("phases.conditions", f"must be ConditionSpec objects; "
-                                                     f"condition {k} is a "
-                                                     f"{type(c).__name__}")
-        object.__setattr__(self, "conditions", conditions)
+        object.__setattr__(self, "conditions", _conditions(self.conditions,
+                                                           "phases.conditions"))
         factor = self.gravity_factor
         if factor is not None:
             if isinstance(factor, list | tuple):
@@ -707,18 +712,7 @@ class BoundaryValueSpec:
                 isinstance(k, str) and isinstance(v, str) for k, v in self.boundaries.items()):
             raise SpecError("boundaries", f"must map names to predicates (text), got "
                                           f"{self.boundaries!r}")
-        conditions = self.conditions
-        if isinstance(conditions, str | bytes | Mapping) or not isinstance(conditions,
-                                                                            Iterable):
-            raise SpecError("conditions", f"must be a sequence of ConditionSpec, got "
-                                          f"{type(conditions).__name__}")
-        conditions = tuple(conditions)
-        for k, c in enumerate(conditions):
-            if not isinstance(c, ConditionSpec):
-                raise SpecError("conditions", f"must be ConditionSpec objects; condition {k} "
-                                              f"is a {type(c).__name__} (a scene's tables are "
-                                              "read by bvp_from_dict)")
-        object.__setattr__(self, "conditions", conditions)
+        object.__setattr__(self, "conditions", _conditions(self.conditions, "conditions"))
 
     @property
     def reference_pressure(self) -> float:
