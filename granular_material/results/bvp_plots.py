@@ -12,7 +12,7 @@ import pandas as pd
 from granular_material.results.plots import deformed_triangles, pyplot, save_figure
 
 __all__ = ["length_unit", "plot_load_displacement", "plot_mechanism",
-           "plot_phased_load_displacement"]
+           "plot_phased_load_displacement", "plot_strength_reduction"]
 
 
 def length_unit(size: float) -> tuple[str, float]:
@@ -137,5 +137,27 @@ def plot_phased_load_displacement(steps: pd.DataFrame,
         ax.legend(title="phase", fontsize=8)
     try:
         return save_figure(fig, path)
+    finally:
+        plt.close(fig)
+
+
+def plot_strength_reduction(factor: Sequence[float], displacement: Sequence[float],
+                            path: str | Path, found: float | None = None,
+                            stopped_by: str = "") -> Path:
+    """The strength reduction factor F [-] against the largest nodal displacement [m] of
+    each step, the factor of safety ``found`` marked (how the reduction ``stopped_by``)."""
+    d = np.asarray(displacement, dtype=float)
+    unit, scale = length_unit(float(d.max(initial=0.0)))
+    plt = pyplot()
+    fig, ax = plt.subplots(figsize=(5.0, 3.6), constrained_layout=True)
+    ax.plot(scale * d, np.asarray(factor, dtype=float), "o-", ms=2.5)
+    if found is not None:
+        ax.axhline(found, color="0.4", ls="--", lw=0.8, label=f"F = {found:.3f} ({stopped_by})")
+        ax.legend(loc="lower right", fontsize=8)
+    ax.set_xlabel(f"largest nodal displacement [{unit}]")
+    ax.set_ylabel("strength reduction factor F [-]")
+    ax.grid(alpha=0.3)
+    try:
+        return save_figure(fig, path, dpi=110)
     finally:
         plt.close(fig)

@@ -22,6 +22,7 @@ from granular_material.fem.solver.strength_reduction import (
     StrengthReductionResult,
     strength_reduction,
 )
+from granular_material.results.bvp_plots import plot_strength_reduction
 from granular_material.runs.boundary_value.spec import BoundaryValueSpec
 
 __all__ = ["PHASE", "reduction_columns", "reduction_figure", "reduction_summary",
@@ -69,26 +70,10 @@ def reduction_summary(result: StrengthReductionResult | None, spec: BoundaryValu
 
 
 def reduction_figure(steps: pd.DataFrame, summary: dict[str, Any], out: Path) -> None:
-    """``strength_reduction.png``: F against the largest nodal displacement, the factor of
-    safety marked."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    """``strength_reduction.png`` of the reduction's rows of ``steps``: F against the largest
+    nodal displacement, the factor of safety marked."""
     if "strength_factor" not in steps or steps.empty:
         return
-    fig, ax = plt.subplots(figsize=(5.0, 3.6))
-    scale, unit = (1.0, "m") if steps["max_displacement"].max() >= 1.0 else (1e3, "mm")
-    ax.plot(scale * steps["max_displacement"], steps["strength_factor"], "o-", ms=2.5)
-    fos = summary.get("factor_of_safety")
-    if fos is not None:
-        ax.axhline(fos, color="0.4", ls="--", lw=0.8,
-                   label=f"F = {fos:.3f} ({summary.get('stopped_by')})")
-        ax.legend(loc="lower right", fontsize=8)
-    ax.set_xlabel(f"largest nodal displacement [{unit}]")
-    ax.set_ylabel("strength reduction factor F [-]")
-    ax.grid(alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(out / "strength_reduction.png", dpi=110)
-    plt.close(fig)
+    plot_strength_reduction(steps["strength_factor"], steps["max_displacement"],
+                            out / "strength_reduction.png", summary.get("factor_of_safety"),
+                            summary.get("stopped_by", ""))
