@@ -324,3 +324,27 @@ def test_a_collapse_sought_in_finite_strain_warns_and_in_small_strain_does_not(
     run_boundary_value(_scene(newton='formulation = "small-strain"\nmax_cutbacks = 2'),
                        out=None)
     assert not [w for w in recwarn if w.category is FiniteStrainCollapseWarning]
+
+
+def test_a_phased_scene_reduces_the_strength_after_its_last_phase(tmp_path) -> None:
+    import tomllib
+
+    from granular_material.runs.boundary_value.spec import bvp_from_dict
+    data = tomllib.loads(ELEMENT_SCENE.format(material="mohr-coulomb", strength=MC,
+                                              newton=""))
+    top = data["conditions"].pop()  # the top's pressure, loaded in the second phase
+    del data["steps"]
+    data["phases"] = [{"name": "confined", "steps": 2,
+                       "conditions": [{"type": "pressure", "boundary": "top",
+                                       "value": top["value"]}]},
+                      {"name": "loaded", "steps": 2,
+                       "conditions": [{"type": "pressure", "boundary": "top",
+                                       "value": top["end"]}]}]
+    outcome = run_boundary_value(bvp_from_dict(data), out=tmp_path / "run")
+    assert outcome.error is None
+    phases = outcome.steps["phase"].tolist()
+    assert phases[-1] == "strength-reduction" and phases[4] == "loaded"
+    assert [p["status"] for p in outcome.summary["phases"]] == ["completed", "completed"]
+    expected = math.tan(math.radians(30)) / math.tan(math.asin(1 / 3))
+    assert outcome.summary["strength_reduction"]["factor_of_safety"] == pytest.approx(
+        expected, rel=0.01)
