@@ -650,7 +650,9 @@ class NewtonSolver:
                     f"converge ({attempt.verdict.reason}) even with its length halved "
                     f"{self.settings.max_cutbacks} times; the state committed at "
                     f"{parameter.name} {start:.6g} is kept", [*self.records, record])
-            length, most = used / 2, abs(change) / 2
+            # half the path tried; a held increment (no length: the parameter moved the body
+            # by nothing, or it was clipped at its end) halves its change alone
+            length, most = (used / 2 if used > 0 else length), abs(change) / 2
         record.converged_by.append(attempt.verdict.by)
         record.stalled += int(attempt.verdict.stalled)
         parameter.apply(start + change)
