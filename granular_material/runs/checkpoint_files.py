@@ -29,7 +29,7 @@ import numpy as np
 import pandas as pd
 
 from granular_material.fem import CommittedState, MaterialResponse, StepRecord
-from granular_material.filesafe import write_whole
+from granular_material.filesafe import deferred_signals, write_whole
 
 __all__ = [
     "MANIFEST_VERSION",
@@ -199,7 +199,11 @@ def write_npz(path: Path, arrays: dict[str, np.ndarray], digest: bool = True) ->
     """``path`` written whole or not at all; returns the SHA-256 of what was written (with
     ``digest`` False, of a file no manifest names: the empty string, not computed)."""
     buffer = io.BytesIO()
-    np.savez(buffer, **arrays)
+    # a stop signal handled inside numpy's zip writer would leave it with a member open, and
+    # the error of closing it ("Can't close the ZIP file while there is an open writing
+    # handle") would replace the stop: the signal waits until the archive is whole
+    with deferred_signals():
+        np.savez(buffer, **arrays)
     data = buffer.getvalue()
     write_bytes(path, data)
     return sha256(data) if digest else ""
