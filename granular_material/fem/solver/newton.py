@@ -618,6 +618,27 @@ class NewtonSolver:
             du, change, value = proposed, change + step_change, value + step_change
         raise AssertionError("unreachable: the rules end every increment")
 
+    @staticmethod
+    def _tally(record: StepRecord, attempt: _Attempt) -> None:
+        """Add an attempt's iterations, costs, failures and histories to its step's record."""
+        record.iterations += attempt.iterations
+        _add_costs(record.costs, attempt.cost)
+        _add_costs(record.failures, attempt.failures)  # type: ignore[arg-type]
+        record.residual_history.append(attempt.history)
+        record.correction_history.append(attempt.corrections)
+
+    def _commit(self, attempt: _Attempt, change: float) -> None:
+        """Make the accepted ``attempt`` (a change of ``change`` in its parameter) the
+        committed state: the material's, the displacement and the second gradient's
+        unknowns, the response and internal force, the last increment."""
+        self.material.commit()
+        self.u = self.u + attempt.du[:self.basis.N]
+        if self._second_gradient is not None:
+            self.extra = self.extra + attempt.du[self.basis.N:]
+        self._grad_committed = gauss_points_grad(self.basis, self.u)
+        self.response, self.f_int = attempt.response, attempt.f_int
+        self._last = (change, attempt.du)
+
     def arc_step(self, parameter: Parameter, start: float, step: int, most: float,
                  end: float = 1.0) -> tuple[StepRecord, float]:
         """One arc-length step from the committed state at parameter ``start``: the
@@ -633,11 +654,7 @@ class NewtonSolver:
         while True:
             attempt, change, used = self._arc_increment(parameter, start, length, most, end,
                                                         times)
-            record.iterations += attempt.iterations
-            _add_costs(record.costs, attempt.cost)
-            _add_costs(record.failures, attempt.failures)  # type: ignore[arg-type]
-            record.residual_history.append(attempt.history)
-            record.correction_history.append(attempt.corrections)
+            self._tally(record, attempt)
             if attempt.verdict.accepted:
                 break
             self.material.revert()
@@ -656,13 +673,7 @@ class NewtonSolver:
         record.converged_by.append(attempt.verdict.by)
         record.stalled += int(attempt.verdict.stalled)
         parameter.apply(start + change)
-        self.material.commit()
-        self.u = self.u + attempt.du[:self.basis.N]
-        if self._second_gradient is not None:
-            self.extra = self.extra + attempt.du[self.basis.N:]
-        self._grad_committed = gauss_points_grad(self.basis, self.u)
-        self.response, self.f_int = attempt.response, attempt.f_int
-        self._last = (change, attempt.du)
+        self._commit(attempt, change)
         if used > 0:
             if path.largest is None:
                 path.largest = 10.0 * used
@@ -689,20 +700,10 @@ class NewtonSolver:
         while self.load_factor < target - 1e-12 * max(abs(target), 1.0):
             end = min(self.load_factor + increment, target)
             attempt = self._increment(end, times)
-            record.iterations += attempt.iterations
-            _add_costs(record.costs, attempt.cost)
-            _add_costs(record.failures, attempt.failures)  # type: ignore[arg-type]
-            record.residual_history.append(attempt.history)
-            record.correction_history.append(attempt.corrections)
+            self._tally(record, attempt)
             if attempt.verdict.accepted:
                 record.converged_by.append(attempt.verdict.by)
-                self.material.commit()
-                self.u = self.u + attempt.du[:self.basis.N]
-                if self._second_gradient is not None:
-                    self.extra = self.extra + attempt.du[self.basis.N:]
-                self._grad_committed = gauss_points_grad(self.basis, self.u)
-                self.response, self.f_int = attempt.response, attempt.f_int
-                self._last = (end - self.load_factor, attempt.du)
+                self._commit(attempt, end - self.load_factor)
                 record.stalled += int(attempt.verdict.stalled)
                 self.load_factor = end
                 increment = min(2 * increment, nominal) if record.cutbacks else increment
