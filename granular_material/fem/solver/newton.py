@@ -332,6 +332,40 @@ class NewtonSolver:
         """Total ∇u [-] at the Gauss points, committed state, shape (n, 2, 2)."""
         return gauss_points_grad(self.basis, self.u)
 
+    @property
+    def committed_grad(self) -> np.ndarray:
+        """The committed state's ∇u [-] at the Gauss points (n, 2, 2), as kept (not a copy:
+        do not write to it)."""
+        return self._grad_committed
+
+    def begin_path(self) -> None:
+        """Start a new arc-length path from the committed state: no peak, length or
+        direction carried over from an earlier path or load step."""
+        self.continuation = ContinuationState()
+        self._last = None
+
+    def follow(self, parameter: Parameter, value: float, end: float, most: float,
+               budget: int, first_step: int,
+               after: Callable[[StepRecord, float], None] | None = None,
+               ) -> tuple[float, str]:
+        """Arc-length steps (:meth:`arc_step`, each changing ``parameter`` by at most
+        ``most``) from ``value`` until it reaches ``end`` ("completed"), the path collapses
+        ("collapse") or ``budget`` steps are taken ("steps"), numbered from ``first_step``;
+        ``after(record, value)`` runs after each. Returns the value reached and why it
+        stopped (:class:`NewtonError` as :meth:`arc_step` raises it)."""
+        def stop() -> str:
+            if value >= end - 1e-12 * max(abs(end), 1.0):
+                return "completed"
+            return "collapse" if self.continuation.collapse is not None else ""
+
+        for k in range(budget):
+            if stop():
+                return value, stop()
+            record, value = self.arc_step(parameter, value, first_step + k, most, end)
+            if after is not None:
+                after(record, value)
+        return value, stop() or "steps"
+
     def _tangents(self) -> Callable[[np.ndarray, MaterialResponse], np.ndarray]:
         """The tangent [Pa] of an increment's corrections, from its iterate's ∇u [-] and the
         material's response there, as ``tangent_update`` asks (a fresh one per increment)."""
@@ -780,30 +814,24 @@ class NewtonSolver:
             self._run_start = self.load_factor
         most = (1.0 - self._run_start) / n_steps
         parameter = LoadParameter(self.loading.at, self.kinematics.finite)
-        first = len(self.records) + 1 - done
         self.stopped_by = ""
         with progress_bar(n_steps, description, progress) as bar:
-            shown = min(round((self.load_factor - self._run_start) / most), n_steps)
-            bar.update(max(shown, 0))
-            for k in range(done, budget):
-                if self.load_factor >= 1.0 - 1e-12:
-                    self.stopped_by = "completed"
-                    break
-                if self.continuation.collapse is not None:
-                    self.stopped_by = "collapse"
-                    break
-                record, self.load_factor = self.arc_step(parameter, self.load_factor,
-                                                         first + k, most)
+            def reached() -> int:  # the nominal steps the load factor has covered
+                return max(min(round((self.load_factor - self._run_start) / most), n_steps), 0)
+
+            shown = reached()
+            bar.update(shown)
+
+            def after(record: StepRecord, value: float) -> None:
+                nonlocal shown
+                self.load_factor = value
                 if on_step is not None:
                     on_step(self, record)
-                now = max(min(round((self.load_factor - self._run_start) / most),
-                              n_steps), 0)
-                bar.set_postfix({"λ": f"{self.load_factor:.4g}", "it": record.iterations,
+                bar.set_postfix({"λ": f"{value:.4g}", "it": record.iterations,
                                  "cut": record.cutbacks, **record.costs})
-                bar.update(now - shown)
-                shown = now
-            else:
-                self.stopped_by = ("completed" if self.load_factor >= 1.0 - 1e-12 else
-                                   "collapse" if self.continuation.collapse is not None
-                                   else "steps")
+                bar.update(reached() - shown)
+                shown = reached()
+
+            _, self.stopped_by = self.follow(parameter, self.load_factor, 1.0, most,
+                                             budget - done, len(self.records) + 1, after)
         return self.records

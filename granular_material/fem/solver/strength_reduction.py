@@ -24,7 +24,7 @@ import numpy as np
 from granular_material.errors import ParameterError
 from granular_material.fem.forms import gauss_points_grad, internal_force
 from granular_material.fem.solver.newton import NewtonSolver
-from granular_material.fem.solver.records import StepRecord
+from granular_material.fem.solver.records import NewtonError, StepRecord
 from granular_material.progress import progress_bar
 
 __all__ = ["RELATIVE_STEP", "StrengthParameter", "StrengthReductionResult", "strength_reduction"]
@@ -62,8 +62,8 @@ class StrengthParameter:
         ``value`` again."""
         s = self.solver
         grad_step = gauss_points_grad(s.basis, u - s.u)
-        grad_u = s.kinematics.material_gradient(s._grad_committed, grad_step)
-        grad_total = s._grad_committed + grad_step
+        grad_u = s.kinematics.material_gradient(s.committed_grad, grad_step)
+        grad_total = s.committed_grad + grad_step
         h = RELATIVE_STEP * value
         s.material.reduce_strength(value + h)
         shifted = s.material.evaluate(grad_u)
@@ -116,49 +116,37 @@ def strength_reduction(solver: NewtonSolver, factor_end: float = 3.0, steps: int
         resume: go on with a reduction the solver (restored from a checkpoint) and its
             material had begun: its path and F are theirs.
     """
-    from granular_material.fem.solver.continuation import ContinuationState
-    from granular_material.fem.solver.records import NewtonError
-
     if not (math.isfinite(factor_end) and factor_end > 1):
         raise ParameterError("factor_end", f"must be a finite number > 1, got {factor_end!r}")
     if steps < 1:
         raise ParameterError("steps", f"must be an integer >= 1, got {steps!r}")
     parameter = StrengthParameter(solver)
     if not resume:
-        solver.continuation = ContinuationState()
-        solver._last = None
-    most = (factor_end - 1.0) / steps
+        solver.begin_path()
     budget = solver.arc_length_budget(steps)
     factor = float(getattr(solver.material, "strength_factor", 1.0))
-    first = len(solver.records) + 1
     done = len(solver.continuation.values)
     result = StrengthReductionResult(factor, "steps",
                                      factors=list(solver.continuation.values))
     with progress_bar(budget, "strength reduction", progress) as bar:
         bar.update(done)
-        for k in range(budget - done):
-            if factor >= factor_end - 1e-12:
-                result.stopped_by = "end"
-                break
-            if solver.continuation.collapse is not None:
-                result.stopped_by = "collapse"
-                break
-            try:
-                record, factor = solver.arc_step(parameter, factor, first + k, most,
-                                                 end=factor_end)
-            except NewtonError as exc:
-                parameter.apply(factor)
-                result.stopped_by, result.error = "failed", str(exc)
-                break
-            result.factors.append(factor)
+
+        def after(record: StepRecord, value: float) -> None:
+            result.factors.append(value)
             result.records.append(record)
             if on_step is not None:
                 on_step(solver, record)
-            bar.set_postfix({"F": f"{factor:.4g}", "it": record.iterations})
+            bar.set_postfix({"F": f"{value:.4g}", "it": record.iterations})
             bar.update()
-        else:
-            if solver.continuation.collapse is not None:
-                result.stopped_by = "collapse"
+
+        try:
+            _, stopped = solver.follow(parameter, factor, factor_end,
+                                       (factor_end - 1.0) / steps, budget - done,
+                                       len(solver.records) + 1, after)
+            result.stopped_by = "end" if stopped == "completed" else stopped
+        except NewtonError as exc:
+            parameter.apply(result.factors[-1] if result.factors else factor)
+            result.stopped_by, result.error = "failed", str(exc)
     path = solver.continuation
     result.factor_of_safety = (float(path.collapse["value"]) if path.collapse is not None
                                else max(result.factors, default=factor))

@@ -35,7 +35,7 @@ PHASE = "strength-reduction"
 def reduction_columns(solver: NewtonSolver) -> dict[str, float]:
     """A row's ``strength_factor`` F [-] (1 during the loading) and ``max_displacement``
     [m], the largest displacement of any node."""
-    u = solver.u.reshape(-1, 2) if solver.u.size % 2 == 0 else solver.u[:, None]
+    u = solver.u.reshape(-1, 2)  # (x, y) of each node's displacement
     return {"strength_factor": float(getattr(solver.material, "strength_factor", 1.0)),
             "max_displacement": float(np.sqrt((u * u).sum(axis=1)).max(initial=0.0))}
 
