@@ -684,7 +684,8 @@ def run_boundary_value(spec: BoundaryValueSpec, out: Path | None = None,
     if regularisation is not None:
         summary["regularisation"] = regularisation
     if b.settings.continuation == "arc-length":
-        summary["continuation"] = _continuation_summary(spec, solver, error)
+        summary["continuation"] = _continuation_summary(spec, solver, error,
+                                                        interrupt is not None)
     if spec.strength_reduction is not None:
         summary["strength_reduction"] = reduction_summary(reduction, spec)
     if checkpoint is not None and error is None:
@@ -701,20 +702,21 @@ def run_boundary_value(spec: BoundaryValueSpec, out: Path | None = None,
 
 
 def _continuation_summary(spec: BoundaryValueSpec, solver: NewtonSolver,
-                          error: str | None) -> dict[str, Any]:
-    """An arc-length run's path: why it stopped, its peak load factor (and step), the
-    collapse it found (None: none) and, with a gravity factor, the gravity factor at the
-    peak (the gravity-increase factor where the run collapsed)."""
+                          error: str | None, interrupted: bool) -> dict[str, Any]:
+    """An arc-length run's path: why it stopped ("stopped" by an interrupt, "failed" by
+    Newton, else the path's own reason), its peak load factor (and step), the collapse it
+    found (None: none) and, with a gravity factor, the gravity factor at the peak and at
+    the collapse (the gravity-increase factor)."""
     path = solver.continuation
-    stopped = "failed" if error is not None else (solver.stopped_by or "stopped")
+    stopped = ("stopped" if interrupted else "failed" if error is not None
+               else solver.stopped_by or "stopped")
     peak = path.peak if path.values else solver.load_factor
     out: dict[str, Any] = {
         "model": "arc-length", "stopped_by": stopped, "peak_load_factor": peak,
         "peak_step": path.peak_step, "collapse": path.collapse}
     if spec.gravity_factor is not None:
         f0, f1 = spec.gravity_factor
-        at = path.collapse["value"] if path.collapse is not None else peak
-        out["gravity_factor_at_peak"] = f0 + (f1 - f0) * at
+        out["gravity_factor_at_peak"] = f0 + (f1 - f0) * peak
         out["gravity_factor_at_collapse"] = (None if path.collapse is None
                                              else f0 + (f1 - f0) * path.collapse["value"])
     return out
