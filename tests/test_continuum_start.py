@@ -4,6 +4,7 @@ settled; in a scene, RVEs prepared at their own points' stresses and a settling 
 
 from __future__ import annotations
 
+import dataclasses
 import warnings
 
 import meshio
@@ -20,7 +21,11 @@ from granular_material.fem.boundary_value.continuum_start import (
 from granular_material.fem.boundary_value.meshes import rectangle_mesh
 from granular_material.fem.forms import internal_force
 from granular_material.runs.boundary_value.continuum import ContinuumStartWarning, settles
-from granular_material.runs.boundary_value.runner import _initial_residual, build
+from granular_material.runs.boundary_value.runner import (
+    _initial_residual,
+    build,
+    run_boundary_value,
+)
 from granular_material.runs.boundary_value.spec import bvp_from_dict
 from granular_material.runs.spec import SpecError
 
@@ -174,3 +179,41 @@ def test_a_dem_slope_starts_its_rves_at_the_continuum_stress_and_settles(tmp_pat
     record = solver.equilibrate(1)
     assert record.iterations <= 10 and solver.load_factor == 0.0
     assert not settles(spec, residual, True)  # a resumed run has taken it already
+
+
+@pytest.mark.parametrize("saved", [0, 2])
+def test_a_continuum_run_settles_first_and_resumes_to_the_run_that_never_stopped(
+        tmp_path, monkeypatch, saved):
+    """Step 1 keeps the load factor (the settling), the load steps follow; a run stopped in
+    its load steps resumes to the same tables, from its initial state (settling again) or
+    from step 2 (the settling not taken twice)."""
+    import pandas as pd
+
+    from granular_material.runs.checkpoint import RunCheckpoint
+
+    def spec():
+        return dataclasses.replace(_slope(tmp_path), steps=3, gravity_factor=(1.0, 1.5))
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        whole = run_boundary_value(spec(), out=tmp_path / "whole")
+        assert whole.error is None
+        assert list(whole.steps["load_factor"]) == pytest.approx([0.0, 0.0, 1 / 3, 2 / 3, 1.0])
+        original = NewtonSolver.step
+
+        def step_or_stop(self, target, k):
+            if k == 3:
+                raise KeyboardInterrupt
+            return original(self, target, k)
+
+        with monkeypatch.context() as m:
+            m.setattr(NewtonSolver, "step", step_or_stop)
+            m.setattr(RunCheckpoint, "due", lambda self, step, last: step == saved)
+            stopped = run_boundary_value(spec(), out=tmp_path / "run")
+        assert stopped.error is not None and len(stopped.steps) == 3
+        resumed = run_boundary_value(spec(), out=tmp_path / "run", resume=True)
+    assert resumed.error is None and resumed.summary["resumed_from_step"] == saved
+    np.testing.assert_array_equal(whole.u, resumed.u)
+    a, b = (pd.read_csv(tmp_path / run / "steps.csv") for run in ("whole", "run"))
+    pd.testing.assert_frame_equal(a.drop(columns=["wall_time"]), b.drop(columns=["wall_time"]),
+                                  check_exact=True)

@@ -628,7 +628,7 @@ def run_boundary_value(spec: BoundaryValueSpec, out: Path | None = None,
             if writer is not None:
                 writer.write(float(row["load_factor"]), u, points)
 
-    reducing = saved is not None and saved.step > spec.steps  # in the strength reduction
+    reducing = False  # in the strength reduction (a resumed run: known from its steps below)
 
     def collect(s: NewtonSolver, record: StepRecord | None) -> None:
         row, points = _rows(b, s, record, p0)
@@ -663,8 +663,12 @@ def run_boundary_value(spec: BoundaryValueSpec, out: Path | None = None,
     error = None
     interrupt = None
     reduction = None
-    loaded = None if saved is None else min(saved.step, spec.steps)
-    settled = settles(spec, initial_residual, saved is not None)
+    # a continuum start's settling step comes before the load steps (a run resumed past it
+    # took it already)
+    ahead = int(settles(spec, initial_residual, False))
+    settled = settles(spec, initial_residual, saved is not None and saved.step >= 1)
+    reducing = saved is not None and saved.step - ahead > spec.steps
+    loaded = None if saved is None else max(min(saved.step - ahead, spec.steps), 0)
     try:
         if settled:
             collect(solver, solver.equilibrate(1))  # the continuum start's own weight
@@ -713,7 +717,8 @@ def run_boundary_value(spec: BoundaryValueSpec, out: Path | None = None,
     if out is not None:
         _figures(b, steps, last, out)
         if reduction is not None:
-            reduction_figure(steps[steps["step"] > spec.steps], summary["strength_reduction"],
+            reduction_figure(steps[steps["step"] > spec.steps + ahead],
+                             summary["strength_reduction"],
                              out)
         summary["out"] = str(out)
         write_json(summary, out / "summary.json")
