@@ -152,6 +152,14 @@ def test_a_continuum_start_refuses_keys_it_does_not_take(tmp_path):
     with pytest.raises(SpecError) as refused:
         _slope(tmp_path, initial="surcharge = 1e3")
     assert refused.value.field == "initial.surcharge"
+    # a cohesive Mohr–Coulomb soil is not capped: a start outside its strength is refused
+    clay = "young = 20e6\npoisson = 0.3\nfriction_angle = 10.0\ncohesion = 1e3"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ContinuumStartWarning)
+        with pytest.raises(SpecError, match="Its friction cap acts on cohesionless materials "
+                                            "only") as refused:
+            build(_slope(tmp_path, parameters=clay, toe=0.2))
+    assert refused.value.field == "initial.state"
 
 
 def test_a_dem_slope_starts_its_rves_at_the_continuum_stress_and_settles(tmp_path):

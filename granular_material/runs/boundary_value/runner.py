@@ -335,6 +335,14 @@ def build(spec: BoundaryValueSpec, allocate: bool = True) -> Built:
     try:
         material = material_for_problem(phased, xy.shape[0], sigma0, allocate, mesh)
     except ParameterError as exc:  # a continuum that refuses its point's stress
+        if spec.initial.state == "continuum" and exc.field == "initial_stress":
+            raise SpecError("initial.state", f"a continuum start: the material's initial "
+                                             f"stress {exc.message}. Its friction cap acts "
+                                             "on cohesionless materials only; start a "
+                                             "cohesive soil stress-free (initial.state = "
+                                             "\"uniform\", pressure = 0) with gravity "
+                                             "ramped on ([gravity] factor = [0.0, 1.0])"
+                            ) from None
         if spec.initial.state != "geostatic" or exc.field != "initial_stress" \
                 or initial.get("level", True):
             raise
