@@ -27,7 +27,7 @@ def continuum_stress(spec: BoundaryValueSpec, problem: Any, gamma: np.ndarray,
     """The continuum start (:func:`~granular_material.fem.boundary_value.continuum_start.settle`)
     of ``problem`` with each region's material's continuum twin (E, ν, φ: its class's
     ``continuum_twin`` hook, a DEM region's calibrated from its RVEs at the median overburden
-    pressure), the floor [Pa] ``floor`` per point and the friction cap
+    pressure of the mesh's points), the floor [Pa] ``floor`` per point and the friction cap
     ``initial.strength_fraction`` times each twin's φ; and what the summary says of it."""
     s = spec.initial
     mesh = problem.mesh_data
@@ -38,7 +38,8 @@ def continuum_stress(spec: BoundaryValueSpec, problem: Any, gamma: np.ndarray,
         pressure = float(np.median(overburden(mesh.mesh, xy, gamma, 0.0).sigma_v))
     except ParameterError:  # an overhang: no column, a representative pressure instead
         pressure = spec.reference_pressure
-    pressure = max(pressure, spec.reference_pressure if pressure <= 0 else 0.0)
+    if not pressure > 0:  # no weight: the scene's representative pressure
+        pressure = spec.reference_pressure
     fraction = STRENGTH_FRACTION if s.strength_fraction is None else s.strength_fraction
     if spec.materials is None:
         pairs = [(None, spec.material, np.arange(n))]
