@@ -27,7 +27,7 @@ from granular_material.runs.spec import SpecError
 VALUES = {"type": '"fixed"', "boundary": '"bottom"', "component": '"x"', "value": "0.001",
           "end": "30e3", "displacement": "[0.0, -0.001]", "rough": "false",
           "state": '"uniform"', "pressure": "20e3", "k0": "0.6", "surcharge": "10e3",
-          "surface": "0.4", "minimum_pressure": "1e3"}
+          "surface": "0.4", "minimum_pressure": "1e3", "strength_fraction": "0.7"}
 #: a complete condition of every type (the keys it needs)
 NEEDS = {"fixed": {}, "roller": {"component": '"y"'}, "displacement": {"component": '"y"',
                                                                           "value": "0.001"},
@@ -55,6 +55,9 @@ young = 60e6
 poisson = 0.3
 """
 UNIFORM = 'state = "uniform"\npressure = 20e3'
+#: an initial table of every state, with nothing it ignores
+STARTS = {"uniform": UNIFORM, "geostatic": 'state = "geostatic"\nsurcharge = 20e3',
+          "continuum": 'state = "continuum"\nminimum_pressure = 1e3'}
 
 
 def _text(kind: str = "fixed", keys: dict[str, str] | None = None,
@@ -113,7 +116,7 @@ INITIAL_CASES = [(state, key) for state in INITIAL_STATES
                          ids=[f"{s}-{k}" for s, k in INITIAL_CASES])
 def test_an_initial_key_its_state_ignores_is_refused_with_its_line(tmp_path, capsys, state,
                                                                     key):
-    initial = UNIFORM if state == "uniform" else 'state = "geostatic"\nsurcharge = 20e3'
+    initial = STARTS[state]
     text = _text(initial=f"{initial}\n{key} = {VALUES[key]}")
     with pytest.raises(SpecError) as refused:
         bvp_from_dict(tomllib.loads(text))
@@ -157,6 +160,11 @@ def test_out_given_twice_and_a_factor_without_weight_are_refused():
      "conditions.rough"),
     (lambda: InitialStateSpec(state="geostatic", pressure=20e3), "initial.pressure"),
     (lambda: InitialStateSpec(state="uniform", pressure=20e3, k0=0.7), "initial.k0"),
+    (lambda: InitialStateSpec(state="continuum", k0=0.7), "initial.k0"),
+    (lambda: InitialStateSpec(state="geostatic", strength_fraction=0.7),
+     "initial.strength_fraction"),
+    (lambda: InitialStateSpec(state="continuum", strength_fraction=1.5),
+     "initial.strength_fraction"),
     (lambda: MeshSpec(file=Path("m.msh"), grading=(2.0, 1.0)), "mesh.grading"),
     (lambda: BoundaryValueSpec(mesh=MeshSpec(size=(1.0, 1.0), elements=(1, 1)),
                                conditions=(ConditionSpec(type="fixed", boundary="bottom"),),

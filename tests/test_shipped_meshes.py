@@ -1,7 +1,7 @@
-"""The meshes shipped with the slope and layered-footing scenes: they read as tri6 with the
-regions and boundary names the scenes use, their boundaries lie where the scenes' comments
-(and the Bishop check of docs/guide/own-ground.md) put them, and the gmsh script beside each
-makes it again (where gmsh is installed)."""
+"""The meshes shipped with the slope and layered-footing scenes: they read as tri6 (the
+reduced DEM slope's as tri3) with the regions and boundary names the scenes use, their
+boundaries lie where the scenes' comments (and the Bishop check of docs/guide/own-ground.md)
+put them, and the gmsh script beside each makes it again (where gmsh is installed)."""
 
 from __future__ import annotations
 
@@ -70,5 +70,36 @@ def test_the_script_beside_a_mesh_makes_it(name, tmp_path):
     made, shipped = read_mesh(tmp_path / f"{name}.msh"), read_mesh(MESHES / f"{name}.msh")
     assert count == made.n_elements == shipped.n_elements
     assert set(made.subdomains) == set(shipped.subdomains)
+    assert {k: len(v) for k, v in made.boundaries.items()} == {
+        k: len(v) for k, v in shipped.boundaries.items()}
+
+
+#: the reduced DEM slope's boundaries (slope-dem-reduced.toml): 1 m high at 2:1 on 0.5 m
+DEM_SLOPE = {"base": lambda x, y: np.isclose(y, -0.5),
+             "left": lambda x, y: np.isclose(x, 0.0),
+             "right": lambda x, y: np.isclose(x, 5.0) & (y <= 0.0),
+             "crest": lambda x, y: np.isclose(y, 1.0) & (x <= 1.5),
+             "face": lambda x, y: np.isclose(y, (3.5 - x) / 2.0),
+             "toe": lambda x, y: np.isclose(y, 0.0) & (x >= 3.5)}
+
+
+def test_the_reduced_dem_slope_mesh_is_coarse_tri3_with_its_boundaries():
+    mesh = read_mesh(MESHES / "slope-dem.msh")
+    assert mesh.element == "tri3" and mesh.n_elements <= 200  # one RVE per element
+    assert set(mesh.subdomains) == {"soil"} and set(mesh.boundaries) == set(DEM_SLOPE)
+    for boundary, on in DEM_SLOPE.items():
+        x, y = _nodes(mesh, mesh.boundaries[boundary])
+        assert on(x, y).all(), boundary
+
+
+@pytest.mark.skipif(importlib.util.find_spec("gmsh") is None,
+                    reason="gmsh (pip install gmsh) makes the meshes; it is no dependency")
+def test_the_script_beside_the_reduced_dem_slope_makes_it(tmp_path):
+    spec = importlib.util.spec_from_file_location("mesh_slope_dem", MESHES / "slope-dem.py")
+    script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(script)
+    count = script.build(tmp_path / "slope-dem.msh")
+    made, shipped = read_mesh(tmp_path / "slope-dem.msh"), read_mesh(MESHES / "slope-dem.msh")
+    assert count == made.n_elements == shipped.n_elements
     assert {k: len(v) for k, v in made.boundaries.items()} == {
         k: len(v) for k, v in shipped.boundaries.items()}

@@ -61,6 +61,7 @@ from granular_material.multiscale.responses import measured_response, response_o
 from granular_material.multiscale.run_hooks import (
     DEMParameters,
     check_run,
+    continuum_twin,
     lowest_pressure,
     material_keywords,
     problem_keywords,
@@ -113,6 +114,7 @@ class DEMMaterial(ScikitFemInterface):
     run_summary = staticmethod(run_summary)
     unit_weight = staticmethod(unit_weight)
     lowest_pressure = staticmethod(lowest_pressure)
+    continuum_twin = staticmethod(continuum_twin)
 
     def __init__(self, parameters: DEMMaterialParameters | str | Path | None = None, *,
                  progress: bool = False, pressure: float | None = None,

@@ -206,6 +206,14 @@ class LinearElastic(ScikitFemInterface):
                              initial_stress=-context.confining)
 
     @staticmethod
+    def continuum_twin(parameters: LinearElasticRunParameters, pressure: float,
+                       device: str | None = None) -> dict[str, Any]:
+        """What a boundary-value problem's continuum start takes of the material: its own
+        ``young`` [Pa] and ``poisson`` [-], and no strength (``friction_angle`` None)."""
+        return {"young": float(parameters.young), "poisson": float(parameters.poisson),
+                "friction_angle": None}
+
+    @staticmethod
     def for_problem(parameters: LinearElasticRunParameters, context: Any,
                     initial_stress: np.ndarray) -> LinearElastic:
         """The material of a boundary-value problem: its Gauss points at ``initial_stress``

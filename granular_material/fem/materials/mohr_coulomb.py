@@ -166,6 +166,17 @@ class MohrCoulomb(ScikitFemInterface):
                            initial_stress=-context.confining)
 
     @staticmethod
+    def continuum_twin(parameters: MohrCoulombRunParameters, pressure: float,
+                       device: str | None = None) -> dict[str, Any]:
+        """What a boundary-value problem's continuum start takes of the material: its own
+        ``young`` [Pa] and ``poisson`` [-], and its ``friction_angle`` [°] where it is
+        cohesionless (the start's friction cap is a cone through the origin; with cohesion,
+        None: the material refuses a start outside its strength itself)."""
+        return {"young": float(parameters.young), "poisson": float(parameters.poisson),
+                "friction_angle": (float(parameters.friction_angle)
+                                   if parameters.cohesion == 0 else None)}
+
+    @staticmethod
     def for_problem(parameters: MohrCoulombRunParameters, context: Any,
                     initial_stress: np.ndarray) -> MohrCoulomb:
         """The material of a boundary-value problem: its Gauss points at ``initial_stress``

@@ -719,6 +719,30 @@ class NewtonSolver:
         self.records.append(record)
         return record, start + change
 
+    def equilibrate(self, step: int) -> StepRecord:
+        """Bring the committed state into equilibrium with the loads at the present load
+        factor: one increment that keeps it (a start out of equilibrium settles before any
+        load changes), committed as step ``step``. :class:`NewtonError` where it does not
+        converge (the committed state is kept)."""
+        t0 = time.perf_counter()
+        record = StepRecord(step=step, load_factor=self.load_factor)
+        times = PhaseTimes()
+        attempt = self._increment(self.load_factor, times)
+        self._tally(record, attempt)
+        record.wall_time = time.perf_counter() - t0
+        record.timings = times.as_dict()
+        if not attempt.verdict.accepted:
+            self.material.revert()
+            raise NewtonError(f"the start did not settle into equilibrium at load factor "
+                              f"{self.load_factor:.6g} ({attempt.verdict.reason}); the initial "
+                              "state is kept", [*self.records, record])
+        record.converged_by.append(attempt.verdict.by)
+        record.stalled += int(attempt.verdict.stalled)
+        self._commit(attempt, 0.0)
+        self._last = None  # no load changed: nothing for the next predictor to extrapolate
+        self.records.append(record)
+        return record
+
     def step(self, target: float, step: int) -> StepRecord:
         """Advance the committed state to load factor ``target``, cutting back as needed.
 

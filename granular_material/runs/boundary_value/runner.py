@@ -58,6 +58,7 @@ from granular_material.multiscale.confinement import UNCONFINED_FRACTION
 from granular_material.results.bvp_plots import plot_load_displacement, plot_mechanism
 from granular_material.results.writers import FieldWriter, write_csv, write_json
 from granular_material.runs.boundary_value.checks import check_disk, check_memory, generated_size
+from granular_material.runs.boundary_value.continuum import continuum_stress, settles
 from granular_material.runs.boundary_value.material import (
     material_for_problem,
     region_elements,
@@ -189,6 +190,8 @@ def _initial_stress(spec: BoundaryValueSpec, problem: Any, f0: float,
     mesh = problem.mesh_data
     nqp = xy.shape[0] // mesh.n_elements
     gamma, k0, floor, floors = _ground_of_regions(spec, mesh, nqp, f0)
+    if s.state == "continuum":
+        return continuum_stress(spec, problem, gamma, floor, floors)
     info: dict[str, Any] = {}
     if s.surface is not None:  # a level surface at the given height (as before regions)
         if np.ptp(gamma) > 0 or np.ptp(k0) > 0:
@@ -332,6 +335,14 @@ def build(spec: BoundaryValueSpec, allocate: bool = True) -> Built:
     try:
         material = material_for_problem(phased, xy.shape[0], sigma0, allocate, mesh)
     except ParameterError as exc:  # a continuum that refuses its point's stress
+        if spec.initial.state == "continuum" and exc.field == "initial_stress":
+            raise SpecError("initial.state", f"a continuum start: the material's initial "
+                                             f"stress {exc.message}. Its friction cap acts "
+                                             "on cohesionless materials only; start a "
+                                             "cohesive soil stress-free (initial.state = "
+                                             "\"uniform\", pressure = 0) with gravity "
+                                             "ramped on ([gravity] factor = [0.0, 1.0])"
+                            ) from None
         if spec.initial.state != "geostatic" or exc.field != "initial_stress" \
                 or initial.get("level", True):
             raise
@@ -344,6 +355,11 @@ def build(spec: BoundaryValueSpec, allocate: bool = True) -> Built:
                                          "([gravity] factor = [0.0, 1.0]), so that the "
                                          "material finds its own state") from None
     except RuntimeError as exc:  # RVEs that did not reach their points' stresses
+        if spec.initial.state == "continuum" and "did not reach" in str(exc):
+            raise RuntimeError(f"{exc}. A continuum start keeps every point's mobilised "
+                               "friction within initial.strength_fraction of the RVEs' "
+                               "calibrated friction angle: a lower fraction asks less of "
+                               "them") from exc
         if spec.initial.state != "geostatic" or "did not reach" not in str(exc):
             raise
         raise RuntimeError(f"{exc}. Near a free face the geostatic start may ask more of an "
@@ -441,6 +457,13 @@ def _equilibrium_hint(spec: BoundaryValueSpec, problem: Any, start: float,
                 "each boundary that is not held a pressure of initial.pressure at step 0 (an "
                 "end value then ramps it), or start stress-free (initial.pressure = 0, a "
                 "continuum material) with the loads ramped from zero")
+    if s.state == "continuum":
+        return (f"The continuum start was settled to {initial['settled_residual']:.2g} of the "
+                f"load from equilibrium, {initial['at_floor']} points at the floor "
+                "(initial.minimum_pressure: an isotropic pressure at a free surface is not in "
+                "equilibrium; a lower floor unbalances less) and "
+                f"{initial['at_cap']} at the friction cap; the rest is how near each RVE "
+                "starts to its target (within about 1 %)")
     if initial.get("lifted_points"):
         lifted = (f"{initial['lifted_points']} points were lifted to "
                   "initial.minimum_pressure, above the weight of the ground over them: "
@@ -613,7 +636,7 @@ def run_boundary_value(spec: BoundaryValueSpec, out: Path | None = None,
             if writer is not None:
                 writer.write(float(row["load_factor"]), u, points)
 
-    reducing = saved is not None and saved.step > spec.steps  # in the strength reduction
+    reducing = False  # in the strength reduction (a resumed run: known from its steps below)
 
     def collect(s: NewtonSolver, record: StepRecord | None) -> None:
         row, points = _rows(b, s, record, p0)
@@ -636,7 +659,8 @@ def run_boundary_value(spec: BoundaryValueSpec, out: Path | None = None,
     if saved is None:
         collect(solver, None)
         initial_residual = remember(checkpoint, "initial_residual",
-                                    _initial_residual(solver, b.hint))
+                                    _initial_residual(solver, b.hint, settles(
+                                        spec, {"norm": math.inf, "newton_atol": 0.0}, False)))
     else:
         for step in saved.steps:
             keep(step.row, step.points, step.u)
@@ -647,8 +671,15 @@ def run_boundary_value(spec: BoundaryValueSpec, out: Path | None = None,
     error = None
     interrupt = None
     reduction = None
-    loaded = None if saved is None else min(saved.step, spec.steps)
+    # a continuum start's settling step comes before the load steps (a run resumed past it
+    # took it already)
+    ahead = int(settles(spec, initial_residual, False))
+    settled = settles(spec, initial_residual, saved is not None and saved.step >= 1)
+    reducing = saved is not None and saved.step - ahead > spec.steps
+    loaded = None if saved is None else max(min(saved.step - ahead, spec.steps), 0)
     try:
+        if settled:
+            collect(solver, solver.equilibrate(1))  # the continuum start's own weight
         if b.plans:
             run_phases(b, solver, collect, checkpoint, loaded)
         else:
@@ -664,7 +695,8 @@ def run_boundary_value(spec: BoundaryValueSpec, out: Path | None = None,
         if b.plans:
             error = f"phase {b.phase + 1} ({b.plans[b.phase].name!r}): {error}"
         relative = initial_residual.get("relative", 0.0)
-        if relative > OUT_OF_EQUILIBRIUM and initial_residual.get("norm", 0.0) > b.settings.atol:
+        if relative > OUT_OF_EQUILIBRIUM and initial_residual.get("norm", 0.0) > b.settings.atol \
+                and not settled:
             error += (f" (the initial state was not in equilibrium with the loads: its "
                       f"residual {relative:.3g} times the load; a start in equilibrium, e.g. "
                       "geostatic, lets the steps carry the load alone)")
@@ -693,7 +725,8 @@ def run_boundary_value(spec: BoundaryValueSpec, out: Path | None = None,
     if out is not None:
         _figures(b, steps, last, out)
         if reduction is not None:
-            reduction_figure(steps[steps["step"] > spec.steps], summary["strength_reduction"],
+            reduction_figure(steps[steps["step"] > spec.steps + ahead],
+                             summary["strength_reduction"],
                              out)
         summary["out"] = str(out)
         write_json(summary, out / "summary.json")
@@ -754,12 +787,14 @@ class OutOfEquilibriumWarning(UserWarning):
 OUT_OF_EQUILIBRIUM = 0.01
 
 
-def _initial_residual(solver: NewtonSolver, fix: str = "") -> dict[str, float]:
+def _initial_residual(solver: NewtonSolver, fix: str = "",
+                      settling: bool = False) -> dict[str, float]:
     """‖R‖ [N/m] of the initial state at λ = 0 over the free dofs, against ‖f_ext‖ there (the
     load; where none acts on the free dofs, ‖f_int‖ over all dofs, the forces the initial
     stress puts on the supports): zero when the initial stress is in equilibrium with the
     loads (a geostatic start). One out of equilibrium (:data:`OUT_OF_EQUILIBRIUM`) is said
-    with an :class:`OutOfEquilibriumWarning` naming ``fix``, the fix that fits the run."""
+    with an :class:`OutOfEquilibriumWarning` naming ``fix``, the fix that fits the run
+    (``settling``: the run settles it in a step of its own before the load changes)."""
     _, f_ext = solver.loading.at(0.0, solver.u if solver.kinematics.finite else None)
     residual = solver.f_int - f_ext
     free = np.ones(residual.size, dtype=bool)
@@ -773,9 +808,11 @@ def _initial_residual(solver: NewtonSolver, fix: str = "") -> dict[str, float]:
         against = ("the load" if load else
                    "the forces of the initial stress (no load acts on the free nodes)")
         warnings.warn(f"the initial state is not in equilibrium with the loads at step 0: its "
-                      f"residual is {norm:.3g} N/m, {relative:.3g} times {against}; the first "
-                      "load step brings it to equilibrium as well as applying its increment, "
-                      "so its response holds both. "
+                      f"residual is {norm:.3g} N/m, {relative:.3g} times {against}; "
+                      + ("step 1 settles it at the start's load factor before the load "
+                         "changes. " if settling else
+                         "the first load step brings it to equilibrium as well as applying "
+                         "its increment, so its response holds both. ")
                       + (fix or "A geostatic start with the scene's unit weight starts in "
                                 "equilibrium"),
                       OutOfEquilibriumWarning, stacklevel=3)

@@ -105,13 +105,14 @@ from granular_material.typed_fields import conform, conform_fields
 from granular_material.vocabulary import RenamedWarning, key_of, user_stacklevel
 
 __all__ = ["CONDITION_KEYS", "CONDITION_TYPES", "INITIAL_KEYS", "INITIAL_STATES", "SCENE_KEYS",
-           "BoundaryValueSpec", "ConditionSpec", "InitialStateSpec", "MeshSpec", "PhaseSpec",
+           "STRENGTH_FRACTION", "BoundaryValueSpec", "ConditionSpec", "InitialStateSpec",
+           "MeshSpec", "PhaseSpec",
            "RegionMaterialSpec", "StrengthReductionSpec", "bvp_from_dict"]
 
 #: the conditions a boundary may carry
 CONDITION_TYPES = ("fixed", "roller", "displacement", "rigid", "pressure")
 #: the initial states of a problem
-INITIAL_STATES = ("uniform", "geostatic")
+INITIAL_STATES = ("uniform", "geostatic", "continuum")
 #: the keys each type of condition acts on (any other is refused, not ignored)
 CONDITION_KEYS: dict[str, frozenset[str]] = {
     "fixed": frozenset({"type", "boundary"}),
@@ -124,7 +125,11 @@ CONDITION_KEYS: dict[str, frozenset[str]] = {
 INITIAL_KEYS: dict[str, frozenset[str]] = {
     "uniform": frozenset({"state", "pressure"}),
     "geostatic": frozenset({"state", "k0", "surcharge", "surface", "minimum_pressure"}),
+    "continuum": frozenset({"state", "minimum_pressure", "strength_fraction"}),
 }
+#: a continuum start's default cap on the mobilised friction angle, as a fraction of the
+#: material's friction angle (its twin's, for DEM RVEs)
+STRENGTH_FRACTION = 0.7
 #: the keys of [mesh] that only a generated rectangle acts on
 _GENERATED_KEYS = frozenset({"size", "elements", "element", "grading", "align_x", "align_y"})
 #: the components by name
@@ -317,7 +322,14 @@ class InitialStateSpec:
             correction) are lifted to it by an isotropic pressure
             (:func:`~granular_material.fem.boundary_value.ground.lift_to_floor`); None: the
             lowest stress an RVE is prepared at in a DEM region (15 Pa for the default
-            contact law), none elsewhere.
+            contact law), none elsewhere. A continuum start's floor too.
+        strength_fraction: a continuum start's cap on each point's mobilised friction angle,
+            as a fraction of its material's friction angle (the Mohr–Coulomb twin calibrated
+            from a DEM region's RVEs), in (0, 1]; None: :data:`STRENGTH_FRACTION`.
+
+    A "continuum" state is the loads at step 0 carried by a linear-elastic stand-in of each
+    region's material (a DEM region's calibrated twin), then floored, capped and settled
+    back towards equilibrium (:mod:`~granular_material.fem.boundary_value.continuum_start`).
     """
 
     state: str = "uniform"
@@ -326,6 +338,7 @@ class InitialStateSpec:
     surcharge: float = 0.0
     surface: float | None = None
     minimum_pressure: float | None = None
+    strength_fraction: float | None = None
 
     def __post_init__(self) -> None:
         conform_fields(self, error=SpecError)
@@ -334,7 +347,8 @@ class InitialStateSpec:
                                              f"got {self.state!r}")
         given = {"pressure": self.pressure is not None, "k0": self.k0 != 0.5,
                  "surcharge": self.surcharge != 0.0, "surface": self.surface is not None,
-                 "minimum_pressure": self.minimum_pressure is not None}
+                 "minimum_pressure": self.minimum_pressure is not None,
+                 "strength_fraction": self.strength_fraction is not None}
         _not_acting("initial", {k for k, on in given.items() if on}, INITIAL_KEYS[self.state],
                     f"a {self.state} initial state")
         if self.state == "uniform" and (self.pressure is None or not self.pressure >= 0):
@@ -345,6 +359,10 @@ class InitialStateSpec:
             raise SpecError("initial.k0", f"must be > 0, got {self.k0:g}")
         if self.surcharge < 0:
             raise SpecError("initial.surcharge", f"must be >= 0 Pa, got {self.surcharge:g}")
+        if self.strength_fraction is not None and not 0 < self.strength_fraction <= 1:
+            raise SpecError("initial.strength_fraction", f"must lie in (0, 1] (a fraction of "
+                                                         f"the material's friction angle), "
+                                                         f"got {self.strength_fraction:g}")
         if self.minimum_pressure is not None and not self.minimum_pressure >= 0:
             raise SpecError("initial.minimum_pressure", f"must be >= 0 Pa, got "
                                                         f"{self.minimum_pressure:g}")
@@ -847,7 +865,7 @@ SCENE_KEYS: dict[str, frozenset[str]] = {
                              "rough"}),
     "gravity": frozenset({"unit_weight", "factor"}),
     "initial": frozenset({"state", "pressure", "k0", "surcharge", "surface",
-                          "minimum_pressure"}),
+                          "minimum_pressure", "strength_fraction"}),
     "material": frozenset({"name", "parameters"}),
     "materials": frozenset({"region", "name", "parameters", "unit_weight", "k0"}),
     "regularisation": frozenset({"model", "internal_length"}),
