@@ -477,3 +477,26 @@ def test_the_summary_and_the_measures_give_the_active_width():
     assert measures["active_band_count"] == 1
     plain = band_measures(*_specimen(True), HEIGHT, WIDTH)
     assert math.isnan(plain["active_band_width"]) and plain["active_band_count"] == 0
+
+
+def test_a_regularised_softening_specimen_has_an_active_band_the_profile_misses():
+    """The softening Mohr–Coulomb specimen regularised at ℓ = 5 mm on 4 × 8 quad8 (a real run,
+    to 3 %): its localised zone is a symmetric cross as wide as half the specimen. The
+    accumulated γ's profile search finds no band at its thresholds; the active bands are
+    the cross, two arms at ±θ of the same width, 20–40 mm (the study: 28 mm on every mesh)."""
+    from granular_material.fem import BiaxialSetup, MohrCoulomb, NewtonSettings, Regularisation
+    from granular_material.runs.runner import run_biaxial
+
+    setup = BiaxialSetup(nx=4, ny=8, element="quad8", platens="rough", axial_strain=0.03)
+    material = MohrCoulomb(friction_angle=35, critical_friction_angle=28,
+                           softening_strain=0.02, dilation_angle=5)
+    result = run_biaxial(setup, material, 15, NewtonSettings(),
+                         regularisation=Regularisation("second-gradient", 0.005))
+    assert result.error is None
+    summary = band_summary(result, [0.03], 3.6)
+    assert math.isnan(summary["band_width"])
+    bands = summary["active_bands"]
+    assert len(bands) == 2
+    assert bands[0]["inclination_deg"] == pytest.approx(-bands[1]["inclination_deg"], abs=1.0)
+    assert bands[0]["width"] == pytest.approx(bands[1]["width"], rel=0.02)
+    assert 0.020 < summary["active_band_width"] < 0.040

@@ -19,15 +19,16 @@ background plus straight ridges,
 
     γ(x) ≈ b + Σ_k A_k exp(−d_k(x)² / 2 s_k²),
 
-d_k the distance of a point to ridge k's axis, fitted by least squares to every point (b ≥
-0, A_k ≥ 0). Ridges are added one at a time (matching pursuit), up to ``max_bands``: each
-new one starts on the line of the largest integral of the residual (the Hough search of
-:mod:`~granular_material.results.bands`), then every ridge is refitted together. The fit
-kept is the one of the most ridges whose last ridge explained at least :data:`MIN_SHARE` of
-the field's variance about its mean (the squared residual fell by that much) and whose
-ridges are each resolved (a width of at least the points' spacing) and fall to half their
-height on both sides inside the specimen and hold half their height along at least
-:data:`MIN_RUN` of their axis (a round spot is no band). Each band's **width** is its
+d_k the distance of a point to ridge k's axis, fitted by least squares (Levenberg–Marquardt)
+to every point (b ≥ 0, A_k ≥ 0). Ridges are added one at a time (matching pursuit), up to
+``max_bands``: each new one starts on the line of the largest integral of the residual (the
+Hough search of :mod:`~granular_material.results.bands`) and on that line turned by 30°,
+60°, …, 150°, and every ridge is refitted together from each start, the best of the six fits
+kept. The fit kept is the one of the most ridges whose last ridge explained at least
+:data:`MIN_SHARE` of the field's variance about its mean (the squared residual fell by that
+much) and whose ridges are each resolved (a width of at least the points' spacing) and fall
+to half their height on both sides inside the specimen and hold half their height along at
+least :data:`MIN_RUN` of their axis (a round spot is no band). Each band's **width** is its
 ridge's full width at half maximum, 2√(2 ln 2) s ≈ 2.3548 s. The rule is the same for every
 field: no threshold is set per run.
 
@@ -41,9 +42,8 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 import pandas as pd
-from scipy.optimize import least_squares
 
-from granular_material.results.bands import _strongest_line
+from granular_material.results.bands import _Line, _normal, _strongest_line
 
 __all__ = ["FWHM_PER_SIGMA", "INCREMENT_SHARE", "MAX_RIDGES", "MIN_RUN", "MIN_SHARE", "FittedBand",
            "active_bands", "fit_bands", "incremental_points", "start_step"]
@@ -62,6 +62,8 @@ MIN_RUN = 0.5
 INCREMENT_SHARE = 0.2
 
 _STRAIN_COLUMNS = ("exx", "eyy", "exy")
+#: the directions a new ridge is started in, 180°/_TURNS apart from the search's line
+_TURNS = 6
 
 
 @dataclass(frozen=True)
@@ -204,6 +206,81 @@ def _jacobian(p: np.ndarray, xy: np.ndarray, n: int) -> np.ndarray:
     return jac
 
 
+def _levenberg_marquardt(residual, jacobian, start: np.ndarray, lower: np.ndarray,
+                         upper: np.ndarray, iterations: int = 300) -> np.ndarray:
+    """The parameters within [lower, upper] that minimise |residual(p)|², from ``start``:
+    Levenberg–Marquardt steps scaled by the diagonal of JᵀJ (so the parameters' units do not
+    matter), a parameter held on a bound the descent points out of, each step projected
+    onto the bounds. numpy only: scipy.optimize would load
+    scipy.spatial into every run that writes a summary."""
+    p = np.clip(start, lower, upper)
+    r = residual(p)
+    cost = float(r @ r)
+    damping = 1e-3
+    for _ in range(iterations):
+        jac = jacobian(p)
+        normal = jac.T @ jac
+        gradient = jac.T @ r
+        diagonal = np.maximum(np.diag(normal), 1e-30 * max(float(np.diag(normal).max()),
+                                                            1e-300))
+        # a parameter on a bound that the descent would push out of it stays there
+        free = ~(((p <= lower) & (gradient > 0)) | ((p >= upper) & (gradient < 0)))
+        system = normal[np.ix_(free, free)]
+        while True:
+            step = np.zeros_like(p)
+            try:
+                step[free] = np.linalg.solve(system + damping * np.diag(diagonal[free]),
+                                             -gradient[free])
+            except np.linalg.LinAlgError:
+                pass
+            trial = np.clip(p + step, lower, upper)
+            r_trial = residual(trial)
+            cost_trial = float(r_trial @ r_trial)
+            if cost_trial < cost:
+                break
+            damping *= 4.0
+            if damping > 1e12:
+                return p
+        converged = cost - cost_trial <= 1e-12 * cost or np.all(
+            np.abs(trial - p) <= 1e-10 * (np.abs(p) + 1e-12))
+        p, r, cost = trial, r_trial, cost_trial
+        damping = max(damping / 3.0, 1e-12)
+        if converged:
+            break
+    return p
+
+
+def _best_fit(xy: np.ndarray, gamma: np.ndarray, p: np.ndarray, line: _Line, height: float,
+              spacing: float, reach: float) -> np.ndarray:
+    """The ridges of ``p`` and one more, fitted together: the new one started on ``line``
+    (its height ``height``) and turned by 0, 30, …, 150° about its point nearest the centre;
+    the fit of the least residual. (The search's line starts a ridge well where bands are
+    narrow; a wide, diffuse zone has shallow minima that one start can miss.)"""
+    m = (p.size - 1) // 4 + 1
+    lower = np.array([0.0] + [-np.inf, -reach, 0.0, spacing / 8] * m)
+    upper = np.array([np.inf] + [np.inf, reach, np.inf, reach] * m)
+    point = line.offset * _normal(line.angle)
+    sigma = min(max(line.half_width, spacing) / (0.5 * FWHM_PER_SIGMA), reach)
+    best, best_cost = p, math.inf
+    for turn in range(_TURNS):
+        angle = line.angle + turn * math.pi / _TURNS
+        start = np.r_[p, angle, float(np.clip(point @ _normal(angle), -reach, reach)),
+                      height, max(sigma, spacing / 8)]
+        fit = _levenberg_marquardt(lambda q: _model(q, xy, m) - gamma,
+                                   lambda q: _jacobian(q, xy, m), start, lower, upper)
+        cost = float(np.sum((_model(fit, xy, m) - gamma) ** 2))
+        if cost < best_cost:
+            best, best_cost = fit, cost
+    return best
+
+
+def _alive(p: np.ndarray, scale: float) -> np.ndarray:
+    """``p`` without its ridges of no height (below 10⁻⁶ of the field's spread ``scale``)."""
+    keep = [0] + [i for k in range((p.size - 1) // 4) if p[3 + 4 * k] > 1e-6 * scale
+                  for i in range(1 + 4 * k, 5 + 4 * k)]
+    return p[keep]
+
+
 def _admissible(p: np.ndarray, xy: np.ndarray, gamma: np.ndarray, n: int,
                 spacing: float) -> bool:
     """Whether every ridge of ``p`` is a band: positive, resolved (at least ``spacing``
@@ -269,7 +346,8 @@ def fit_bands(points: pd.DataFrame, step: int | None = None, max_bands: int = MA
         return []
     p, rms = np.array([max(float(gamma.mean()), 0.0)]), scale
     chosen, chosen_rms, n = p, rms, 0
-    for m in range(1, max_bands + 1):  # the pursuit's path: one more ridge each time
+    for _ in range(max_bands):  # the pursuit's path: one more ridge each time
+        m = (p.size - 1) // 4 + 1
         if rms ** 2 < share * scale ** 2:
             break  # no further ridge can explain that share
         residual = gamma - _model(p, centred, m - 1)
@@ -277,20 +355,14 @@ def fit_bands(points: pd.DataFrame, step: int | None = None, max_bands: int = MA
         if not excess.max() > 0:
             break
         line = _strongest_line(centred, excess, spacing, reach)
-        start = np.r_[p, line.angle, line.offset, excess.max(),
-                      max(line.half_width, spacing) / (0.5 * FWHM_PER_SIGMA)]
-        lower = [0.0] + [-np.inf, -reach, 0.0, spacing / 8] * m
-        upper = [np.inf] + [np.inf, reach, np.inf, reach] * m
-        start[2::4] = np.clip(start[2::4], -reach, reach)
-        start[4::4] = np.clip(start[4::4], spacing / 8, reach)
-        fit = least_squares(lambda q, m=m: _model(q, centred, m) - gamma, start,
-                            jac=lambda q, m=m: _jacobian(q, centred, m),
-                            bounds=(lower, upper), x_scale="jac")
-        new = float(np.sqrt(np.mean(fit.fun ** 2)))
-        if rms ** 2 - new ** 2 >= share * scale ** 2 and _admissible(fit.x, centred, gamma,
-                                                                     m, spacing):
-            chosen, chosen_rms, n = fit.x, new, m
-        p, rms = fit.x, new
+        fit = _best_fit(centred, gamma, p, line, excess.max(), spacing, reach)
+        fit = _alive(fit, scale)
+        new = float(np.sqrt(np.mean((_model(fit, centred, (fit.size - 1) // 4) - gamma)
+                                    ** 2)))
+        if (fit.size == p.size + 4 and rms ** 2 - new ** 2 >= share * scale ** 2
+                and _admissible(fit, centred, gamma, m, spacing)):
+            chosen, chosen_rms, n = fit, new, m
+        p, rms = fit, new
     p, rms = chosen, chosen_rms
     strain = float(at["axial_strain"].iloc[0])
     start_step_ = int(at["start_step"].iloc[0]) if "start_step" in at.columns else None
