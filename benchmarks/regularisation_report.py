@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 from pathlib import Path
 from typing import Any
@@ -80,11 +81,14 @@ def specimen_figures(out: Path, rows: list[dict[str, Any]]) -> list[str]:
     fig.savefig(out / "specimen_maps.png", dpi=110)
     plt.close(fig)
 
-    fig, ax = plt.subplots(figsize=(5, 3.6))
-    for length in lengths:
+    fig, ax = plt.subplots(figsize=(5.4, 3.9))
+    for k, length in enumerate(lengths):
         line = table[table["internal_length"] == length]
-        ax.plot(1e3 * line["element_size"], 1e3 * line["band_width"], "o-",
-                label=_label(length))
+        if "active_band_width" in line:
+            ax.plot(1e3 * line["element_size"], 1e3 * line["active_band_width"], "o-",
+                    color=f"C{k}", label=f"{_label(length)}: active")
+        ax.plot(1e3 * line["element_size"], 1e3 * line["band_width"], "x--", color=f"C{k}",
+                alpha=0.6, label="accumulated γ" if k == len(lengths) - 1 else None)
     sizes = 1e3 * np.array(sorted(table["element_size"].unique()))
     ax.plot(sizes, sizes, "k:", label="one element")
     ax.set_xlabel("element size [mm]")
@@ -92,11 +96,95 @@ def specimen_figures(out: Path, rows: list[dict[str, Any]]) -> list[str]:
     ax.set_xscale("log")
     ax.set_yscale("log")
     ax.grid(alpha=0.3, which="both")
-    ax.legend(fontsize=8)
+    ax.legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(out / "band_width.png", dpi=110)
     plt.close(fig)
-    return ["specimen_curves.png", "specimen_maps.png", "band_width.png"]
+    if "active_band_width" not in table:
+        return ["specimen_curves.png", "specimen_maps.png", "band_width.png"]
+
+    from granular_material.results.active_bands import active_bands, incremental_points
+
+    fig, axes = plt.subplots(len(lengths), len(meshes), figsize=(2.3 * len(meshes),
+                                                                   3.9 * len(lengths)),
+                             squeeze=False)
+    for i, length in enumerate(lengths):
+        for j, mesh in enumerate(meshes):
+            ax = axes[i, j]
+            line = table[(table["mesh"] == mesh) & (table["internal_length"] == length)]
+            ax.set_xticks([])
+            ax.set_yticks([])
+            if line.empty:
+                ax.axis("off")
+                continue
+            points = pd.read_csv(out / line["folder"].iloc[0] / "points.csv")
+            if points["step"].nunique() < 2:
+                continue
+            field = incremental_points(points)
+            ax.tricontourf(field["x"], field["y"], field["shear_strain"], levels=24,
+                           cmap="inferno")
+            low, high = field[["x", "y"]].min().to_numpy(), field[["x", "y"]].max().to_numpy()
+            for band in active_bands(points):
+                t = np.radians(band.inclination_deg)
+                along = np.array([np.cos(t), np.sin(t)])
+                normal = np.array([-np.sin(t), np.cos(t)])
+                centre = np.array([band.centre_x, band.centre_y])
+                for side in (-0.5, 0.0, 0.5):
+                    ends = centre + side * band.width * normal + np.outer([-1, 1], along)
+                    ax.plot(ends[:, 0], ends[:, 1], "-" if side == 0 else "--", color="c",
+                            lw=0.8)
+            ax.set_xlim(low[0], high[0])
+            ax.set_ylim(low[1], high[1])
+            ax.set_aspect("equal")
+            row = line.iloc[0]
+            window = row["active_window"]
+            width = "no band found" if not row["active_band_count"] else (
+                f"w = {_mm(row['active_band_width'])} mm")
+            span = (f"{100 * window[0]:.1f}–{100 * window[1]:.1f} %"
+                    if len(window) == 2 else "")
+            ax.set_title(f"{mesh}, {_label(length).split(',')[-1].strip()}\n{span}: {width}",
+                         fontsize=8)
+    fig.suptitle("shear strain of the increment over the last fifth of the axial strain;\n"
+                 "the fitted bands' axes (solid) and half widths (dashed)", fontsize=9)
+    fig.tight_layout(rect=(0, 0, 1, 0.97))
+    fig.savefig(out / "specimen_active_maps.png", dpi=110)
+    plt.close(fig)
+    return ["specimen_curves.png", "specimen_maps.png", "band_width.png",
+            "specimen_active_maps.png"]
+
+
+def field_differences(out: Path, rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """For each internal length, how far apart two meshes' fields are at their last common
+    step, point by point: the finer mesh's γ interpolated (linearly) onto the coarser
+    one's Gauss points, the root-mean-square difference over the coarser γ's root mean
+    square, for the accumulated γ and the increment over the last fifth of the strain."""
+    from scipy.interpolate import griddata
+
+    from granular_material.results.active_bands import incremental_points
+
+    table = pd.DataFrame(rows)
+    out_rows = []
+    for length, group in table.groupby("internal_length", sort=True):
+        group = group.sort_values("element_size", ascending=False)
+        folders = list(zip(group["mesh"], group["folder"], strict=True))
+        for (coarse, a), (fine, b) in itertools.pairwise(folders):
+            pa, pb = (pd.read_csv(out / f / "points.csv") for f in (a, b))
+            last = min(int(pa["step"].max()), int(pb["step"].max()))
+            if last < 1:
+                continue
+            row = {"internal_length": length, "meshes": f"{coarse} / {fine}", "step": last}
+            fields = {"accumulated": (pa[pa["step"] == last], pb[pb["step"] == last]),
+                      "increment": (incremental_points(pa, last),
+                                    incremental_points(pb, last))}
+            for name, (fa, fb) in fields.items():
+                at = griddata(fb[["x", "y"]].to_numpy(), fb["shear_strain"].to_numpy(),
+                              fa[["x", "y"]].to_numpy(), method="linear")
+                ok = np.isfinite(at)
+                ga = fa["shear_strain"].to_numpy()[ok]
+                row[name] = float(np.sqrt(np.mean((ga - at[ok]) ** 2))
+                                  / np.sqrt(np.mean(ga ** 2)))
+            out_rows.append(row)
+    return out_rows
 
 
 def dem_figure(out: Path, rows: list[dict[str, Any]]) -> list[str]:
@@ -178,21 +266,58 @@ def write_report(out: Path, results: dict[str, Any]) -> None:
                 f"{angles} | {_f(r['iterations'], 1)} | {_f(r['time_s'], 1)} | "
                 f"{_f(r['linear_solve_s'], 1)} |")
         lines += ["", "![stress ratio](specimen_curves.png)", "",
-                  "![shear strain](specimen_maps.png)", "", "![band width](band_width.png)",
-                  ""]
+                  "![shear strain](specimen_maps.png)", ""]
+        if any("active_band_width" in r for r in results["specimen"]):
+            lines += ["Active bands: Gaussian ridges fitted to the shear strain of the last "
+                      "fifth of the axial strain (`granular_material.results.active_bands`), "
+                      "beside the accumulated γ's bands of the table above:", "",
+                      "| mesh | ℓ [mm] | increment [%] | bands | widths [mm] | mean [mm] | "
+                      "angles [°] | fit residual | mean width at 3 % [mm] | at 4 % [mm] | "
+                      "accumulated γ: widths [mm] |",
+                      "|---|---|---|---|---|---|---|---|---|---|---|"]
+            for r in results["specimen"]:
+                window = r.get("active_window") or []
+                span = (f"{100 * window[0]:.1f}–{100 * window[1]:.1f}" if len(window) == 2
+                        else "–")
+                at = r.get("active_width_at", {})
+                lines.append(
+                    f"| {r['mesh']} | {r['internal_length'] * 1e3:g} | {span} | "
+                    f"{r.get('active_band_count', 0)} | "
+                    f"{', '.join(_mm(w) for w in r.get('active_widths', [])) or '–'} | "
+                    f"{_mm(r.get('active_band_width'))} | "
+                    f"{', '.join(f'{a:.0f}' for a in r.get('active_angles', [])) or '–'} | "
+                    f"{_f(r.get('active_residual'), 2)} | {_mm(at.get('3'))} | "
+                    f"{_mm(at.get('4'))} | "
+                    f"{', '.join(_mm(w) for w in r['band_widths']) or '–'} |")
+            lines += ["", "![active bands](specimen_active_maps.png)", ""]
+            lines += ["Two meshes' fields point by point at their last common step (the "
+                      "finer mesh's γ interpolated onto the coarser one's Gauss points; "
+                      "root-mean-square difference over the coarser γ's root mean square):",
+                      "", "| ℓ [mm] | meshes | step | accumulated γ | increment |",
+                      "|---|---|---|---|---|"]
+            for d in field_differences(out, results["specimen"]):
+                lines.append(f"| {d['internal_length'] * 1e3:g} | {d['meshes']} | "
+                             f"{d['step']} | {100 * d['accumulated']:.1f} % | "
+                             f"{100 * d['increment']:.1f} % |")
+            lines.append("")
+        lines += ["![band width](band_width.png)", ""]
     if results.get("dem"):
         dem_figure(out, results["dem"])
         lines += ["## FEM × DEM specimen", "",
                   "| mesh | seed | ℓ [mm] | steps | peak σ1/σ3 | σ1/σ3 at 5 % | at 10 % | "
-                  "bands | band width [mm] | angles [°] | iterations / step | time [s] |",
-                  "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+                  "bands | band width [mm] | angles [°] | active bands: widths [mm] | "
+                  "angles [°] | iterations / step | time [s] |",
+                  "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
         for r in results["dem"]:
             angles = ", ".join(f"{a:.0f}" for a in r["band_angles"]) or "–"
             lines.append(
                 f"| {r['mesh']} | {r['seed']} | {r['internal_length'] * 1e3:g} | "
                 f"{r['steps_completed']} | {_f(r['peak_ratio'])} | {_f(r['ratio_5'])} | "
                 f"{_f(r['ratio_10'])} | {r['band_count']} | {_mm(r['band_width'])} | "
-                f"{angles} | {_f(r['iterations'], 1)} | {_f(r['time_s'], 0)} |")
+                f"{angles} | "
+                f"{', '.join(_mm(w) for w in r.get('active_widths', [])) or '–'} | "
+                f"{', '.join(f'{a:.0f}' for a in r.get('active_angles', [])) or '–'} | "
+                f"{_f(r['iterations'], 1)} | {_f(r['time_s'], 0)} |")
         table = pd.DataFrame(results["dem"])
         lines += ["", "Mean ± standard deviation over the seeds:", "",
                   "| mesh | ℓ [mm] | σ1/σ3 at 5 % | σ1/σ3 at 10 % |", "|---|---|---|---|"]

@@ -58,6 +58,9 @@ MC_SPECIMEN = ("--material", "mohr-coulomb", "--friction-angle", "35",
 #: times wider): a zone 20–30 mm wide across a 50 mm specimen is no longer than 1.5 times
 #: its width, so each band's length is reported beside its width
 WIDE_BANDS = {"contrast": 1.1, "aspect": 1.2}
+#: the axial strains [-] at which the active bands are also measured (each over the last
+#: fifth of its strain, as at the last step): how the width evolves
+ACTIVE_STRAINS = (0.03, 0.04)
 
 
 @dataclass(frozen=True)
@@ -133,13 +136,43 @@ def _regularised(length: float) -> list[Any]:
                                    "--internal-length", length]
 
 
-def bands_of(folder: Path, step: int | None = None) -> list[dict[str, float]]:
-    """The bands of a run's points table at ``step`` (None: its last), searched with the
-    study's thresholds (:data:`WIDE_BANDS`)."""
+def bands_of(folder: Path, step: int | None = None,
+             points: pd.DataFrame | None = None) -> list[dict[str, float]]:
+    """The bands of a run's points table (None: read from ``folder``) at ``step`` (None: its
+    last), searched with the study's thresholds (:data:`WIDE_BANDS`)."""
     from granular_material.results.bands import find_bands
 
-    points = pd.read_csv(folder / "points.csv")
+    points = pd.read_csv(folder / "points.csv") if points is None else points
     return [b.as_dict() for b in find_bands(points, step, **WIDE_BANDS)]
+
+
+def active_of(points: pd.DataFrame, strains: tuple[float, ...] = ACTIVE_STRAINS
+              ) -> dict[str, Any]:
+    """The bands active at the last step of a run's ``points`` (Gaussian ridges fitted to
+    the shear strain of the increment over the last fifth of the axial strain,
+    :func:`~granular_material.results.active_bands.active_bands`), and their mean width at
+    the steps nearest ``strains`` that the run reached."""
+    from granular_material.results.active_bands import active_bands
+
+    bands = active_bands(points)
+    by_step = points.groupby("step")["axial_strain"].first()
+    evolution = {}
+    for e in strains:
+        if e >= by_step.max() * (1 - 1e-9):
+            continue  # the last step's is the run's own; past it, none
+        step = int((by_step - e).abs().idxmin())
+        at = active_bands(points, step)
+        evolution[f"{100 * e:g}"] = (float(np.mean([b.width for b in at])) if at
+                                     else math.nan)
+    return {"active_band_count": len(bands),
+            "active_band_width": (float(np.mean([b.width for b in bands])) if bands
+                                  else math.nan),
+            "active_widths": [b.width for b in bands],
+            "active_angles": [b.inclination_deg for b in bands],
+            "active_residual": bands[0].residual if bands else math.nan,
+            "active_window": ([bands[0].start_axial_strain, bands[0].axial_strain] if bands
+                              else []),
+            "active_width_at": evolution}
 
 
 def specimen_row(folder: Path, summary: dict[str, Any]) -> dict[str, Any]:
@@ -147,7 +180,8 @@ def specimen_row(folder: Path, summary: dict[str, Any]) -> dict[str, Any]:
     steps = pd.read_csv(folder / "steps.csv")
     strain = steps["axial_strain"].to_numpy(dtype=float)
     ratio = steps["stress_ratio"].to_numpy(dtype=float)
-    bands = bands_of(folder)
+    points = pd.read_csv(folder / "points.csv")
+    bands = bands_of(folder, points=points)
     widest = max(bands, key=lambda b: b["strength"]) if bands else None
     return {
         "steps_completed": int(summary.get("steps_completed", len(steps) - 1)),
@@ -164,6 +198,7 @@ def specimen_row(folder: Path, summary: dict[str, Any]) -> dict[str, Any]:
         "band_widths": [b["width"] for b in bands],
         "band_lengths": [b["length"] for b in bands],
         "band_angles": [b["inclination_deg"] for b in bands],
+        **active_of(points),
         "error": summary.get("error"),
     }
 

@@ -14,6 +14,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from granular_material.results.active_bands import (
+    active_bands,
+    fit_bands,
+    incremental_points,
+    start_step,
+)
 from granular_material.results.band_measures import band_measures
 from granular_material.results.bands import band_width, find_bands
 from granular_material.results.summary import band_summary
@@ -329,3 +335,168 @@ def test_a_band_reflected_at_a_side_gives_its_two_legs():
     assert (bands[1].centre_x, bands[1].centre_y) == pytest.approx(
         ((WIDTH + WIDTH - (HEIGHT - turn[1]) / math.tan(math.radians(50.0))) / 2,
          (turn[1] + HEIGHT) / 2), abs=3e-3)
+
+
+# The bands active over an increment (results.active_bands): the shear strain of the change
+# of strain between two steps, fitted as Gaussian ridges.
+
+def _strain_table(x: np.ndarray, y: np.ndarray, steps: dict[int, tuple[float, np.ndarray,
+                                                                     np.ndarray, np.ndarray]]
+                  ) -> pd.DataFrame:
+    """A points table with strain columns: step → (axial strain, exx, eyy, exy)."""
+    return pd.concat([pd.DataFrame({"step": step, "axial_strain": e, "point": np.arange(x.size),
+                                    "x": x, "y": y, "exx": exx, "eyy": eyy, "exy": exy,
+                                    "shear_strain": np.hypot(exx - eyy, 2 * exy)})
+                      for step, (e, exx, eyy, exy) in steps.items()], ignore_index=True)
+
+
+def _simple_shear(x: np.ndarray, y: np.ndarray, angle_deg: float, s: float,
+                  amount: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The strain (exx, eyy, exy) of a Gaussian band of simple shear along ``angle_deg``:
+    its shear strain is amount · exp(−d²/2s²)."""
+    g = amount * np.exp(-distance(x, y, angle_deg) ** 2 / (2 * s * s))
+    t = math.radians(angle_deg)
+    # shear γ along the axis (cos t, sin t) with normal (−sin t, cos t): ε = γ/2 (a⊗n + n⊗a)
+    a, n = (math.cos(t), math.sin(t)), (-math.sin(t), math.cos(t))
+    return g * a[0] * n[0], g * a[1] * n[1], 0.5 * g * (a[0] * n[1] + a[1] * n[0])
+
+
+def _diffuse(x: np.ndarray, y: np.ndarray, amount: float) -> tuple[np.ndarray, ...]:
+    """A wide, smooth compression (more at the middle) of no band's shape."""
+    bump = amount * (1 + np.exp(-((x - WIDTH / 2) ** 2 + (y - HEIGHT / 2) ** 2) / 0.03 ** 2))
+    return 0.2 * bump, -bump, 0.0 * bump
+
+
+@pytest.mark.parametrize("mesh", [(8, 16), (16, 32)], ids=["8x16", "16x32"])
+def test_the_incremental_band_is_found_under_a_diffuse_past(mesh):
+    """Up to step 2 the specimen strains diffusely; from step 2 to 3 a band of simple shear
+    (s = 4 mm at 50°) forms. The accumulated field's widest feature is the diffuse past; the
+    increment's band is recovered to a few per cent, whatever the mesh."""
+    x, y = gauss_points(*mesh, 2)
+    before = _diffuse(x, y, 0.05)
+    band = _simple_shear(x, y, 50.0, 0.004, 0.1)
+    after = tuple(b + d for b, d in zip(before, band, strict=True))
+    points = _strain_table(x, y, {0: (0.0, *(0 * c for c in before)), 1: (0.02, *before),
+                                  2: (0.04, *before), 3: (0.05, *after)})
+    field = incremental_points(points)
+    assert int(field["start_step"].iloc[0]) == start_step(points) == 2  # 0.8 × 5 % = 4 %
+    assert field["shear_strain"].to_numpy() == pytest.approx(
+        0.1 * np.exp(-distance(x, y, 50.0) ** 2 / (2 * 0.004 ** 2)), abs=1e-12)
+    bands = active_bands(points)
+    assert len(bands) == 1
+    assert bands[0].width == pytest.approx(FWHM * 0.004, rel=0.03)
+    assert angle_error(bands[0].inclination_deg, 50.0) < 1.0
+    assert (bands[0].step, bands[0].start_step) == (3, 2)
+    assert bands[0].start_axial_strain == pytest.approx(0.04)
+    # the increment since step 1 holds the same band (the diffuse part stopped at step 1)
+    assert active_bands(points, start=1)[0].width == pytest.approx(bands[0].width)
+
+
+@pytest.mark.parametrize(("theta", "s"), [(50.0, 0.012), (45.0, 0.015), (55.0, 0.008)])
+def test_a_cross_of_wide_overlapping_bands_gives_both_widths(theta, s):
+    """Two bands each as wide as 40–60 % of the specimen, crossing at its middle: no part of an
+    arm lies clear of the other (the profile search finds one arm or none), and the fit
+    gives both, each at its width within a few per cent."""
+    x, y = gauss_points(16, 32, 2)
+    gamma = (0.002 + 0.02 * np.exp(-distance(x, y, theta) ** 2 / (2 * s * s))
+             + 0.02 * np.exp(-distance(x, y, -theta) ** 2 / (2 * s * s)))
+    bands = fit_bands(table(x, y, gamma))
+    assert len(bands) == 2
+    assert sorted(angle_error(b.inclination_deg, theta) for b in bands)[0] < 1.0
+    assert sorted(angle_error(b.inclination_deg, -theta) for b in bands)[0] < 1.0
+    for band in bands:
+        assert band.width == pytest.approx(FWHM * s, rel=0.03)
+        assert band.centre_x == pytest.approx(WIDTH / 2, abs=0.002)
+        assert band.centre_y == pytest.approx(HEIGHT / 2, abs=0.002)
+        assert band.background == pytest.approx(0.002, rel=0.05)
+        assert band.residual < 0.02
+
+
+def test_parallel_and_crossed_narrow_bands_are_each_fitted():
+    """Four reflected narrow bands (two parallel pairs) give four ridges of their width."""
+    x, y = gauss_points(16, 32, 3)
+    s = 0.0015
+    gamma = 0.01 + sum(0.2 * np.exp(-distance(x, y, a, (WIDTH / 2, c)) ** 2 / (2 * s * s))
+                       for a, c in ((50, 0.035), (-50, 0.035), (50, 0.065), (-50, 0.065)))
+    bands = fit_bands(table(x, y, gamma))
+    assert len(bands) == 4
+    assert [b.width for b in bands] == pytest.approx([FWHM * s] * 4, rel=0.05)
+
+
+@pytest.mark.parametrize("name", ["uniform", "gradient", "noise", "hot spot"])
+def test_no_band_gives_no_fitted_band(name):
+    x, y = gauss_points(8, 16, 2)
+    rng = np.random.default_rng(3)
+    gamma = {"uniform": np.full(x.size, 0.02), "gradient": 0.01 + 0.5 * x,
+             "noise": 0.02 + 0.002 * rng.standard_normal(x.size),
+             "hot spot": 0.01 + 0.2 * np.exp(-((x - 0.025) ** 2 + (y - 0.05) ** 2)
+                                              / (2 * 0.003 ** 2))}[name]
+    assert fit_bands(table(x, y, gamma)) == []
+
+
+def test_the_increment_refuses_what_it_cannot_read():
+    x, y = gauss_points(2, 4, 2)
+    zero = np.zeros(x.size)
+    points = _strain_table(x, y, {0: (0.0, zero, zero, zero), 1: (0.01, zero, zero, zero)})
+    with pytest.raises(ValueError, match="exx"):
+        incremental_points(points.drop(columns="exx"))
+    with pytest.raises(ValueError, match="no step 5"):
+        incremental_points(points, step=5)
+    with pytest.raises(ValueError, match="start before"):
+        incremental_points(points, step=1, start=1)
+    with pytest.raises(ValueError, match="first"):
+        start_step(points, step=0)
+    with pytest.raises(ValueError, match="share"):
+        start_step(points, share=0.0)
+    with pytest.raises(ValueError, match="same points"):
+        incremental_points(points[~((points["step"] == 0) & (points["point"] == 0))])
+    with pytest.raises(ValueError, match="max_bands"):
+        fit_bands(table(x, y, zero), max_bands=0)
+    # a table without strain, or of one step, has no active band
+    assert active_bands(points.drop(columns=["exx", "eyy", "exy"])) == []
+    assert active_bands(points[points["step"] == 1]) == []
+
+
+def test_the_summary_and_the_measures_give_the_active_width():
+    """A run whose band forms over the last steps: the summary's and the measures'
+    active width is the band's; a table without strain gives NaN."""
+    x, y = gauss_points(16, 32, 2)
+    zero = np.zeros(x.size)
+    band = _simple_shear(x, y, -50.0, 0.005, 0.1)
+    points = _strain_table(x, y, {0: (0.0, zero, zero, zero), 1: (0.05, zero, zero, zero),
+                                  2: (0.10, *band)})
+    steps = pd.DataFrame({"step": [0, 1, 2], "axial_strain": [0.0, 0.05, 0.10],
+                          "stress_ratio": [1.0, 3.0, 2.5], "volumetric_strain": 0.0})
+    result = SimpleNamespace(steps=steps, points=points, row_nearest=lambda e: 2)
+    summary = band_summary(result, [0.1], 3.0)
+    assert summary["active_band_width"] == pytest.approx(FWHM * 0.005, rel=0.03)
+    assert len(summary["active_bands"]) == 1
+    assert summary["active_bands"][0]["start_step"] == 1
+    measures = band_measures(steps, points, HEIGHT, WIDTH)
+    assert measures["active_band_width"] == summary["active_band_width"]
+    assert measures["active_band_count"] == 1
+    plain = band_measures(*_specimen(True), HEIGHT, WIDTH)
+    assert math.isnan(plain["active_band_width"]) and plain["active_band_count"] == 0
+
+
+def test_a_regularised_softening_specimen_has_an_active_band_the_profile_misses():
+    """The softening Mohr–Coulomb specimen regularised at ℓ = 5 mm on 4 × 8 quad8 (a real run,
+    to 3 %): its localised zone is a symmetric cross as wide as half the specimen. The
+    accumulated γ's profile search finds no band at its thresholds; the active bands are
+    the cross, two arms at ±θ of the same width, 20–40 mm (the study: 28 mm on every mesh)."""
+    from granular_material.fem import BiaxialSetup, MohrCoulomb, NewtonSettings, Regularisation
+    from granular_material.runs.runner import run_biaxial
+
+    setup = BiaxialSetup(nx=4, ny=8, element="quad8", platens="rough", axial_strain=0.03)
+    material = MohrCoulomb(friction_angle=35, critical_friction_angle=28,
+                           softening_strain=0.02, dilation_angle=5)
+    result = run_biaxial(setup, material, 15, NewtonSettings(),
+                         regularisation=Regularisation("second-gradient", 0.005))
+    assert result.error is None
+    summary = band_summary(result, [0.03], 3.6)
+    assert math.isnan(summary["band_width"])
+    bands = summary["active_bands"]
+    assert len(bands) == 2
+    assert bands[0]["inclination_deg"] == pytest.approx(-bands[1]["inclination_deg"], abs=1.0)
+    assert bands[0]["width"] == pytest.approx(bands[1]["width"], rel=0.02)
+    assert 0.020 < summary["active_band_width"] < 0.040

@@ -44,7 +44,7 @@ def test_the_report_and_figures_are_written(smoke):
     for heading in ("Mohr–Coulomb softening specimen", "FEM × DEM specimen", "Footing"):
         assert f"## {heading}" in report
     for figure in ("specimen_curves.png", "specimen_maps.png", "band_width.png",
-                   "dem_ratios.png", "footing_curves.png"):
+                   "specimen_active_maps.png", "dem_ratios.png", "footing_curves.png"):
         assert (out / figure).stat().st_size > 10_000, figure
 
 

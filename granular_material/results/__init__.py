@@ -3,6 +3,12 @@ writers (CSV, XDMF), figures, localisation (shear-band) measures, peak finding a
 summaries the commands report. Reads what the procedures and
 the FEM produce; imports nothing above it."""
 
+from granular_material.results.active_bands import (
+    FittedBand,
+    active_bands,
+    fit_bands,
+    incremental_points,
+)
 from granular_material.results.band_measures import (
     band_measures,
     band_onset,
@@ -44,13 +50,17 @@ __all__ = [
     "BiaxialSummary",
     "BiaxialWriter",
     "FieldWriter",
+    "FittedBand",
     "ShearBand",
+    "active_bands",
     "band_measures",
     "band_onset",
     "band_summary",
     "band_width",
     "find_bands",
     "find_peak",
+    "fit_bands",
+    "incremental_points",
     "localisation_history",
     "mohr_coulomb_inclination",
     "plot_biaxial_curves",

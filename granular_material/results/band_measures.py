@@ -15,6 +15,9 @@ axial_strain, x, y, shear_strain) at every load step:
 - the straight bands at the last step, each with its own inclination (from
   :func:`~granular_material.results.bands.find_bands`): how many, the two strongest ones'
   inclinations, and the strongest one's width in metres;
+- the bands active over the last fifth of the run's axial strain (from
+  :func:`~granular_material.results.active_bands.active_bands`: Gaussian ridges fitted to
+  the shear strain of that increment): how many, and their mean width in metres;
 - σ1/σ3 and the volumetric strain at :data:`SOFTENING_STRAINS`.
 """
 
@@ -27,6 +30,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from granular_material.results.active_bands import active_bands
 from granular_material.results.bands import find_bands
 from granular_material.results.localization import shear_band
 
@@ -110,7 +114,11 @@ def band_measures(steps: pd.DataFrame, points: pd.DataFrame, height: float,
     is no band), ``band_count`` (the straight bands found there, each with its own
     inclination: 1 for one band, 2 for a cross, 0 for none), ``band_1_inclination_deg`` and
     ``band_2_inclination_deg`` (the two strongest bands' angles to the x axis, signed, in
-    (−90, 90], positive rising to the right; NaN where there are fewer).
+    (−90, 90], positive rising to the right; NaN where there are fewer);
+    ``active_band_width`` [m] (the mean full width at half maximum of the bands active over
+    the last :data:`~granular_material.results.active_bands.INCREMENT_SHARE` of the run's
+    axial strain, Gaussian ridges fitted to the shear strain of that increment; NaN where
+    there is none or the points carry no strain) and ``active_band_count``.
     """
     history = localisation_history(points)
     strain = history["axial_strain"].to_numpy(dtype=float)
@@ -130,6 +138,10 @@ def band_measures(steps: pd.DataFrame, points: pd.DataFrame, height: float,
     measures.update({"band_width": bands[0].width if bands else math.nan,
                      "band_count": len(bands), "band_1_inclination_deg": inclinations[0],
                      "band_2_inclination_deg": inclinations[1]})
+    active = active_bands(points)
+    measures.update({"active_band_width": (float(np.mean([b.width for b in active]))
+                                           if active else math.nan),
+                     "active_band_count": len(active)})
     run_strain = steps["axial_strain"].to_numpy(dtype=float)
     for e in softening:
         measures[f"stress_ratio_{100 * e:g}"] = value_at(

@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING, Any
 
 import pandas as pd
 
+from granular_material.results.active_bands import active_bands
 from granular_material.results.bands import find_bands
 from granular_material.results.biaxial import COST_COLUMNS
 from granular_material.results.localization import mohr_coulomb_inclination, shear_band
@@ -74,12 +75,19 @@ def band_summary(result: BiaxialResult, map_strains: Sequence[float],
     :mod:`granular_material.results.localization`), and the straight bands of the last step
     (:func:`~granular_material.results.bands.find_bands`): ``bands_final`` (each band's
     measures, strongest first; empty where there is none) and ``band_width`` (the strongest
-    band's full width at half maximum of γ across it [m]; NaN where there is no band)."""
+    band's full width at half maximum of γ across it [m]; NaN where there is no band); and
+    the bands active over the last fifth of the axial strain
+    (:func:`~granular_material.results.active_bands.active_bands`, Gaussian ridges fitted to
+    the shear strain of that increment, which also measures a band as wide as a third of
+    the specimen): ``active_bands`` (each one's measures, highest first) and
+    ``active_band_width`` (their mean full width at half maximum [m]; NaN where there is
+    none)."""
     steps = result.steps
     if len(steps) < 2:
         return {}
     rows = sorted({result.row_nearest(e) for e in map_strains})
     bands = find_bands(result.points)
+    active = active_bands(result.points)
     return {
         "shear_bands": [shear_band(result.points, int(steps["step"].iloc[r])).as_dict()
                         for r in rows],
@@ -87,4 +95,7 @@ def band_summary(result: BiaxialResult, map_strains: Sequence[float],
         "mohr_coulomb_inclination_deg": mohr_coulomb_inclination(max(peak_ratio, 1.0)),
         "band_width": bands[0].width if bands else math.nan,
         "bands_final": [band.as_dict() for band in bands],
+        "active_band_width": (sum(band.width for band in active) / len(active) if active
+                              else math.nan),
+        "active_bands": [band.as_dict() for band in active],
     }
