@@ -5,12 +5,14 @@ at every point, a DEM RVE where the twin is no longer trusted).
 Each scene of examples/scenes runs once per variant:
 
 - ``all-DEM``: the scene as written, the reference;
-- ``f=0.7`` (the default threshold), ``f=0.5`` (tight) and ``f=0.9`` (loose): a point
-  switches once its mobilised friction reaches that fraction of the twin's peak friction
-  angle, its element's points with it, its RVE driven through the point's deformation
-  (``start = "strain"``);
+- ``f=0.7`` (the default threshold), ``f=0.9`` (loose) and, on the footing, ``f=0.5``
+  (tight): a point is DEM from the step in which its mobilised friction reaches that
+  fraction of the twin's peak friction angle, its element's points with it, its RVE driven
+  through the point's deformation (the defaults: ``start = "strain"``,
+  ``switch = "in-step"``);
 - on the footing also ``f=0.7, point`` (no neighbours), ``γ=0.5 %`` (the shear-strain
-  threshold) and ``f=0.7, stress`` (the RVE brought by the servo to the twin's stress).
+  threshold), ``f=0.7, after-step`` (DEM from the step after) and ``f=0.7, stress`` (the
+  RVE brought by the servo to the twin's stress).
 
 It reports every run's load at each step against the reference's (the error at every step
 up to the reference's peak and after it), the DEM points over the run, the particle-steps
@@ -59,17 +61,18 @@ STUDIED = {
 #: the variants: their [adaptivity] table (None: all-DEM)
 VARIANTS: dict[str, dict[str, Any] | None] = {
     "all-DEM": None,
-    "f=0.7": {"mobilised_fraction": 0.7, "start": "strain"},
-    "f=0.5": {"mobilised_fraction": 0.5, "start": "strain"},
-    "f=0.9": {"mobilised_fraction": 0.9, "start": "strain"},
-    "f=0.7, point": {"mobilised_fraction": 0.7, "start": "strain", "neighbours": "point"},
-    "γ=0.5 %": {"shear_strain": 0.005, "start": "strain"},
+    "f=0.7": {"mobilised_fraction": 0.7},
+    "f=0.5": {"mobilised_fraction": 0.5},
+    "f=0.9": {"mobilised_fraction": 0.9},
+    "f=0.7, point": {"mobilised_fraction": 0.7, "neighbours": "point"},
+    "γ=0.5 %": {"shear_strain": 0.005},
+    "f=0.7, after-step": {"mobilised_fraction": 0.7, "switch": "after-step"},
     "f=0.7, stress": {"mobilised_fraction": 0.7, "start": "stress"},
 }
 #: which variants each scene runs
 PLAN = {"footing": list(VARIANTS),
-        "wall-passive": ["all-DEM", "f=0.7", "f=0.5", "f=0.9"],
-        "wall-active": ["all-DEM", "f=0.7", "f=0.5", "f=0.9"]}
+        "wall-passive": ["all-DEM", "f=0.7", "f=0.9"],
+        "wall-active": ["all-DEM", "f=0.7", "f=0.9"]}
 #: the smoke study: the footing on a 3 × 2 mesh of 16-disc RVEs, 3 steps
 SMOKE = {"footing": ["all-DEM", "f=0.7"]}
 

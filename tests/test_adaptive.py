@@ -54,13 +54,17 @@ def _biaxial(scale: np.ndarray) -> np.ndarray:
     return g
 
 
-def _load_until_a_switch(material: AdaptiveMaterial, scale: np.ndarray) -> np.ndarray:
-    """Steps until some point switches; the committed stress before that switch."""
-    for _ in range(20):
+def _load_until_a_switch(material: AdaptiveMaterial, scale: np.ndarray
+                         ) -> tuple[np.ndarray, np.ndarray, int]:
+    """Steps until some point switches (that step evaluated, not committed): its response's
+    stress, the committed stress before it, and the steps committed before it."""
+    committed = np.repeat(-100e3 * np.eye(2)[None], len(scale), axis=0)
+    for k in range(20):
         response = material.evaluate(_biaxial(scale))
-        material.commit()
         if material.dem_points:
-            return response.stress
+            return response.stress, committed, k
+        material.commit()
+        committed = response.stress
     raise AssertionError("no point switched")
 
 
@@ -109,34 +113,64 @@ def test_the_shear_strain_criterion_reads_the_total_strain():
 def test_a_switch_brings_the_rve_to_the_points_stress_within_the_servo_tolerance():
     material = _material("stress")
     material.allocate(3)
-    committed = _load_until_a_switch(material, np.array([0.5, 1.0, 1.5]))
+    _, committed, _ = _load_until_a_switch(material, np.array([0.5, 1.0, 1.5]))
     switched = material.switches[-1].points
     assert switched.size and material.is_dem[switched].all()
-    assert (mobilised_friction(committed[switched]) >= 0.7 * PEAK).all()
+    # the step in which it passed the threshold: the twin's answer there would pass it
     assert not material.is_dem[np.setdiff1d(np.arange(3), switched)].any()
-    answer = material.evaluate(np.zeros((3, 2, 2)))  # the RVE as it is, unstepped but twice
+    assert material.switches[-1].error <= 0.01
+    material.revert()  # the step's start: the RVE as the servo left it, at the point's
+    answer = material.evaluate(np.zeros((3, 2, 2)))  # stress then (two free DEM steps)
     scale = np.abs(committed[switched]).max(axis=(1, 2))
     error = np.abs(answer.stress[switched] - committed[switched]).max(axis=(1, 2)) / scale
-    assert (error <= 0.01 + 0.005).all(), error  # the servo's 1 %, and two free DEM steps
+    assert (error <= 0.01 + 0.005).all(), error
     assert answer.fields["dem"].tolist() == material.is_dem.astype(float).tolist()
     assert material.switches[-1].particle_steps > 0
+
+
+def test_a_point_is_dem_in_the_step_it_passes_the_threshold():
+    scale = np.array([0.5, 1.0, 1.5])
+    twin = MohrCoulomb(young=60e6, poisson=0.3, friction_angle=PEAK, initial_stress=-100e3)
+    twin.allocate(3)
+    adaptive = _material("strain")
+    adaptive.allocate(3)
+    _, _, steps = _load_until_a_switch(adaptive, scale)
+    for _ in range(steps + 1):  # the twin alone, the same steps
+        alone = twin.evaluate(_biaxial(scale))
+        twin.commit()
+    switched = adaptive.switches[-1].points
+    assert (mobilised_friction(alone.stress[switched]) >= 0.7 * PEAK).all()
+    assert (mobilised_friction(alone.stress[adaptive.is_dem == 0]) < 0.7 * PEAK).all()
+
+
+def test_after_step_switching_tests_the_committed_state():
+    material = AdaptiveMaterial(
+        MohrCoulomb(young=60e6, poisson=0.3, friction_angle=PEAK, initial_stress=-100e3),
+        PEAK, DEMMaterialParameters(device="cpu", shards=1, confining=100e3),
+        load_rve(SOURCE), SwitchCriterion(0.7, neighbours="point", in_step=False))
+    material.allocate(3)
+    scale = np.array([0.5, 1.0, 1.5])
+    for _ in range(20):
+        response = material.evaluate(_biaxial(scale))
+        assert not material.dem_points  # never during a step
+        material.commit()
+        if material.dem_points:
+            break
+    assert (mobilised_friction(response.stress[material.is_dem]) >= 0.7 * PEAK).all()
 
 
 def test_a_strain_start_is_the_source_driven_through_the_points_deformation():
     material = _material("strain")
     material.allocate(3)
     scale = np.array([0.5, 1.0, 1.5])
-    _load_until_a_switch(material, scale)
-    switched = material.switches[-1].points
-    steps = material._commits
-    deformation = np.linalg.matrix_power(np.eye(2) + _biaxial(scale)[switched[0]], steps)
+    trial, _, steps = _load_until_a_switch(material, scale)
+    point = material.switches[-1].points[0]
+    g = _biaxial(scale)[point]
+    deformation = np.linalg.matrix_power(np.eye(2) + g, steps)
     alone = DEMMaterial.holding(load_rve(SOURCE).replicate(1), material.dem)
-    expected = alone.evaluate((deformation - np.eye(2))[None])
+    assert alone.evaluate((deformation - np.eye(2))[None]).ok
     alone.commit()
-    again = alone.evaluate(np.zeros((1, 2, 2)))
-    answer = material.evaluate(np.zeros((3, 2, 2)))
-    np.testing.assert_array_equal(answer.stress[switched[0]], again.stress[0])
-    assert expected.ok
+    np.testing.assert_array_equal(trial[point], alone.evaluate(g[None]).stress[0])
 
 
 def test_an_elements_points_switch_together():
@@ -151,6 +185,7 @@ def test_a_restored_material_answers_as_the_one_it_was_written_from(tmp_path):
     material.allocate(3)
     scale = np.array([0.5, 1.0, 1.5])
     _load_until_a_switch(material, scale)
+    material.commit()
     material.checkpoint(tmp_path / "state.npz")
     restored = _material("stress")
     restored.restore(tmp_path / "state.npz")
@@ -202,7 +237,7 @@ def test_the_adaptivity_table_acts_key_by_key(tmp_path):
     base = bvp_from_dict(tomllib.loads(SCENE), tmp_path)
     assert base.adaptivity.mobilised_fraction == 0.7
     changed = {"mobilised_fraction": 0.5, "shear_strain": 0.01, "neighbours": "point",
-               "start": "strain", "calibration": "calibration.json"}
+               "start": "stress", "switch": "after-step", "calibration": "calibration.json"}
     assert set(changed) == SCENE_KEYS["adaptivity"]
     for key, value in changed.items():
         data = tomllib.loads(SCENE)
@@ -217,9 +252,10 @@ def test_the_adaptivity_table_acts_key_by_key(tmp_path):
 @pytest.mark.parametrize("table, field", [
     ({"mobilised_fraction": 2.0}, "adaptivity.mobilised_fraction"),
     ({"start": "gas"}, "adaptivity.start"),
+    ({"switch": "later"}, "adaptivity.switch"),
     ({"neighbours": "all"}, "adaptivity.neighbours"),
     ({"calibration": "missing.json"}, "adaptivity.calibration"),
-    ({"switch": "now"}, "adaptivity.switch"),
+    ({"swap": "now"}, "adaptivity.swap"),
 ])
 def test_the_adaptivity_table_refuses_naming_the_key(tmp_path, table, field):
     with pytest.raises(SpecError) as refused:

@@ -28,6 +28,5 @@ def test_the_smoke_study_measures_the_adaptive_footing_against_all_dem(tmp_path)
 
 def test_a_variant_is_the_scene_with_its_adaptivity_table() -> None:
     text = study.scene_text("footing", "f=0.7, point")
-    assert text.endswith('[adaptivity]\nmobilised_fraction = 0.7\nstart = "strain"\n'
-                         'neighbours = "point"\n')
+    assert text.endswith('[adaptivity]\nmobilised_fraction = 0.7\nneighbours = "point"\n')
     assert "[adaptivity]" not in study.scene_text("wall-passive", "all-DEM")

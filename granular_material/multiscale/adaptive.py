@@ -100,11 +100,16 @@ class SwitchCriterion:
             angle (0 < f ≤ 1).
         shear_strain: switch once the accumulated shear strain γ [-] reaches this (> 0).
         neighbours: "point" (the point alone) or "element" (every point of its element).
+        in_step: a point that meets a threshold during a load step is DEM in that whole
+            step (its RVE made from its state at the step's start, and the step's
+            iterations from there on answered by it); False: from the next step on (the
+            test made on the committed state, a step behind).
     """
 
     mobilised_fraction: float | None = 0.7
     shear_strain: float | None = None
     neighbours: str = "element"
+    in_step: bool = True
 
     def __post_init__(self) -> None:
         f, g = self.mobilised_fraction, self.shear_strain
@@ -262,7 +267,7 @@ class AdaptiveMaterial(ScikitFemInterface):
 
     def __init__(self, twin: Material, peak_friction: float, dem: DEMMaterialParameters,
                  source: RVEData, criterion: SwitchCriterion | None = None, nqp: int = 1,
-                 start: str = "stress", progress: bool = False) -> None:
+                 start: str = "strain", progress: bool = False) -> None:
         if not isinstance(twin, Material):
             raise ParameterError("twin", f"{type(twin).__name__} does not implement the "
                                          "Material protocol")
@@ -285,6 +290,7 @@ class AdaptiveMaterial(ScikitFemInterface):
         self.nqp = nqp
         self.start = start
         self._deformation = np.zeros((0, 2, 2))
+        self._committed_stress = np.zeros((0, 2, 2))
         self._increment: np.ndarray | None = None
         self.progress = progress
         self._cohorts: list[_Cohort] = []
@@ -339,6 +345,8 @@ class AdaptiveMaterial(ScikitFemInterface):
         self._cohorts = []
         self._is_dem = np.zeros(n, dtype=bool)
         self._deformation = np.repeat(np.eye(2)[None], n, axis=0)
+        self._committed_stress = self.twin.evaluate(np.zeros((n, 2, 2))).stress.copy()
+        self.twin.revert()
         self._missed = np.zeros(n, dtype=bool)
         self._track_allocate(n)
         self._last = None
@@ -350,8 +358,13 @@ class AdaptiveMaterial(ScikitFemInterface):
         grad = check_grad(grad_u, n)
         self._track_evaluate(grad)
         self._increment = grad
+        r = self.twin.evaluate(np.where(self._is_dem[:, None, None], 0.0, grad))
+        if self.criterion.in_step:  # a point that passes the threshold in this step is DEM
+            points = self.switching(r.stress, self.committed_grad_u + grad)  # in all of it
+            if points.size:
+                self._switch(points, self._committed_stress)
+                r = self.twin.evaluate(np.where(self._is_dem[:, None, None], 0.0, grad))
         dem = self._is_dem
-        r = self.twin.evaluate(np.where(dem[:, None, None], 0.0, grad))
         stress, tangent = r.stress.copy(), r.tangent.copy()
         status = r.status.copy()
         reasons = np.asarray(r.reasons, dtype=object).copy()
@@ -401,7 +414,11 @@ class AdaptiveMaterial(ScikitFemInterface):
             self._increment = None
         self._commits += 1
         if last is not None:
-            self._switch(last.stress)
+            self._committed_stress = last.stress.copy()
+            if not self.criterion.in_step:
+                points = self.switching(last.stress, self.committed_grad_u)
+                if points.size:
+                    self._switch(points, last.stress)
         self._last = None
 
     def revert(self) -> None:
@@ -418,10 +435,10 @@ class AdaptiveMaterial(ScikitFemInterface):
             cohort.material.hold_tangent(hold)
 
     # -- the switch -------------------------------------------------------------------------
-    def switching(self, stress: np.ndarray) -> np.ndarray:
-        """The twin points that would switch at the committed ``stress`` [Pa] (n, 2, 2)
-        (their neighbours included), indices."""
-        met = self.criterion.met(stress, self.committed_grad_u, self.peak_friction)
+    def switching(self, stress: np.ndarray, grad_u: np.ndarray) -> np.ndarray:
+        """The twin points that switch at ``stress`` [Pa] (n, 2, 2) and the total ∇u [-]
+        (n, 2, 2) (their neighbours included), indices."""
+        met = self.criterion.met(stress, grad_u, self.peak_friction)
         met &= ~self._is_dem & ~self._missed
         if self.criterion.neighbours == "element" and met.any():
             elements = np.unique(np.flatnonzero(met) // self.nqp)
@@ -429,13 +446,11 @@ class AdaptiveMaterial(ScikitFemInterface):
             met &= ~self._is_dem & ~self._missed
         return np.flatnonzero(met)
 
-    def _switch(self, stress: np.ndarray) -> None:
-        """Give the points that meet the criterion their RVEs (:attr:`start` says how)."""
+    def _switch(self, points: np.ndarray, stress: np.ndarray) -> None:
+        """Give ``points`` their RVEs in the committed state (:attr:`start` says how: the
+        committed deformation, or the committed ``stress`` [Pa] (n, 2, 2))."""
         import time
 
-        points = self.switching(stress)
-        if points.size == 0:
-            return
         began = time.perf_counter()
         if self.start == "strain":
             material, reached, work, error, lifted, capped = self._by_strain(points)
@@ -547,7 +562,7 @@ class AdaptiveMaterial(ScikitFemInterface):
         arrays: dict[str, np.ndarray] = {
             CHECKPOINT_NAME_KEY: np.array(_NAME), "is_dem": self._is_dem,
             "missed": self._missed, "grad_u": self.committed_grad_u,
-            "deformation": self._deformation,
+            "deformation": self._deformation, "stress": self._committed_stress,
             "commits": np.array(self._commits), "pending": np.array(self._pending_steps),
             "cohorts": np.array(len(self._cohorts))}
         with tempfile.TemporaryDirectory(prefix="adaptive-") as folder:
@@ -572,13 +587,14 @@ class AdaptiveMaterial(ScikitFemInterface):
     def restore(self, path: str | Path) -> None:
         """Read a :meth:`checkpoint`: the twin, every cohort and each point's model.
         ValueError for another material's checkpoint."""
-        keys = ("is_dem", "missed", "grad_u", "deformation", "commits", "pending", "cohorts",
-                "twin", "source")
+        keys = ("is_dem", "missed", "grad_u", "deformation", "stress", "commits", "pending",
+                "cohorts", "twin", "source")
         with checkpoint_archive(path, _NAME, keys) as data:
             is_dem = np.array(data["is_dem"], dtype=bool)
             missed = np.array(data["missed"], dtype=bool)
             grad = np.array(data["grad_u"], dtype=np.float64)
             deformation = np.array(data["deformation"], dtype=np.float64)
+            committed_stress = np.array(data["stress"], dtype=np.float64)
             commits, pending = int(data["commits"]), int(data["pending"])
             count = int(data["cohorts"])
             blobs = {"twin": np.array(data["twin"]), "source": np.array(data["source"])}
@@ -607,6 +623,7 @@ class AdaptiveMaterial(ScikitFemInterface):
         self._track_allocate(int(is_dem.size))
         self._committed_grad = grad
         self._deformation = deformation
+        self._committed_stress = committed_stress
         self._increment = None
         self._commits, self._pending_steps = commits, pending
         self._last = None

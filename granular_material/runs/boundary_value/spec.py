@@ -89,7 +89,10 @@ into a :class:`BoundaryValueSpec` by :func:`bvp_from_dict` (every key checked, a
     mobilised_fraction = 0.7        # point, a DEM RVE once φ_mob reaches this fraction of the
     shear_strain = 0.01             # twin's φ (and/or γ this); neighbours = "element" or
     neighbours = "element"          # "point"; calibration = "calibration.json" (else the
-                                    # scene's RVE is calibrated at its pressure at the start)
+    start = "strain"                # scene's RVE is calibrated at its pressure at the start);
+    switch = "in-step"              # the RVE driven through the point's deformation, or
+                                    # "stress": servoed to its stress; DEM in the step a
+                                    # threshold is met, or "after-step"
 
     [newton]                        # NewtonSpec's fields
     [regularisation]                # past a peak: model = "second-gradient" (quad8, quad9,
@@ -498,6 +501,8 @@ class StrengthReductionSpec:
                                                         f"{self.steps!r}")
 
 
+#: when a point that meets a threshold becomes DEM: in the step it meets it, or after it
+SWITCHES = ("in-step", "after-step")
 #: the mobilised fraction of the twin's peak friction angle at which a point switches to its
 #: DEM RVE when an [adaptivity] table names no threshold
 DEFAULT_MOBILISED_FRACTION = 0.7
@@ -517,8 +522,11 @@ class AdaptivitySpec:
             not used (at least one of the two is given).
         neighbours: "element" (every point of a switching point's element switches with it)
             or "point".
-        start: how a switching point's RVE starts: "stress" (the stress servo brings it to
-            the point's twin stress) or "strain" (driven through the point's deformation).
+        start: how a switching point's RVE starts: "strain" (driven through the point's
+            deformation) or "stress" (the stress servo brings it to the point's twin
+            stress).
+        switch: "in-step" (a point that meets a threshold during a load step is DEM in that
+            whole step) or "after-step" (from the next step on).
         calibration: a ``calibration.json`` of ``granular-material calibrate`` whose
             parameters make the twin; None: the scene's RVE is calibrated at the scene's
             reference pressure when the run starts.
@@ -527,7 +535,8 @@ class AdaptivitySpec:
     mobilised_fraction: float | None = DEFAULT_MOBILISED_FRACTION
     shear_strain: float | None = None
     neighbours: str = "element"
-    start: str = "stress"
+    start: str = "strain"
+    switch: str = "in-step"
     calibration: Path | None = None
 
     def __post_init__(self) -> None:
@@ -544,12 +553,16 @@ class AdaptivitySpec:
         if self.start not in STARTS:
             raise SpecError("adaptivity.start", f"must be one of {', '.join(STARTS)}, got "
                                                 f"{self.start!r}")
+        if self.switch not in SWITCHES:
+            raise SpecError("adaptivity.switch", f"must be one of {', '.join(SWITCHES)}, got "
+                                                 f"{self.switch!r}")
 
     def criterion(self) -> Any:
         """The :class:`~granular_material.multiscale.adaptive.SwitchCriterion` it names."""
         from granular_material.multiscale.adaptive import SwitchCriterion
 
-        return SwitchCriterion(self.mobilised_fraction, self.shear_strain, self.neighbours)
+        return SwitchCriterion(self.mobilised_fraction, self.shear_strain, self.neighbours,
+                               in_step=self.switch == "in-step")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -936,7 +949,7 @@ SCENE_KEYS: dict[str, frozenset[str]] = {
     "regularisation": frozenset({"model", "internal_length"}),
     "strength_reduction": frozenset({"factor_end", "steps"}),
     "adaptivity": frozenset({"mobilised_fraction", "shear_strain", "neighbours", "start",
-                             "calibration"}),
+                             "switch", "calibration"}),
     "output": frozenset({"out", "device", "shards", "progress", "fields"}),
     "phases": frozenset({"name", "steps", "conditions", "gravity", "reset_displacements"}),
     "phases.gravity": frozenset({"factor"}),
