@@ -11,8 +11,9 @@ Each scene of examples/scenes runs once per variant:
   through the point's deformation (the defaults: ``start = "strain"``,
   ``switch = "in-step"``);
 - on the footing also ``f=0.7, point`` (no neighbours), ``γ=0.5 %`` (the shear-strain
-  threshold), ``f=0.7, after-step`` (DEM from the step after) and ``f=0.7, stress`` (the
-  RVE brought by the servo to the twin's stress).
+  threshold), ``f=0.7, after-step`` (DEM from the step after), ``f=0.7, E over 0.1 %`` (the
+  twin's E and ν read as calibrate reads them) and ``f=0.7, stress`` (the RVE brought by
+  the servo to the twin's stress).
 
 It reports every run's load at each step against the reference's (the error at every step
 up to the reference's peak and after it), the DEM points over the run, the particle-steps
@@ -67,6 +68,7 @@ VARIANTS: dict[str, dict[str, Any] | None] = {
     "f=0.7, point": {"mobilised_fraction": 0.7, "neighbours": "point"},
     "γ=0.5 %": {"shear_strain": 0.005},
     "f=0.7, after-step": {"mobilised_fraction": 0.7, "switch": "after-step"},
+    "f=0.7, E over 0.1 %": {"mobilised_fraction": 0.7, "elastic_window": 1e-3},
     "f=0.7, stress": {"mobilised_fraction": 0.7, "start": "stress"},
 }
 #: which variants each scene runs

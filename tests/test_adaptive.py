@@ -237,7 +237,8 @@ def test_the_adaptivity_table_acts_key_by_key(tmp_path):
     base = bvp_from_dict(tomllib.loads(SCENE), tmp_path)
     assert base.adaptivity.mobilised_fraction == 0.7
     changed = {"mobilised_fraction": 0.5, "shear_strain": 0.01, "neighbours": "point",
-               "start": "stress", "switch": "after-step", "calibration": "calibration.json"}
+               "start": "stress", "switch": "after-step", "calibration": "calibration.json",
+               "elastic_window": 1e-3}
     assert set(changed) == SCENE_KEYS["adaptivity"]
     for key, value in changed.items():
         data = tomllib.loads(SCENE)
@@ -256,8 +257,12 @@ def test_the_adaptivity_table_acts_key_by_key(tmp_path):
     ({"neighbours": "all"}, "adaptivity.neighbours"),
     ({"calibration": "missing.json"}, "adaptivity.calibration"),
     ({"swap": "now"}, "adaptivity.swap"),
+    ({"elastic_window": 0.2}, "adaptivity.elastic_window"),
+    ({"elastic_window": 1e-3, "calibration": "calibration.json"}, "adaptivity.elastic_window"),
 ])
 def test_the_adaptivity_table_refuses_naming_the_key(tmp_path, table, field):
+    if table.get("elastic_window") == 1e-3:
+        (tmp_path / "calibration.json").write_text("{}")
     with pytest.raises(SpecError) as refused:
         bvp_from_dict({**tomllib.loads(SCENE), "adaptivity": table}, tmp_path)
     assert refused.value.field == field

@@ -65,6 +65,7 @@ from granular_material.fem.materials.protocol import (
 from granular_material.filesafe import write_whole
 from granular_material.multiscale.material import DEMMaterial
 from granular_material.multiscale.parameters import DEMMaterialParameters
+from granular_material.reference_values import TWIN_ELASTIC_WINDOW
 
 __all__ = ["NEIGHBOURS", "STARTS", "TARGET_FRICTION", "AdaptiveMaterial", "SwitchCriterion",
            "SwitchRecord", "cap_friction", "mobilised_friction", "twin_from_calibration",
@@ -172,19 +173,20 @@ def cap_friction(stress: np.ndarray, limit: float) -> tuple[np.ndarray, np.ndarr
 
 
 def twin_from_rve(source: RVEData, pressure: float, initial_stress: np.ndarray,
-                  device: str | None = "cpu", progress: bool = False
+                  device: str | None = "cpu", progress: bool = False,
+                  elastic_window: float = TWIN_ELASTIC_WINDOW
                   ) -> tuple[Material, dict[str, Any]]:
     """The Mohr–Coulomb twin of the RVE ``source`` (its first RVE): drained biaxial DEM test
     at ``pressure`` P [Pa] read by
-    :func:`~granular_material.procedures.calibration.calibrate_mohr_coulomb` (E and ν of
-    the elastic window, φ, ψ, the critical state and softening), at every point's
-    ``initial_stress`` [Pa] (n, 2, 2). Returns the (not allocated) material and the
-    calibration's ``as_dict()`` without its curve."""
+    :func:`~granular_material.procedures.calibration.calibrate_mohr_coulomb` (E and ν over
+    the first ``elastic_window`` of axial strain, φ, ψ, the critical state and softening),
+    at every point's ``initial_stress`` [Pa] (n, 2, 2). Returns the (not allocated) material
+    and the calibration's ``as_dict()`` without its curve."""
     from granular_material.fem.materials.mohr_coulomb import MohrCoulomb
     from granular_material.procedures.calibration import calibrate_mohr_coulomb
 
     calibration = calibrate_mohr_coulomb(source.take([0]), confining=pressure, device=device,
-                                         progress=progress)
+                                         progress=progress, elastic_window=elastic_window)
     keywords = calibration.material_keywords()
     keywords["initial_stress"] = np.asarray(initial_stress, dtype=np.float64)
     described = calibration.as_dict()

@@ -158,7 +158,8 @@ def adaptive_material(spec: BoundaryValueSpec, n_points: int, initial_stress: np
     else:
         twin, calibration = twin_from_rve(source, spec.reference_pressure, sigma0,
                                           device=first.parameters.device,
-                                          progress=spec.progress)
+                                          progress=spec.progress,
+                                          elastic_window=a.elastic_window)
     material = AdaptiveMaterial(twin, calibration["parameters"]["friction_angle"],
                                 first.parameters, source, a.criterion(), nqp=nqp,
                                 start=a.start, progress=spec.progress)

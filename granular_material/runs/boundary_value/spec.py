@@ -109,6 +109,7 @@ from pathlib import Path
 from typing import Any
 
 from granular_material.multiscale.parameters import MAX_SHARDS
+from granular_material.reference_values import TWIN_ELASTIC_WINDOW
 from granular_material.runs.spec import MaterialSpec, NewtonSpec, RegularisationSpec, SpecError
 from granular_material.typed_fields import conform, conform_fields
 from granular_material.vocabulary import RenamedWarning, key_of, user_stacklevel
@@ -530,6 +531,9 @@ class AdaptivitySpec:
         calibration: a ``calibration.json`` of ``granular-material calibrate`` whose
             parameters make the twin; None: the scene's RVE is calibrated at the scene's
             reference pressure when the run starts.
+        elastic_window: the axial strain [-] that calibration reads the twin's E and ν over
+            (:data:`~granular_material.reference_values.TWIN_ELASTIC_WINDOW`, 2e-4: the
+            far field's strains).
     """
 
     mobilised_fraction: float | None = DEFAULT_MOBILISED_FRACTION
@@ -538,6 +542,7 @@ class AdaptivitySpec:
     start: str = "strain"
     switch: str = "in-step"
     calibration: Path | None = None
+    elastic_window: float = TWIN_ELASTIC_WINDOW
 
     def __post_init__(self) -> None:
         from granular_material.errors import ParameterError
@@ -553,6 +558,15 @@ class AdaptivitySpec:
         if self.start not in STARTS:
             raise SpecError("adaptivity.start", f"must be one of {', '.join(STARTS)}, got "
                                                 f"{self.start!r}")
+        if not (isinstance(self.elastic_window, int | float)
+                and 0 < self.elastic_window < 0.05):
+            raise SpecError("adaptivity.elastic_window", f"must be an axial strain in (0, 0.05) "
+                                                         f"[-], got {self.elastic_window!r}")
+        if self.calibration is not None and self.elastic_window != TWIN_ELASTIC_WINDOW:
+            raise SpecError("adaptivity.elastic_window", "reads the calibration the run makes; "
+                                                         "with a calibration file it would do "
+                                                         "nothing (calibrate it with "
+                                                         "--elastic-window instead)")
         if self.switch not in SWITCHES:
             raise SpecError("adaptivity.switch", f"must be one of {', '.join(SWITCHES)}, got "
                                                  f"{self.switch!r}")
@@ -949,7 +963,7 @@ SCENE_KEYS: dict[str, frozenset[str]] = {
     "regularisation": frozenset({"model", "internal_length"}),
     "strength_reduction": frozenset({"factor_end", "steps"}),
     "adaptivity": frozenset({"mobilised_fraction", "shear_strain", "neighbours", "start",
-                             "switch", "calibration"}),
+                             "switch", "calibration", "elastic_window"}),
     "output": frozenset({"out", "device", "shards", "progress", "fields"}),
     "phases": frozenset({"name", "steps", "conditions", "gravity", "reset_displacements"}),
     "phases.gravity": frozenset({"factor"}),
