@@ -190,8 +190,10 @@ CHANGED = {
     "regularisation": {"model": "second-gradient", "internal_length": 0.01},
     "strength_reduction": {"factor_end": 2.5, "steps": 5},
 }
+#: the tables; [adaptivity] needs a dem material: its keys are walked in test_adaptive.py
 TABLES = ("mesh", "boundaries", "conditions", "gravity", "initial", "material", "newton",
-          "output", "regularisation", "regions", "materials", "phases", "strength_reduction")
+          "output", "regularisation", "regions", "materials", "phases", "strength_reduction",
+          "adaptivity")
 #: the materials by region: [regions] (free names, walked by changing a predicate) and a
 #: changed value for every key of a [[materials]] entry (walked on the first of two)
 REGIONAL = {"regions": {"lower": "y <= 0.05"},

@@ -30,6 +30,13 @@ from granular_material.dem.state import State, state_from_data, state_to_data
 
 __all__ = ["CPU_SHARD_DISCS", "BatchSnapshot", "DEMBatch", "Shard"]
 
+#: a cell whose perpendicular height is below this many times the engine's limit (twice the
+#: contact cut-off) takes its lattice's least skewed basis (:meth:`DEMBatch.rebase_thin_cells`):
+#: close to the limit, so that only RVEs about to stop are re-described (the others stay bit
+#: for bit as they were), and far enough that a load step's shear (a path that would cross
+#: the limit is refused and cut back, then rebased at its commit) seldom reaches it first
+REBASE_MARGIN = 1.1
+
 
 def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
     """The runs ``(first, stop)`` of consecutive True entries of a 1-D boolean mask."""
@@ -278,6 +285,14 @@ class DEMBatch:
                 state.fractional_position.assign(frac.reshape(-1, 2))
                 state.force_rebuild.assign(rebuild)
         return changed
+
+    def rebase_thin_cells(self, margin: float = REBASE_MARGIN) -> np.ndarray:
+        """:meth:`rebase_cells` of every RVE whose cell's perpendicular height is below
+        ``margin`` times the engine's limit (twice the contact cut-off); the mask (B,) of
+        those whose basis changed."""
+        from granular_material.dem.model import cell_heights
+
+        return self.rebase_cells(cell_heights(self.cell()) < margin * 2.0 * self.cutoff)
 
     def set_cell(self, cell: np.ndarray, refresh: bool = True) -> None:
         """Overwrite the cell matrices H [m], shape (B, 2, 2); discs keep their fractional

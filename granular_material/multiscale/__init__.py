@@ -11,7 +11,9 @@ and :mod:`granular_material.dem`, through the :class:`~granular_material.fem.Mat
 protocol alone: its settings (:mod:`.parameters`), the RVEs it starts from
 (:mod:`.preparation`), the batch in this process (:mod:`.backend`) or on the ranks of an MPI
 job (:mod:`.mpi`), what an evaluation gives (:mod:`.evaluation`) and its run hooks
-(:mod:`.run_hooks`).
+(:mod:`.run_hooks`); beside it, :class:`AdaptiveMaterial` (:mod:`.adaptive`): the
+calibrated Mohr–Coulomb twin at every point and a DEM RVE only where the twin is no longer
+trusted.
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ from typing import TYPE_CHECKING
 from granular_material.lazy_names import lazy_names
 
 if TYPE_CHECKING:
+    from granular_material.multiscale.adaptive import AdaptiveMaterial, SwitchCriterion
     from granular_material.multiscale.backend import InProcessBackend
     from granular_material.multiscale.confinement import (
         UNCONFINED_FRACTION,
@@ -40,6 +43,8 @@ if TYPE_CHECKING:
 #: the module each public name comes from: imported on first use (PEP 562), so that the DEM
 #: material's parameters (the command line's defaults) load neither warp nor the DEM
 _HOME = {
+    "AdaptiveMaterial": "granular_material.multiscale.adaptive",
+    "SwitchCriterion": "granular_material.multiscale.adaptive",
     "InProcessBackend": "granular_material.multiscale.backend",
     "UNCONFINED_FRACTION": "granular_material.multiscale.confinement",
     "UnconfinedWarning": "granular_material.multiscale.confinement",
@@ -57,6 +62,6 @@ _HOME = {
 # a public name (or a submodule) of the package, imported on first use
 __getattr__, __dir__ = lazy_names(__name__, _HOME, globals(), submodules=True)
 
-__all__ = ["BACKENDS", "UNCONFINED_FRACTION", "DEMBackend", "DEMDriving", "DEMMaterial",
-           "DEMMaterialParameters", "DEMParameters", "DEMRVEs", "Evaluation",
-           "InProcessBackend", "UnconfinedWarning", "unconfined"]
+__all__ = ["BACKENDS", "UNCONFINED_FRACTION", "AdaptiveMaterial", "DEMBackend", "DEMDriving",
+           "DEMMaterial", "DEMMaterialParameters", "DEMParameters", "DEMRVEs", "Evaluation",
+           "InProcessBackend", "SwitchCriterion", "UnconfinedWarning", "unconfined"]

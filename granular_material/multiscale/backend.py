@@ -17,8 +17,8 @@ from typing import Any
 import numpy as np
 
 from granular_material.dem import DEMBatch, DEMInstabilityError, Homogenized, RVEData, save_rve
+from granular_material.dem.batch import REBASE_MARGIN as BATCH_REBASE_MARGIN
 from granular_material.dem.condensed.dispatch import condense
-from granular_material.dem.model import cell_heights
 from granular_material.fem.materials.protocol import FailureReason
 from granular_material.multiscale.evaluation import (
     Evaluation,
@@ -33,12 +33,8 @@ from granular_material.timing import PhaseTimes
 __all__ = ["Committed", "InProcessBackend", "Trial"]
 
 _COMPONENTS = ((0, 0), (0, 1), (1, 0), (1, 1))  # the (k, l) of ∂u_k/∂x_l
-#: a committed cell whose perpendicular height is below this many times the engine's limit
-#: (twice the contact cut-off) takes its lattice's least skewed basis: close to the limit, so
-#: that only RVEs about to stop are re-described (the others stay bit for bit as they were),
-#: and far enough that a load step's shear (a path that would cross the limit is refused
-#: and cut back, then rebased at its commit) seldom reaches it first
-REBASE_MARGIN = 1.1
+#: the margin of the committed cells' rebasing (:meth:`DEMBatch.rebase_thin_cells`)
+REBASE_MARGIN = BATCH_REBASE_MARGIN
 
 
 @dataclass(frozen=True)
@@ -346,8 +342,7 @@ class InProcessBackend:
                            @ np.linalg.inv(eye + trial.reached[reused]) - eye)
         # a cell sheared near the engine's limit takes its least skewed basis (the same
         # packing), so that the soil shears on (beside a footing's edge, in a band)
-        self.batch.rebase_cells(cell_heights(self.batch.cell())
-                                < REBASE_MARGIN * 2.0 * self.batch.cutoff)
+        self.batch.rebase_thin_cells(REBASE_MARGIN)
         self._committed = Committed(self.batch.snapshot(), lag, trial.response)
         self._trial = self._fresh_trial()
 

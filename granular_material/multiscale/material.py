@@ -242,6 +242,20 @@ class DEMMaterial(ScikitFemInterface):
         if self.parameters.isotropic:
             self.make_isotropic()
 
+    @classmethod
+    def holding(cls, data: RVEData, parameters: DEMMaterialParameters,
+                initial_pressure: np.ndarray | None = None) -> DEMMaterial:
+        """A material allocated with the RVE states ``data`` as they are, one per Gauss point
+        (no preparation, no relaxation): RVEs brought to their points' stresses elsewhere
+        (an adaptive material's switch). ``initial_pressure`` [Pa] (n,): each point's
+        initial mean pressure, the scale of its unconfined test (default ``confining``)."""
+        material = cls(replace(parameters, initial_stress=None, isotropic=False))
+        material.backend = material._backend(data)
+        material._reset_state(data.n_rve)
+        if initial_pressure is not None:
+            material._restored_pressure = np.asarray(initial_pressure, dtype=np.float64)
+        return material
+
     def _check_points(self, n_points: Any) -> int:
         """``n_points`` as a count whose RVEs (their discs, about DISC_BYTES each, and the
         point's tables) fit in the memory available now (:func:`check_points`)."""
@@ -396,7 +410,9 @@ class DEMMaterial(ScikitFemInterface):
         tangent of its first evaluation after the resume, and answers failed points by a
         measured response, so that it is another run."""
         floor = self._initial_tangent
-        answers = {_FLOOR_KEY: np.zeros(0) if floor is None else floor}
+        if floor is None:  # not evaluated yet: NaN, batch-first as every RVE array
+            floor = np.full((self._allocated().n_rve, 2, 2, 2, 2), np.nan)
+        answers = {_FLOOR_KEY: floor}
         if self.preparation is not None:
             answers[_PRESSURE_KEY] = np.asarray(self._initial_pressure(), dtype=np.float64)
         committed = self._committed_response
@@ -428,7 +444,7 @@ class DEMMaterial(ScikitFemInterface):
         if _GRAD_KEY in extra:
             self._committed_grad = np.array(extra[_GRAD_KEY], dtype=np.float64)
         floor = np.array(extra[_FLOOR_KEY], dtype=np.float64)
-        self._initial_tangent = floor if floor.size else None
+        self._initial_tangent = floor if floor.size and not np.isnan(floor).all() else None
         if _PRESSURE_KEY in extra:
             self._restored_pressure = np.array(extra[_PRESSURE_KEY], dtype=np.float64)
         if _COMMITTED_PREFIX + "stress" in extra:

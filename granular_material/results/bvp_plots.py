@@ -61,12 +61,14 @@ def plot_load_displacement(steps: pd.DataFrame, bodies: Sequence[tuple[str, str,
 
 def plot_mechanism(xy: np.ndarray, cells: np.ndarray, kind: str, ux: np.ndarray,
                    uy: np.ndarray, shear_strain: np.ndarray, path: str | Path,
-                   title: str = "", scale: float = 1.0) -> Path:
+                   title: str = "", scale: float = 1.0,
+                   dem_elements: np.ndarray | None = None) -> Path:
     """The mechanism: shear strain γ [%] of every element (``shear_strain``, (nelems,)) on
     the mesh displaced by ``scale`` × (ux, uy) [m] (nodal, meshio order of ``cells``), with
     the nodes' displacement as arrows (the longest a twentieth of the mesh's width, its
     length written beside). Lengths in mm for a mesh under 1 m, else in m
-    (:func:`length_unit`)."""
+    (:func:`length_unit`). ``dem_elements`` (nelems,) bool: the elements whose points are
+    DEM RVEs in an adaptive run, outlined."""
     plt = pyplot()
     from matplotlib.tri import Triangulation
 
@@ -89,6 +91,13 @@ def plot_mechanism(xy: np.ndarray, cells: np.ndarray, kind: str, ux: np.ndarray,
                   scale_units="xy", scale=f * longest / (0.05 * f * np.ptp(x)))
         ax.annotate(f"arrows: displacement, the longest {f * longest / scale:.3g} {unit}",
                     (0.01, 0.01), xycoords="axes fraction", fontsize=8, color="0.3")
+    if dem_elements is not None and np.any(dem_elements):
+        inside = np.asarray(dem_elements, dtype=bool)[element]
+        ax.triplot(Triangulation(f * x, f * y, triangles[inside]), color="lime", lw=0.5,
+                   alpha=0.8)
+        ax.annotate(f"green: DEM RVEs ({int(np.sum(dem_elements))} of "
+                    f"{len(dem_elements)} elements), the twin elsewhere", (0.01, 0.96),
+                    xycoords="axes fraction", fontsize=8, color="0.3")
     ax.set_aspect("equal")
     ax.set_xlabel(f"x [{unit}]")
     ax.set_ylabel(f"y [{unit}]")

@@ -817,9 +817,16 @@ class NewtonSolver:
                     on_step(self, record)
                 last = record.residual_history[-1][-1] if record.residual_history[-1] else 0.0
                 bar.set_postfix({"it": record.iterations, "cut": record.cutbacks,
-                                 "res": f"{last:.2g}", **record.costs})
+                                 "res": f"{last:.2g}", **record.costs,
+                                 **self._material_progress()})
                 bar.update()
         return self.records
+
+    def _material_progress(self) -> dict[str, object]:
+        """What the material adds to the progress bar (its optional ``progress_fields()``:
+        an adaptive material's DEM points)."""
+        fields = getattr(self.material, "progress_fields", None)
+        return dict(fields()) if callable(fields) else {}
 
     def arc_length_budget(self, n_steps: int) -> int:
         """The most steps an arc-length run of ``n_steps`` nominal steps takes."""
@@ -852,7 +859,8 @@ class NewtonSolver:
                 if on_step is not None:
                     on_step(self, record)
                 bar.set_postfix({"λ": f"{value:.4g}", "it": record.iterations,
-                                 "cut": record.cutbacks, **record.costs})
+                                 "cut": record.cutbacks, **record.costs,
+                                 **self._material_progress()})
                 bar.update(reached() - shown)
                 shown = reached()
 

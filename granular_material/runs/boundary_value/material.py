@@ -30,8 +30,8 @@ from granular_material.fem.materials.run_context import RunContext
 from granular_material.runs.boundary_value.spec import BoundaryValueSpec
 from granular_material.runs.spec import MaterialSpec, SpecError
 
-__all__ = ["GRAVITY", "material_for_problem", "problem_context", "region_elements",
-           "region_unit_weights", "unit_weight_of"]
+__all__ = ["GRAVITY", "adaptive_material", "material_for_problem", "problem_context",
+           "region_elements", "region_unit_weights", "unit_weight_of"]
 
 #: standard gravity [m/s²]
 GRAVITY = 9.81
@@ -112,6 +112,11 @@ def material_for_problem(spec: BoundaryValueSpec, n_points: int,
     False; with ``[[materials]]``, a
     :class:`~granular_material.fem.materials.regions.RegionalMaterial` of every region's
     material on the regions of ``mesh``."""
+    if spec.adaptivity is not None:
+        if mesh is None:
+            raise ValueError("adaptivity needs the mesh (its Gauss points an element)")
+        return adaptive_material(spec, n_points, initial_stress, n_points // mesh.n_elements,
+                                 allocate)
     if spec.materials is None:
         return _one_material(spec, spec.material, "material", n_points, initial_stress,
                              allocate)
@@ -128,6 +133,40 @@ def material_for_problem(spec: BoundaryValueSpec, n_points: int,
     if allocate:
         regional.allocate(n_points)
     return regional
+
+
+def adaptive_material(spec: BoundaryValueSpec, n_points: int, initial_stress: np.ndarray,
+                      nqp: int, allocate: bool = True) -> Any:
+    """The :class:`~granular_material.multiscale.adaptive.AdaptiveMaterial` of ``spec``'s
+    DEM material: the source RVE is the one the DEM material prepares for the first Gauss
+    point (at its initial stress: the packing every point of an all-DEM run of a uniform
+    start holds), the twin the Mohr–Coulomb material of ``[adaptivity] calibration`` or,
+    without it, of the source RVE calibrated at the scene's reference pressure; every point
+    starts on the twin at its ``initial_stress`` [Pa] (n, 2, 2)."""
+    from granular_material.multiscale.adaptive import (
+        AdaptiveMaterial,
+        twin_from_calibration,
+        twin_from_rve,
+    )
+
+    a = spec.adaptivity
+    sigma0 = np.asarray(initial_stress, float)
+    first = _one_material(spec, spec.material, "material", 1, sigma0[:1], True)
+    source = first.committed_rves()
+    if a.calibration is not None:
+        twin, calibration = twin_from_calibration(a.calibration, sigma0)
+    else:
+        twin, calibration = twin_from_rve(source, spec.reference_pressure, sigma0,
+                                          device=first.parameters.device,
+                                          progress=spec.progress,
+                                          elastic_window=a.elastic_window)
+    material = AdaptiveMaterial(twin, calibration["parameters"]["friction_angle"],
+                                first.parameters, source, a.criterion(), nqp=nqp,
+                                start=a.start, progress=spec.progress)
+    material.calibration = calibration
+    if allocate:
+        material.allocate(n_points)
+    return material
 
 
 def region_unit_weights(spec: BoundaryValueSpec) -> dict[str, float]:

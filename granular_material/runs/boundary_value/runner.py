@@ -534,6 +534,9 @@ def _rows(b: Built, solver: NewtonSolver, record: StepRecord | None, p0: np.ndar
         # the material's costs (step 0: none spent, under the names its evaluations use)
         **(dict(record.costs) if record else dict.fromkeys(solver.response.costs, 0)),
     }
+    dem_points = getattr(b.material, "dem_points", None)
+    if dem_points is not None:  # an adaptive material: the points on DEM RVEs after the step
+        row["dem_points"] = int(dem_points)
     for name, loaded in b.reported_boundaries():
         fx, fy = problem.boundary_force(name, f_ext if loaded else reaction)
         ux, uy = problem.boundary_displacement(name, u)
@@ -856,6 +859,23 @@ def _summary(b: Built, solver: NewtonSolver, steps: pd.DataFrame, points: pd.Dat
         "unconfined_where": _where(points, "unconfined") if len(points) else "",
         "bodies": bodies, "timing_s": {k: round(v, 3) for k, v in timings.items()},
         "wall_s": round(wall, 3),
+        **({} if spec.adaptivity is None else {"adaptivity": _adaptivity_summary(b)}),
+    }
+
+
+def _adaptivity_summary(b: Built) -> dict[str, Any]:
+    """What an adaptive run's material did: its criterion, its twin, its switches."""
+    m = b.material
+    a = b.spec.adaptivity
+    return {
+        "mobilised_fraction": a.mobilised_fraction, "shear_strain": a.shear_strain,
+        "neighbours": a.neighbours, "twin": m.calibration,
+        "dem_points_final": int(m.dem_points), "gauss_points": int(m.n_points),
+        "missed_points": m.missed.tolist(),
+        "switches": [{"after_commit": s.commit, "points": int(s.points.size),
+                      "missed": int(s.missed.size), "lifted": s.lifted,
+                      "particle_steps": s.particle_steps, "seconds": round(s.seconds, 3),
+                      "largest_error": s.error} for s in m.switches],
     }
 
 
@@ -874,9 +894,12 @@ def _figures(b: Built, steps: pd.DataFrame, last: dict[str, Any], out: Path) -> 
                                size=max(x1 - x0, y1 - y0))
     xy, cells, kind, dofs = b.problem.nodes()
     u = last["u"]
-    gamma = last["points"].groupby("element")["shear_strain"].mean().to_numpy()
+    by_element = last["points"].groupby("element")
+    gamma = by_element["shear_strain"].mean().to_numpy()
+    dem = by_element["dem"].max().to_numpy() > 0 if "dem" in last["points"] else None
     plot_mechanism(xy, cells, kind, u[dofs[0]], u[dofs[1]], gamma, out / "mechanism.png",
-                   title=f"{b.spec.name}: shear strain at step {int(steps['step'].iloc[-1])}")
+                   title=f"{b.spec.name}: shear strain at step {int(steps['step'].iloc[-1])}",
+                   dem_elements=dem)
 
 
 def boundary_length(mesh: MeshData, name: str) -> float:

@@ -85,6 +85,15 @@ into a :class:`BoundaryValueSpec` by :func:`bvp_from_dict` (every key checked, a
     factor_end = 3.0                # regions divided by F, followed by arc length to the
     steps = 20                      # collapse (the factor of safety)
 
+    [adaptivity]                    # a DEM material: the calibrated Mohr–Coulomb twin at every
+    mobilised_fraction = 0.7        # point, a DEM RVE once φ_mob reaches this fraction of the
+    shear_strain = 0.01             # twin's φ (and/or γ this); neighbours = "element" or
+    neighbours = "element"          # "point"; calibration = "calibration.json" (else the
+    start = "strain"                # scene's RVE is calibrated at its pressure at the start);
+    switch = "in-step"              # the RVE driven through the point's deformation, or
+                                    # "stress": servoed to its stress; DEM in the step a
+                                    # threshold is met, or "after-step"
+
     [newton]                        # NewtonSpec's fields
     [regularisation]                # past a peak: model = "second-gradient" (quad8, quad9,
     internal_length = 0.005         # tri6), ℓ [m]; default model = "none"
@@ -100,14 +109,15 @@ from pathlib import Path
 from typing import Any
 
 from granular_material.multiscale.parameters import MAX_SHARDS
+from granular_material.reference_values import TWIN_ELASTIC_WINDOW
 from granular_material.runs.spec import MaterialSpec, NewtonSpec, RegularisationSpec, SpecError
 from granular_material.typed_fields import conform, conform_fields
 from granular_material.vocabulary import RenamedWarning, key_of, user_stacklevel
 
 __all__ = ["CONDITION_KEYS", "CONDITION_TYPES", "INITIAL_KEYS", "INITIAL_STATES", "SCENE_KEYS",
-           "STRENGTH_FRACTION", "BoundaryValueSpec", "ConditionSpec", "InitialStateSpec",
-           "MeshSpec", "PhaseSpec",
-           "RegionMaterialSpec", "StrengthReductionSpec", "bvp_from_dict"]
+           "STRENGTH_FRACTION", "AdaptivitySpec", "BoundaryValueSpec", "ConditionSpec",
+           "InitialStateSpec", "MeshSpec", "PhaseSpec", "RegionMaterialSpec",
+           "StrengthReductionSpec", "bvp_from_dict"]
 
 #: the conditions a boundary may carry
 CONDITION_TYPES = ("fixed", "roller", "displacement", "rigid", "pressure")
@@ -509,6 +519,83 @@ class StrengthReductionSpec:
                                                         f"{self.steps!r}")
 
 
+#: when a point that meets a threshold becomes DEM: in the step it meets it, or after it
+SWITCHES = ("in-step", "after-step")
+#: the mobilised fraction of the twin's peak friction angle at which a point switches to its
+#: DEM RVE when an [adaptivity] table names no threshold
+DEFAULT_MOBILISED_FRACTION = 0.7
+
+
+@dataclass(frozen=True, kw_only=True)
+class AdaptivitySpec:
+    """A DEM material modelled only where the scene requires it
+    (:class:`~granular_material.multiscale.adaptive.AdaptiveMaterial`): every point starts on
+    the Mohr–Coulomb twin calibrated from the scene's RVE and moves to a DEM RVE of its own,
+    brought to its stress, once a threshold is met.
+
+    Attributes:
+        mobilised_fraction: switch once the mobilised friction angle reaches this fraction
+            (0, 1] of the twin's peak friction angle; None: not used.
+        shear_strain: switch once the accumulated shear strain γ [-] reaches this; None:
+            not used (at least one of the two is given).
+        neighbours: "element" (every point of a switching point's element switches with it)
+            or "point".
+        start: how a switching point's RVE starts: "strain" (driven through the point's
+            deformation) or "stress" (the stress servo brings it to the point's twin
+            stress).
+        switch: "in-step" (a point that meets a threshold during a load step is DEM in that
+            whole step) or "after-step" (from the next step on).
+        calibration: a ``calibration.json`` of ``granular-material calibrate`` whose
+            parameters make the twin; None: the scene's RVE is calibrated at the scene's
+            reference pressure when the run starts.
+        elastic_window: the axial strain [-] that calibration reads the twin's E and ν over
+            (:data:`~granular_material.reference_values.TWIN_ELASTIC_WINDOW`, 2e-4: the
+            far field's strains).
+    """
+
+    mobilised_fraction: float | None = DEFAULT_MOBILISED_FRACTION
+    shear_strain: float | None = None
+    neighbours: str = "element"
+    start: str = "strain"
+    switch: str = "in-step"
+    calibration: Path | None = None
+    elastic_window: float = TWIN_ELASTIC_WINDOW
+
+    def __post_init__(self) -> None:
+        from granular_material.errors import ParameterError
+
+        if self.calibration is not None:
+            object.__setattr__(self, "calibration", Path(self.calibration))
+        try:
+            self.criterion()
+        except ParameterError as exc:
+            raise SpecError(exc.field, exc.message) from None
+        from granular_material.multiscale.adaptive import STARTS
+
+        if self.start not in STARTS:
+            raise SpecError("adaptivity.start", f"must be one of {', '.join(STARTS)}, got "
+                                                f"{self.start!r}")
+        if not (isinstance(self.elastic_window, int | float)
+                and 0 < self.elastic_window < 0.05):
+            raise SpecError("adaptivity.elastic_window", f"must be an axial strain in (0, 0.05) "
+                                                         f"[-], got {self.elastic_window!r}")
+        if self.calibration is not None and self.elastic_window != TWIN_ELASTIC_WINDOW:
+            raise SpecError("adaptivity.elastic_window", "reads the calibration the run makes; "
+                                                         "with a calibration file it would do "
+                                                         "nothing (calibrate it with "
+                                                         "--elastic-window instead)")
+        if self.switch not in SWITCHES:
+            raise SpecError("adaptivity.switch", f"must be one of {', '.join(SWITCHES)}, got "
+                                                 f"{self.switch!r}")
+
+    def criterion(self) -> Any:
+        """The :class:`~granular_material.multiscale.adaptive.SwitchCriterion` it names."""
+        from granular_material.multiscale.adaptive import SwitchCriterion
+
+        return SwitchCriterion(self.mobilised_fraction, self.shear_strain, self.neighbours,
+                               in_step=self.switch == "in-step")
+
+
 @dataclass(frozen=True, kw_only=True)
 class BoundaryValueSpec:
     """One boundary-value problem run (see the module docstring for its file form).
@@ -547,6 +634,8 @@ class BoundaryValueSpec:
             becomes their sum.
         strength_reduction: the factor of safety by strength reduction after the loading
             (``[strength_reduction]``), or None.
+        adaptivity: the DEM material where the scene requires it, the calibrated twin
+            elsewhere (``[adaptivity]``), or None: DEM at every point.
     """
 
     mesh: MeshSpec
@@ -570,10 +659,12 @@ class BoundaryValueSpec:
     name: str = "problem"
     phases: tuple[PhaseSpec, ...] = ()
     strength_reduction: StrengthReductionSpec | None = None
+    adaptivity: AdaptivitySpec | None = None
 
     def __post_init__(self) -> None:
         self._check_sections()
         self._check_strength_reduction()
+        self._check_adaptivity()
         conform_fields(self, error=SpecError, skip=_SECTIONS)
         if self.phases:
             _check_phases(self)
@@ -707,6 +798,23 @@ class BoundaryValueSpec:
                                                    "it is stepped by load, the reduction by "
                                                    "its own arc length")
 
+    def _check_adaptivity(self) -> None:
+        """SpecError for adaptivity that cannot act: with no DEM material, or with materials
+        by region."""
+        a = self.adaptivity
+        if a is None:
+            return
+        if not isinstance(a, AdaptivitySpec):
+            raise SpecError("adaptivity", f"must be an AdaptivitySpec, got {type(a).__name__}")
+        if self.materials is not None:
+            raise SpecError("adaptivity", "works on one [material] of DEM RVEs, not on "
+                                          "materials by region")
+        if self.material.name != "dem":
+            raise SpecError("adaptivity", f"moves points from a continuum twin to DEM RVEs, "
+                                          f"and this problem's material is "
+                                          f"{self.material.name}, not dem: leave "
+                                          "[adaptivity] out")
+
     @property
     def noisy(self) -> bool:
         """Whether any material of the problem is noisy (DEM RVEs): the Newton defaults of
@@ -742,7 +850,7 @@ class BoundaryValueSpec:
 #: ``unit_weight``, a number or "rve")
 _SECTIONS = ("mesh", "boundaries", "conditions", "unit_weight", "gravity_factor", "initial",
              "material", "regions", "materials", "newton", "regularisation", "phases",
-             "strength_reduction")
+             "strength_reduction", "adaptivity")
 #: the sides every generated rectangle names
 _GENERATED_SIDES = frozenset({"left", "right", "bottom", "top"})
 
@@ -858,7 +966,8 @@ def _initial(table: dict[str, Any]) -> InitialStateSpec:
 SCENE_KEYS: dict[str, frozenset[str]] = {
     "": frozenset({"test", "steps", "name", "out", "mesh", "boundaries", "conditions",
                    "gravity", "initial", "material", "regions", "materials", "newton",
-                   "output", "regularisation", "phases", "strength_reduction"}),
+                   "output", "regularisation", "phases", "strength_reduction",
+                   "adaptivity"}),
     "mesh": frozenset({"file", "size", "elements", "element", "grading", "quadrature",
                        "align_x", "align_y"}),
     "conditions": frozenset({"type", "boundary", "component", "value", "end", "displacement",
@@ -870,12 +979,36 @@ SCENE_KEYS: dict[str, frozenset[str]] = {
     "materials": frozenset({"region", "name", "parameters", "unit_weight", "k0"}),
     "regularisation": frozenset({"model", "internal_length"}),
     "strength_reduction": frozenset({"factor_end", "steps"}),
+    "adaptivity": frozenset({"mobilised_fraction", "shear_strain", "neighbours", "start",
+                             "switch", "calibration", "elastic_window"}),
     "output": frozenset({"out", "device", "shards", "progress", "fields"}),
     "phases": frozenset({"name", "steps", "conditions", "gravity", "reset_displacements"}),
     "phases.gravity": frozenset({"factor"}),
 }
 _SCENE_KEYS = SCENE_KEYS[""]
 _OUTPUT_KEYS = SCENE_KEYS["output"]
+
+
+def _adaptivity(table: dict[str, Any], folder: Path) -> AdaptivitySpec:
+    """The [adaptivity] table: a threshold named alone is the only one (the mobilised
+    fraction's default applies when neither is named); a calibration file relative to
+    ``folder`` must exist."""
+    _unknown("adaptivity", table, SCENE_KEYS["adaptivity"])
+    table = dict(table)
+    if "shear_strain" in table and "mobilised_fraction" not in table:
+        table["mobilised_fraction"] = None
+    calibration = table.get("calibration")
+    if calibration is not None:
+        if not isinstance(calibration, str):
+            raise SpecError("adaptivity.calibration", f"must be the path of a "
+                                                      f"calibration.json, got {calibration!r}")
+        path = folder / calibration
+        if not path.is_file():
+            raise SpecError("adaptivity.calibration", f"{path} is no file (a calibration.json "
+                                                      "written by granular-material "
+                                                      "calibrate)")
+        table["calibration"] = path
+    return _within("adaptivity", lambda: AdaptivitySpec(**table))
 
 
 def bvp_from_dict(data: Mapping[str, Any], folder: Path | str = ".") -> BoundaryValueSpec:
@@ -925,6 +1058,9 @@ def bvp_from_dict(data: Mapping[str, Any], folder: Path | str = ".") -> Boundary
         reduction = _table("strength_reduction", reduction)
         _unknown("strength_reduction", reduction, SCENE_KEYS["strength_reduction"])
         reduction = _within("strength_reduction", lambda: StrengthReductionSpec(**reduction))
+    adaptivity = data.get("adaptivity")
+    if adaptivity is not None:
+        adaptivity = _adaptivity(_table("adaptivity", adaptivity), folder)
     output = _table("output", data.get("output"))
     _unknown("output", output, _OUTPUT_KEYS)
     if "out" in output and "out" in data:
@@ -955,7 +1091,8 @@ def bvp_from_dict(data: Mapping[str, Any], folder: Path | str = ".") -> Boundary
                                    lambda: RegularisationSpec(**regularisation)),
             device=output.get("device"), shards=output.get("shards"),
             progress=output.get("progress", False), fields=output.get("fields", True),
-            name=data.get("name", "problem"), phases=phases, strength_reduction=reduction)
+            name=data.get("name", "problem"), phases=phases, strength_reduction=reduction,
+            adaptivity=adaptivity)
     except SpecError as exc:
         if exc.field in _OUTPUT_KEYS:  # the [output] table's, named within it
             raise SpecError(f"output.{exc.field}", exc.message) from None

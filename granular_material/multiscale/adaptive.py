@@ -1,0 +1,631 @@
+"""Model only what the scene requires: a continuum twin at every Gauss point, a DEM RVE where
+the twin is no longer trusted.
+
+:class:`AdaptiveMaterial` answers the :class:`~granular_material.fem.materials.protocol.Material`
+protocol for a mesh whose points start on a *twin*, a continuum material calibrated from the
+scene's own RVE (the Mohr–Coulomb material of :func:`twin_from_rve`:
+:func:`~granular_material.procedures.calibration.calibrate_mohr_coulomb` at the scene's
+pressure), and move one by one to a DEM RVE of their own:
+
+- **When.** After every committed step, each point still on the twin is tested by its
+  :class:`SwitchCriterion` on the committed state: its mobilised friction angle
+  φ_mob = asin((σ1 − σ3)/(σ1 + σ3)) (compression positive) against a fraction of the twin's
+  peak friction angle, and/or its accumulated shear strain
+  γ = √((εxx − εyy)² + (2εxy)²) (of the total ∇u since the start, small-strain) against a
+  threshold. With ``neighbours = "element"`` every point of an element that holds a
+  switching point switches with it.
+- **How.** The switching points' RVEs are copies of the scene's source RVE (the packing
+  every point would hold in an all-DEM run, in its start state), each brought by the
+  anisotropic stress servo
+  (:func:`~granular_material.procedures.anisotropic.bring_to_stress`, every component within
+  1 % of the target's scale, the shear included) to its point's committed twin stress; a
+  target whose least principal compression is under the lowest an RVE is prepared to
+  (:func:`~granular_material.procedures.anisotropic.lowest_target_pressure`) is lifted to it
+  by an isotropic compression (its deviator kept). Those RVEs form a *cohort*, a
+  :class:`~granular_material.multiscale.material.DEMMaterial` of their own, and carry on
+  from there: the next evaluation drives them by the point's ∇u. A point that has switched
+  stays DEM. A point whose RVE the servo did not bring to its target stays on the twin for
+  good (said in a warning and in :attr:`AdaptiveMaterial.missed`).
+- **What is answered.** Twin points: the twin's stress, tangent and fields; DEM points: their
+  cohort's. Each field either model reports is NaN where the other model answers; the
+  field ``dem`` is 1 at DEM points, 0 on the twin. Costs are summed (``particle_steps`` is
+  the cohorts' DEM work), and ``switch_particle_steps`` is the servo's work of the switches
+  (reported once, by the first evaluation after them). The twin is not moved at DEM points
+  (they are given ∇u = 0): it keeps the state the point switched from.
+
+The material is noisy when it may hold DEM points (always: the Newton defaults of the DEM
+material apply, so that an adaptive run and an all-DEM run are solved alike).
+``checkpoint``/``restore`` keep each point's model, every cohort's RVEs and the twin's state
+in one file, so a resumed run is the run that was stopped.
+"""
+
+from __future__ import annotations
+
+import math
+import tempfile
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from granular_material.dem import DEMInstabilityError, RVEData, load_rve, save_rve
+from granular_material.errors import ParameterError
+from granular_material.fem.materials.checks import (
+    CHECKPOINT_NAME_KEY,
+    check_grad,
+    checkpoint_archive,
+)
+from granular_material.fem.materials.protocol import (
+    Material,
+    MaterialResponse,
+    ScikitFemInterface,
+)
+from granular_material.filesafe import write_whole
+from granular_material.multiscale.material import DEMMaterial
+from granular_material.multiscale.parameters import DEMMaterialParameters
+from granular_material.reference_values import TWIN_ELASTIC_WINDOW
+
+__all__ = ["NEIGHBOURS", "STARTS", "TARGET_FRICTION", "AdaptiveMaterial", "SwitchCriterion",
+           "SwitchRecord", "cap_friction", "mobilised_friction", "twin_from_calibration",
+           "twin_from_rve"]
+
+#: which points switch with a point that meets the criterion: itself, or its element's
+NEIGHBOURS = ("point", "element")
+#: how a switching point's RVE starts: driven from the source RVE through the point's
+#: accumulated deformation ("strain"), or brought by the stress servo to the point's twin
+#: stress ("stress")
+STARTS = ("strain", "stress")
+#: how near its target the servo brings a switching RVE (the fractions of
+#: :func:`~granular_material.procedures.servo.servo_to_stress`: every component within 1 %
+#: of the target's scale, the shear included), as for a DEM material's initial stress
+SERVO_TOLERANCE = 0.01
+#: the largest mobilised friction a switching RVE is brought to, as a fraction of the twin's
+#: peak friction angle: a twin point at (or near) its peak asks the servo for the RVE's own
+#: strength, which it reaches only by shearing on and on (on the reduced footing an RVE
+#: servoed to 0.97 of the peak sheared its cell past the engine's limit); the deviator of
+#: such a target is scaled down to this, its pressure kept, and the next step's Newton
+#: iterations carry the difference
+TARGET_FRICTION = 0.9
+#: the name an adaptive material's checkpoint carries
+_NAME = "adaptive"
+
+
+@dataclass(frozen=True)
+class SwitchCriterion:
+    """When a point leaves its twin for a DEM RVE (either threshold met; None: not used).
+
+    Attributes:
+        mobilised_fraction: switch once φ_mob ≥ this fraction of the twin's peak friction
+            angle (0 < f ≤ 1).
+        shear_strain: switch once the accumulated shear strain γ [-] reaches this (> 0).
+        neighbours: "point" (the point alone) or "element" (every point of its element).
+        in_step: a point that meets a threshold during a load step is DEM in that whole
+            step (its RVE made from its state at the step's start, and the step's
+            iterations from there on answered by it); False: from the next step on (the
+            test made on the committed state, a step behind).
+    """
+
+    mobilised_fraction: float | None = 0.7
+    shear_strain: float | None = None
+    neighbours: str = "element"
+    in_step: bool = True
+
+    def __post_init__(self) -> None:
+        f, g = self.mobilised_fraction, self.shear_strain
+        if f is None and g is None:
+            raise ParameterError("adaptivity", "needs a threshold: mobilised_fraction, "
+                                               "shear_strain or both")
+        if f is not None and not (isinstance(f, int | float) and 0 < f <= 1):
+            raise ParameterError("adaptivity.mobilised_fraction",
+                                 f"must be a fraction in (0, 1] of the twin's peak friction "
+                                 f"angle, got {f!r}")
+        if g is not None and not (isinstance(g, int | float) and math.isfinite(g) and g > 0):
+            raise ParameterError("adaptivity.shear_strain",
+                                 f"must be a shear strain > 0 [-], got {g!r}")
+        if self.neighbours not in NEIGHBOURS:
+            raise ParameterError("adaptivity.neighbours", f"must be one of "
+                                                          f"{', '.join(NEIGHBOURS)}, got "
+                                                          f"{self.neighbours!r}")
+
+    def met(self, stress: np.ndarray, grad_u: np.ndarray, peak_friction: float
+            ) -> np.ndarray:
+        """Whether each point meets it: ``stress`` [Pa] (n, 2, 2), tension positive, the
+        total ``grad_u`` [-] (n, 2, 2), the twin's peak friction angle [deg]; (n,) bool."""
+        met = np.zeros(len(stress), dtype=bool)
+        if self.mobilised_fraction is not None:
+            met |= mobilised_friction(stress) >= self.mobilised_fraction * peak_friction
+        if self.shear_strain is not None:
+            e = 0.5 * (grad_u + np.swapaxes(grad_u, 1, 2))
+            met |= np.hypot(e[:, 0, 0] - e[:, 1, 1], 2 * e[:, 0, 1]) >= self.shear_strain
+        return met
+
+
+def mobilised_friction(stress: np.ndarray) -> np.ndarray:
+    """φ_mob [deg] of each in-plane stress [Pa] (n, 2, 2), tension positive:
+    asin((σ1 − σ3)/(σ1 + σ3)) of the principal compressions; 90° where the least principal
+    compression is ≤ 0 (at or past a cohesionless material's apex), 0 where both are."""
+    s = np.asarray(stress, dtype=np.float64)
+    principal = -np.linalg.eigvalsh(0.5 * (s + np.swapaxes(s, 1, 2)))  # σ1 >= σ3, compression
+    major, minor = principal[:, 0], principal[:, 1]
+    total = major + minor
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.where(total > 0, (major - minor) / total, 0.0)
+    phi = np.degrees(np.arcsin(np.clip(ratio, 0.0, 1.0)))
+    return np.where((minor <= 0) & (major > 0), 90.0, phi)
+
+
+def cap_friction(stress: np.ndarray, limit: float) -> tuple[np.ndarray, np.ndarray]:
+    """The stresses [Pa] (n, 2, 2), tension positive, whose mobilised friction exceeds
+    ``limit`` [deg] with their deviator scaled down to it (mean stress and principal
+    directions kept), and the mask (n,) of those changed."""
+    s = np.asarray(stress, dtype=np.float64)
+    phi = mobilised_friction(s)
+    over = phi > limit
+    out = s.copy()
+    if over.any():
+        mean = 0.5 * np.trace(s[over], axis1=1, axis2=2)
+        deviator = s[over] - mean[:, None, None] * np.eye(2)
+        factor = np.sin(np.radians(limit)) / np.sin(np.radians(phi[over]))
+        out[over] = mean[:, None, None] * np.eye(2) + factor[:, None, None] * deviator
+    return out, over
+
+
+def twin_from_rve(source: RVEData, pressure: float, initial_stress: np.ndarray,
+                  device: str | None = "cpu", progress: bool = False,
+                  elastic_window: float = TWIN_ELASTIC_WINDOW
+                  ) -> tuple[Material, dict[str, Any]]:
+    """The Mohr–Coulomb twin of the RVE ``source`` (its first RVE): drained biaxial DEM test
+    at ``pressure`` P [Pa] read by
+    :func:`~granular_material.procedures.calibration.calibrate_mohr_coulomb` (E and ν over
+    the first ``elastic_window`` of axial strain, φ, ψ, the critical state and softening),
+    at every point's ``initial_stress`` [Pa] (n, 2, 2). Returns the (not allocated) material
+    and the calibration's ``as_dict()`` without its curve."""
+    from granular_material.fem.materials.mohr_coulomb import MohrCoulomb
+    from granular_material.procedures.calibration import calibrate_mohr_coulomb
+
+    calibration = calibrate_mohr_coulomb(source.take([0]), confining=pressure, device=device,
+                                         progress=progress, elastic_window=elastic_window)
+    keywords = calibration.material_keywords()
+    keywords["initial_stress"] = np.asarray(initial_stress, dtype=np.float64)
+    described = calibration.as_dict()
+    return MohrCoulomb(**keywords), {k: described[k] for k in ("parameters", "pressure",
+                                                               "notes")}
+
+
+def twin_from_calibration(path: str | Path, initial_stress: np.ndarray
+                          ) -> tuple[Material, dict[str, Any]]:
+    """The Mohr–Coulomb twin of a ``calibration.json`` written by ``granular-material
+    calibrate`` (its ``parameters`` and ``pressure``), at every point's ``initial_stress``
+    [Pa] (n, 2, 2); the material (not allocated) and the file's content. ParameterError
+    naming ``calibration`` for a file without them."""
+    import json
+
+    import pandas as pd
+
+    from granular_material.fem.materials.mohr_coulomb import MohrCoulomb
+    from granular_material.procedures.calibration import PARAMETER_UNITS, Calibration
+
+    content = json.loads(Path(path).read_text())
+    parameters = content.get("parameters") if isinstance(content, dict) else None
+    missing = [k for k in PARAMETER_UNITS if not isinstance(parameters, dict)
+               or k not in parameters]
+    if missing or "pressure" not in content:
+        raise ParameterError("calibration", f"{path} is no calibration.json of granular-"
+                                            f"material calibrate (it lacks "
+                                            f"{', '.join(missing) or 'pressure'})")
+    calibration = Calibration(parameters={k: float(parameters[k]) for k in PARAMETER_UNITS},
+                              readings={}, curve=pd.DataFrame(),
+                              pressure=float(content["pressure"]), source=str(path))
+    keywords = calibration.material_keywords()
+    keywords["initial_stress"] = np.asarray(initial_stress, dtype=np.float64)
+    return MohrCoulomb(**keywords), {k: content[k] for k in ("parameters", "pressure")}
+
+
+@dataclass
+class _Cohort:
+    """The RVEs of the points that switched together: their indices and their material."""
+
+    points: np.ndarray
+    material: DEMMaterial
+
+
+@dataclass
+class SwitchRecord:
+    """One switch: the commit after which it happened, the points that switched, those whose
+    RVE missed its target, the servo's work [disc-steps], the targets lifted to the lowest
+    prepared pressure and those capped at :data:`TARGET_FRICTION`, the seconds it took and
+    the largest error of a reached RVE (of its target's scale)."""
+
+    commit: int
+    points: np.ndarray
+    missed: np.ndarray
+    particle_steps: int
+    lifted: int = 0
+    capped: int = 0
+    seconds: float = 0.0
+    error: float = 0.0
+
+
+class AdaptiveMaterial(ScikitFemInterface):
+    """A twin at every Gauss point, a DEM RVE where the twin is no longer trusted (see the
+    module docstring).
+
+    Args:
+        twin: the continuum material (not yet allocated), e.g. :func:`twin_from_rve`'s.
+        peak_friction: the twin's peak friction angle [deg] (the criterion's reference).
+        dem: the DEM material's parameters, which every cohort is made with (``device``,
+            ``shards``, ``tangent``, ``drive``, …).
+        source: the RVE (one, its first used) every switching point's RVE is a copy of, in
+            the state the scene's RVEs start from.
+        criterion: when a point switches.
+        nqp: Gauss points an element (points ``e·nqp … e·nqp + nqp − 1`` are element e's).
+        start: how a switching point's RVE starts (:data:`STARTS`).
+        progress: show the servo's progress at a switch.
+    """
+
+    noisy = True
+
+    def __init__(self, twin: Material, peak_friction: float, dem: DEMMaterialParameters,
+                 source: RVEData, criterion: SwitchCriterion | None = None, nqp: int = 1,
+                 start: str = "strain", progress: bool = False) -> None:
+        if not isinstance(twin, Material):
+            raise ParameterError("twin", f"{type(twin).__name__} does not implement the "
+                                         "Material protocol")
+        if not (isinstance(peak_friction, int | float) and 0 < peak_friction < 90):
+            raise ParameterError("peak_friction", f"must be an angle in (0, 90) degrees, got "
+                                                  f"{peak_friction!r}")
+        if isinstance(nqp, bool) or not isinstance(nqp, int) or nqp < 1:
+            raise ParameterError("nqp", f"must be an integer >= 1, got {nqp!r}")
+        if start not in STARTS:
+            raise ParameterError("adaptivity.start", f"must be one of {', '.join(STARTS)}, "
+                                                     f"got {start!r}")
+        if dem.backend != "inprocess":
+            raise ParameterError("backend", "an adaptive material holds its RVEs in this "
+                                            f"process, not {dem.backend!r}")
+        self.twin = twin
+        self.peak_friction = float(peak_friction)
+        self.dem = dem
+        self.source = source.take([0])
+        self.criterion = criterion or SwitchCriterion()
+        self.nqp = nqp
+        self.start = start
+        self._deformation = np.zeros((0, 2, 2))
+        self._committed_stress = np.zeros((0, 2, 2))
+        self._increment: np.ndarray | None = None
+        self.progress = progress
+        self._cohorts: list[_Cohort] = []
+        self._is_dem = np.zeros(0, dtype=bool)
+        self._missed = np.zeros(0, dtype=bool)
+        self._last: MaterialResponse | None = None
+        self._dem_fields = self._fields_of_dem()
+        self._pending_steps = 0
+        self._commits = 0
+        #: every switch so far, in order (:class:`SwitchRecord`)
+        self.switches: list[SwitchRecord] = []
+        #: how the twin was made (a calibration's parameters and pressure), where known
+        self.calibration: dict[str, Any] | None = None
+
+    def _fields_of_dem(self) -> tuple[str, ...]:
+        """The fields a DEM cohort reports (measured on the source: no step)."""
+        from granular_material.multiscale.responses import measured_response
+
+        return tuple(measured_response(self.source, self.dem.device, 1).fields)
+
+    # -- what it holds ---------------------------------------------------------------------
+    @property
+    def n_points(self) -> int:
+        """Number of Gauss points allocated (0 before :meth:`allocate`)."""
+        return int(self._is_dem.size)
+
+    @property
+    def is_dem(self) -> np.ndarray:
+        """Whether each point is answered by a DEM RVE, (n,) bool (a copy)."""
+        return self._is_dem.copy()
+
+    @property
+    def dem_points(self) -> int:
+        """Number of points answered by DEM RVEs."""
+        return int(self._is_dem.sum())
+
+    @property
+    def missed(self) -> np.ndarray:
+        """The points whose RVE the servo did not bring to their stress (they stay on the
+        twin), indices."""
+        return np.flatnonzero(self._missed)
+
+    def progress_fields(self) -> dict[str, str]:
+        """The progress bar's count of DEM points (of all)."""
+        return {"DEM": f"{self.dem_points}/{self.n_points}"}
+
+    # -- protocol --------------------------------------------------------------------------
+    def allocate(self, n_points: int) -> None:
+        """Allocate the twin at ``n_points`` points, every one on the twin."""
+        self.twin.allocate(n_points)
+        n = int(self.twin.n_points)
+        self._cohorts = []
+        self._is_dem = np.zeros(n, dtype=bool)
+        self._deformation = np.repeat(np.eye(2)[None], n, axis=0)
+        self._committed_stress = self.twin.evaluate(np.zeros((n, 2, 2))).stress.copy()
+        self.twin.revert()
+        self._missed = np.zeros(n, dtype=bool)
+        self._track_allocate(n)
+        self._last = None
+
+    def evaluate(self, grad_u: np.ndarray) -> MaterialResponse:
+        """σ [Pa] (n, 2, 2), D [Pa] (n, 2, 2, 2, 2), status and fields for ∇u [-] (n, 2, 2)
+        since the last commit: each point's from its model (see the module docstring)."""
+        n = self.n_points
+        grad = check_grad(grad_u, n)
+        self._track_evaluate(grad)
+        self._increment = grad
+        r = self.twin.evaluate(np.where(self._is_dem[:, None, None], 0.0, grad))
+        if self.criterion.in_step:  # a point that passes the threshold in this step is DEM
+            points = self.switching(r.stress, self.committed_grad_u + grad)  # in all of it
+            if points.size:
+                self._switch(points, self._committed_stress)
+                r = self.twin.evaluate(np.where(self._is_dem[:, None, None], 0.0, grad))
+        dem = self._is_dem
+        stress, tangent = r.stress.copy(), r.tangent.copy()
+        status = r.status.copy()
+        reasons = np.asarray(r.reasons, dtype=object).copy()
+        costs: dict[str, int | float] = dict(r.costs)
+        timings = {k: float(v) for k, v in r.timings.items()}
+        fields = {k: np.where(dem, np.nan, np.asarray(v, dtype=np.float64).reshape(-1))
+                  for k, v in r.fields.items()}
+        for name in self._dem_fields:
+            fields.setdefault(name, np.full(n, np.nan))
+        for cohort in self._cohorts:
+            index = cohort.points
+            c = cohort.material.evaluate(grad[index])
+            stress[index], tangent[index] = c.stress, c.tangent
+            status[index], reasons[index] = c.status, c.reasons
+            for key, value in c.costs.items():
+                costs[key] = costs.get(key, 0) + value
+            for key, value in c.timings.items():
+                timings[key] = timings.get(key, 0.0) + float(value)
+            for key, values in c.fields.items():
+                fields.setdefault(key, np.full(n, np.nan))[index] = np.asarray(
+                    values, dtype=np.float64).reshape(-1)
+        for key in ("particle_steps", "dem_steps", "rve_evaluations"):
+            costs.setdefault(key, 0)
+        costs["switch_particle_steps"] = self._pending_steps
+        self._pending_steps = 0
+        fields["dem"] = dem.astype(np.float64)
+        response = MaterialResponse(stress=stress, tangent=tangent, status=status,
+                                    costs=costs, fields=fields, reasons=reasons,
+                                    timings=timings)
+        self._last = response
+        return response
+
+    def commit(self) -> None:
+        """Commit the twin and every cohort, then switch the points that now meet the
+        criterion (their RVEs brought to their committed stresses)."""
+        self.twin.commit()
+        for cohort in self._cohorts:
+            cohort.material.commit()
+        last = self._last
+        failed = None
+        if last is not None:
+            failed = np.zeros(self.n_points, dtype=bool)
+            failed[last.failed_points()] = True
+        self._track_commit(failed)
+        if self._increment is not None:  # F ← (I + ∇u) F: the points' whole deformation
+            self._deformation = (np.eye(2) + self._increment) @ self._deformation
+            self._increment = None
+        self._commits += 1
+        if last is not None:
+            self._committed_stress = last.stress.copy()
+            if not self.criterion.in_step:
+                points = self.switching(last.stress, self.committed_grad_u)
+                if points.size:
+                    self._switch(points, last.stress)
+        self._last = None
+
+    def revert(self) -> None:
+        """Revert the twin and every cohort."""
+        self.twin.revert()
+        for cohort in self._cohorts:
+            cohort.material.revert()
+        self._track_revert()
+        self._last = None
+
+    def hold_tangent(self, hold: bool) -> None:
+        """Pass ``hold`` to every cohort (the Newton driver's ``tangent_update="hold"``)."""
+        for cohort in self._cohorts:
+            cohort.material.hold_tangent(hold)
+
+    # -- the switch -------------------------------------------------------------------------
+    def switching(self, stress: np.ndarray, grad_u: np.ndarray) -> np.ndarray:
+        """The twin points that switch at ``stress`` [Pa] (n, 2, 2) and the total ∇u [-]
+        (n, 2, 2) (their neighbours included), indices."""
+        met = self.criterion.met(stress, grad_u, self.peak_friction)
+        met &= ~self._is_dem & ~self._missed
+        if self.criterion.neighbours == "element" and met.any():
+            elements = np.unique(np.flatnonzero(met) // self.nqp)
+            met[(elements[:, None] * self.nqp + np.arange(self.nqp)).reshape(-1)] = True
+            met &= ~self._is_dem & ~self._missed
+        return np.flatnonzero(met)
+
+    def _switch(self, points: np.ndarray, stress: np.ndarray) -> None:
+        """Give ``points`` their RVEs in the committed state (:attr:`start` says how: the
+        committed deformation, or the committed ``stress`` [Pa] (n, 2, 2))."""
+        import time
+
+        began = time.perf_counter()
+        if self.start == "strain":
+            material, reached, work, error, lifted, capped = self._by_strain(points)
+        else:
+            material, reached, work, error, lifted, capped = self._by_stress(points, stress)
+        self._pending_steps += work
+        missed = points[~reached]
+        if missed.size:
+            self._missed[missed] = True
+            warnings.warn(f"{missed.size} of {points.size} switching points' RVEs did not "
+                          f"reach their {'deformation' if self.start == 'strain' else 'stress'}"
+                          f" (points {missed[:8].tolist()}{' …' if missed.size > 8 else ''}):"
+                          " they stay on the twin", UserWarning, stacklevel=3)
+        if material is not None:
+            self._cohorts.append(_Cohort(points[reached], material))
+            self._is_dem[points[reached]] = True
+        self.switches.append(SwitchRecord(
+            commit=self._commits, points=points[reached], missed=missed,
+            particle_steps=work, lifted=lifted, capped=capped,
+            seconds=time.perf_counter() - began, error=error))
+
+    def _by_strain(self, points: np.ndarray
+                   ) -> tuple[DEMMaterial | None, np.ndarray, int, float, int, int]:
+        """Copies of the source driven through the points' deformation F − I in one
+        evaluation (the DEM's constant velocity gradient log F), committed; a point whose
+        RVE fails stays on the twin. The cohort, which points reached, the work
+        [disc-steps], the largest error (0: the deformation is reached exactly) and no
+        target lifted or capped."""
+        reached = np.ones(points.size, dtype=bool)
+        work = 0
+        pressure = np.full(points.size, self._source_pressure())
+        grad = self._deformation[points] - np.eye(2)
+        while reached.any():
+            kept = np.flatnonzero(reached)
+            material = DEMMaterial.holding(self.source.replicate(kept.size), self.dem,
+                                           pressure[kept])
+            response = material.evaluate(grad[kept])
+            work += int(response.costs.get("particle_steps", 0))
+            if response.ok:
+                material.commit()
+                return material, reached, work, 0.0, 0, 0
+            reached[kept[response.failed_points()]] = False
+        return None, reached, work, 0.0, 0, 0
+
+    def _source_pressure(self) -> float:
+        """The source RVE's mean pressure [Pa], compression positive."""
+        from granular_material.multiscale.responses import measured_response
+
+        stress = measured_response(self.source, self.dem.device, 1).stress[0]
+        return float(-0.5 * np.trace(stress))
+
+    def _by_stress(self, points: np.ndarray, stress: np.ndarray
+                   ) -> tuple[DEMMaterial | None, np.ndarray, int, float, int, int]:
+        """Copies of the source brought by the stress servo to the points' committed
+        stresses (lifted to the lowest prepared pressure, capped at
+        :data:`TARGET_FRICTION`); an RVE that the servo breaks or does not bring to its
+        target stays on the twin. The cohort, which points reached, the work
+        [disc-steps], the largest error of the target's scale, the targets lifted and
+        capped."""
+        from granular_material.procedures.anisotropic import (
+            bring_to_stress,
+            lowest_target_pressure,
+        )
+        from granular_material.procedures.packing import PackingParameters
+
+        target = 0.5 * (stress[points] + np.swapaxes(stress[points], 1, 2))
+        radius = self.source.radius
+        lowest = lowest_target_pressure(PackingParameters(
+            meta=self.source.meta, radius_range=(float(radius.min()), float(radius.max()))))
+        least = -np.linalg.eigvalsh(target)[:, 1]
+        lift = np.maximum(lowest - least, 0.0)
+        target = target - lift[:, None, None] * np.eye(2)
+        target, capped = cap_friction(target, TARGET_FRICTION * self.peak_friction)
+        reached = np.zeros(points.size, dtype=bool)
+        trying = np.arange(points.size)
+        work = 0
+        while trying.size:  # an RVE that the servo breaks is left out, the others redone
+            try:
+                data, servo = bring_to_stress(self.source.replicate(trying.size),
+                                              target[trying], device=self.dem.device,
+                                              shards=self.dem.shards, strict=False,
+                                              progress=self.progress,
+                                              tolerance=SERVO_TOLERANCE,
+                                              shear_tolerance=SERVO_TOLERANCE)
+            except DEMInstabilityError as exc:
+                broken = np.zeros(trying.size, dtype=bool)
+                broken[np.asarray(exc.rve, dtype=int)] = True
+                trying = trying[~broken]
+                continue
+            work += int(np.asarray(servo.rve_steps).sum()) * int(self.source.n_disc)
+            done = np.asarray(servo.reached, dtype=bool)
+            reached[trying] = done
+            if not done.any():
+                break
+            kept = np.flatnonzero(reached)
+            pressure = -0.5 * np.trace(target[kept], axis1=1, axis2=2)
+            material = DEMMaterial.holding(data.take(np.flatnonzero(done)), self.dem,
+                                           pressure)
+            error = float(np.asarray(servo.error)[done].max())
+            return (material, reached, work, error, int((lift > 0).sum()),
+                    int(capped.sum()))
+        return None, reached, work, 0.0, int((lift > 0).sum()), int(capped.sum())
+
+    # -- checkpoints -------------------------------------------------------------------------
+    def checkpoint(self, path: str | Path) -> None:
+        """Write the committed state to ``path``: one ``.npz`` holding the twin's and every
+        cohort's own checkpoints (bytes), the cohorts' points, each point's model, the
+        source RVE, the committed total ∇u and deformation; whole or not at all."""
+        arrays: dict[str, np.ndarray] = {
+            CHECKPOINT_NAME_KEY: np.array(_NAME), "is_dem": self._is_dem,
+            "missed": self._missed, "grad_u": self.committed_grad_u,
+            "deformation": self._deformation, "stress": self._committed_stress,
+            "commits": np.array(self._commits), "pending": np.array(self._pending_steps),
+            "cohorts": np.array(len(self._cohorts))}
+        with tempfile.TemporaryDirectory(prefix="adaptive-") as folder:
+            own = Path(folder) / "twin.npz"
+            self.twin.checkpoint(own)
+            arrays["twin"] = np.frombuffer(own.read_bytes(), dtype=np.uint8)
+            own = Path(folder) / "source.npz"
+            save_rve(own, self.source, compress=False, validate=False)
+            arrays["source"] = np.frombuffer(own.read_bytes(), dtype=np.uint8)
+            for k, cohort in enumerate(self._cohorts):
+                own = Path(folder) / f"cohort_{k}.npz"
+                cohort.material.checkpoint(own)
+                arrays[f"cohort_{k}"] = np.frombuffer(own.read_bytes(), dtype=np.uint8)
+                arrays[f"cohort_{k}_points"] = cohort.points
+
+        def write(tmp: Path) -> None:
+            with open(tmp, "wb") as fh:
+                np.savez(fh, **arrays)
+
+        write_whole(path, write)
+
+    def restore(self, path: str | Path) -> None:
+        """Read a :meth:`checkpoint`: the twin, every cohort and each point's model.
+        ValueError for another material's checkpoint."""
+        keys = ("is_dem", "missed", "grad_u", "deformation", "stress", "commits", "pending",
+                "cohorts", "twin", "source")
+        with checkpoint_archive(path, _NAME, keys) as data:
+            is_dem = np.array(data["is_dem"], dtype=bool)
+            missed = np.array(data["missed"], dtype=bool)
+            grad = np.array(data["grad_u"], dtype=np.float64)
+            deformation = np.array(data["deformation"], dtype=np.float64)
+            committed_stress = np.array(data["stress"], dtype=np.float64)
+            commits, pending = int(data["commits"]), int(data["pending"])
+            count = int(data["cohorts"])
+            blobs = {"twin": np.array(data["twin"]), "source": np.array(data["source"])}
+            for k in range(count):
+                blobs[f"cohort_{k}"] = np.array(data[f"cohort_{k}"])
+                blobs[f"cohort_{k}_points"] = np.array(data[f"cohort_{k}_points"])
+        with tempfile.TemporaryDirectory(prefix="adaptive-") as folder:
+            def unpack(name: str) -> Path:
+                own = Path(folder) / f"{name}.npz"
+                own.write_bytes(blobs[name].tobytes())
+                return own
+
+            self.twin.restore(unpack("twin"))
+            self.source = load_rve(unpack("source"))
+            cohorts = []
+            for k in range(count):
+                material = DEMMaterial(self.dem)
+                material.restore(unpack(f"cohort_{k}"))
+                cohorts.append(_Cohort(blobs[f"cohort_{k}_points"].astype(np.int64),
+                                       material))
+        if self.twin.n_points != is_dem.size:
+            raise ValueError(f"{path}: the twin holds {self.twin.n_points} points, the "
+                             f"models {is_dem.size}")
+        self._cohorts = cohorts
+        self._is_dem, self._missed = is_dem, missed
+        self._track_allocate(int(is_dem.size))
+        self._committed_grad = grad
+        self._deformation = deformation
+        self._committed_stress = committed_stress
+        self._increment = None
+        self._commits, self._pending_steps = commits, pending
+        self._last = None
