@@ -14,6 +14,8 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 
+from granular_material.results import read_points
+
 
 def _label(length: float) -> str:
     return "no regularisation" if length == 0 else f"second gradient, ℓ = {length * 1e3:g} mm"
@@ -65,7 +67,7 @@ def specimen_figures(out: Path, rows: list[dict[str, Any]]) -> list[str]:
             ax.set_yticks([])
             if line.empty:
                 continue
-            points = pd.read_csv(out / line["folder"].iloc[0] / "points.csv")
+            points = read_points(out / line["folder"].iloc[0])
             last = points[points["step"] == points["step"].max()]
             ax.scatter(last["x"], last["y"], c=last["shear_strain"], s=4 if len(last) > 600
                        else 12, cmap="inferno", marker="s", linewidths=0)

@@ -40,6 +40,7 @@ import numpy as np
 import pandas as pd
 
 from granular_material.results.band_measures import value_at
+from granular_material.results.writers import read_points
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -138,7 +139,7 @@ def bands_of(folder: Path, step: int | None = None) -> list[dict[str, float]]:
     study's thresholds (:data:`WIDE_BANDS`)."""
     from granular_material.results.bands import find_bands
 
-    points = pd.read_csv(folder / "points.csv")
+    points = read_points(folder)
     return [b.as_dict() for b in find_bands(points, step, **WIDE_BANDS)]
 
 

@@ -209,7 +209,10 @@ def _common_arguments(parser: argparse.ArgumentParser) -> None:
                              f"(default {_PROBLEM['confining']:g})")
     parser.add_argument("--steps", type=int, default=_PROBLEM["steps"],
                         help=f"load steps (default {_PROBLEM['steps']})")
-    add_out(parser, "output folder: steps.csv, points.csv, fields.xdmf, summary.json, figures")
+    add_out(parser, "output folder: steps.csv, points.npy, fields.xdmf, summary.json, figures")
+    parser.add_argument("--points-csv", action="store_true", default=_OUTPUT.points_csv,
+                        help="with --out, the Gauss-point table also as text, points.csv "
+                             "(points.npy, read by numpy.load, is written regardless)")
     add_json(parser, "a summary")
     add_device(parser, "DEM device")
     parser.add_argument("--preset", choices=PRESET_NAMES, default=None,

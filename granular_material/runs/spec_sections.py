@@ -361,6 +361,8 @@ class OutputSpec:
             after every step while saving is cheap, at most every ``checkpoint_minutes``).
         checkpoint_minutes: with ``checkpoint_every`` None, the longest time [min] between
             two saves of the committed state.
+        points_csv: with ``out``, the Gauss-point table also as text, ``points.csv``
+            (``points.npy`` is written regardless).
         progress: show progress bars.
     """
 
@@ -371,6 +373,7 @@ class OutputSpec:
     postprocess: tuple[str, ...] | None = None
     checkpoint_every: int | None = None
     checkpoint_minutes: float = 10.0
+    points_csv: bool = False
     progress: bool = False
 
     def __post_init__(self) -> None:
