@@ -241,9 +241,10 @@ def _common_arguments(parser: argparse.ArgumentParser) -> None:
                    metavar="N",
                    help="save the committed state (RVEs with contact history, displacement, "
                         "Newton state) in OUT/checkpoint after every N load steps and after "
-                        "the last; default: by elapsed time, after every step while a save "
-                        "takes under a tenth of the time since the last, at the latest every "
-                        "--checkpoint-minutes; the tables of every step are kept regardless")
+                        "the last; default: by elapsed time, after the first step at least a "
+                        "second and ten times a save's duration after the last save, at the "
+                        "latest every --checkpoint-minutes; the tables of every step are kept "
+                        "regardless")
     g.add_argument("--checkpoint-minutes", type=positive,
                    default=_OUTPUT.checkpoint_minutes, metavar="M",
                    help="without --checkpoint-every: the longest time between two saves of "
