@@ -40,18 +40,17 @@ _ALIGN = 64
 
 
 def _text_width(values: np.ndarray) -> int:
-    """The longest text among ``values`` (at least 1 character)."""
-    return max([1, *(len(v) for v in values.tolist())])
+    """The longest text among ``values`` as text (at least 1 character)."""
+    return max(1, np.asarray(values, dtype=str).dtype.itemsize // 4)
 
 
 def record_dtype(frame: pd.DataFrame) -> np.dtype:
     """The structured record of a row of ``frame``: float64 for a column of floats, int64
     for one of integers, bool for booleans, and a unicode field as wide as the column's
-    longest text for one of text (any other object column is taken as text)."""
+    longest text for one of text (any other column is taken as text)."""
     fields = []
-    for name in frame.columns:
-        values = frame[name].to_numpy()
-        kind = values.dtype.kind
+    for k, (name, dtype) in enumerate(zip(frame.columns, frame.dtypes, strict=True)):
+        kind = dtype.kind if isinstance(dtype, np.dtype) else "O"
         if kind == "f":
             fields.append((str(name), "<f8"))
         elif kind in "iu":
@@ -59,7 +58,7 @@ def record_dtype(frame: pd.DataFrame) -> np.dtype:
         elif kind == "b":
             fields.append((str(name), "?"))
         else:
-            fields.append((str(name), f"<U{_text_width(values.astype(str))}"))
+            fields.append((str(name), f"<U{_text_width(frame.iloc[:, k].to_numpy())}"))
     return np.dtype(fields)
 
 
