@@ -62,6 +62,23 @@ def test_a_longer_text_or_a_new_column_rewrites_the_table_whole(tmp_path):
     assert table["void_ratio"].isna().sum() == 8 and (table["void_ratio"].iloc[8:] == 0.7).all()
 
 
+def test_flags_with_gaps_are_numbers_and_text_stays_text(tmp_path):
+    """A flag a region's material does not report (True/False, NaN there) is stored as
+    float64, 1.0/0.0/NaN; a column of text as text."""
+    frame = pd.DataFrame({"step": [0, 0, 0], "failed": [True, np.nan, False],
+                          "phase": ["load", "load", "gravity"]})
+    write_npy_table(frame, tmp_path / "points.npy")
+    records = np.load(tmp_path / "points.npy")
+    assert records.dtype["failed"] == np.float64 and records.dtype["phase"] == np.dtype("<U7")
+    np.testing.assert_array_equal(records["failed"], [1.0, np.nan, 0.0])
+    assert list(read_npy_table(tmp_path / "points.npy")["phase"]) == list(frame["phase"])
+    size = (tmp_path / "points.npy").stat().st_size
+    append_npy(frame.assign(failed=[True, False, True]), tmp_path / "points.npy")  # no gaps
+    records = np.load(tmp_path / "points.npy")
+    assert (tmp_path / "points.npy").stat().st_size == size + 3 * records.dtype.itemsize
+    np.testing.assert_array_equal(records["failed"][3:], [1.0, 0.0, 1.0])  # appended
+
+
 def test_a_failed_append_leaves_the_table_as_it_was(tmp_path, monkeypatch):
     path = tmp_path / "points.npy"
     write_npy_table(_points(0), path)

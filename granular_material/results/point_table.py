@@ -44,13 +44,30 @@ def _text_width(values: np.ndarray) -> int:
     return max(1, np.asarray(values, dtype=str).dtype.itemsize // 4)
 
 
+#: what :func:`pandas.api.types.infer_dtype` finds in a column of Python objects that is
+#: stored as float64 (booleans and numbers with gaps: a flag that a region's material does
+#: not report is NaN there)
+_NUMBER_OBJECTS = frozenset({"boolean", "integer", "floating", "mixed-integer-float",
+                             "decimal", "empty"})
+
+
+def _kind(frame: pd.DataFrame, k: int, dtype: Any) -> str:
+    """The numpy kind column ``k`` of ``frame`` is stored as: ``f``, ``i``, ``b`` or ``U``."""
+    if isinstance(dtype, np.dtype) and dtype.kind in "fiub":
+        return "i" if dtype.kind == "u" else dtype.kind
+    values = frame.iloc[:, k].to_numpy()
+    if values.dtype.kind in "fiub":
+        return "i" if values.dtype.kind == "u" else values.dtype.kind
+    return "f" if pd.api.types.infer_dtype(values, skipna=True) in _NUMBER_OBJECTS else "U"
+
+
 def record_dtype(frame: pd.DataFrame) -> np.dtype:
-    """The structured record of a row of ``frame``: float64 for a column of floats, int64
-    for one of integers, bool for booleans, and a unicode field as wide as the column's
-    longest text for one of text (any other column is taken as text)."""
+    """The structured record of a row of ``frame``: float64 for a column of floats (and one
+    of Python booleans or numbers with gaps), int64 for one of integers, bool for booleans,
+    and a unicode field as wide as the column's longest text for any other."""
     fields = []
     for k, (name, dtype) in enumerate(zip(frame.columns, frame.dtypes, strict=True)):
-        kind = dtype.kind if isinstance(dtype, np.dtype) else "O"
+        kind = _kind(frame, k, dtype)
         if kind == "f":
             fields.append((str(name), "<f8"))
         elif kind in "iu":
@@ -66,8 +83,14 @@ def _records(frame: pd.DataFrame, dtype: np.dtype) -> np.ndarray:
     """The rows of ``frame`` as records of ``dtype`` (its fields by column name)."""
     records = np.empty(len(frame), dtype=dtype)
     for name in dtype.names:
-        values = frame[name].to_numpy()
-        records[name] = values.astype(str) if dtype[name].kind == "U" else values
+        column = frame[name]
+        kind = dtype[name].kind
+        if kind == "U":
+            records[name] = column.to_numpy().astype(str)
+        elif kind == "f" and column.dtype.kind not in "fiub":  # booleans with gaps
+            records[name] = column.astype(float).to_numpy()
+        else:
+            records[name] = column.to_numpy()
     return records
 
 
@@ -124,14 +147,18 @@ def read_npy_table(path: str | Path) -> pd.DataFrame:
 
 def _fits(frame: pd.DataFrame, dtype: np.dtype) -> bool:
     """Whether the rows of ``frame`` are records of ``dtype`` as they are: the same column
-    names, each of the same type, no text longer than its field."""
+    names, each of the same type (or of integers or booleans in a float64 field, which a
+    column with gaps became), no text longer than its field."""
     if sorted(map(str, frame.columns)) != sorted(dtype.names) or frame.columns.has_duplicates:
         return False
     ours = record_dtype(frame)
     for name in dtype.names:
         mine, theirs = ours[name], dtype[name]
-        if mine.kind != theirs.kind or (mine.kind == "U" and mine.itemsize > theirs.itemsize):
-            return False
+        if mine.kind == theirs.kind or (theirs.kind == "f" and mine.kind in "ib"):
+            if mine.kind == "U" and mine.itemsize > theirs.itemsize:
+                return False
+            continue
+        return False
     return True
 
 
