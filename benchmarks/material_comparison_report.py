@@ -27,6 +27,8 @@ from material_comparison_measures import (
     quadrant_angles,
 )
 
+from granular_material.results import read_points
+
 #: the footing scene's half-width B [m] and surcharge q [Pa]
 HALF_WIDTH, SURCHARGE = 0.05, 20e3
 
@@ -124,10 +126,12 @@ def specimen_results(out: Path, phi: float, psi: float) -> dict[str, Any]:
     tables = {}
     for name, style, label in SPECIMENS:
         s = _steps(out / f"specimen-{name}")
-        pts_path = out / f"specimen-{name}" / "points.csv"
-        if s is None or not pts_path.is_file():
+        if s is None:
             continue
-        points = pd.read_csv(pts_path)
+        try:
+            points = read_points(out / f"specimen-{name}")
+        except FileNotFoundError:
+            continue
         tables[name] = points
         loc = localisation_series(points)
         last = int(points["step"].max())
@@ -233,9 +237,13 @@ def _footing_maps(out: Path, res: dict[str, Any]) -> None:
              "mc-cs": "MC perfectly plastic at φcs"}
     tables = {}
     for name in names:
-        pts, st = out / f"footing-{name}" / "points.csv", _steps(out / f"footing-{name}")
-        if pts.is_file() and st is not None:
-            tables[name] = (pd.read_csv(pts), st)
+        st = _steps(out / f"footing-{name}")
+        if st is None:
+            continue
+        try:
+            tables[name] = (read_points(out / f"footing-{name}"), st)
+        except FileNotFoundError:
+            continue
     if "dem" not in tables or len(tables) < 2:
         return
     dem_points, dem_steps = tables["dem"]

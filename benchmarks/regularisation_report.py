@@ -15,6 +15,8 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 
+from granular_material.results import read_points
+
 
 def _label(length: float) -> str:
     return "no regularisation" if length == 0 else f"second gradient, ℓ = {length * 1e3:g} mm"
@@ -66,7 +68,7 @@ def specimen_figures(out: Path, rows: list[dict[str, Any]]) -> list[str]:
             ax.set_yticks([])
             if line.empty:
                 continue
-            points = pd.read_csv(out / line["folder"].iloc[0] / "points.csv")
+            points = read_points(out / line["folder"].iloc[0])
             last = points[points["step"] == points["step"].max()]
             ax.scatter(last["x"], last["y"], c=last["shear_strain"], s=4 if len(last) > 600
                        else 12, cmap="inferno", marker="s", linewidths=0)
@@ -117,7 +119,7 @@ def specimen_figures(out: Path, rows: list[dict[str, Any]]) -> list[str]:
             if line.empty:
                 ax.axis("off")
                 continue
-            points = pd.read_csv(out / line["folder"].iloc[0] / "points.csv")
+            points = read_points(out / line["folder"].iloc[0])
             if points["step"].nunique() < 2:
                 continue
             field = incremental_points(points)
@@ -168,7 +170,7 @@ def field_differences(out: Path, rows: list[dict[str, Any]]) -> list[dict[str, A
         group = group.sort_values("element_size", ascending=False)
         folders = list(zip(group["mesh"], group["folder"], strict=True))
         for (coarse, a), (fine, b) in itertools.pairwise(folders):
-            pa, pb = (pd.read_csv(out / f / "points.csv") for f in (a, b))
+            pa, pb = (read_points(out / f) for f in (a, b))
             last = min(int(pa["step"].max()), int(pb["step"].max()))
             if last < 1:
                 continue

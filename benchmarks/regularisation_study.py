@@ -40,6 +40,7 @@ import numpy as np
 import pandas as pd
 
 from granular_material.results.band_measures import value_at
+from granular_material.results.writers import read_points
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -142,7 +143,7 @@ def bands_of(folder: Path, step: int | None = None,
     last), searched with the study's thresholds (:data:`WIDE_BANDS`)."""
     from granular_material.results.bands import find_bands
 
-    points = pd.read_csv(folder / "points.csv") if points is None else points
+    points = read_points(folder) if points is None else points
     return [b.as_dict() for b in find_bands(points, step, **WIDE_BANDS)]
 
 

@@ -117,3 +117,14 @@ def benchmark_module(name: str) -> ModuleType:
     sys.modules[name] = module
     spec.loader.exec_module(module)
     return module
+
+
+def run_table(folder: Path, name: str) -> pd.DataFrame:
+    """Table ``name`` (``steps.csv``, ``points.csv``, ``tracked.csv``) of the run in
+    ``folder``: the Gauss-point table as the run wrote it (``points.npy`` or ``points.csv``,
+    :func:`~granular_material.results.read_points`), any other read from its CSV file."""
+    from granular_material.results import read_points
+
+    if name == "points.csv":
+        return read_points(folder)
+    return pd.read_csv(Path(folder) / name)

@@ -295,13 +295,14 @@ def _footing(tmp_path: Path, steps: int = 3, adaptivity: str = "") -> object:
 def test_an_adaptive_footing_reports_its_dem_points(tmp_path):
     import pandas as pd
 
+    from granular_material.results import read_points
     from granular_material.runs.boundary_value.runner import run_boundary_value
 
     outcome = run_boundary_value(_footing(tmp_path, adaptivity='start = "strain"\n'),
                                  out=tmp_path / "run")
     assert outcome.error is None
     steps = pd.read_csv(tmp_path / "run" / "steps.csv")
-    points = pd.read_csv(tmp_path / "run" / "points.csv")
+    points = read_points(tmp_path / "run")
     assert steps["dem_points"].iloc[0] == 0 and steps["dem_points"].iloc[-1] > 0
     assert steps["dem_points"].is_monotonic_increasing
     last = points[points["step"] == points["step"].max()]

@@ -13,10 +13,12 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+from run_helpers import run_table
 
 from granular_material.fem import NewtonError
 from granular_material.fem.boundary_value.loading import Loading
 from granular_material.fem.solver.newton import NewtonSolver
+from granular_material.results import read_points
 from granular_material.runs.boundary_value.phases import phase_of_step
 from granular_material.runs.boundary_value.runner import build, run_boundary_value
 from granular_material.runs.boundary_value.spec import SCENE_KEYS, bvp_from_dict
@@ -123,7 +125,7 @@ def test_a_reset_reports_from_the_phase_start_and_changes_nothing_else(formulati
     if formulation == "small-strain":  # then exactly the total less the strain at the reset
         with_steps = run_boundary_value(bvp_from_dict(_scene(formulation=formulation)),
                                         out=tmp_path / "run")
-        points = pd.read_csv(tmp_path / "run" / "points.csv")
+        points = read_points(tmp_path / "run")
         at_reset = points[points["step"] == 2].reset_index(drop=True)
         for column in ("exx", "eyy", "exy"):
             np.testing.assert_allclose(reset.points[column].to_numpy(),
@@ -146,7 +148,7 @@ def test_a_failing_phase_keeps_the_earlier_phases_results(tmp_path, monkeypatch)
     steps = pd.read_csv(tmp_path / "run" / "steps.csv")
     assert list(steps["step"]) == [0, 1, 2, 3]
     assert list(steps["phase"]) == ["gravity"] * 3 + ["load"]
-    assert set(pd.read_csv(tmp_path / "run" / "points.csv")["phase"]) == {"gravity", "load"}
+    assert set(read_points(tmp_path / "run")["phase"]) == {"gravity", "load"}
     summary = json.loads((tmp_path / "run" / "summary.json").read_text())
     assert summary["failed_phase"] == "load"
     first, second = summary["phases"]
@@ -185,8 +187,8 @@ def test_a_phased_run_resumed_inside_a_phase_equals_the_one_that_never_stopped(
     assert resumed.error is None and resumed.summary["resumed_from_step"] == stop - 1
     assert phase_of_step([2, 4], stop - 1) == (1, stop - 3)
     for name in ("steps.csv", "points.csv"):
-        a = pd.read_csv(tmp_path / "whole" / name).drop(columns=["wall_time"], errors="ignore")
-        b = pd.read_csv(tmp_path / "run" / name).drop(columns=["wall_time"], errors="ignore")
+        a = run_table(tmp_path / "whole", name).drop(columns=["wall_time"], errors="ignore")
+        b = run_table(tmp_path / "run", name).drop(columns=["wall_time"], errors="ignore")
         pd.testing.assert_frame_equal(a, b, check_exact=True)
     np.testing.assert_array_equal(whole.u, resumed.u)
     assert resumed.summary["phases"] == whole.summary["phases"]

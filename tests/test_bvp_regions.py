@@ -10,8 +10,10 @@ import meshio
 import numpy as np
 import pandas as pd
 import pytest
+from run_helpers import run_table
 from test_bvp_resume import _stop_at
 
+from granular_material.results import read_points
 from granular_material.runs.boundary_value.runner import build, run_boundary_value
 from granular_material.runs.boundary_value.spec import bvp_from_dict
 from granular_material.runs.spec import SpecError
@@ -85,7 +87,7 @@ def test_two_layers_settle_by_the_sum_of_their_compressions(tmp_path):
     dp = 100e3
     expected = -dp * 0.25 / (M * e_lower) - dp * 0.25 / (M * e_upper)
     assert outcome.steps["top_displacement_y"].iloc[-1] == pytest.approx(expected, rel=1e-9)
-    points = pd.read_csv(tmp_path / "run" / "points.csv")
+    points = read_points(tmp_path / "run")
     last = points[points.step == 2]
     assert set(last.region) == {"lower", "upper"}
     assert (last.region == np.where(last.y < 0.25, "lower", "upper")).all()
@@ -187,7 +189,7 @@ def test_a_stopped_regional_run_resumes_to_the_run_that_never_stopped(tmp_path, 
     assert resumed.error is None and 0 <= resumed.summary["resumed_from_step"] <= 2
     np.testing.assert_array_equal(whole.u, resumed.u)
     for name in ("steps.csv", "points.csv"):
-        a, b = (pd.read_csv(tmp_path / run / name) for run in ("whole", "run"))
+        a, b = (run_table(tmp_path / run, name) for run in ("whole", "run"))
         pd.testing.assert_frame_equal(a.drop(columns=["wall_time"], errors="ignore"),
                                       b.drop(columns=["wall_time"], errors="ignore"),
                                       check_exact=True)

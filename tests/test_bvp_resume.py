@@ -12,6 +12,7 @@ from test_bvp_run import FOOTING
 
 from granular_material.cli import main
 from granular_material.fem.solver.newton import NewtonSolver
+from granular_material.results import read_points
 from granular_material.runs.boundary_value.resume import scene_record
 from granular_material.runs.boundary_value.runner import run_boundary_value
 from granular_material.runs.boundary_value.spec import bvp_from_dict
@@ -54,7 +55,7 @@ def _stop_at(monkeypatch, step: int) -> None:
 
 def _tables(folder):
     steps = pd.read_csv(folder / "steps.csv").drop(columns=list(TIMES))
-    return steps, pd.read_csv(folder / "points.csv")
+    return steps, read_points(folder)
 
 
 @pytest.mark.parametrize(("material", "elements"), [(MOHR_COULOMB, "[6, 4]"),

@@ -13,6 +13,7 @@ import pandas as pd
 import pytest
 
 from granular_material.cli import main
+from granular_material.results import read_points
 from granular_material.runs.boundary_value.runner import build, run_boundary_value
 from granular_material.runs.boundary_value.spec import bvp_from_dict
 
@@ -68,7 +69,7 @@ def test_linear_elastic_footing_runs_into_its_folder(tmp_path, capsys):
                                             material=ELASTIC))
     out = tmp_path / "run"
     assert main(["run", str(scene), "--out", str(out)]) == 0
-    for name in ("steps.csv", "points.csv", "fields.xdmf", "load_displacement.png",
+    for name in ("steps.csv", "points.npy", "fields.xdmf", "load_displacement.png",
                  "mechanism.png", "summary.json", "scene.toml"):
         assert (out / name).is_file(), name
     steps = pd.read_csv(out / "steps.csv")
@@ -83,9 +84,24 @@ def test_linear_elastic_footing_runs_into_its_folder(tmp_path, capsys):
     assert summary["initial_residual"]["relative"] < 1e-10
     # finite strain: one correction for the geometric nonlinearity, to the force test's 1e-4
     assert summary["error"] is None and summary["iterations"] == [2, 2, 2, 2]
-    points = pd.read_csv(out / "points.csv")
+    points = read_points(out)
     assert set(points["step"]) == {0, 1, 2, 3, 4}
     assert {"mean_pressure", "shear_strain", "rotation", "unconfined"} <= set(points)
+
+
+def test_output_points_csv_writes_the_table_as_text_too(tmp_path, capsys):
+    """[output] points_csv = true: points.csv beside points.npy, pandas' text of the same
+    table; without it, an earlier run's points.csv in the folder is removed."""
+    text = FOOTING.format(steps=2, elements="[4, 3]", settlement=-0.001, material=ELASTIC)
+    out = tmp_path / "run"
+    assert main(["run", str(_scene(tmp_path, text + "[output]\npoints_csv = true\n")),
+                 "--out", str(out)]) == 0
+    points = read_points(out)
+    assert set(points["step"]) == {0, 1, 2} and (out / "points.npy").is_file()
+    assert (out / "points.csv").read_text() == points.to_csv(index=False)
+    assert main(["run", str(_scene(tmp_path, text, "plain.toml")), "--out", str(out)]) == 0
+    assert not (out / "points.csv").exists()
+    pd.testing.assert_frame_equal(read_points(out), points, check_exact=True)
 
 
 def test_mohr_coulomb_footing_levels_off_near_prandtl(tmp_path):

@@ -5,6 +5,7 @@ shards), and nothing it is given is silently moved or ignored."""
 from __future__ import annotations
 
 import copy
+import dataclasses
 import time
 from collections import namedtuple
 
@@ -71,8 +72,10 @@ def test_tables_beyond_the_free_disk_are_refused_before_any_work(tmp_path, monke
     monkeypatch.setattr(bvp_checks.shutil, "disk_usage", lambda path: usage(10**6, 0, 10**4))
     spec = scene(tmp_path, steps=1000)
     with pytest.raises(SpecError, match=r"steps 1000 load steps of 16 Gauss points write at "
-                                        r"least 1.63 MB of points.csv; .* has 10 kB free"):
+                                        r"least 2.18 MB of points.npy; .* has 10 kB free"):
         run_boundary_value(spec, tmp_path / "run")
+    with pytest.raises(SpecError, match=r"least 3.81 MB of points.npy and points.csv"):
+        run_boundary_value(dataclasses.replace(spec, points_csv=True), tmp_path / "run")
     assert not (tmp_path / "run").exists()
 
 

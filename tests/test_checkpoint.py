@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-from run_helpers import StopAtStep, without_clock
+from run_helpers import StopAtStep, run_table, without_clock
 
 from granular_material.cli import main
 from granular_material.dem import save_rve
@@ -197,8 +197,8 @@ def _command(rve: Path, out_option: str, out: Path, steps: int = 24) -> list[str
 
 def _assert_same_run(out: Path, reference: Path, steps: int = 24) -> None:
     for table in ("steps.csv", "points.csv", "tracked.csv"):
-        pd.testing.assert_frame_equal(without_clock(pd.read_csv(out / table)),
-                                      without_clock(pd.read_csv(reference / table)),
+        pd.testing.assert_frame_equal(without_clock(run_table(out, table)),
+                                      without_clock(run_table(reference, table)),
                                       check_exact=True, obj=table)
     name = f"material_{steps:05d}.npz"
     assert _same_arrays(out / "checkpoint" / name, reference / "checkpoint" / name)

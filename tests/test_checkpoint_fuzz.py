@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-from run_helpers import without_clock
+from run_helpers import run_table, without_clock
 
 from granular_material.cli import main
 from granular_material.dem import save_rve
@@ -134,8 +134,8 @@ def _assert_refused(runs, out: Path, capsys, says: str) -> None:
 def _assert_same_run(runs, out: Path) -> None:
     for table in ("steps.csv", "points.csv"):
         pd.testing.assert_frame_equal(
-            without_clock(pd.read_csv(out / table)),
-            without_clock(pd.read_csv(runs["reference"] / table)), check_exact=True)
+            without_clock(run_table(out, table)),
+            without_clock(run_table(runs["reference"], table)), check_exact=True)
 
 
 @pytest.mark.parametrize("case", sorted(DAMAGE))

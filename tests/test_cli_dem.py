@@ -7,6 +7,7 @@ from dataclasses import replace
 
 import pandas as pd
 import pytest
+from run_helpers import run_table
 
 from granular_material.cli import main
 from granular_material.dem import DEMBatch, load_rve, save_rve
@@ -115,7 +116,7 @@ def test_a_prepared_file_gives_a_run_the_rves_it_would_prepare(tmp_path, capsys)
     assert main([*common, "--rve", str(rves), "--out", str(tmp_path / "file")]) == 0
     capsys.readouterr()
     for table in ("steps.csv", "points.csv"):
-        own, file = (pd.read_csv(tmp_path / run / table).drop(columns="wall_time",
+        own, file = (run_table(tmp_path / run, table).drop(columns="wall_time",
                                                                errors="ignore")
                      for run in ("own", "file"))
         pd.testing.assert_frame_equal(own, file, check_exact=True)

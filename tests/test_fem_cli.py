@@ -7,10 +7,12 @@ import json
 from pathlib import Path
 
 import meshio
+import numpy as np
 import pandas as pd
 import pytest
 
 from granular_material.cli import main
+from granular_material.results import read_points
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "skfem_material_swap.py"
 
@@ -54,13 +56,28 @@ def test_single_element_linear_elastic_json(tmp_path, capsys):
     assert out["newton_iterations_mean"] == 1.0
     assert out["peak_stress_ratio"] == pytest.approx(-out["syy"] / 100e3, rel=1e-10)
     steps = pd.read_csv(tmp_path / "steps.csv")
-    points = pd.read_csv(tmp_path / "points.csv")
+    points = read_points(tmp_path)
     assert len(steps) == 5 and len(points) == 5 * 4
     for name in ("stress_strain.png", "maps.png", "fields.xdmf"):
         assert (tmp_path / name).stat().st_size > 0
     with meshio.xdmf.TimeSeriesReader(str(tmp_path / "fields.xdmf")) as reader:
         _, cells = reader.read_points_cells()
         assert reader.num_steps == 5 and cells[0].data.shape == (1, 4)
+
+
+def test_points_csv_is_written_on_request_as_pandas_writes_the_table(tmp_path, capsys):
+    """points.npy always; points.csv with --points-csv, the table's text as pandas writes it
+    (as every run wrote it before points.npy); a run without it leaves no earlier one."""
+    options = ["single-element", "--material", "mohr-coulomb", "--steps", "3",
+               "--axial-strain", "0.01", "--no-progress", "--out", str(tmp_path)]
+    assert main([*options, "--points-csv"]) == 0
+    points = read_points(tmp_path)
+    assert len(points) == 4 * 4 and (tmp_path / "points.npy").is_file()
+    pd.testing.assert_frame_equal(pd.DataFrame(np.load(tmp_path / "points.npy")), points)
+    assert (tmp_path / "points.csv").read_text() == points.to_csv(index=False)
+    assert main(options) == 0
+    assert not (tmp_path / "points.csv").exists()
+    pd.testing.assert_frame_equal(read_points(tmp_path), points, check_exact=True)
 
 
 def test_bad_input_is_a_value_error(capsys):
@@ -87,7 +104,7 @@ def test_biaxial_command_reduced_scale(tmp_path, capsys):
     out = json.loads(capsys.readouterr().out)
     assert code == 0, out["error"]
     assert out["gauss_points"] == 8 and out["steps_completed"] == 2 and out["dem_steps"] > 0
-    points = pd.read_csv(tmp_path / "points.csv")
+    points = read_points(tmp_path)
     assert points["void_ratio"].notna().all() and points["point"].max() == 7
     # the tables written step by step match the final ones; band measures of the last step
     assert len(pd.read_csv(tmp_path / "steps.csv")) == 3 and len(points) == 3 * 8

@@ -21,7 +21,7 @@ import meshio
 import numpy as np
 import pandas as pd
 import pytest
-from run_helpers import StopAtStep, without_clock
+from run_helpers import StopAtStep, run_table, without_clock
 from skfem import Basis, MeshQuad, MeshTri, condense, solve
 
 from granular_material.cli import main
@@ -41,6 +41,7 @@ from granular_material.fem.boundary_value.biaxial import (
     element_of,
 )
 from granular_material.fem.forms import gauss_points_grad, internal_force, stiffness
+from granular_material.results import read_points
 from granular_material.runs import RunCheckpoint, run_biaxial
 
 ELEMENT_NAMES = tuple(ELEMENTS)
@@ -383,7 +384,7 @@ def test_dem_biaxial_quad8_outputs(tmp_path, capsys):
     assert summary["element"] == "quad8" and summary["gauss_points"] == 8
     assert summary["points_per_element"] == 4 and summary["error"] is None
     assert summary["convergence"] == "displacement"
-    points = pd.read_csv(out / "points.csv")
+    points = read_points(out)
     assert len(points) == 3 * 8
     assert points.groupby("step")["point"].apply(list).tolist() == [list(range(8))] * 3
     assert set(pd.read_csv(out / "tracked.csv")["point"]) == {7}
@@ -453,7 +454,7 @@ def test_scene_with_quad8_runs(tmp_path, capsys):
     assert main(["run", str(path)]) == 0
     report = json.loads(capsys.readouterr().out)
     assert report["error"] is None and report["steps_completed"] == 2
-    points = pd.read_csv(tmp_path / "q8" / "points.csv")
+    points = read_points(tmp_path / "q8")
     assert len(points) == 3 * 9
     steps = pd.read_csv(tmp_path / "q8" / "steps.csv")
     assert (steps["converged_by"].iloc[1:] == "displacement").all()
@@ -489,9 +490,9 @@ def test_quad9_biaxial_on_two_ranks_is_the_in_process_run(tmp_path):
         done = subprocess.run(run, capture_output=True, text=True, env=env, timeout=300)
         assert done.returncode == 0, done.stderr[-3000:]
     for table in ("steps.csv", "points.csv", "tracked.csv"):
-        a, b = (without_clock(pd.read_csv(tmp_path / k / table)) for k in runs)
+        a, b = (without_clock(run_table(tmp_path / k, table)) for k in runs)
         pd.testing.assert_frame_equal(a, b, check_exact=True, obj=table)
-    assert len(pd.read_csv(tmp_path / "mpi" / "points.csv")) == 3 * 18
+    assert len(read_points(tmp_path / "mpi")) == 3 * 18
 
 
 def test_a_checkpoint_from_before_the_element_options_resumes(tmp_path, capsys):

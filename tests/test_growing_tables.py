@@ -122,13 +122,21 @@ def test_a_step_writes_its_steps_row_last(tmp_path, monkeypatch):
         def write(self, *args: object) -> None:
             pass
 
+    real_points = writers.write_points
+
+    def points_recording(frame: pd.DataFrame, out: Path, append: bool = False,
+                         **keywords: bool) -> dict[str, Path]:
+        order.append("points.npy")
+        return real_points(frame, out, append, **keywords)
+
     monkeypatch.setattr(writers, "write_csv", recording)
+    monkeypatch.setattr(writers, "write_points", points_recording)
     writer = BiaxialWriter(tmp_path)
     writer._fields = Fields()  # the fields file is not what this test is about
     for step in range(3):
         writer.record({"step": step, "axial_strain": step * 1e-3}, _points(step),
                       np.zeros(2), _points(step, 1))
-    assert order == ["tracked.csv", "points.csv", "steps.csv"] * 3
+    assert order == ["tracked.csv", "points.npy", "steps.csv"] * 3
     tables = read_run_tables(tmp_path)
     assert list(tables["steps"]["step"]) == [0, 1, 2] and len(tables["points"]) == 9
     assert len(tables["tracked"]) == 3
@@ -137,20 +145,23 @@ def test_a_step_writes_its_steps_row_last(tmp_path, monkeypatch):
 _WRITER = """
 import sys
 import numpy as np, pandas as pd
-from granular_material.results.writers import write_csv
-out = sys.argv[1]
+from granular_material.results.writers import write_csv, write_points
+out, kind = sys.argv[1:3]
 print("ready", flush=True)
 for step in range(10**6):
     points = pd.DataFrame({"step": step, "point": np.arange(500), "sxx": np.full(500, -1.0 - step)})
-    write_csv(points, out + "/points.csv", append=step > 0)
+    if kind == "csv":
+        write_csv(points, out + "/points.csv", append=step > 0)
+    else:
+        write_points(points, out, append=step > 0)
     write_csv(pd.DataFrame([{"step": step}]), out + "/steps.csv", append=step > 0)
 """
 
 
 @pytest.mark.skipif(os.name != "posix", reason="SIGKILL")
-@pytest.mark.parametrize("after", [0.4, 0.9])
-def test_a_writer_killed_outright_leaves_tables_that_read_whole(tmp_path, after):
-    process = subprocess.Popen([sys.executable, "-c", _WRITER, str(tmp_path)],
+@pytest.mark.parametrize(("after", "kind"), [(0.4, "csv"), (0.9, "csv"), (0.6, "npy")])
+def test_a_writer_killed_outright_leaves_tables_that_read_whole(tmp_path, after, kind):
+    process = subprocess.Popen([sys.executable, "-c", _WRITER, str(tmp_path), kind],
                                stdout=subprocess.PIPE, text=True)
     assert process.stdout.readline().strip() == "ready"
     time.sleep(after)

@@ -85,6 +85,11 @@ def test_by_elapsed_time_the_state_is_saved_when_saving_is_cheap_or_overdue(
     assert not checkpoint.due(5, 50)
     clock.now += 1.0
     assert checkpoint.due(5, 50)
+    checkpoint._save_seconds = 0.003  # a cheap save: at most once a second
+    clock.now = checkpoint._saved_at + 0.99
+    assert not checkpoint.due(6, 50)
+    clock.now += 0.01
+    assert checkpoint.due(6, 50)
     with pytest.raises(ValueError, match="minutes"):
         RunCheckpoint(tmp_path, every=None, minutes=0.0)
 

@@ -22,6 +22,7 @@ from granular_material.cli.scene import TESTS, command_parsers, load_scene, scen
 from granular_material.cli.scene_load import _NOT_KEYS
 from granular_material.dem import load_rve
 from granular_material.procedures.packing import VOID_RATIO_TOLERANCE
+from granular_material.results import read_points
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -237,7 +238,7 @@ def test_single_element_scene_runs_into_its_folder(tmp_path, capsys):
     assert json.loads((out / "summary.json").read_text()) == report
     assert (out / "scene.toml").read_text() == text
     assert len(pd.read_csv(out / "steps.csv")) == 3
-    assert len(pd.read_csv(out / "points.csv")) == 3 * 4
+    assert len(read_points(out)) == 3 * 4
     assert set(pd.read_csv(out / "tracked.csv")["point"]) == {0, 3}
     assert len(pd.read_csv(out / "pure_dem.csv")) > 1
     for name in ("fields.xdmf", "stress_strain.png", "maps.png"):
@@ -310,7 +311,7 @@ def test_scene_sets_the_material_of_the_rves_it_prepares(tmp_path, capsys):
     assert 4e-3 <= rves.radius.min() and rves.radius.max() <= 6e-3
     # compacted frictionless to e0 = 0.21, then consolidated with friction: a little below it
     # (0.207 measured; straight to 100 kPa the same discs end at 0.194)
-    initial = pd.read_csv(out / "points.csv").query("step == 0")["void_ratio"]
+    initial = read_points(out).query("step == 0")["void_ratio"]
     assert ((0.2 < initial) & (initial <= 0.21 + VOID_RATIO_TOLERANCE)).all()
     path.write_text(path.read_text().replace("angle = 0.3", "angle = 0.35"))
     assert main(["run", str(path), "--out", str(out), "--resume"]) == 2

@@ -14,7 +14,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from granular_material.results import writers
-from granular_material.results.writers import BiaxialWriter, format_rows, read_table, xml_text
+from granular_material.results.writers import BiaxialWriter, format_rows, xml_text
 
 _FLOATS = st.floats(allow_nan=True, allow_infinity=True, width=64)
 
@@ -137,24 +137,22 @@ def test_a_stop_between_a_steps_writes_has_the_tables_written_whole(tmp_path, mo
     run's result holds the step, so finish() writes the tables whole with it."""
     writer = BiaxialWriter(tmp_path)
     _record(writer, 2, kind=int)
-    real = writers.write_csv
+    real = writers.write_points
 
-    def interrupted(frame, path, append=False, **keywords):
-        result = real(frame, path, append, **keywords)
-        if Path(path).name == "points.csv":
-            raise KeyboardInterrupt
-        return result
+    def interrupted(*args, **keywords):
+        real(*args, **keywords)
+        raise KeyboardInterrupt
 
-    monkeypatch.setattr(writers, "write_csv", interrupted)
+    monkeypatch.setattr(writers, "write_points", interrupted)
     points = pd.DataFrame({"step": 2, "point": np.arange(3), "sxx": np.arange(3.0) - 2})
     with pytest.raises(KeyboardInterrupt):
         writer.record({"step": 2, "axial_strain": 2e-3, "cost": 2}, points, np.zeros(2))
-    monkeypatch.setattr(writers, "write_csv", real)
+    monkeypatch.setattr(writers, "write_points", real)
     steps = pd.DataFrame([{"step": s, "axial_strain": s * 1e-3, "cost": s} for s in range(3)])
     result = _Result(tmp_path)
     assert len(result.steps) == 2  # the steps row of step 2 is not on disk
     result.steps = steps  # the run's result holds step 2, its points too
-    result.points = pd.concat([read_table(tmp_path / "points.csv")], ignore_index=True)
+    result.points = writers.read_npy_table(tmp_path / "points.npy")  # step 2's points too
     assert len(result.points) == 9
     assert not writer.holds(result)
     writer.finish(result)
@@ -173,18 +171,24 @@ def test_the_tables_are_flushed_to_the_disk_now_and_then_and_at_the_end(tmp_path
 
     monkeypatch.setattr(writers.os, "fsync", fsync)
     monkeypatch.setattr(writers, "SYNC_SECONDS", 3600.0)
+    # a step appended to points.npy and flushed: its records, then its header's count
+    flushed = ["points.npy", "points.npy", "steps.csv"]
     with BiaxialWriter(tmp_path) as writer:
         _record(writer, 2, kind=int)  # step 0 written whole, step 1 appended and flushed
-        assert synced == ["points.csv", "steps.csv"]
+        assert synced == flushed
         _record(writer, 4, kind=int)  # appended only
-        assert synced == ["points.csv", "steps.csv"]
+        assert synced == flushed
         writer.finish(_Result(tmp_path))
-        assert synced == ["points.csv", "steps.csv"] * 2
+        assert synced == [*flushed, "points.npy", "steps.csv"]
     monkeypatch.setattr(writers, "SYNC_SECONDS", 0.0)
     synced.clear()
     with BiaxialWriter(tmp_path / "every") as writer:
         _record(writer, 4, kind=int)
-    assert synced == ["points.csv", "steps.csv"] * 3  # each appended step
+    assert synced == flushed * 3  # each appended step
+    synced.clear()
+    with BiaxialWriter(tmp_path / "csv", points_csv=True) as writer:
+        _record(writer, 2, kind=int)
+    assert synced == ["points.npy", "points.npy", "points.csv", "steps.csv"]
 
 
 def test_the_checkpoints_newton_records_are_converted_once_and_read_alike():

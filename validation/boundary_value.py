@@ -29,6 +29,7 @@ import numpy as np
 import pandas as pd
 
 from granular_material.results.plots import pyplot, save_figure
+from granular_material.results.writers import read_points
 from granular_material.runs.boundary_value.runner import build, run_boundary_value
 from granular_material.runs.boundary_value.spec import bvp_from_dict
 from granular_material.runs.run_folder import ended_summary, resumable
@@ -276,7 +277,7 @@ def main(argv: list[str] | None = None) -> int:
             folder = runs / f"wall-{case}-{material}"
             table = pd.read_csv(folder / "steps.csv")
             nodal = np.abs(table["wall_force_x"].to_numpy())
-            stress = wall_stress_thrust(pd.read_csv(folder / "points.csv"))
+            stress = wall_stress_thrust(read_points(folder))
             peak, end = ((k_p, k_p_end) if case == "passive" else (k_a, k_a_end))
             bound, bound_end = peak * SURCHARGE * WALL_HEIGHT, end * SURCHARGE * WALL_HEIGHT
             pick = np.max if case == "passive" else np.min

@@ -37,6 +37,7 @@ import pandas as pd
 from granular_material.procedures.element_tests import DEFAULT_AXIAL_STRAIN
 from granular_material.procedures.packing import DEFAULT_DISCS, DEFAULT_PRESSURE
 from granular_material.procedures.strain_path import DEFAULT_MAX_DEM_STEPS, DEFAULT_STRAIN_PER_STEP
+from granular_material.results.writers import read_points
 
 __all__ = [
     "EngineError",
@@ -334,7 +335,7 @@ def ours_femxdem_biaxial(rve: str | Path, out_dir: str | Path,
         done.write_text(json.dumps({"spec": key, "result": result}, indent=1))
     curve = pd.read_csv(out_dir / "steps.csv").drop(columns=["residual_history"],
                                                     errors="ignore")
-    return curve, pd.read_csv(out_dir / "points.csv"), result
+    return curve, read_points(out_dir), result
 
 
 def voigt_tangent(tangent: np.ndarray) -> np.ndarray:

@@ -56,6 +56,8 @@ from granular_material_validation.gz_footing_mesh import (
 from granular_material_validation.yade_io import export_rve
 from granular_material_validation.yade_runner import YadeError, find_yade, run_script
 
+from granular_material.results.writers import read_points
+
 __all__ = ["FOOTING_PATCHES", "HALF_WIDTH", "SETTLEMENT_PER_STEP", "SURCHARGE", "X_LINES",
            "Y_LINES", "FootingMesh", "finish_footing", "footing_mesh",
            "footing_nodal_reaction", "footing_traction_force", "guo_zhao_footing",
@@ -235,7 +237,7 @@ def ours_footing(rve: str | Path, workdir: str | Path, mesh: FootingMesh, steps:
     summary.update(driver_wall_s=wall, driver_cpu_s=cpu)
     (work / "summary.json").write_text(json.dumps(summary, indent=1))
     return {"steps": pd.read_csv(work / "run" / "steps.csv"),
-            "points": pd.read_csv(work / "run" / "points.csv"), "summary": summary}
+            "points": read_points(work / "run"), "summary": summary}
 
 
 def main(argv: list[str] | None = None) -> int:

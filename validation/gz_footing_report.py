@@ -31,6 +31,8 @@ from granular_material_validation.gz_footing_mesh import (
     read_gmsh22,
 )
 
+from granular_material.results.writers import read_points
+
 __all__ = ["compare", "element_gamma", "markdown", "projected_forces", "write_report"]
 
 
@@ -77,7 +79,7 @@ def compare(folder: str | Path) -> dict[str, Any]:
     tsum = json.loads((folder / "guo_zhao" / "gz_summary.json").read_text())
     tpoints = gauss_fields(folder / "guo_zhao")
     osteps = pd.read_csv(folder / "ours" / "run" / "steps.csv")
-    opoints = pd.read_csv(folder / "ours" / "run" / "points.csv")
+    opoints = read_points(folder / "ours" / "run")
     osum = json.loads((folder / "ours" / "summary.json").read_text())
     tproj = projected_forces(mesh, tpoints)
     oproj = projected_forces(mesh, opoints)

@@ -209,7 +209,10 @@ def _common_arguments(parser: argparse.ArgumentParser) -> None:
                              f"(default {_PROBLEM['confining']:g})")
     parser.add_argument("--steps", type=int, default=_PROBLEM["steps"],
                         help=f"load steps (default {_PROBLEM['steps']})")
-    add_out(parser, "output folder: steps.csv, points.csv, fields.xdmf, summary.json, figures")
+    add_out(parser, "output folder: steps.csv, points.npy, fields.xdmf, summary.json, figures")
+    parser.add_argument("--points-csv", action="store_true", default=_OUTPUT.points_csv,
+                        help="with --out, the Gauss-point table also as text, points.csv "
+                             "(points.npy, read by numpy.load, is written regardless)")
     add_json(parser, "a summary")
     add_device(parser, "DEM device")
     parser.add_argument("--preset", choices=PRESET_NAMES, default=None,
@@ -238,9 +241,10 @@ def _common_arguments(parser: argparse.ArgumentParser) -> None:
                    metavar="N",
                    help="save the committed state (RVEs with contact history, displacement, "
                         "Newton state) in OUT/checkpoint after every N load steps and after "
-                        "the last; default: by elapsed time, after every step while a save "
-                        "takes under a tenth of the time since the last, at the latest every "
-                        "--checkpoint-minutes; the tables of every step are kept regardless")
+                        "the last; default: by elapsed time, after the first step at least a "
+                        "second and ten times a save's duration after the last save, at the "
+                        "latest every --checkpoint-minutes; the tables of every step are kept "
+                        "regardless")
     g.add_argument("--checkpoint-minutes", type=positive,
                    default=_OUTPUT.checkpoint_minutes, metavar="M",
                    help="without --checkpoint-every: the longest time between two saves of "

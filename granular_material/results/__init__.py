@@ -1,7 +1,7 @@
 """Results floor: what a biaxial run produces (:class:`BiaxialResult`, its tables), their
-writers (CSV, XDMF), figures, localisation (shear-band) measures, peak finding and the
-summaries the commands report. Reads what the procedures and
-the FEM produce; imports nothing above it."""
+writers (CSV, NumPy records, XDMF) and readers, figures, localisation (shear-band)
+measures, peak finding and the summaries the commands report. Reads what the procedures
+and the FEM produce; imports nothing above it."""
 
 from granular_material.results.active_bands import (
     FittedBand,
@@ -37,9 +37,12 @@ from granular_material.results.summary import (
 from granular_material.results.writers import (
     BiaxialWriter,
     FieldWriter,
+    read_points,
+    read_run_tables,
     write_csv,
     write_json,
     write_outputs,
+    write_points,
     write_tables,
 )
 
@@ -67,11 +70,14 @@ __all__ = [
     "plot_maps",
     "plot_stress_strain",
     "pyplot",
+    "read_points",
+    "read_run_tables",
     "run_summary",
     "shear_band",
     "summarize_biaxial",
     "write_csv",
     "write_json",
     "write_outputs",
+    "write_points",
     "write_tables",
 ]

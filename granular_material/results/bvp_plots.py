@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from granular_material.results.plots import deformed_triangles, pyplot, save_figure
+from granular_material.results.plots import FAST_PNG, deformed_triangles, pyplot, save_figure
 
 __all__ = ["length_unit", "plot_load_displacement", "plot_mechanism",
            "plot_phased_load_displacement", "plot_strength_reduction"]
@@ -54,7 +54,7 @@ def plot_load_displacement(steps: pd.DataFrame, bodies: Sequence[tuple[str, str,
         ax.grid(alpha=0.3)
         ax.set_title(name)
     try:
-        return save_figure(fig, path)
+        return save_figure(fig, path, compress_level=FAST_PNG)
     finally:
         plt.close(fig)
 
@@ -103,7 +103,7 @@ def plot_mechanism(xy: np.ndarray, cells: np.ndarray, kind: str, ux: np.ndarray,
     ax.set_ylabel(f"y [{unit}]")
     ax.set_title(title)
     try:
-        return save_figure(fig, path)
+        return save_figure(fig, path, compress_level=FAST_PNG)
     finally:
         plt.close(fig)
 
@@ -145,7 +145,7 @@ def plot_phased_load_displacement(steps: pd.DataFrame,
         ax.set_title(name)
         ax.legend(title="phase", fontsize=8)
     try:
-        return save_figure(fig, path)
+        return save_figure(fig, path, compress_level=FAST_PNG)
     finally:
         plt.close(fig)
 
@@ -167,6 +167,6 @@ def plot_strength_reduction(factor: Sequence[float], displacement: Sequence[floa
     ax.set_ylabel("strength reduction factor F [-]")
     ax.grid(alpha=0.3)
     try:
-        return save_figure(fig, path, dpi=110)
+        return save_figure(fig, path, dpi=110, compress_level=FAST_PNG)
     finally:
         plt.close(fig)

@@ -20,8 +20,8 @@ from granular_material.results.localization import shear_band
 if TYPE_CHECKING:
     from granular_material.results.biaxial import BiaxialResult
 
-__all__ = ["deformed_triangles", "plot_biaxial_curves", "plot_maps", "plot_stress_strain", "pyplot",
-           "save_figure"]
+__all__ = ["FAST_PNG", "deformed_triangles", "plot_biaxial_curves", "plot_maps",
+           "plot_stress_strain", "pyplot", "save_figure"]
 
 
 #: the margins of a run's two figures (fractions of the figure), set once instead of by
@@ -43,13 +43,23 @@ def pyplot() -> ModuleType:
     return plt
 
 
-def save_figure(fig: Any, path: str | Path, dpi: int = 120) -> Path:
+#: zlib's level for the PNG files of a run's own figures: the same pixels as the default
+#: level 6, in about a third of its time and a third more bytes (a 1440 × 600 maps figure:
+#: 0.12 s and 603 kB against 0.34 s and 457 kB, at a load of 6)
+FAST_PNG = 1
+
+
+def save_figure(fig: Any, path: str | Path, dpi: int = 120,
+                compress_level: int | None = None) -> Path:
     """Save the matplotlib figure ``fig`` to ``path`` (format from its suffix) whole or not
     at all: drawn into ``path.part`` and renamed into place; a failed write leaves no
-    ``.part`` and its error names the file."""
+    ``.part`` and its error names the file. ``compress_level``: zlib's level (0–9) of a
+    PNG file (None: matplotlib's default)."""
     path = Path(path)
-    return write_whole(path, lambda tmp: fig.savefig(
-        tmp, dpi=dpi, format=path.suffix.removeprefix(".").lower() or "png"))
+    kind = path.suffix.removeprefix(".").lower() or "png"
+    extra = ({"pil_kwargs": {"compress_level": compress_level}}
+             if compress_level is not None and kind == "png" else {})
+    return write_whole(path, lambda tmp: fig.savefig(tmp, dpi=dpi, format=kind, **extra))
 
 
 def plot_biaxial_curves(curve: pd.DataFrame, path: str | Path) -> Path:
@@ -96,7 +106,7 @@ def plot_stress_strain(steps: pd.DataFrame, path: str | Path, reference: pd.Data
         ax.grid(alpha=0.3)
         ax.legend()
     try:
-        return save_figure(fig, path)
+        return save_figure(fig, path, compress_level=FAST_PNG)
     finally:
         plt.close(fig)
 
@@ -182,6 +192,6 @@ def plot_maps(result: BiaxialResult, axial_strain: float, path: str | Path) -> P
                  f"inclination {band.inclination_deg:.0f}°, elongation "
                  f"{band.elongation:.2f}, γ ratio {band.localization:.1f}")
     try:
-        return save_figure(fig, path)
+        return save_figure(fig, path, compress_level=FAST_PNG)
     finally:
         plt.close(fig)

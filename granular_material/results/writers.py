@@ -1,7 +1,10 @@
-"""Files of the runs: CSV tables, JSON summaries and an XDMF time series for ParaView.
+"""Files of the runs: CSV tables, the Gauss-point table of records, JSON summaries and an
+XDMF time series for ParaView.
 
-``steps.csv`` and ``points.csv`` of a biaxial run are written by :func:`write_tables` only,
-whether whole at the end or step by step while the run goes (:class:`BiaxialWriter`).
+``steps.csv`` and the Gauss-point table (``points.npy``, a NumPy file of records:
+:mod:`~granular_material.results.point_table`; also ``points.csv`` on request) of a biaxial
+run are written by :func:`write_tables` only, whether whole at the end or step by step while
+the run goes (:class:`BiaxialWriter`); :func:`read_points` reads either.
 
 A table that grows while a run goes is whole on disk at every step. Its rows are appended by
 :func:`append_csv`: the step's rows in one write after the table's last whole row, taken
@@ -11,7 +14,7 @@ killed process loses nothing it wrote (the kernel holds it); against a power cut
 :class:`BiaxialWriter` flushes its tables to the disk (``fsync``) with the first step that
 ends :data:`SYNC_SECONDS` after the last flush, points before steps, and when the run ends
 (an ``fsync`` at every step cost 1–4 ms a table on a shared disk, more than formatting a
-128-point step). A step writes ``tracked.csv`` and ``points.csv`` first and its
+128-point step). A step writes ``tracked.csv`` and its points first and its
 ``steps.csv`` row last: a step is committed once that row is whole. :func:`read_table`
 leaves a cut last row out, and :func:`read_run_tables` also the rows of steps ``steps.csv``
 does not hold. A resumed run writes its tables anew from its checkpoint. The appended tables
@@ -45,14 +48,15 @@ import pandas as pd
 
 from granular_material.filesafe import deferred_signals, write_whole
 from granular_material.results.plots import plot_maps, plot_stress_strain
+from granular_material.results.point_table import append_npy, read_npy_table, write_npy_table
 
 if TYPE_CHECKING:
     from granular_material.fem.boundary_value.biaxial import BiaxialProblem
     from granular_material.results.biaxial import BiaxialResult
 
-__all__ = ["BiaxialWriter", "FieldWriter", "append_csv", "format_rows", "read_run_tables",
-           "read_table", "strict_json", "write_csv", "write_json", "write_outputs",
-           "write_tables"]
+__all__ = ["BiaxialWriter", "FieldWriter", "append_csv", "format_rows", "read_points",
+           "read_run_tables", "read_table", "strict_json", "write_csv", "write_json",
+           "write_outputs", "write_points", "write_tables"]
 
 _CELL_FIELDS = ("sxx", "syy", "sxy", "exx", "eyy", "exy", "volumetric_strain",
                 "shear_strain", "rotation", "mean_pressure", "unconfined", "failed",
@@ -238,21 +242,58 @@ def read_table(path: str | Path, **read_csv: Any) -> pd.DataFrame:
         return pd.read_csv(io.BytesIO(fh.read(end)), **read_csv)
 
 
+def _committed(table: pd.DataFrame, committed: set[Any] | None) -> pd.DataFrame:
+    """``table`` without the rows of steps not in ``committed`` (None: every row)."""
+    if committed is not None and "step" in table:
+        return table[table["step"].isin(committed)].reset_index(drop=True)
+    return table
+
+
+def _committed_steps(out: Path) -> set[Any] | None:
+    """The steps ``steps.csv`` under ``out`` holds (None: it has no ``step`` column)."""
+    steps = read_table(out / "steps.csv")
+    return set(steps["step"]) if "step" in steps else set() if steps.empty else None
+
+
+def _points_table(out: Path) -> pd.DataFrame | None:
+    """The Gauss-point table of the run folder ``out`` as written, from ``points.npy`` or
+    else ``points.csv`` (None: neither is there)."""
+    if (out / "points.npy").exists():
+        return read_npy_table(out / "points.npy")
+    if (out / "points.csv").exists():
+        return read_table(out / "points.csv")
+    return None
+
+
+def read_points(folder: str | Path) -> pd.DataFrame:
+    """The Gauss-point history of the run in ``folder``: every point at every committed step,
+    read from ``points.npy`` (what a run writes) or ``points.csv`` (a run with the option
+    ``points_csv``, or of an older version), without the records of steps ``steps.csv`` does
+    not hold (a run killed between a step's points and its row). ``FileNotFoundError`` where
+    the folder holds neither file."""
+    out = Path(folder)
+    table = _points_table(out)
+    if table is None:
+        raise FileNotFoundError(f"{out} holds no points.npy nor points.csv: not the folder "
+                                "of a FEM run, or one that wrote no steps")
+    if not (out / "steps.csv").exists():
+        return table
+    return _committed(table, _committed_steps(out))
+
+
 def read_run_tables(out_dir: str | Path) -> dict[str, pd.DataFrame]:
     """The tables of a run folder as they stood at its last committed step, also of a run
-    killed while it wrote: ``steps`` (``steps.csv``) and, where written, ``points`` and
-    ``tracked``, each without a cut last row and without the rows of a step that
-    ``steps.csv`` does not hold yet."""
+    killed while it wrote: ``steps`` (``steps.csv``) and, where written, ``points``
+    (``points.npy`` or ``points.csv``: :func:`read_points`) and ``tracked``, each without a
+    cut last row and without the rows of a step that ``steps.csv`` does not hold yet."""
     out = Path(out_dir)
     tables = {"steps": read_table(out / "steps.csv")}
-    steps = tables["steps"]
-    committed = set(steps["step"]) if "step" in steps else set() if steps.empty else None
-    for name in ("points", "tracked"):
-        if (out / f"{name}.csv").exists():
-            table = read_table(out / f"{name}.csv")
-            if committed is not None and "step" in table:
-                table = table[table["step"].isin(committed)].reset_index(drop=True)
-            tables[name] = table
+    committed = _committed_steps(out)
+    points = _points_table(out)
+    if points is not None:
+        tables["points"] = _committed(points, committed)
+    if (out / "tracked.csv").exists():
+        tables["tracked"] = _committed(read_table(out / "tracked.csv"), committed)
     return tables
 
 
@@ -282,18 +323,37 @@ def write_json(data: Any, path: str | Path, indent: int = 2) -> Path:
     return write_whole(path, lambda tmp: tmp.write_text(text))
 
 
-def write_tables(steps: pd.DataFrame, points: pd.DataFrame, out_dir: str | Path,
-                 append_points: bool = False) -> dict[str, Path]:
-    """Write ``steps.csv`` and ``points.csv`` under ``out_dir``; returns their paths.
+def write_points(points: pd.DataFrame, out_dir: str | Path, append: bool = False, *,
+                 csv: bool = False, sync: bool = True) -> dict[str, Path]:
+    """Write the Gauss-point table ``points`` under ``out_dir``: ``points.npy``
+    (:mod:`~granular_material.results.point_table`) and, where ``csv``, ``points.csv`` too,
+    each whole or, where ``append``, its rows added (flushed to the disk where ``sync``).
+    Returns their paths by name, ``points`` and ``points_csv``."""
+    out = Path(out_dir)
+    paths = {"points": out / "points.npy"}
+    if append:
+        append_npy(points, paths["points"], sync=sync)
+    else:
+        out.mkdir(parents=True, exist_ok=True)
+        write_npy_table(points, paths["points"])
+    if csv:
+        paths["points_csv"] = write_csv(points, out / "points.csv", append=append, sync=sync)
+    return paths
 
-    ``append_points``: add the rows of ``points`` to the existing ``points.csv`` (a run that
-    writes step by step, :func:`append_csv`) instead of writing the whole table.
-    ``steps.csv`` is written whole, last: its rows are the committed steps.
+
+def write_tables(steps: pd.DataFrame, points: pd.DataFrame, out_dir: str | Path,
+                 append_points: bool = False, *, points_csv: bool = False) -> dict[str, Path]:
+    """Write ``points.npy`` (and ``points.csv`` where ``points_csv``) and ``steps.csv`` under
+    ``out_dir``; returns their paths (``steps``, ``points`` and ``points_csv``).
+
+    ``append_points``: add the rows of ``points`` to the existing tables of points (a run that
+    writes step by step) instead of writing them whole. ``steps.csv`` is written whole,
+    last: its rows are the committed steps.
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    paths = {"steps": out / "steps.csv", "points": out / "points.csv"}
-    write_csv(points, paths["points"], append=append_points)
+    paths = write_points(points, out, append_points, csv=points_csv)
+    paths["steps"] = out / "steps.csv"
     write_csv(steps, paths["steps"])  # last: a step is committed once its row is here
     return paths
 
@@ -380,6 +440,8 @@ class BiaxialWriter:
 
     Every step appends to the tables (a long run can be followed, and is not lost if it is
     stopped; the module docstring says what a killed run leaves) and to ``fields.xdmf``.
+    The Gauss-point table is ``points.npy``, and also ``points.csv`` where ``points_csv``
+    (:func:`write_points`).
     The appended tables are the whole tables of the run: :meth:`finish` writes them anew only
     where they could differ from the result's (a step not recorded here, or a column whose
     type changed between steps, which the result's table holds as one type). The tables are
@@ -388,8 +450,9 @@ class BiaxialWriter:
     however it ends.
     """
 
-    def __init__(self, out_dir: str | Path) -> None:
+    def __init__(self, out_dir: str | Path, *, points_csv: bool = False) -> None:
         self.out_dir = Path(out_dir)
+        self.points_csv = points_csv
         self._stack = ExitStack()
         self._fields: FieldWriter | None = None
         self._steps = 0  # steps recorded: after the first, the tables are appended
@@ -398,7 +461,7 @@ class BiaxialWriter:
         #: each table's columns and their types as first recorded; False once they changed
         self._kinds: dict[str, Any] = {}
         self._synced_at = -math.inf  # when the tables were last flushed (time.monotonic)
-        self._unsynced: set[str] = set()  # tables appended to since
+        self._unsynced: set[str] = set()  # files of the tables appended to since
 
     def __enter__(self) -> BiaxialWriter:
         self.out_dir.mkdir(parents=True, exist_ok=True)
@@ -416,11 +479,11 @@ class BiaxialWriter:
 
     def sync(self) -> None:
         """Flush the tables appended to since their last flush to the disk (``fsync``)."""
-        for name in ("tracked", "points", "steps"):  # steps last: the commit
+        for name in ("tracked.csv", "points.npy", "points.csv", "steps.csv"):  # steps last
             if name in self._unsynced:
                 self._unsynced.discard(name)
                 try:
-                    fd = os.open(self.out_dir / f"{name}.csv", os.O_RDONLY)
+                    fd = os.open(self.out_dir / name, os.O_RDONLY)
                 except FileNotFoundError:  # removed meanwhile (a rejected run's folder)
                     continue
                 try:
@@ -432,11 +495,16 @@ class BiaxialWriter:
     def _append(self, name: str, frame: pd.DataFrame, append: bool, sync: bool) -> None:
         """Add ``frame`` to table ``name`` (``append`` False: write it whole), flushed to the
         disk where ``sync``."""
-        write_csv(frame, self.out_dir / f"{name}.csv", append=append, sync=sync)
-        if append and not sync:
-            self._unsynced.add(name)
+        if name == "points":
+            files = list(write_points(frame, self.out_dir, append, csv=self.points_csv,
+                                      sync=sync).values())
         else:
-            self._unsynced.discard(name)
+            files = [write_csv(frame, self.out_dir / f"{name}.csv", append=append, sync=sync)]
+        for path in files:
+            if append and not sync:
+                self._unsynced.add(path.name)
+            else:
+                self._unsynced.discard(path.name)
 
     def start(self, problem: BiaxialProblem) -> None:
         """Open the fields file of ``problem``'s mesh."""
@@ -448,6 +516,8 @@ class BiaxialWriter:
         self._rows = {"steps": 0, "points": 0, "tracked": 0}
         self._kinds = {}
         self._synced_at, self._unsynced = -math.inf, set()
+        if not self.points_csv:  # an earlier run's, which this one does not write
+            (self.out_dir / "points.csv").unlink(missing_ok=True)
 
     def _seen(self, name: str, frame: pd.DataFrame) -> None:
         """Count ``frame``'s rows as recorded in table ``name`` and note whether its columns
@@ -470,7 +540,7 @@ class BiaxialWriter:
         sync = more and now - self._synced_at >= SYNC_SECONDS
         if sync:
             self._synced_at = now
-            if "tracked" in self._unsynced and (tracked is None or not len(tracked)):
+            if "tracked.csv" in self._unsynced and (tracked is None or not len(tracked)):
                 self.sync()  # earlier steps' tracked rows, before this step's points
         # each table's rows count once written: a stop signal delivered between two writes
         # leaves the count short, and finish() then writes the tables whole
@@ -488,9 +558,9 @@ class BiaxialWriter:
 
     def holds(self, result: BiaxialResult) -> bool:
         """Whether the tables appended here are, byte for byte, those :func:`write_tables`
-        writes of ``result``: every row of the result recorded, each table's columns and
-        their types alike at every step (so that the result's concatenated table formats
-        every cell as the step's own table did)."""
+        writes of ``result`` (``points_csv`` as here): every row of the result recorded,
+        each table's columns and their types alike at every step (so that the result's
+        concatenated table formats every cell as the step's own table did)."""
         tables = {"steps": result.steps, "points": result.points, "tracked": result.tracked}
         return self._steps > 0 and all(
             self._rows[name] == len(table) and self._kinds.get(name, True) is not False
@@ -503,7 +573,7 @@ class BiaxialWriter:
             self.sync()
             return
         self._unsynced.clear()  # written anew, whole
-        write_tables(result.steps, result.points, self.out_dir)
+        write_tables(result.steps, result.points, self.out_dir, points_csv=self.points_csv)
         if len(result.tracked):
             write_csv(result.tracked, self.out_dir / "tracked.csv")
 
@@ -511,8 +581,9 @@ class BiaxialWriter:
 def write_outputs(result: BiaxialResult, out_dir: str | Path,
                   map_strain: float | Sequence[float] | None = None,
                   reference: pd.DataFrame | None = None, *,
-                  tables: bool = True) -> dict[str, Path]:
-    """Tables, the stress–strain figure and the maps figures under ``out_dir``.
+                  tables: bool = True, points_csv: bool = False) -> dict[str, Path]:
+    """Tables, the stress–strain figure and the maps figures under ``out_dir``
+    (``points_csv``: the Gauss-point table as ``points.csv`` too, :func:`write_tables`).
 
     ``tables`` False: the tables are not written again, being already whole there (a
     :class:`BiaxialWriter`'s, after its :meth:`~BiaxialWriter.finish`); their paths are
@@ -524,11 +595,13 @@ def write_outputs(result: BiaxialResult, out_dir: str | Path,
     """
     out = Path(out_dir)
     if tables:
-        paths = write_tables(result.steps, result.points, out)
+        paths = write_tables(result.steps, result.points, out, points_csv=points_csv)
         if len(result.tracked):
             paths["tracked"] = write_csv(result.tracked, out / "tracked.csv")
     else:
-        paths = {"steps": out / "steps.csv", "points": out / "points.csv"}
+        paths = {"steps": out / "steps.csv", "points": out / "points.npy"}
+        if points_csv:
+            paths["points_csv"] = out / "points.csv"
         if len(result.tracked):
             paths["tracked"] = out / "tracked.csv"
     paths["stress_strain"] = plot_stress_strain(result.steps, out / "stress_strain.png",

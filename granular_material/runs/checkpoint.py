@@ -63,19 +63,26 @@ from granular_material.runs.checkpoint_files import (
     write_npz,
 )
 
-__all__ = ["SAVE_SPACING", "CheckpointError", "RunCheckpoint", "SavedRun", "SavedStep"]
+__all__ = ["SAVE_FLOOR_SECONDS", "SAVE_SPACING", "CheckpointError", "RunCheckpoint",
+           "SavedRun", "SavedStep"]
 
 #: by elapsed time, the committed state is saved once this many times the last save's
 #: duration has passed since it ended: a cheap save is made after every step, and saving
 #: costs at most about 1/SAVE_SPACING of the run
 SAVE_SPACING = 10.0
+#: by elapsed time, the committed state is saved at most once this many seconds [s] (but
+#: after the initial state and the last step): a kill loses about this much work, redone
+#: alike by the resume; a save after every step of a fast continuum run (3 ms of a 40 ms
+#: step) cost more than the tables
+SAVE_FLOOR_SECONDS = 1.0
 
 
 class RunCheckpoint:
     """The checkpoint folder of one run. The committed state is saved after the initial state,
     after the last step and, in between, after every ``every`` load steps; with ``every``
     None, by elapsed time: after the first step that ends :data:`SAVE_SPACING` times the last
-    save's duration after it, and at the latest ``minutes`` after it. The per-step tables are
+    save's duration after it and at least :data:`SAVE_FLOOR_SECONDS` after it, and at the
+    latest ``minutes`` after it. The per-step tables are
     kept for every step."""
 
     def __init__(self, folder: str | Path, every: int | None = 1,
@@ -195,7 +202,8 @@ class RunCheckpoint:
         if step == last_step or self._saved_at is None:
             return True
         since = time.monotonic() - self._saved_at
-        return since >= min(SAVE_SPACING * self._save_seconds, 60.0 * self.minutes)
+        return since >= min(max(SAVE_SPACING * self._save_seconds, SAVE_FLOOR_SECONDS),
+                            60.0 * self.minutes)
 
     def save_state(self, step: int, solver: NewtonSolver, material: Material) -> None:
         """Save the committed state after load ``step`` (material first, then the solver's

@@ -316,7 +316,8 @@ def _execute(plan: RunPlan, material: Material, observer: RunObserver | None,
     noisy = spec.material.noisy
     t0 = time.perf_counter()
     with contextlib.ExitStack() as stack:
-        writer = (stack.enter_context(BiaxialWriter(spec.output.out))
+        writer = (stack.enter_context(BiaxialWriter(spec.output.out,
+                                                    points_csv=spec.output.points_csv))
                   if spec.output.out is not None else None)
         observers = [o for o in (writer, observer) if o is not None]
         result = run_biaxial(plan.setup, material, spec.problem.steps,

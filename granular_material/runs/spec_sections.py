@@ -358,9 +358,12 @@ class OutputSpec:
         postprocess: with ``track``: the post-processors; None: every installed one.
         checkpoint_every: save the committed state every this many load steps (with out);
             None: by elapsed time (:class:`~granular_material.runs.checkpoint.RunCheckpoint`:
-            after every step while saving is cheap, at most every ``checkpoint_minutes``).
+            at most once a second and while saving is cheap, at the latest every
+            ``checkpoint_minutes``).
         checkpoint_minutes: with ``checkpoint_every`` None, the longest time [min] between
             two saves of the committed state.
+        points_csv: with ``out``, the Gauss-point table also as text, ``points.csv``
+            (``points.npy`` is written regardless).
         progress: show progress bars.
     """
 
@@ -371,6 +374,7 @@ class OutputSpec:
     postprocess: tuple[str, ...] | None = None
     checkpoint_every: int | None = None
     checkpoint_minutes: float = 10.0
+    points_csv: bool = False
     progress: bool = False
 
     def __post_init__(self) -> None:

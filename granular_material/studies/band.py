@@ -27,7 +27,7 @@ from granular_material.multiscale.run_hooks import RUN_TANGENT
 from granular_material.procedures import progress_bar
 from granular_material.procedures.packing import DEFAULT_PRESSURE
 from granular_material.procedures.strain_path import DEFAULT_STRAIN_PER_STEP
-from granular_material.results import write_json
+from granular_material.results import read_points, write_json
 from granular_material.runs.presets import settings_fields
 from granular_material.runs.run_folder import ended_summary, resumable
 
@@ -210,5 +210,5 @@ def run_band_rows(rows: list[BandRow], scale: BandScale, out: Path, device: str 
 
 def read_band_run(folder: Path) -> tuple[pd.DataFrame, pd.DataFrame, dict[str, Any]]:
     """A done run's steps and points tables and summary."""
-    return (pd.read_csv(folder / "steps.csv"), pd.read_csv(folder / "points.csv"),
+    return (pd.read_csv(folder / "steps.csv"), read_points(folder),
             json.loads((folder / "summary.json").read_text()))

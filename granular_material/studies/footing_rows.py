@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from granular_material.results import read_points
 from granular_material.runs.boundary_value.runner import run_boundary_value
 from granular_material.runs.boundary_value.spec import bvp_from_dict
 from granular_material.runs.presets import settings_fields
@@ -239,7 +240,7 @@ def footing_table(rows: list[FootingRow], out: Path, b: float) -> pd.DataFrame:
         if summary is None:
             continue
         steps = pd.read_csv(folder / "steps.csv")
-        points = pd.read_csv(folder / "points.csv")
+        points = read_points(folder)
         done = steps[steps["step"] > 0]
         lines.append({"knob": row.knob, "value": row.value,
                       **footing_measures(steps, points, b),

@@ -25,7 +25,7 @@ import pandas as pd
 
 from granular_material.cli.signals import Terminated
 from granular_material.dem import load_rve, save_rve
-from granular_material.results import write_csv, write_json
+from granular_material.results import read_points, write_csv, write_json
 
 from . import coupling, plots, rve_size, speedup
 from .report import write_report
@@ -181,7 +181,7 @@ def _part_specimen(scale: ReproductionScale, folder: Path, device: str, progress
     run = folder / "run"
     steps, summary = coupling.read_run(run)
     error = _fem_status(code, summary, "biaxial")
-    points = pd.read_csv(run / "points.csv")
+    points = read_points(run)
     tracked = pd.read_csv(run / "tracked.csv")
     dem = coupling.dem_reference(scale, rves, folder, device)
     comparison = coupling.compare_with_dem(steps, dem)

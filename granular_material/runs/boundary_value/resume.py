@@ -40,7 +40,7 @@ __all__ = ["RESUME_FREE", "check_not_stopped", "open_bvp_checkpoint", "remember"
 
 #: the scene's fields a resume may change: where it writes, how it reports, the device and
 #: the CPU shards (none changes a result beyond the DEM's float rounding)
-RESUME_FREE = frozenset({"out", "progress", "device", "shards", "fields"})
+RESUME_FREE = frozenset({"out", "progress", "device", "shards", "fields", "points_csv"})
 #: minutes between saves of the committed state at the latest
 SAVE_MINUTES = 10.0
 

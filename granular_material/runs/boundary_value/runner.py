@@ -14,12 +14,13 @@ The run folder gets:
   also as ``{name}_settlement``); then the mean displacement ``{name}_displacement_x``,
   ``_y`` [m] of every other named boundary (each name of ``[boundaries]``, and every
   boundary group of a mesh file: a crest, a slope face);
-- ``points.csv``: every Gauss point at every step (coordinates, stress [Pa], strain, shear
+- ``points.npy``: every Gauss point at every step (coordinates, stress [Pa], strain, shear
   strain, mean pressure, the material's own fields such as the void ratio; with materials by
   region, the point's ``region`` and NaN in a field its region's material does not report),
-  appended a step
-  at a time before that step's ``steps.csv`` row (a killed run: read both with
-  :func:`~granular_material.results.writers.read_run_tables`);
+  a NumPy table of records (:mod:`~granular_material.results.point_table`), appended a step
+  at a time before that step's ``steps.csv`` row (read it with
+  :func:`~granular_material.results.writers.read_points`, also of a killed run); with
+  ``points_csv``, also as text, ``points.csv``;
 - ``fields.xdmf``: the same for ParaView at every committed step (XML, no HDF5 needed);
 - ``load_displacement.png``, ``mechanism.png`` and ``summary.json``.
 """
@@ -56,7 +57,7 @@ from granular_material.fem.forms import gauss_points_grad
 from granular_material.fem.materials.regions import RegionalMaterial
 from granular_material.multiscale.confinement import UNCONFINED_FRACTION
 from granular_material.results.bvp_plots import plot_load_displacement, plot_mechanism
-from granular_material.results.writers import FieldWriter, write_csv, write_json
+from granular_material.results.writers import FieldWriter, write_csv, write_json, write_points
 from granular_material.runs.boundary_value.checks import check_disk, check_memory, generated_size
 from granular_material.runs.boundary_value.continuum import continuum_stress, settles
 from granular_material.runs.boundary_value.material import (
@@ -623,7 +624,7 @@ def run_boundary_value(spec: BoundaryValueSpec, out: Path | None = None,
         starting()
         out.mkdir(parents=True, exist_ok=True)
         start_bvp_checkpoint(spec, checkpoint, saved)
-        for stale in ("points.csv", *_OUTPUTS):  # an earlier run's, rewritten by this one
+        for stale in ("points.npy", "points.csv", *_OUTPUTS):  # an earlier run's
             (out / stale).unlink(missing_ok=True)
         if spec.fields:
             writer = FieldWriter(out / "fields.xdmf", problem).__enter__()
@@ -633,7 +634,7 @@ def run_boundary_value(spec: BoundaryValueSpec, out: Path | None = None,
         last.update(points=points, u=u.copy())
         if out is not None:
             first = row["step"] == 0
-            write_csv(points, out / "points.csv", append=not first)
+            write_points(points, out, append=not first, csv=spec.points_csv)
             write_csv(pd.DataFrame([row]), out / "steps.csv",  # last: the step's commit
                       append=not first)
             if writer is not None:

@@ -97,7 +97,7 @@ into a :class:`BoundaryValueSpec` by :func:`bvp_from_dict` (every key checked, a
     [newton]                        # NewtonSpec's fields
     [regularisation]                # past a peak: model = "second-gradient" (quad8, quad9,
     internal_length = 0.005         # tri6), ℓ [m]; default model = "none"
-    [output]                        # out, device, shards, progress, fields
+    [output]                        # out, device, shards, progress, fields, points_csv
 """
 
 from __future__ import annotations
@@ -626,6 +626,8 @@ class BoundaryValueSpec:
         device: the DEM device ("cpu", "cuda", "cuda:N"; None: CUDA where present); shards:
             CPU shards; progress: progress bars.
         fields: write the ParaView fields (fields.xdmf) at every committed step.
+        points_csv: write the Gauss-point table also as text, points.csv (points.npy is
+            written regardless).
         name: the problem's name (tables and figures).
         phases: the loading in stages (:class:`PhaseSpec`), each from the state the one
             before committed; empty: one phase, ``conditions``, ``gravity_factor`` and
@@ -656,6 +658,7 @@ class BoundaryValueSpec:
     shards: int | None = None
     progress: bool = False
     fields: bool = True
+    points_csv: bool = False
     name: str = "problem"
     phases: tuple[PhaseSpec, ...] = ()
     strength_reduction: StrengthReductionSpec | None = None
@@ -981,7 +984,7 @@ SCENE_KEYS: dict[str, frozenset[str]] = {
     "strength_reduction": frozenset({"factor_end", "steps"}),
     "adaptivity": frozenset({"mobilised_fraction", "shear_strain", "neighbours", "start",
                              "switch", "calibration", "elastic_window"}),
-    "output": frozenset({"out", "device", "shards", "progress", "fields"}),
+    "output": frozenset({"out", "device", "shards", "progress", "fields", "points_csv"}),
     "phases": frozenset({"name", "steps", "conditions", "gravity", "reset_displacements"}),
     "phases.gravity": frozenset({"factor"}),
 }
@@ -1091,6 +1094,7 @@ def bvp_from_dict(data: Mapping[str, Any], folder: Path | str = ".") -> Boundary
                                    lambda: RegularisationSpec(**regularisation)),
             device=output.get("device"), shards=output.get("shards"),
             progress=output.get("progress", False), fields=output.get("fields", True),
+            points_csv=output.get("points_csv", False),
             name=data.get("name", "problem"), phases=phases, strength_reduction=reduction,
             adaptivity=adaptivity)
     except SpecError as exc:
