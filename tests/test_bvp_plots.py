@@ -15,7 +15,7 @@ def _labels(monkeypatch) -> list:
     """The figures plot_* would save, kept open for their labels."""
     figures: list = []
 
-    def keep(fig, path):
+    def keep(fig, path, **options):
         figures.append(fig)
         return path
 
