@@ -34,6 +34,24 @@ def _mm(value: Any) -> str:
     return f"{value * 1e3:.1f}"
 
 
+def _panels(table: pd.DataFrame, lengths: list[float], meshes: list[str]
+            ) -> tuple[Any, list[tuple[Any, str, float, pd.DataFrame]]]:
+    """A figure of one panel per internal length (rows) and mesh (columns), ticks off, and
+    each panel with its mesh, length and row of ``table`` (empty where that run is not)."""
+    fig, axes = plt.subplots(len(lengths), len(meshes), figsize=(2.3 * len(meshes),
+                                                                   3.9 * len(lengths)),
+                             squeeze=False)
+    panels = []
+    for i, length in enumerate(lengths):
+        for j, mesh in enumerate(meshes):
+            ax = axes[i, j]
+            ax.set_xticks([])
+            ax.set_yticks([])
+            line = table[(table["mesh"] == mesh) & (table["internal_length"] == length)]
+            panels.append((ax, mesh, length, line))
+    return fig, panels
+
+
 def specimen_figures(out: Path, rows: list[dict[str, Any]]) -> list[str]:
     """Stress ratio against axial strain per internal length; the shear strain of every
     mesh at the last step; band width against element size."""
@@ -57,27 +75,20 @@ def specimen_figures(out: Path, rows: list[dict[str, Any]]) -> list[str]:
     fig.savefig(out / "specimen_curves.png", dpi=110)
     plt.close(fig)
 
-    fig, axes = plt.subplots(len(lengths), len(meshes), figsize=(2.3 * len(meshes),
-                                                                   3.9 * len(lengths)),
-                             squeeze=False)
-    for i, length in enumerate(lengths):
-        for j, mesh in enumerate(meshes):
-            ax = axes[i, j]
-            line = table[(table["mesh"] == mesh) & (table["internal_length"] == length)]
-            ax.set_xticks([])
-            ax.set_yticks([])
-            if line.empty:
-                continue
-            points = read_points(out / line["folder"].iloc[0])
-            last = points[points["step"] == points["step"].max()]
-            ax.scatter(last["x"], last["y"], c=last["shear_strain"], s=4 if len(last) > 600
-                       else 12, cmap="inferno", marker="s", linewidths=0)
-            ax.set_aspect("equal")
-            row = line.iloc[0]
-            width = "no band found" if not row["band_count"] else (
-                f"w = {_mm(row['band_width'])} mm")
-            ax.set_title(f"{mesh}, {_label(length).split(',')[-1].strip()}\n{width}",
-                         fontsize=8)
+    fig, panels = _panels(table, lengths, meshes)
+    for ax, mesh, length, line in panels:
+        if line.empty:
+            continue
+        points = read_points(out / line["folder"].iloc[0])
+        last = points[points["step"] == points["step"].max()]
+        ax.scatter(last["x"], last["y"], c=last["shear_strain"], s=4 if len(last) > 600
+                   else 12, cmap="inferno", marker="s", linewidths=0)
+        ax.set_aspect("equal")
+        row = line.iloc[0]
+        width = "no band found" if not row["band_count"] else (
+            f"w = {_mm(row['band_width'])} mm")
+        ax.set_title(f"{mesh}, {_label(length).split(',')[-1].strip()}\n{width}",
+                     fontsize=8)
     fig.suptitle("shear strain γ at the last step", fontsize=10)
     fig.tight_layout()
     fig.savefig(out / "specimen_maps.png", dpi=110)
@@ -107,45 +118,38 @@ def specimen_figures(out: Path, rows: list[dict[str, Any]]) -> list[str]:
 
     from granular_material.results.active_bands import active_bands, incremental_points
 
-    fig, axes = plt.subplots(len(lengths), len(meshes), figsize=(2.3 * len(meshes),
-                                                                   3.9 * len(lengths)),
-                             squeeze=False)
-    for i, length in enumerate(lengths):
-        for j, mesh in enumerate(meshes):
-            ax = axes[i, j]
-            line = table[(table["mesh"] == mesh) & (table["internal_length"] == length)]
-            ax.set_xticks([])
-            ax.set_yticks([])
-            if line.empty:
-                ax.axis("off")
-                continue
-            points = read_points(out / line["folder"].iloc[0])
-            if points["step"].nunique() < 2:
-                continue
-            field = incremental_points(points)
-            ax.tricontourf(field["x"], field["y"], field["shear_strain"], levels=24,
-                           cmap="inferno")
-            low, high = field[["x", "y"]].min().to_numpy(), field[["x", "y"]].max().to_numpy()
-            for band in active_bands(points):
-                t = np.radians(band.inclination_deg)
-                along = np.array([np.cos(t), np.sin(t)])
-                normal = np.array([-np.sin(t), np.cos(t)])
-                centre = np.array([band.centre_x, band.centre_y])
-                for side in (-0.5, 0.0, 0.5):
-                    ends = centre + side * band.width * normal + np.outer([-1, 1], along)
-                    ax.plot(ends[:, 0], ends[:, 1], "-" if side == 0 else "--", color="c",
-                            lw=0.8)
-            ax.set_xlim(low[0], high[0])
-            ax.set_ylim(low[1], high[1])
-            ax.set_aspect("equal")
-            row = line.iloc[0]
-            window = row["active_window"]
-            width = "no band found" if not row["active_band_count"] else (
-                f"w = {_mm(row['active_band_width'])} mm")
-            span = (f"{100 * window[0]:.1f}–{100 * window[1]:.1f} %"
-                    if len(window) == 2 else "")
-            ax.set_title(f"{mesh}, {_label(length).split(',')[-1].strip()}\n{span}: {width}",
-                         fontsize=8)
+    fig, panels = _panels(table, lengths, meshes)
+    for ax, mesh, length, line in panels:
+        if line.empty:
+            ax.axis("off")
+            continue
+        points = read_points(out / line["folder"].iloc[0])
+        if points["step"].nunique() < 2:
+            continue
+        field = incremental_points(points)
+        ax.tricontourf(field["x"], field["y"], field["shear_strain"], levels=24,
+                       cmap="inferno")
+        low, high = field[["x", "y"]].min().to_numpy(), field[["x", "y"]].max().to_numpy()
+        for band in active_bands(points):
+            t = np.radians(band.inclination_deg)
+            along = np.array([np.cos(t), np.sin(t)])
+            normal = np.array([-np.sin(t), np.cos(t)])
+            centre = np.array([band.centre_x, band.centre_y])
+            for side in (-0.5, 0.0, 0.5):
+                ends = centre + side * band.width * normal + np.outer([-1, 1], along)
+                ax.plot(ends[:, 0], ends[:, 1], "-" if side == 0 else "--", color="c",
+                        lw=0.8)
+        ax.set_xlim(low[0], high[0])
+        ax.set_ylim(low[1], high[1])
+        ax.set_aspect("equal")
+        row = line.iloc[0]
+        window = row["active_window"]
+        width = "no band found" if not row["active_band_count"] else (
+            f"w = {_mm(row['active_band_width'])} mm")
+        span = (f"{100 * window[0]:.1f}–{100 * window[1]:.1f} %"
+                if len(window) == 2 else "")
+        ax.set_title(f"{mesh}, {_label(length).split(',')[-1].strip()}\n{span}: {width}",
+                     fontsize=8)
     fig.suptitle("shear strain of the increment over the last fifth of the axial strain;\n"
                  "the fitted bands' axes (solid) and half widths (dashed)", fontsize=9)
     fig.tight_layout(rect=(0, 0, 1, 0.97))
