@@ -181,7 +181,7 @@ def specimen_row(folder: Path, summary: dict[str, Any]) -> dict[str, Any]:
     steps = pd.read_csv(folder / "steps.csv")
     strain = steps["axial_strain"].to_numpy(dtype=float)
     ratio = steps["stress_ratio"].to_numpy(dtype=float)
-    points = pd.read_csv(folder / "points.csv")
+    points = read_points(folder)
     bands = bands_of(folder, points=points)
     widest = max(bands, key=lambda b: b["strength"]) if bands else None
     return {
