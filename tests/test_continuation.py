@@ -278,6 +278,8 @@ def test_a_strength_reduction_stopped_part_way_resumes_to_the_one_never_stopped(
         tmp_path, monkeypatch) -> None:
     from test_bvp_resume import _tables
 
+    from granular_material.runs import checkpoint
+
     whole = run_boundary_value(_scene(), out=tmp_path / "whole")
     original = NewtonSolver.arc_step
 
@@ -288,6 +290,7 @@ def test_a_strength_reduction_stopped_part_way_resumes_to_the_one_never_stopped(
 
     with monkeypatch.context() as m:
         m.setattr(NewtonSolver, "arc_step", step_or_stop)
+        m.setattr(checkpoint, "SAVE_FLOOR_SECONDS", 0.0)  # a save at every step it can
         stopped = run_boundary_value(_scene(), out=tmp_path / "run")
     assert "interrupted" in stopped.error
     resumed = run_boundary_value(_scene(), out=tmp_path / "run", resume=True)

@@ -606,7 +606,8 @@ class AdaptiveMaterial(ScikitFemInterface):
         with tempfile.TemporaryDirectory(prefix="adaptive-") as folder:
             def unpack(name: str) -> Path:
                 own = Path(folder) / f"{name}.npz"
-                own.write_bytes(blobs[name].tobytes())
+                data = blobs[name].tobytes()
+                write_whole(own, lambda tmp: tmp.write_bytes(data))
                 return own
 
             self.twin.restore(unpack("twin"))

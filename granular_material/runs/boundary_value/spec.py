@@ -582,8 +582,8 @@ class AdaptivitySpec:
         if self.calibration is not None and self.elastic_window != TWIN_ELASTIC_WINDOW:
             raise SpecError("adaptivity.elastic_window", "reads the calibration the run makes; "
                                                          "with a calibration file it would do "
-                                                         "nothing (calibrate it with "
-                                                         "--elastic-window instead)")
+                                                         "nothing (give the window to the "
+                                                         "calibration that writes the file)")
         if self.switch not in SWITCHES:
             raise SpecError("adaptivity.switch", f"must be one of {', '.join(SWITCHES)}, got "
                                                  f"{self.switch!r}")
