@@ -874,7 +874,7 @@ def _adaptivity_summary(b: Built) -> dict[str, Any]:
         "dem_points_final": int(m.dem_points), "gauss_points": int(m.n_points),
         "missed_points": m.missed.tolist(),
         "switches": [{"after_commit": s.commit, "points": int(s.points.size),
-                      "missed": int(s.missed.size), "lifted": s.lifted,
+                      "missed": int(s.missed.size), "lifted": s.lifted, "capped": s.capped,
                       "particle_steps": s.particle_steps, "seconds": round(s.seconds, 3),
                       "largest_error": s.error} for s in m.switches],
     }
