@@ -152,8 +152,12 @@ def measure(folder: Path, scene: str, reference: pd.DataFrame | None) -> dict[st
         row["error_by_step"] = [None, *error[1:].tolist()]
         row["peak_step"] = peak
         row["largest_error_to_peak"] = float(np.abs(error[1:peak + 1]).max())
-        row["largest_error_after_peak"] = (float(np.abs(error[peak + 1:n]).max())
-                                           if n > peak + 1 else None)
+        row["largest_error_step"] = int(np.argmax(np.abs(error[1:peak + 1]))) + 1
+        row["median_error_to_peak"] = float(np.median(np.abs(error[1:peak + 1])))
+        after = np.abs(error[peak + 1:n])
+        row["largest_error_after_peak"] = float(after.max()) if after.size else None
+        row["median_error_after_peak"] = float(np.median(after)) if after.size else None
+        row["dem_points_at_peak"] = int(row["dem_points"][min(peak, len(load) - 1)])
         total_ref = int(reference["particle_steps"][:n].sum())
         row["cost_ratio"] = (row["particle_steps"] + switching) / max(total_ref, 1)
     return row
@@ -209,17 +213,23 @@ def report(out: Path, results: dict[str, dict[str, Any]], commit: str) -> None:
                   f"{STUDIED[scene]['unit'] * ref['load'][peak]:.1f} "
                   f"{STUDIED[scene]['label'].split('[')[1].rstrip(']')}); "
                   f"its particle-steps {ref['particle_steps']:.3g}.", "",
-                  "| run | steps | largest error to the peak | after it | DEM points at the "
-                  "end | particle-steps / all-DEM (switches) | load steps [s] |",
+                  "| run | steps | error to the peak: largest (at) / median | after it: "
+                  "largest / median | DEM points at the peak / end | particle-steps / all-DEM "
+                  "(switches) | load steps [s] |",
                   "|---|---|---|---|---|---|---|"]
         for variant, row in rows.items():
             switch = row["switch_particle_steps"] / max(ref["particle_steps"], 1)
             stopped = f" ({row['error'][:40]})" if row["error"] else ""
+            at = 1e3 * ref["displacement"][row.get("largest_error_step", 0)]
             lines.append(
                 f"| {variant} | {row['steps']}{stopped}"
-                f" | {_pct(row.get('largest_error_to_peak'))} | "
-                f"{_pct(row.get('largest_error_after_peak'))} | {row['dem_points'][-1]} of "
-                f"{row['gauss_points']} | {row.get('cost_ratio', 1.0):.3f} ({switch:.3f}) | "
+                f" | {_pct(row.get('largest_error_to_peak'))} ({at:.2f} mm) / "
+                f"{_pct(row.get('median_error_to_peak'))} | "
+                f"{_pct(row.get('largest_error_after_peak'))} / "
+                f"{_pct(row.get('median_error_after_peak'))} | "
+                f"{row.get('dem_points_at_peak', row['dem_points'][-1])} / "
+                f"{row['dem_points'][-1]} of {row['gauss_points']} | "
+                f"{row.get('cost_ratio', 1.0):.3f} ({switch:.3f}) | "
                 f"{row['load_steps_s']:.0f} |")
         lines.append("")
     (out / "report.md").write_text("\n".join(lines) + "\n", encoding="utf-8")
