@@ -336,3 +336,21 @@ def test_a_stopped_adaptive_run_resumes_to_the_run_that_never_stopped(tmp_path, 
     for a, b in zip(_tables(tmp_path / "whole"), _tables(tmp_path / "run"), strict=True):
         pd.testing.assert_frame_equal(a, b, check_exact=True)
     np.testing.assert_array_equal(whole.u, resumed.u)
+
+
+def test_a_point_whose_rve_cannot_be_driven_stays_on_the_twin():
+    twin = MohrCoulomb(young=60e6, poisson=0.3, friction_angle=PEAK, initial_stress=-100e3)
+    capped = DEMMaterialParameters(device="cpu", shards=1, confining=100e3, max_dem_steps=1)
+    material = AdaptiveMaterial(twin, PEAK, capped, load_rve(SOURCE),
+                                SwitchCriterion(0.7, neighbours="point"), start="strain")
+    material.allocate(3)
+    scale = np.array([0.5, 1.0, 1.5])
+    with pytest.warns(UserWarning, match="stay on the twin"):
+        for _ in range(12):
+            response = material.evaluate(_biaxial(scale))
+            assert response.ok
+            material.commit()
+            if material.missed.size:
+                break
+    assert material.missed.size and not material.dem_points
+    assert material.switches[-1].particle_steps == 0  # nothing was stepped: capped at once

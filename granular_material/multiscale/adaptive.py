@@ -494,7 +494,8 @@ class AdaptiveMaterial(ScikitFemInterface):
             if response.ok:
                 material.commit()
                 return material, reached, work, 0.0, 0, 0
-            reached[kept[response.failed_points()]] = False
+            causes = response.failure_causes()  # not those its batch's failure sent back
+            reached[kept[causes if causes.size else response.failed_points()]] = False
         return None, reached, work, 0.0, 0, 0
 
     def _source_pressure(self) -> float:
