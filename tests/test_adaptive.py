@@ -311,6 +311,8 @@ def test_an_adaptive_footing_reports_its_dem_points(tmp_path):
     assert last.loc[last["dem"] == 1, "void_ratio"].notna().all()
     assert last.loc[last["dem"] == 0, "void_ratio"].isna().all()
     assert last.loc[last["dem"] == 0, "plastic_shear_strain"].notna().all()
+    fields = (tmp_path / "run" / "fields.xdmf").read_text()
+    assert 'Name="dem"' in fields  # ParaView shows each element's model (its DEM share)
     summary = outcome.summary["adaptivity"]
     assert summary["dem_points_final"] == steps["dem_points"].iloc[-1]
     assert sum(s["points"] for s in summary["switches"]) == summary["dem_points_final"]

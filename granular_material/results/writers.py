@@ -61,7 +61,7 @@ __all__ = ["BiaxialWriter", "FieldWriter", "append_csv", "format_rows", "read_po
 _CELL_FIELDS = ("sxx", "syy", "sxy", "exx", "eyy", "exy", "volumetric_strain",
                 "shear_strain", "rotation", "mean_pressure", "unconfined", "failed",
                 "void_ratio", "coordination", "stress_zz", "plastic_shear_strain",
-                "friction_angle", "return_region")
+                "friction_angle", "return_region", "dem")
 
 
 #: a :class:`BiaxialWriter` flushes its growing tables to the disk once this many seconds
