@@ -43,7 +43,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 import pandas as pd
 
-from granular_material.results.bands import _Line, _normal, _strongest_line
+from granular_material.results.bands import _Line, _normal, _strongest_line, step_points
 
 __all__ = ["FWHM_PER_SIGMA", "INCREMENT_SHARE", "MAX_RIDGES", "MIN_RUN", "MIN_SHARE", "FittedBand",
            "active_bands", "fit_bands", "incremental_points", "start_step"]
@@ -323,17 +323,9 @@ def fit_bands(points: pd.DataFrame, step: int | None = None, max_bands: int = MA
         raise ValueError(f"max_bands must be at least 1, got {max_bands!r}")
     if not 0.0 < share < 1.0:
         raise ValueError(f"share must be in (0, 1), got {share!r}")
-    missing = {"step", "axial_strain", "x", "y", "shear_strain"} - set(points.columns)
-    if missing:
-        raise ValueError(f"points table lacks columns {sorted(missing)}")
-    step = int(points["step"].max()) if step is None else int(step)
-    at = points[points["step"] == step]
-    if at.empty:
-        raise ValueError(f"points table has no step {step}")
+    step, _, at = step_points(points, step)
     xy = at[["x", "y"]].to_numpy(dtype=float)
     gamma = at["shear_strain"].to_numpy(dtype=float)
-    if not np.isfinite(gamma).all():
-        raise ValueError(f"shear strain at step {step} is not finite")
     extent = xy.max(axis=0) - xy.min(axis=0) if len(xy) else np.zeros(2)
     if gamma.size < 8 or extent.min() <= 0:
         return []

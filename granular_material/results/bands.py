@@ -56,7 +56,7 @@ import pandas as pd
 from scipy.ndimage import gaussian_filter1d
 
 __all__ = ["MAX_BANDS", "MIN_ASPECT", "MIN_CONTRAST", "MIN_STRENGTH", "Band", "band_width",
-           "find_bands"]
+           "find_bands", "step_points"]
 
 #: the most bands :func:`find_bands` looks for by default
 MAX_BANDS = 4
@@ -288,7 +288,10 @@ def _refined(line: _Line, xy: np.ndarray, excess: np.ndarray, others: list[_Line
     return line
 
 
-def _step_points(points: pd.DataFrame, step: int | None) -> tuple[int, float, pd.DataFrame]:
+def step_points(points: pd.DataFrame, step: int | None) -> tuple[int, float, pd.DataFrame]:
+    """The step (None: the last), its axial strain [-] and its rows of a Gauss-point table;
+    ValueError for a table without the columns a band search reads, without that step, or
+    whose shear strain there is not finite."""
     missing = {"step", "axial_strain", "x", "y", "shear_strain"} - set(points.columns)
     if missing:
         raise ValueError(f"points table lacks columns {sorted(missing)}")
@@ -315,7 +318,7 @@ def find_bands(points: pd.DataFrame, step: int | None = None, max_bands: int = M
     """
     if max_bands < 1:
         raise ValueError(f"max_bands must be at least 1, got {max_bands!r}")
-    step, strain, at = _step_points(points, step)
+    step, strain, at = step_points(points, step)
     xy = at[["x", "y"]].to_numpy(dtype=float)
     gamma = at["shear_strain"].to_numpy(dtype=float)
     extent = xy.max(axis=0) - xy.min(axis=0) if len(xy) else np.zeros(2)
