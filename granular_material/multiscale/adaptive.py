@@ -7,31 +7,38 @@ scene's own RVE (the Mohr–Coulomb material of :func:`twin_from_rve`:
 :func:`~granular_material.procedures.calibration.calibrate_mohr_coulomb` at the scene's
 pressure), and move one by one to a DEM RVE of their own:
 
-- **When.** After every committed step, each point still on the twin is tested by its
-  :class:`SwitchCriterion` on the committed state: its mobilised friction angle
-  φ_mob = asin((σ1 − σ3)/(σ1 + σ3)) (compression positive) against a fraction of the twin's
-  peak friction angle, and/or its accumulated shear strain
+- **When.** A point still on the twin is tested by its :class:`SwitchCriterion`: its
+  mobilised friction angle φ_mob = asin((σ1 − σ3)/(σ1 + σ3)) (compression positive) against
+  a fraction of the twin's peak friction angle, and/or its accumulated shear strain
   γ = √((εxx − εyy)² + (2εxy)²) (of the total ∇u since the start, small-strain) against a
-  threshold. With ``neighbours = "element"`` every point of an element that holds a
-  switching point switches with it.
-- **How.** The switching points' RVEs are copies of the scene's source RVE (the packing
-  every point would hold in an all-DEM run, in its start state), each brought by the
-  anisotropic stress servo
+  threshold. By default (``in_step``) the test is made on every evaluation's twin answer: a
+  point that passes it during a load step is DEM for that whole step, its RVE made from its
+  state at the step's start, and the evaluation answers it by its RVE already; otherwise it
+  is made on the committed state after each step, and the point is DEM from the next step
+  on. With ``neighbours = "element"`` every point of an element that holds a switching
+  point switches with it. A point that has switched stays DEM.
+- **How** (``start``). Each switching point's RVE is a copy of the scene's source RVE (the
+  packing every point would hold in an all-DEM run, in its start state). ``"strain"``
+  drives the copies through their points' whole deformation F so far in one DEM drive (the
+  constant velocity gradient log F) and commits them: each RVE has its point's strain, its
+  stress is the DEM's own. ``"stress"`` brings them by the anisotropic stress servo
   (:func:`~granular_material.procedures.anisotropic.bring_to_stress`, every component within
-  1 % of the target's scale, the shear included) to its point's committed twin stress; a
-  target whose least principal compression is under the lowest an RVE is prepared to
+  1 % of the target's scale, the shear included) to their points' committed twin stresses:
+  a target whose least principal compression is under the lowest an RVE is prepared to
   (:func:`~granular_material.procedures.anisotropic.lowest_target_pressure`) is lifted to it
-  by an isotropic compression (its deviator kept). Those RVEs form a *cohort*, a
-  :class:`~granular_material.multiscale.material.DEMMaterial` of their own, and carry on
-  from there: the next evaluation drives them by the point's ∇u. A point that has switched
-  stays DEM. A point whose RVE the servo did not bring to its target stays on the twin for
-  good (said in a warning and in :attr:`AdaptiveMaterial.missed`).
+  by an isotropic compression (its deviator kept), one past :data:`TARGET_FRICTION` of the
+  peak is capped there. The RVEs of one switch form a *cohort*, a
+  :class:`~granular_material.multiscale.material.DEMMaterial` of their own, driven from then
+  on by their points' ∇u. A point whose RVE fails to be made (the drive fails, the servo
+  breaks it or misses its target) stays on the twin for good (a warning, and
+  :attr:`AdaptiveMaterial.missed`).
 - **What is answered.** Twin points: the twin's stress, tangent and fields; DEM points: their
   cohort's. Each field either model reports is NaN where the other model answers; the
   field ``dem`` is 1 at DEM points, 0 on the twin. Costs are summed (``particle_steps`` is
-  the cohorts' DEM work), and ``switch_particle_steps`` is the servo's work of the switches
-  (reported once, by the first evaluation after them). The twin is not moved at DEM points
-  (they are given ∇u = 0): it keeps the state the point switched from.
+  the cohorts' DEM work), and ``switch_particle_steps`` is the work of making the switched
+  RVEs (reported once, by the evaluation that made them or, after a step, the next one).
+  The twin is not moved at DEM points (they are given ∇u = 0): it keeps the state the point
+  switched from.
 
 The material is noisy when it may hold DEM points (always: the Newton defaults of the DEM
 material apply, so that an adaptive run and an all-DEM run are solved alike).
@@ -400,8 +407,9 @@ class AdaptiveMaterial(ScikitFemInterface):
         return response
 
     def commit(self) -> None:
-        """Commit the twin and every cohort, then switch the points that now meet the
-        criterion (their RVEs brought to their committed stresses)."""
+        """Commit the twin and every cohort (and each point's deformation and stress); with
+        ``in_step`` False, then switch the points whose committed state meets the
+        criterion."""
         self.twin.commit()
         for cohort in self._cohorts:
             cohort.material.commit()
