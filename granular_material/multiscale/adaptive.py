@@ -59,6 +59,9 @@ import numpy as np
 
 from granular_material.dem import DEMInstabilityError, RVEData, load_rve, save_rve
 from granular_material.errors import ParameterError
+from granular_material.fem.boundary_value.continuum_start import cap_friction
+from granular_material.fem.boundary_value.continuum_start import mobilised_friction as friction_of
+from granular_material.fem.boundary_value.ground import lift_to_floor
 from granular_material.fem.materials.checks import (
     CHECKPOINT_NAME_KEY,
     check_grad,
@@ -72,10 +75,11 @@ from granular_material.fem.materials.protocol import (
 from granular_material.filesafe import write_whole
 from granular_material.multiscale.material import DEMMaterial
 from granular_material.multiscale.parameters import DEMMaterialParameters
+from granular_material.multiscale.preparation import SERVO_TOLERANCES
 from granular_material.reference_values import TWIN_ELASTIC_WINDOW
 
 __all__ = ["NEIGHBOURS", "STARTS", "TARGET_FRICTION", "AdaptiveMaterial", "SwitchCriterion",
-           "SwitchRecord", "cap_friction", "mobilised_friction", "twin_from_calibration",
+           "SwitchRecord", "mobilised_friction", "twin_from_calibration",
            "twin_from_rve"]
 
 #: which points switch with a point that meets the criterion: itself, or its element's
@@ -84,10 +88,6 @@ NEIGHBOURS = ("point", "element")
 #: accumulated deformation ("strain"), or brought by the stress servo to the point's twin
 #: stress ("stress")
 STARTS = ("strain", "stress")
-#: how near its target the servo brings a switching RVE (the fractions of
-#: :func:`~granular_material.procedures.servo.servo_to_stress`: every component within 1 %
-#: of the target's scale, the shear included), as for a DEM material's initial stress
-SERVO_TOLERANCE = 0.01
 #: the largest mobilised friction a switching RVE is brought to, as a fraction of the twin's
 #: peak friction angle: a twin point at (or near) its peak asks the servo for the RVE's own
 #: strength, which it reaches only by shearing on and on (on the reduced footing an RVE
@@ -150,33 +150,15 @@ class SwitchCriterion:
 
 
 def mobilised_friction(stress: np.ndarray) -> np.ndarray:
-    """φ_mob [deg] of each in-plane stress [Pa] (n, 2, 2), tension positive:
-    asin((σ1 − σ3)/(σ1 + σ3)) of the principal compressions; 90° where the least principal
-    compression is ≤ 0 (at or past a cohesionless material's apex), 0 where both are."""
+    """φ_mob [deg] of each in-plane stress [Pa] (n, 2, 2), tension positive, as the
+    continuum start reads it (``fem.boundary_value.continuum_start``: asin((σ1 − σ3)/(σ1 +
+    σ3)) of the principal compressions, 90° past a cohesionless material's apex), but 0
+    where neither principal stress is compressive: a point that carries nothing has nothing
+    mobilised, and its RVE would be a gas."""
     s = np.asarray(stress, dtype=np.float64)
-    principal = -np.linalg.eigvalsh(0.5 * (s + np.swapaxes(s, 1, 2)))  # σ1 >= σ3, compression
-    major, minor = principal[:, 0], principal[:, 1]
-    total = major + minor
-    with np.errstate(divide="ignore", invalid="ignore"):
-        ratio = np.where(total > 0, (major - minor) / total, 0.0)
-    phi = np.degrees(np.arcsin(np.clip(ratio, 0.0, 1.0)))
-    return np.where((minor <= 0) & (major > 0), 90.0, phi)
-
-
-def cap_friction(stress: np.ndarray, limit: float) -> tuple[np.ndarray, np.ndarray]:
-    """The stresses [Pa] (n, 2, 2), tension positive, whose mobilised friction exceeds
-    ``limit`` [deg] with their deviator scaled down to it (mean stress and principal
-    directions kept), and the mask (n,) of those changed."""
-    s = np.asarray(stress, dtype=np.float64)
-    phi = mobilised_friction(s)
-    over = phi > limit
-    out = s.copy()
-    if over.any():
-        mean = 0.5 * np.trace(s[over], axis1=1, axis2=2)
-        deviator = s[over] - mean[:, None, None] * np.eye(2)
-        factor = np.sin(np.radians(limit)) / np.sin(np.radians(phi[over]))
-        out[over] = mean[:, None, None] * np.eye(2) + factor[:, None, None] * deviator
-    return out, over
+    s = 0.5 * (s + np.swapaxes(s, 1, 2))
+    uncompressed = (np.trace(s, axis1=1, axis2=2) >= 0) & (np.linalg.det(s) >= 0)
+    return np.where(uncompressed, 0.0, friction_of(s))
 
 
 def twin_from_rve(source: RVEData, pressure: float, initial_stress: np.ndarray,
@@ -302,11 +284,12 @@ class AdaptiveMaterial(ScikitFemInterface):
         self._committed_stress = np.zeros((0, 2, 2))
         self._increment: np.ndarray | None = None
         self.progress = progress
+        self._measured: MaterialResponse | None = None
         self._cohorts: list[_Cohort] = []
         self._is_dem = np.zeros(0, dtype=bool)
         self._missed = np.zeros(0, dtype=bool)
         self._last: MaterialResponse | None = None
-        self._dem_fields = self._fields_of_dem()
+        self._dem_fields = tuple(self._source_response().fields)
         self._pending_steps = 0
         self._commits = 0
         #: every switch so far, in order (:class:`SwitchRecord`)
@@ -314,11 +297,13 @@ class AdaptiveMaterial(ScikitFemInterface):
         #: how the twin was made (a calibration's parameters and pressure), where known
         self.calibration: dict[str, Any] | None = None
 
-    def _fields_of_dem(self) -> tuple[str, ...]:
-        """The fields a DEM cohort reports (measured on the source: no step)."""
-        from granular_material.multiscale.responses import measured_response
+    def _source_response(self) -> MaterialResponse:
+        """The source RVE's response as it is (measured once: no step)."""
+        if self._measured is None:
+            from granular_material.multiscale.responses import measured_response
 
-        return tuple(measured_response(self.source, self.dem.device, 1).fields)
+            self._measured = measured_response(self.source, self.dem.device, 1)
+        return self._measured
 
     # -- what it holds ---------------------------------------------------------------------
     @property
@@ -491,7 +476,8 @@ class AdaptiveMaterial(ScikitFemInterface):
         target lifted or capped."""
         reached = np.ones(points.size, dtype=bool)
         work = 0
-        pressure = np.full(points.size, self._source_pressure())
+        source = self._source_response().stress[0]
+        pressure = np.full(points.size, -0.5 * float(np.trace(source)))
         grad = self._deformation[points] - np.eye(2)
         while reached.any():
             kept = np.flatnonzero(reached)
@@ -505,13 +491,6 @@ class AdaptiveMaterial(ScikitFemInterface):
             causes = response.failure_causes()  # not those its batch's failure sent back
             reached[kept[causes if causes.size else response.failed_points()]] = False
         return None, reached, work, 0.0, 0, 0
-
-    def _source_pressure(self) -> float:
-        """The source RVE's mean pressure [Pa], compression positive."""
-        from granular_material.multiscale.responses import measured_response
-
-        stress = measured_response(self.source, self.dem.device, 1).stress[0]
-        return float(-0.5 * np.trace(stress))
 
     def _by_stress(self, points: np.ndarray, stress: np.ndarray
                    ) -> tuple[DEMMaterial | None, np.ndarray, int, float, int, int]:
@@ -531,9 +510,7 @@ class AdaptiveMaterial(ScikitFemInterface):
         radius = self.source.radius
         lowest = lowest_target_pressure(PackingParameters(
             meta=self.source.meta, radius_range=(float(radius.min()), float(radius.max()))))
-        least = -np.linalg.eigvalsh(target)[:, 1]
-        lift = np.maximum(lowest - least, 0.0)
-        target = target - lift[:, None, None] * np.eye(2)
+        target, lifted = lift_to_floor(target, lowest)
         target, capped = cap_friction(target, TARGET_FRICTION * self.peak_friction)
         reached = np.zeros(points.size, dtype=bool)
         trying = np.arange(points.size)
@@ -544,8 +521,7 @@ class AdaptiveMaterial(ScikitFemInterface):
                                               target[trying], device=self.dem.device,
                                               shards=self.dem.shards, strict=False,
                                               progress=self.progress,
-                                              tolerance=SERVO_TOLERANCE,
-                                              shear_tolerance=SERVO_TOLERANCE)
+                                              **SERVO_TOLERANCES)
             except DEMInstabilityError as exc:
                 broken = np.zeros(trying.size, dtype=bool)
                 broken[np.asarray(exc.rve, dtype=int)] = True
@@ -561,9 +537,8 @@ class AdaptiveMaterial(ScikitFemInterface):
             material = DEMMaterial.holding(data.take(np.flatnonzero(done)), self.dem,
                                            pressure)
             error = float(np.asarray(servo.error)[done].max())
-            return (material, reached, work, error, int((lift > 0).sum()),
-                    int(capped.sum()))
-        return None, reached, work, 0.0, int((lift > 0).sum()), int(capped.sum())
+            return material, reached, work, error, lifted.size, capped.size
+        return None, reached, work, 0.0, lifted.size, capped.size
 
     # -- checkpoints -------------------------------------------------------------------------
     def checkpoint(self, path: str | Path) -> None:
@@ -621,6 +596,7 @@ class AdaptiveMaterial(ScikitFemInterface):
 
             self.twin.restore(unpack("twin"))
             self.source = load_rve(unpack("source"))
+            self._measured = None
             cohorts = []
             for k in range(count):
                 material = DEMMaterial(self.dem)

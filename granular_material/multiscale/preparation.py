@@ -31,9 +31,10 @@ from granular_material.procedures.servo import StressServoResult, stress_scale
 #: on footing-geostatic.toml (128 points, 64 discs): at 2 % the mesh's initial residual was
 #: 106 N/m, above Newton's tolerance of 98 N/m; at 1 %, 53 N/m; at 0.5 %, 26 N/m; the
 #: preparation took 2.6-3.5 s at each
-_SERVO = {"tolerance": 0.01, "shear_tolerance": 0.01}
+SERVO_TOLERANCES = {"tolerance": 0.01, "shear_tolerance": 0.01}
 
-__all__ = ["StressPreparation", "initial_rves", "prepare_rves", "rves_at_stress"]
+__all__ = ["SERVO_TOLERANCES", "StressPreparation", "initial_rves", "prepare_rves",
+           "rves_at_stress"]
 
 
 def initial_rves(parameters: DEMMaterialParameters, n_points: int,
@@ -165,7 +166,7 @@ def rves_at_stress(parameters: DEMMaterialParameters, n_points: int,
             raise ValueError(f"rve file {p.rve} holds {source.n_rve} RVEs; {n_points} Gauss "
                              f"points need 1 (replicated) or {n_points}")
         data, servo = bring_to_stress(source, group_target, device=p.device, shards=p.shards,
-                                      strict=False, progress=progress, **_SERVO)
+                                      strict=False, progress=progress, **SERVO_TOLERANCES)
     elif p.replicate:
         one = np.mean(start_pressure(group_target))
         data, _ = prepare_to_stress(-one * np.eye(2)[None], p.discs, p.seed, p.packing,
@@ -173,11 +174,11 @@ def rves_at_stress(parameters: DEMMaterialParameters, n_points: int,
         packings = 1
         data, servo = bring_to_stress(data.replicate(n_groups), group_target, device=p.device,
                                       shards=p.shards, strict=False, progress=progress,
-                                      **_SERVO)
+                                      **SERVO_TOLERANCES)
     else:
         data, servo = prepare_to_stress(group_target, p.discs, p.seed, p.packing,
                                         device=p.device, shards=p.shards, strict=False,
-                                        progress=progress, **_SERVO)
+                                        progress=progress, **SERVO_TOLERANCES)
         packings = n_groups
     missed = np.flatnonzero(~servo.reached[labels])
     if missed.size:
