@@ -108,3 +108,22 @@ def test_an_interrupted_row_is_not_done_and_continues_where_it_stopped(tmp_path,
     assert summary is not None and summary["error"] is None and summary["steps"] == 3
     assert summary["resumed_from_step"] is not None
     assert list(footing_table(rows, tmp_path, B_HALF)["steps"]) == [3]
+
+
+def test_the_adaptivity_row_runs_the_scene_with_its_table(tmp_path):
+    from granular_material.studies.footing_rows import (
+        FOOTING_SCALES,
+        _scene_of,
+        footing_table,
+        run_footing_rows,
+    )
+
+    row = next(r for r in footing_rows() if r.knob == "adaptivity")
+    assert "adaptivity" in _scene_of(row, FOOTING_SCALES["smoke"])
+    assert "adaptivity" not in _scene_of(footing_rows()[0], FOOTING_SCALES["smoke"])
+    run_footing_rows([row], FOOTING_SCALES["smoke"], tmp_path)
+    steps = pd.read_csv(tmp_path / "footing" / row.key / "steps.csv")
+    # every point starts on the twin: the first steps do not cost the whole mesh's DEM work
+    assert steps["dem_points"].iloc[0] == 0 and "switch_particle_steps" in steps
+    table = footing_table([row], tmp_path, B_HALF)
+    assert list(table["steps"]) == [3] and table["particle_steps"].iloc[0] >= 0

@@ -78,14 +78,16 @@ FOOTING_SCALES = {"smoke": FootingScale("smoke", steps=3, discs=16, elements=(4,
 @dataclass(frozen=True)
 class FootingRow:
     """One variant of the footing scene: its knob and value, the changes to the scene's
-    ``[material.parameters]`` and ``[newton]`` tables, and another material (name and
-    parameters) where it has one."""
+    ``[material.parameters]`` and ``[newton]`` tables, another material (name and
+    parameters) where it has one, and an ``[adaptivity]`` table where it has one (the
+    twin where the soil has not yielded, DEM where it has)."""
 
     knob: str
     value: str
     parameters: dict[str, Any] = field(default_factory=dict)
     newton: dict[str, Any] = field(default_factory=dict)
     material: tuple[str, dict[str, Any]] | None = None
+    adaptivity: dict[str, Any] | None = None
 
     @property
     def key(self) -> str:
@@ -98,7 +100,8 @@ def footing_rows() -> list[FootingRow]:
     """The knobs' rows: the scene as written (the reference), another packing (the scatter
     between RVEs), the force test and the force test with reuse (what issue 44 measured),
     the band rows' knobs (the RVEs' drive continued, a coarser strain per DEM step, no
-    relaxation, a looser displacement test) and the Mohr–Coulomb twin."""
+    relaxation, a looser displacement test), the Mohr–Coulomb twin, and adaptivity with its
+    defaults (the twin calibrated from the scene's RVE, DEM where it is no longer trusted)."""
     return [FootingRow("reference", "scene"),
             FootingRow("seed", "2", {"seed": 2}),
             FootingRow("convergence", "force", newton={"convergence": "force"}),
@@ -110,7 +113,8 @@ def footing_rows() -> list[FootingRow]:
             FootingRow("convergence", "residual-displacement 3e-2", newton={"rtol": 3e-2}),
             FootingRow("material", "mohr-coulomb twin",
                        material=("mohr-coulomb", dict(MOHR_COULOMB_TWIN)),
-                       newton={"formulation": "small-strain"})]
+                       newton={"formulation": "small-strain"}),
+            FootingRow("adaptivity", "defaults", adaptivity={})]
 
 
 def preset_footing_row(name: str, settings: dict[str, Any]) -> FootingRow | None:
@@ -178,6 +182,8 @@ def _scene_of(row: FootingRow, scale: FootingScale) -> dict[str, Any]:
     else:
         data["material"].setdefault("parameters", {}).update(row.parameters)
     data.setdefault("newton", {}).update(row.newton)
+    if row.adaptivity is not None:
+        data["adaptivity"] = dict(row.adaptivity)
     data.setdefault("output", {}).update(progress=False, fields=False)
     return data
 
