@@ -15,6 +15,12 @@ Each scene of examples/scenes runs once per variant:
   twin's E and ν read as calibrate reads them) and ``f=0.7, stress`` (the RVE brought by
   the servo to the twin's stress).
 
+``--scenes footing-full`` runs Guo & Zhao's footing at their size (``footing-gz2016.toml``:
+7500 RVEs of 400 discs, an hour or more on a 2-core CPU) with the defaults only, against the
+all-DEM run committed in docs/validation/footing-cost (``full_steps.csv``), which it does not
+run again; a stopped run continues with ``--resume`` when the study is run again, and an
+unfinished one is measured over the steps it has.
+
 It reports every run's load at each step against the reference's (the error at every step
 up to the reference's peak and after it), the DEM points over the run, the particle-steps
 (the switches' own included) and the wall time, in ``results.json``, ``report.md`` and
@@ -44,6 +50,8 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 
+from granular_material.runs.run_folder import ended_summary, resumable
+
 ROOT = Path(__file__).resolve().parents[1]
 SCENES = ROOT / "examples" / "scenes"
 #: each scene: its file, its load and displacement columns, the load's scale (the bearing
@@ -60,6 +68,11 @@ STUDIED = {
     "wall-active": {"scene": "retaining-wall-gz2016-active-cpu.toml", "force": "wall_force_x",
                     "displacement": "wall_displacement", "scale": 1.0,
                     "label": "wall force [kN/m]", "unit": 1e-3, "peak": False},
+    "footing-full": {"scene": "footing-gz2016.toml", "force": "footing_force_y",
+                     "displacement": "footing_settlement", "scale": -1.0 / 0.05,
+                     "label": "q [kPa]", "unit": 1e-3, "window_mm": (1.0, 5.0),
+                     "reference": ROOT / "docs" / "validation" / "footing-cost"
+                     / "full_steps.csv"},
 }
 #: the variants: their [adaptivity] table (None: all-DEM)
 VARIANTS: dict[str, dict[str, Any] | None] = {
@@ -77,6 +90,9 @@ VARIANTS: dict[str, dict[str, Any] | None] = {
 PLAN = {"footing": list(VARIANTS),
         "wall-passive": ["all-DEM", "f=0.7", "f=0.9"],
         "wall-active": ["all-DEM", "f=0.7", "f=0.9"]}
+#: scenes run only when asked for (``--scenes``): their all-DEM reference is a committed
+#: table of steps, not a run of the study
+ON_REQUEST = {"footing-full": ["f=0.7"]}
 #: the smoke study: the footing on a 3 × 2 mesh of 16-disc RVEs, 3 steps
 SMOKE = {"footing": ["all-DEM", "f=0.7"]}
 
@@ -106,16 +122,25 @@ def _folder_name(scene: str, variant: str) -> str:
         .replace("%", "pct").replace("γ", "gamma")
 
 
-def run(out: Path, scene: str, variant: str, smoke: bool, force: bool) -> Path:
-    """The run's folder (run where it has no summary, or with ``force``)."""
+def run(out: Path, scene: str, variant: str, smoke: bool, force: bool,
+        measure_only: bool = False) -> Path:
+    """The run's folder (run where it has no summary, or with ``force``; a stopped run of a
+    scene run on request continues from its checkpoint; ``measure_only``: nothing is run,
+    the folder's run is read as it stands)."""
     folder = out / _folder_name(scene, variant)
-    if force or not (folder / "summary.json").exists():
-        if folder.exists():
+    if measure_only:
+        if not (folder / "summary.json").is_file():
+            raise FileNotFoundError(f"{folder} has no summary.json to measure")
+        return folder
+    resume = (scene in ON_REQUEST and not force and resumable(folder)
+              and ended_summary(folder) is None)
+    if force or resume or not (folder / "summary.json").exists():
+        if folder.exists() and not resume:
             shutil.rmtree(folder)
         path = out / f"{folder.name}.toml"
         path.write_text(scene_text(scene, variant, smoke), encoding="utf-8")
         command = [sys.executable, "-m", "granular_material.cli", "run", str(path), "--out",
-                   str(folder)]
+                   str(folder), *(["--resume"] if resume else [])]
         print("$", " ".join(command[2:]), flush=True)
         t0 = time.perf_counter()
         done = subprocess.run(command, capture_output=True, text=True)
@@ -128,14 +153,21 @@ def run(out: Path, scene: str, variant: str, smoke: bool, force: bool) -> Path:
 
 def measure(folder: Path, scene: str, reference: pd.DataFrame | None) -> dict[str, Any]:
     """A run's curve, costs and (against ``reference``, the all-DEM run's steps) errors."""
-    spec = STUDIED[scene]
-    steps = pd.read_csv(folder / "steps.csv")
     summary = json.loads((folder / "summary.json").read_text(encoding="utf-8"))
+    return measure_steps(pd.read_csv(folder / "steps.csv"), summary, folder.name, scene,
+                         reference)
+
+
+def measure_steps(steps: pd.DataFrame, summary: dict[str, Any], name: str, scene: str,
+                  reference: pd.DataFrame | None) -> dict[str, Any]:
+    """:func:`measure` of a table of steps and its run's summary (``error``,
+    ``gauss_points``, ``adaptivity``)."""
+    spec = STUDIED[scene]
     load = spec["scale"] * steps[spec["force"]].to_numpy()
     switching = (int(steps["switch_particle_steps"].sum())
                  if "switch_particle_steps" in steps else 0)
     row: dict[str, Any] = {
-        "folder": folder.name, "steps": int(len(steps) - 1), "error": summary["error"],
+        "folder": name, "steps": int(len(steps) - 1), "error": summary["error"],
         "displacement": steps[spec["displacement"]].abs().tolist(), "load": load.tolist(),
         "particle_steps": int(steps["particle_steps"].sum()),
         "switch_particle_steps": switching,
@@ -145,19 +177,32 @@ def measure(folder: Path, scene: str, reference: pd.DataFrame | None) -> dict[st
         "iterations": int(steps["iterations"].sum()),
         "load_steps_s": float(steps["wall_time"].sum()),
         "twin": (summary.get("adaptivity") or {}).get("twin"),
+        "wall_s": float(summary.get("wall_s") or math.nan),
     }
     if reference is not None:
         ref = spec["scale"] * reference[spec["force"]].to_numpy()
         n = min(len(ref), len(load))
-        # the reference's largest load after its start, or its last step (no peak)
-        peak = (1 + int(np.argmax(np.abs(ref[1:n]))) if spec.get("peak", True)
-                else n - 1)
+        # the reference's largest load after its start, or its last step (no peak); a run
+        # that stopped before it is measured to its own last step
+        peak = (1 + int(np.argmax(np.abs(ref[1:]))) if spec.get("peak", True)
+                else len(ref) - 1)
         error = (load[:n] - ref[:n]) / np.abs(ref[:n]).clip(1e-300)
         row["error_by_step"] = [None, *error[1:].tolist()]
         row["peak_step"] = peak
-        row["largest_error_to_peak"] = float(np.abs(error[1:peak + 1]).max())
-        row["largest_error_step"] = int(np.argmax(np.abs(error[1:peak + 1]))) + 1
-        row["median_error_to_peak"] = float(np.median(np.abs(error[1:peak + 1])))
+        upto = min(peak, n - 1)
+        row["reached_peak"] = upto == peak
+        row["largest_error_to_peak"] = float(np.abs(error[1:upto + 1]).max())
+        row["largest_error_step"] = int(np.argmax(np.abs(error[1:upto + 1]))) + 1
+        row["median_error_to_peak"] = float(np.median(np.abs(error[1:upto + 1])))
+        if "window_mm" in spec:
+            low, high = spec["window_mm"]
+            d = 1e3 * np.abs(reference[spec["displacement"]].to_numpy()[:n])
+            inside = (d >= low - 1e-9) & (d <= high + 1e-9)
+            inside[0] = False
+            row["window_mm"] = [low, high]
+            row["window_steps"] = int(inside.sum())
+            row["largest_error_in_window"] = (float(np.abs(error[inside]).max())
+                                              if inside.any() else None)
         after = np.abs(error[peak + 1:n])
         row["largest_error_after_peak"] = float(after.max()) if after.size else None
         row["median_error_after_peak"] = float(np.median(after)) if after.size else None
@@ -238,7 +283,27 @@ def report(out: Path, results: dict[str, dict[str, Any]], commit: str) -> None:
                 f"{row.get('cost_ratio', 1.0):.3f} ({switch:.3f}) | "
                 f"{row['load_steps_s']:.0f} |")
         lines.append("")
+        for variant, row in rows.items():
+            if row.get("window_mm") is not None and variant != "all-DEM":
+                low, high = row["window_mm"]
+                lines.append(f"- {variant}: the largest error from {low:g} to {high:g} mm "
+                             f"({row['window_steps']} steps): "
+                             f"{_pct(row.get('largest_error_in_window'))}.")
+            if not row.get("reached_peak", True):
+                lines.append(f"- {variant} has {row['steps']} of the reference's steps "
+                             f"(to {1e3 * row['displacement'][-1]:.2f} mm), not its peak: "
+                             "its errors 'to the peak' are to its last step, and its "
+                             "particle-steps are over the reference's to that step.")
+        if lines[-1] != "":
+            lines.append("")
     (out / "report.md").write_text("\n".join(lines) + "\n", encoding="utf-8")
+
+
+def _gauss_points(folders: dict[str, Path]) -> int:
+    """The Gauss points of a scene's runs (their summaries agree)."""
+    summary = json.loads((next(iter(folders.values())) / "summary.json").read_text(
+        encoding="utf-8"))
+    return int(summary["gauss_points"])
 
 
 def main(argv: list[str] | None = None) -> dict[str, Any]:
@@ -250,18 +315,30 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     ap.add_argument("--scenes", nargs="+", choices=list(STUDIED), default=None,
                     help="only these scenes")
     ap.add_argument("--force", action="store_true", help="redo runs whose summary exists")
+    ap.add_argument("--measure-only", action="store_true",
+                    help="run nothing: measure the runs in --out as they stand (a stopped "
+                         "run over the steps it has)")
     ap.add_argument("--publish", type=Path, default=None, metavar="DIR",
                     help="copy the report, results and figure there (docs/validation/adaptivity)")
     args = ap.parse_args(argv)
     out = args.out
     out.mkdir(parents=True, exist_ok=True)
-    plan = SMOKE if args.smoke else {s: v for s, v in PLAN.items()
-                                     if args.scenes is None or s in args.scenes}
+    plan = SMOKE if args.smoke else {s: v for s, v in {**PLAN, **ON_REQUEST}.items()
+                                     if (args.scenes is None and s in PLAN)
+                                     or (args.scenes is not None and s in args.scenes)}
     results: dict[str, dict[str, Any]] = {}
     for scene, variants in plan.items():
-        folders = {v: run(out, scene, v, args.smoke, args.force) for v in variants}
-        reference = pd.read_csv(folders["all-DEM"] / "steps.csv")
-        results[scene] = {v: measure(f, scene, reference) for v, f in folders.items()}
+        folders = {v: run(out, scene, v, args.smoke, args.force, args.measure_only)
+                   for v in variants}
+        results[scene] = {}
+        if "reference" in STUDIED[scene]:
+            reference = pd.read_csv(STUDIED[scene]["reference"])
+            results[scene]["all-DEM"] = measure_steps(
+                reference, {"error": None, "gauss_points": _gauss_points(folders)},
+                str(STUDIED[scene]["reference"].relative_to(ROOT)), scene, reference)
+        else:
+            reference = pd.read_csv(folders["all-DEM"] / "steps.csv")
+        results[scene].update({v: measure(f, scene, reference) for v, f in folders.items()})
     commit = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"],
                             capture_output=True, text=True).stdout.strip() or "unknown"
     (out / "results.json").write_text(json.dumps(results, indent=2) + "\n", encoding="utf-8")

@@ -30,3 +30,18 @@ def test_a_variant_is_the_scene_with_its_adaptivity_table() -> None:
     text = study.scene_text("footing", "f=0.7, point")
     assert text.endswith('[adaptivity]\nmobilised_fraction = 0.7\nneighbours = "point"\n')
     assert "[adaptivity]" not in study.scene_text("wall-passive", "all-DEM")
+
+
+def test_a_stopped_full_size_run_is_measured_against_the_committed_table() -> None:
+    import pandas as pd
+
+    reference = pd.read_csv(study.STUDIED["footing-full"]["reference"])
+    stopped = reference.iloc[:9].copy()  # to 2 mm, before the reference's peak
+    stopped["footing_force_y"] *= 1.02
+    stopped["particle_steps"] //= 4
+    row = study.measure_steps(stopped, {"error": None, "gauss_points": 7500}, "run",
+                              "footing-full", reference)
+    assert row["steps"] == 8 and not row["reached_peak"] and row["peak_step"] == 23
+    assert abs(row["largest_error_to_peak"] - 0.02) < 1e-9
+    assert row["window_steps"] == 5 and abs(row["largest_error_in_window"] - 0.02) < 1e-9
+    assert abs(row["cost_ratio"] - 0.25) < 1e-3
