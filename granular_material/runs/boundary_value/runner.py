@@ -21,7 +21,8 @@ The run folder gets:
   at a time before that step's ``steps.csv`` row (read it with
   :func:`~granular_material.results.writers.read_points`, also of a killed run); with
   ``points_csv``, also as text, ``points.csv``;
-- ``fields.xdmf``: the same for ParaView at every committed step (XML, no HDF5 needed);
+- ``fields.xdmf``: the same for ParaView at every committed step (its values in
+  ``fields.h5``, HDF5);
 - ``load_displacement.png``, ``mechanism.png`` and ``summary.json``.
 """
 
@@ -96,7 +97,7 @@ from granular_material.runs.spec import SpecError
 
 #: the files a run writes into its folder beside its tables (removed when a run starts, so
 #: that an earlier run's never stand beside this one's)
-_OUTPUTS = ("fields.xdmf", "load_displacement.png", "mechanism.png", "summary.json",
+_OUTPUTS = ("fields.xdmf", "fields.h5", "load_displacement.png", "mechanism.png", "summary.json",
             "strength_reduction.png")
 
 __all__ = [
