@@ -16,12 +16,15 @@ from granular_material.results import writers
 from granular_material.results.writers import BiaxialWriter, format_rows
 
 _FLOATS = st.floats(allow_nan=True, allow_infinity=True, width=64)
+_TEXTS = st.one_of(st.text(alphabet=st.sampled_from('ab ,"\'\n\r[]1.5e-'), max_size=8),
+                   st.sampled_from(["", "[]", "[1.0, 0.5]", "force+energy"]))
 
 
 @settings(max_examples=200, deadline=None)
 @given(rows=st.integers(1, 6), data=st.data())
 def test_rows_are_formatted_as_pandas_formats_them(rows, data):
-    kinds = data.draw(st.lists(st.sampled_from(["f", "i", "b", "c"]), min_size=1, max_size=5))
+    kinds = data.draw(st.lists(st.sampled_from(["f", "i", "b", "c", "s"]), min_size=1,
+                               max_size=5))
     columns = {}
     for k, kind in enumerate(kinds):
         if kind == "f":
@@ -31,10 +34,12 @@ def test_rows_are_formatted_as_pandas_formats_them(rows, data):
         elif kind == "i":
             values = data.draw(st.lists(st.integers(-2**63, 2**63 - 1), min_size=rows,
                                         max_size=rows))
+        elif kind == "s":  # text, as the histories of steps.csv (quoted where need be)
+            values = data.draw(st.lists(_TEXTS, min_size=rows, max_size=rows))
         else:
             values = data.draw(st.lists(st.booleans(), min_size=rows, max_size=rows))
         columns[f"c{k}"] = np.array(values, dtype={"f": float, "c": float, "i": np.int64,
-                                                    "b": bool}[kind])
+                                                    "b": bool, "s": object}[kind])
     frame = pd.DataFrame(columns)
     assert format_rows(frame) == frame.to_csv(index=False, header=False)
     # a second time (every column remembered, as from one step to the next) alike

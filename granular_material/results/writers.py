@@ -166,19 +166,40 @@ def _column(frame: pd.DataFrame, k: int) -> np.ndarray:
     return np.asarray(column(k)) if column is not None else frame.iloc[:, k].to_numpy()
 
 
+def _texts(values: np.ndarray) -> list[str] | None:
+    """The cells of a column of Python ``str`` (the steps table's histories), as they are
+    (the csv module quotes them); None for any other column of objects."""
+    cells = values.tolist()
+    return cells if all(type(cell) is str for cell in cells) else None
+
+
 def format_rows(frame: pd.DataFrame, order: list[int] | None = None) -> str:
     """The rows of ``frame`` (its columns in ``order``, positions; None: as they are) as
     ``frame.to_csv(index=False, header=False)`` writes them, byte for byte, formatted faster
-    where every column holds float64, int64 or booleans (the Gauss-point tables) in two
-    columns or more; any other frame is formatted by pandas (the csv module quotes a row of
-    one empty cell)."""
+    where every column holds float64, int64, booleans or text (the Gauss-point tables, a
+    ``steps.csv`` row) in two columns or more; any other frame is formatted by pandas (the
+    csv module quotes a row of one empty cell)."""
     order = list(range(frame.shape[1])) if order is None else list(order)
     arrays = [_column(frame, k) for k in order]
-    if not len(frame) or len(arrays) < 2 or any(
-            a.dtype not in (np.float64, np.int64, np.bool_) for a in arrays):
+    if not len(frame) or len(arrays) < 2:
         return frame.iloc[:, order].to_csv(index=False, header=False)
-    cells = [_cells(str(frame.columns[k]), a) for k, a in zip(order, arrays, strict=True)]
-    return os.linesep.join(map(",".join, zip(*cells, strict=True))) + os.linesep
+    cells: list[list[str]] = []
+    text = False
+    for k, a in zip(order, arrays, strict=True):
+        if a.dtype in (np.float64, np.int64, np.bool_):
+            cells.append(_cells(str(frame.columns[k]), a))
+            continue
+        column = _texts(a) if a.dtype == object else None
+        if column is None:
+            return frame.iloc[:, order].to_csv(index=False, header=False)
+        cells.append(column)
+        text = True
+    rows = zip(*cells, strict=True)
+    if not text:
+        return os.linesep.join(map(",".join, rows)) + os.linesep
+    buffer = io.StringIO()  # pandas' own writer of text cells: the csv module, quoting alike
+    csv.writer(buffer, lineterminator=os.linesep, quoting=csv.QUOTE_MINIMAL).writerows(rows)
+    return buffer.getvalue()
 
 
 def append_csv(frame: pd.DataFrame, path: str | Path, *, sync: bool = True) -> Path:
