@@ -54,9 +54,9 @@ if TYPE_CHECKING:
     from granular_material.fem.boundary_value.biaxial import BiaxialProblem
     from granular_material.results.biaxial import BiaxialResult
 
-__all__ = ["BiaxialWriter", "FieldWriter", "append_csv", "format_rows", "read_points",
-           "read_run_tables", "read_table", "strict_json", "write_csv", "write_json",
-           "write_outputs", "write_points", "write_tables"]
+__all__ = ["BiaxialWriter", "FieldWriter", "append_csv", "cell_means", "format_rows",
+           "read_points", "read_run_tables", "read_table", "strict_json", "sync_files",
+           "write_csv", "write_json", "write_outputs", "write_points", "write_tables"]
 
 _CELL_FIELDS = ("sxx", "syy", "sxy", "exx", "eyy", "exy", "volumetric_strain",
                 "shear_strain", "rotation", "mean_pressure", "unconfined", "failed",
@@ -67,6 +67,20 @@ _CELL_FIELDS = ("sxx", "syy", "sxy", "exx", "eyy", "exy", "volumetric_strain",
 #: a :class:`BiaxialWriter` flushes its growing tables to the disk once this many seconds
 #: have passed since it last did, and at the run's end [s]
 SYNC_SECONDS = 1.0
+
+
+def sync_files(paths: Sequence[Path]) -> None:
+    """Flush the files ``paths`` to the disk (``fsync``), in their order; one that is not
+    there (removed meanwhile, or never written) is passed over."""
+    for path in paths:
+        try:
+            fd = os.open(path, os.O_RDONLY)
+        except FileNotFoundError:
+            continue
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
 
 
 def write_csv(frame: pd.DataFrame, path: str | Path, append: bool = False, *,
@@ -590,17 +604,10 @@ class BiaxialWriter:
 
     def sync(self) -> None:
         """Flush the tables appended to since their last flush to the disk (``fsync``)."""
-        for name in ("tracked.csv", "points.npy", "points.csv", "steps.csv"):  # steps last
-            if name in self._unsynced:
-                self._unsynced.discard(name)
-                try:
-                    fd = os.open(self.out_dir / name, os.O_RDONLY)
-                except FileNotFoundError:  # removed meanwhile (a rejected run's folder)
-                    continue
-                try:
-                    os.fsync(fd)
-                finally:
-                    os.close(fd)
+        names = [name for name in ("tracked.csv", "points.npy", "points.csv", "steps.csv")
+                 if name in self._unsynced]  # steps last
+        self._unsynced.difference_update(names)
+        sync_files([self.out_dir / name for name in names])
         self._synced_at = time.monotonic()
 
     def _append(self, name: str, frame: pd.DataFrame, append: bool, sync: bool) -> None:
