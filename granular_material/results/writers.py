@@ -1,5 +1,6 @@
 """Files of the runs: CSV tables, the Gauss-point table of records, JSON summaries and an
-XDMF time series for ParaView.
+XDMF time series for ParaView (:class:`FieldWriter`: ``fields.xdmf``, its values in
+``fields.h5``).
 
 ``steps.csv`` and the Gauss-point table (``points.npy``, a NumPy file of records:
 :mod:`~granular_material.results.point_table`; also ``points.csv`` on request) of a biaxial
@@ -38,7 +39,7 @@ import json
 import math
 import os
 import time
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from contextlib import ExitStack
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -450,6 +451,7 @@ class FieldWriter:
         self._steps = 0
         self._dofs: np.ndarray | None = None
         self._groups: dict[str, Any] = {}  # the HDF5 file's groups by name
+        self._broken = False  # a write failed: nothing more is written
 
     def __enter__(self) -> FieldWriter:
         import h5py
@@ -460,12 +462,15 @@ class FieldWriter:
             raise ValueError(f"the fields file cannot hold cells of kind {kind!r}")
         geometry = np.column_stack([xy, np.zeros(xy.shape[0])]).astype(np.float64)
         topology = np.ascontiguousarray(cells, dtype=np.int64)
-        self._h5 = h5py.File(self.h5_path, "w", track_order=False)
+        self._broken = False
+        with self._naming(self.h5_path):
+            self._h5 = h5py.File(self.h5_path, "w", track_order=False)
         try:
             self._groups = {}
-            self._dataset("mesh", "geometry", geometry)
-            self._dataset("mesh", "topology", topology)
-            self._h5.flush()
+            with self._naming(self.h5_path):
+                self._dataset("mesh", "geometry", geometry)
+                self._dataset("mesh", "topology", topology)
+                self._h5.flush()
             name = self.h5_path.name
             head = ('<Xdmf Version="3.0" xmlns:xi="http://www.w3.org/2001/XInclude">\n'
                     "  <Domain>\n"
@@ -480,10 +485,12 @@ class FieldWriter:
                     "    </Grid>\n"
                     '    <Grid Name="steps" GridType="Collection" '
                     'CollectionType="Temporal">\n').encode("utf-8")
-            self._fd = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o666)
-            self._write_at(0, head + _XDMF_TAIL)
+            with self._naming(self.path):
+                self._fd = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o666)
+                self._write_at(0, head + _XDMF_TAIL)
             self._end = len(head)
         except BaseException:
+            self._broken = True
             self.__exit__()
             raise
         self._steps = 0
@@ -516,12 +523,29 @@ class FieldWriter:
     def __exit__(self, *exc: object) -> None:
         try:
             if self._h5 is not None:
-                self._h5.close()
+                if self._broken or (exc and exc[0] is not None):
+                    with contextlib.suppress(OSError, RuntimeError, ValueError):
+                        self._h5.close()  # already failing: that error is the one told
+                else:
+                    with self._naming(self.h5_path):
+                        self._h5.close()
         finally:
             self._h5, self._groups = None, {}
             if self._fd is not None:
                 os.close(self._fd)
                 self._fd = None
+
+    @contextlib.contextmanager
+    def _naming(self, path: Path) -> Iterator[None]:
+        """Errors of writing ``path`` (HDF5's included: a full disk) as an ``OSError`` that
+        names it; the writer is then broken (its files are closed without more writing)."""
+        try:
+            yield
+        except (OSError, RuntimeError) as exc:
+            self._broken = True
+            if isinstance(exc, OSError) and exc.errno is not None:
+                raise OSError(exc.errno, f"cannot write {path}: {exc.strerror or exc}") from exc
+            raise OSError(f"cannot write {path}: {exc}") from exc
 
     def write(self, time: float, u: np.ndarray, points: pd.DataFrame) -> None:
         """Append one step: nodal displacement ``u`` (ndofs,) and the Gauss-point table."""
@@ -538,7 +562,9 @@ class FieldWriter:
                 '        <xi:include xpointer="xpointer(//Grid[@Name=&quot;mesh&quot;]/*'
                 '[self::Topology or self::Geometry])"/>\n'
                 f'        <Time Value="{float(time)!r}"/>\n']
-        with deferred_signals():  # a step's values whole, then its grid
+        if self._broken:
+            raise OSError(f"cannot write {self.h5_path}: an earlier write failed")
+        with deferred_signals(), self._naming(self.h5_path):  # a step's values, then its grid
             for field, values in fields.items():
                 values = np.asarray(values, dtype=np.float64)
                 self._dataset(field, str(k), values)
@@ -550,9 +576,10 @@ class FieldWriter:
                             + "        </Attribute>\n")
             grid.append("      </Grid>\n")
             self._h5.flush()
-            text = "".join(grid).encode("utf-8")
+        text = "".join(grid).encode("utf-8")
+        with deferred_signals(), self._naming(self.path):
             self._write_at(self._end, text + _XDMF_TAIL)
-            self._end += len(text)
+        self._end += len(text)
         self._steps += 1
 
 
