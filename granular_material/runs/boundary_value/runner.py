@@ -646,7 +646,7 @@ def run_boundary_value(spec: BoundaryValueSpec, out: Path | None = None,
             first = row["step"] == 0
             # flushed (fsync) as a biaxial run's: with the first step SYNC_SECONDS after the
             # last flush, and at the end
-            sync = time.monotonic() - synced_at[0] >= SYNC_SECONDS
+            sync = not first and time.monotonic() - synced_at[0] >= SYNC_SECONDS
             if sync:
                 synced_at[0] = time.monotonic()
             write_points(points, out, append=not first, csv=spec.points_csv, sync=sync)
