@@ -18,9 +18,9 @@ From the command line (installed with the package)::
 It prints the initial residual against the Newton tolerance, then the bearing pressure
 against the settlement at every step (the reaction on the footing), and the Mohr–Coulomb
 run's last pressure against Prandtl's bearing capacity. ``--out DIR`` writes the fields
-for ParaView (``DIR/fields.xdmf``) and the curve (``DIR/bearing.png``). ``--plain`` solves
-with a plain scikit-fem Newton loop instead of the project's ``NewtonSolver``. See
-docs/guide/footing-script.md.
+for ParaView (``DIR/fields.xdmf``, its values in ``DIR/fields.h5``) and the curve
+(``DIR/bearing.png``). ``--plain`` solves with a plain scikit-fem Newton loop instead of the
+project's ``NewtonSolver``. See docs/guide/footing-script.md.
 """
 
 from __future__ import annotations

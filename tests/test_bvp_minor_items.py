@@ -77,7 +77,7 @@ def test_a_rerun_into_a_finished_folder_leaves_no_old_file_beside_the_new(tmp_pa
     # the rerun writes no fields
     scene.write_text(scene.read_text() + "[output]\nfields = false\n")
     assert main(["run", str(scene), "--out", str(out)]) == 0
-    assert not (out / "fields.xdmf").exists()
+    assert not (out / "fields.xdmf").exists() and not (out / "fields.h5").exists()
     assert (out / "mechanism.png").is_file()  # drawn again by this run
 
 
@@ -207,3 +207,28 @@ def test_a_stopped_scene_says_how_to_continue_it(tmp_path, capsys, monkeypatch, 
     assert "the same options" not in err
     monkeypatch.undo()
     assert main(["run", str(scene), "--out", str(out), "--resume"]) == 0
+
+
+def test_the_tables_are_flushed_a_second_apart_and_at_the_end(tmp_path, monkeypatch):
+    """A boundary-value run flushes its tables (``fsync``) as a biaxial run does: with the
+    first step a second after the last flush, and when it ends; not at every step."""
+    import os
+
+    from granular_material.runs.boundary_value import runner
+
+    flushed: list[str] = []
+    real = os.fsync
+
+    def fsync(fd: int) -> None:
+        flushed.append(os.path.basename(os.readlink(f"/proc/self/fd/{fd}")))
+        real(fd)
+
+    if not os.path.isdir("/proc/self/fd"):
+        pytest.skip("needs /proc to name the flushed files")
+    monkeypatch.setattr(os, "fsync", fsync)
+    monkeypatch.setattr(runner, "SYNC_SECONDS", 1e9)  # the clock never lets one more in
+    out = tmp_path / "run"
+    assert main(["run", str(_scene(tmp_path)), "--out", str(out)]) == 0
+    steps = [name for name in flushed if name in ("points.npy", "steps.csv")]
+    # the first appended step (step 1) and the end: points before steps each time
+    assert steps == ["points.npy", "points.npy", "steps.csv", "points.npy", "steps.csv"]

@@ -50,5 +50,5 @@ def test_a_run_killed_after_a_save_resumes_to_the_same_residuals(tmp_path):
     assert done.returncode == 137, done.stderr[-2000:]
     assert main([*_OPTIONS, "--resume", str(stopped)]) == 0
     assert _rows(stopped / "steps.csv") == _rows(tmp_path / "whole" / "steps.csv")
-    for name in ("points.npy", "fields.xdmf"):
+    for name in ("points.npy", "fields.xdmf", "fields.h5"):
         assert (stopped / name).read_bytes() == (tmp_path / "whole" / name).read_bytes()

@@ -1,5 +1,6 @@
 """Files of the runs: CSV tables, the Gauss-point table of records, JSON summaries and an
-XDMF time series for ParaView.
+XDMF time series for ParaView (:class:`FieldWriter`: ``fields.xdmf``, its values in
+``fields.h5``).
 
 ``steps.csv`` and the Gauss-point table (``points.npy``, a NumPy file of records:
 :mod:`~granular_material.results.point_table`; also ``points.csv`` on request) of a biaxial
@@ -38,7 +39,7 @@ import json
 import math
 import os
 import time
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from contextlib import ExitStack
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -54,9 +55,9 @@ if TYPE_CHECKING:
     from granular_material.fem.boundary_value.biaxial import BiaxialProblem
     from granular_material.results.biaxial import BiaxialResult
 
-__all__ = ["BiaxialWriter", "FieldWriter", "append_csv", "format_rows", "read_points",
-           "read_run_tables", "read_table", "strict_json", "write_csv", "write_json",
-           "write_outputs", "write_points", "write_tables"]
+__all__ = ["BiaxialWriter", "FieldWriter", "append_csv", "cell_means", "format_rows",
+           "read_points", "read_run_tables", "read_table", "strict_json", "sync_files",
+           "write_csv", "write_json", "write_outputs", "write_points", "write_tables"]
 
 _CELL_FIELDS = ("sxx", "syy", "sxy", "exx", "eyy", "exy", "volumetric_strain",
                 "shear_strain", "rotation", "mean_pressure", "unconfined", "failed",
@@ -67,6 +68,20 @@ _CELL_FIELDS = ("sxx", "syy", "sxy", "exx", "eyy", "exy", "volumetric_strain",
 #: a :class:`BiaxialWriter` flushes its growing tables to the disk once this many seconds
 #: have passed since it last did, and at the run's end [s]
 SYNC_SECONDS = 1.0
+
+
+def sync_files(paths: Sequence[Path]) -> None:
+    """Flush the files ``paths`` to the disk (``fsync``), in their order; one that is not
+    there (removed meanwhile, or never written) is passed over."""
+    for path in paths:
+        try:
+            fd = os.open(path, os.O_RDONLY)
+        except FileNotFoundError:
+            continue
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
 
 
 def write_csv(frame: pd.DataFrame, path: str | Path, append: bool = False, *,
@@ -166,19 +181,40 @@ def _column(frame: pd.DataFrame, k: int) -> np.ndarray:
     return np.asarray(column(k)) if column is not None else frame.iloc[:, k].to_numpy()
 
 
+def _texts(values: np.ndarray) -> list[str] | None:
+    """The cells of a column of Python ``str`` (the steps table's histories), as they are
+    (the csv module quotes them); None for any other column of objects."""
+    cells = values.tolist()
+    return cells if all(type(cell) is str for cell in cells) else None
+
+
 def format_rows(frame: pd.DataFrame, order: list[int] | None = None) -> str:
     """The rows of ``frame`` (its columns in ``order``, positions; None: as they are) as
     ``frame.to_csv(index=False, header=False)`` writes them, byte for byte, formatted faster
-    where every column holds float64, int64 or booleans (the Gauss-point tables) in two
-    columns or more; any other frame is formatted by pandas (the csv module quotes a row of
-    one empty cell)."""
+    where every column holds float64, int64, booleans or text (the Gauss-point tables, a
+    ``steps.csv`` row) in two columns or more; any other frame is formatted by pandas (the
+    csv module quotes a row of one empty cell)."""
     order = list(range(frame.shape[1])) if order is None else list(order)
     arrays = [_column(frame, k) for k in order]
-    if not len(frame) or len(arrays) < 2 or any(
-            a.dtype not in (np.float64, np.int64, np.bool_) for a in arrays):
+    if not len(frame) or len(arrays) < 2:
         return frame.iloc[:, order].to_csv(index=False, header=False)
-    cells = [_cells(str(frame.columns[k]), a) for k, a in zip(order, arrays, strict=True)]
-    return os.linesep.join(map(",".join, zip(*cells, strict=True))) + os.linesep
+    cells: list[list[str]] = []
+    text = False
+    for k, a in zip(order, arrays, strict=True):
+        if a.dtype in (np.float64, np.int64, np.bool_):
+            cells.append(_cells(str(frame.columns[k]), a))
+            continue
+        column = _texts(a) if a.dtype == object else None
+        if column is None:
+            return frame.iloc[:, order].to_csv(index=False, header=False)
+        cells.append(column)
+        text = True
+    rows = zip(*cells, strict=True)
+    if not text:
+        return os.linesep.join(map(",".join, rows)) + os.linesep
+    buffer = io.StringIO()  # pandas' own writer of text cells: the csv module, quoting alike
+    csv.writer(buffer, lineterminator=os.linesep, quoting=csv.QUOTE_MINIMAL).writerows(rows)
+    return buffer.getvalue()
 
 
 def append_csv(frame: pd.DataFrame, path: str | Path, *, sync: bool = True) -> Path:
@@ -358,77 +394,193 @@ def write_tables(steps: pd.DataFrame, points: pd.DataFrame, out_dir: str | Path,
     return paths
 
 
-def xml_text(data: np.ndarray, fmt: str) -> str:
-    """The values of ``data`` (flattened), one a line in the %-format ``fmt``: the text
-    ``numpy.savetxt(data.flatten(), fmt)`` writes, byte for byte, in one formatting call
-    instead of one a value."""
-    values = data.flatten().tolist()
-    return ((fmt + "\n") * len(values)) % tuple(values)
+#: the XDMF topology of each cell kind :meth:`BiaxialProblem.nodes` names (meshio's names)
+_XDMF_TOPOLOGY = {"quad": "Quadrilateral", "quad8": "Quadrilateral_8",
+                  "quad9": "Quadrilateral_9", "triangle": "Triangle",
+                  "triangle6": "Triangle_6"}
+#: the end of the fields file's XML: each step's grid is written before it
+_XDMF_TAIL = b"    </Grid>\n  </Domain>\n</Xdmf>\n"
 
 
-def _xml_series_writer(meshio: Any) -> type:
-    """meshio's XDMF time-series writer with its XML text made by :func:`xml_text` (the
-    same bytes, several times faster than the ``numpy.savetxt`` meshio calls)."""
-    from meshio.xdmf.common import dtype_to_format_string
+def _xdmf_item(data: np.ndarray, h5: str, dataset: str, indent: str) -> str:
+    """The XDMF ``DataItem`` of ``data`` stored as ``dataset`` in the HDF5 file named ``h5``
+    (float64 or int64)."""
+    kind = {"f": "Float", "i": "Int"}[data.dtype.kind]
+    dims = " ".join(map(str, data.shape))
+    return (f'{indent}<DataItem DataType="{kind}" Dimensions="{dims}" Format="HDF" '
+            f'Precision="{data.dtype.itemsize}">{h5}:/{dataset}</DataItem>\n')
 
-    class Writer(meshio.xdmf.TimeSeriesWriter):
-        def numpy_to_xml_string(self, data: np.ndarray) -> str:
-            fmt = dtype_to_format_string.get(data.dtype.name)
-            if self.data_format != "XML" or fmt is None or "%" not in fmt:
-                return super().numpy_to_xml_string(data)
-            return xml_text(data, fmt)
 
-    return Writer
+def cell_means(points: pd.DataFrame) -> dict[str, np.ndarray]:
+    """Each element's mean of the Gauss-point columns named in ``_CELL_FIELDS`` that
+    ``points`` holds (booleans as 0/1), by element number (pandas' group means)."""
+    means = points.groupby("element").mean(numeric_only=True)
+    return {k: means[k].to_numpy(dtype=float) for k in _CELL_FIELDS if k in means}
 
 
 class FieldWriter:
-    """XDMF time series (XML data, no HDF5 needed) of the mesh with per-step fields.
+    """XDMF time series of the mesh with per-step fields, for ParaView and meshio: the XML
+    ``path`` (``fields.xdmf``) names the values, which are in the HDF5 file beside it of the
+    same stem (``fields.h5``; written through h5py).
 
     A context manager: ``with FieldWriter(path, problem) as fields: fields.write(...)``.
-    Cells: quad, quad8 or quad9, with every node of the element (midside and centre nodes
-    of quad8 and quad9 included, see :meth:`BiaxialProblem.nodes`).
+    Cells: quad, quad8, quad9, triangle or triangle6, with every node of the element
+    (midside and centre nodes included, see :meth:`BiaxialProblem.nodes`).
     Point data: ``displacement`` [m] (nnodes, 3). Cell data: element means of the
     Gauss-point columns named in ``_CELL_FIELDS`` that the table holds, and where it has a
     ``region`` column (materials by region), each element's region numbered 0, 1, … in the
-    alphabetical order of the regions' names. Time = axial strain.
+    alphabetical order of the regions' names. Time: what :meth:`write` is given (a biaxial
+    run's axial strain, a boundary-value run's load factor).
+
+    In the HDF5 file: ``/mesh/geometry`` and ``/mesh/topology``, and every step's fields as
+    ``/NAME/K`` (K = 0, 1, … the steps written). Both files are begun anew when the writer is
+    entered and grow step by step: a step's values are written and flushed first, then its
+    grid is added to the XML before the XML's closing tags (whose bytes are rewritten with
+    it), so the pair read by meshio or ParaView holds every step whose grid is written. The
+    same steps written give the same bytes (no times are stored), which a resumed run,
+    writing its steps again from the first, relies on.
     """
 
     def __init__(self, path: str | Path, problem: BiaxialProblem) -> None:
         self.path = Path(path)
+        self.h5_path = self.path.with_suffix(".h5")
         self.problem = problem
-        self._stack = ExitStack()
-        self._writer: Any = None
+        self._h5: Any = None
+        self._fd: int | None = None
+        self._end = 0  # where the XML's closing tags begin [bytes]
+        self._steps = 0
         self._dofs: np.ndarray | None = None
+        self._groups: dict[str, Any] = {}  # the HDF5 file's groups by name
+        self._broken = False  # a write failed: nothing more is written
 
     def __enter__(self) -> FieldWriter:
-        import meshio
+        import h5py
 
         self.path.parent.mkdir(parents=True, exist_ok=True)
         xy, cells, kind, self._dofs = self.problem.nodes()
-        # meshio writes the whole file when it is closed: under a temporary name, renamed
-        # into place by __exit__ (write_whole)
-        self._writer = self._stack.enter_context(
-            _xml_series_writer(meshio)(str(self.path) + ".part", data_format="XML")
-        )
-        points = np.column_stack([xy, np.zeros(xy.shape[0])])
-        self._writer.write_points_cells(points, [(kind, cells.astype(np.int64))])
+        if kind not in _XDMF_TOPOLOGY:
+            raise ValueError(f"the fields file cannot hold cells of kind {kind!r}")
+        geometry = np.column_stack([xy, np.zeros(xy.shape[0])]).astype(np.float64)
+        topology = np.ascontiguousarray(cells, dtype=np.int64)
+        self._broken = False
+        with self._naming(self.h5_path):
+            self._h5 = h5py.File(self.h5_path, "w", track_order=False)
+        try:
+            self._groups = {}
+            with self._naming(self.h5_path):
+                self._dataset("mesh", "geometry", geometry)
+                self._dataset("mesh", "topology", topology)
+                self._h5.flush()
+            name = self.h5_path.name
+            head = ('<Xdmf Version="3.0" xmlns:xi="http://www.w3.org/2001/XInclude">\n'
+                    "  <Domain>\n"
+                    '    <Grid Name="mesh" GridType="Uniform">\n'
+                    '      <Geometry GeometryType="XYZ">\n'
+                    + _xdmf_item(geometry, name, "mesh/geometry", "        ")
+                    + "      </Geometry>\n"
+                    f'      <Topology TopologyType="{_XDMF_TOPOLOGY[kind]}" '
+                    f'NumberOfElements="{len(topology)}">\n'
+                    + _xdmf_item(topology, name, "mesh/topology", "        ")
+                    + "      </Topology>\n"
+                    "    </Grid>\n"
+                    '    <Grid Name="steps" GridType="Collection" '
+                    'CollectionType="Temporal">\n').encode("utf-8")
+            with self._naming(self.path):
+                self._fd = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o666)
+                self._write_at(0, head + _XDMF_TAIL)
+            self._end = len(head)
+        except BaseException:
+            self._broken = True
+            self.__exit__()
+            raise
+        self._steps = 0
         return self
 
+    def _dataset(self, group: str, name: str, values: np.ndarray) -> None:
+        """``values`` stored as the dataset ``/group/name`` of the HDF5 file, without times
+        (through h5py's low-level calls: a third of the high-level ones' cost a dataset)."""
+        import h5py
+
+        values = np.ascontiguousarray(values)
+        gid = self._groups.get(group)
+        if gid is None:
+            gid = self._groups[group] = self._h5.create_group(group).id
+        dcpl = h5py.h5p.create(h5py.h5p.DATASET_CREATE)
+        dcpl.set_obj_track_times(False)
+        dataset = h5py.h5d.create(gid, name.encode(), h5py.h5t.py_create(values.dtype),
+                                  h5py.h5s.create_simple(values.shape), dcpl=dcpl)
+        dataset.write(h5py.h5s.ALL, h5py.h5s.ALL, values)
+
+    def _write_at(self, offset: int, data: bytes) -> None:
+        """``data`` written into the XML file from ``offset`` on (always to a longer file:
+        the closing tags it overwrites are in ``data`` again)."""
+        assert self._fd is not None
+        view = memoryview(data)
+        while view:
+            written = os.pwrite(self._fd, view, offset)
+            view, offset = view[written:], offset + written
+
     def __exit__(self, *exc: object) -> None:
-        write_whole(self.path, lambda tmp: self._stack.close())
+        try:
+            if self._h5 is not None:
+                if self._broken or (exc and exc[0] is not None):
+                    with contextlib.suppress(OSError, RuntimeError, ValueError):
+                        self._h5.close()  # already failing: that error is the one told
+                else:
+                    with self._naming(self.h5_path):
+                        self._h5.close()
+        finally:
+            self._h5, self._groups = None, {}
+            if self._fd is not None:
+                os.close(self._fd)
+                self._fd = None
+
+    @contextlib.contextmanager
+    def _naming(self, path: Path) -> Iterator[None]:
+        """Errors of writing ``path`` (HDF5's included: a full disk) as an ``OSError`` that
+        names it; the writer is then broken (its files are closed without more writing)."""
+        try:
+            yield
+        except (OSError, RuntimeError) as exc:
+            self._broken = True
+            if isinstance(exc, OSError) and exc.errno is not None:
+                raise OSError(exc.errno, f"cannot write {path}: {exc.strerror or exc}") from exc
+            raise OSError(f"cannot write {path}: {exc}") from exc
 
     def write(self, time: float, u: np.ndarray, points: pd.DataFrame) -> None:
         """Append one step: nodal displacement ``u`` (ndofs,) and the Gauss-point table."""
         ux, uy = u[self._dofs[0]], u[self._dofs[1]]
-        disp = np.column_stack([ux, uy, np.zeros_like(ux)])
-        means = points.groupby("element").mean(numeric_only=True)
-        cell_data = {k: [means[k].to_numpy(dtype=float)] for k in _CELL_FIELDS if k in means}
+        fields = {"displacement": np.column_stack([ux, uy, np.zeros_like(ux)])}
+        fields.update(cell_means(points))
         if "region" in points:  # materials by region: numbered in their names' order
             names = points.groupby("element")["region"].first().astype(str)
             order = {name: k for k, name in enumerate(sorted(set(names)))}
-            cell_data["region"] = [names.map(order).to_numpy(dtype=float)]
-        self._writer.write_data(float(time), point_data={"displacement": disp},
-                                cell_data=cell_data)
+            fields["region"] = names.map(order).to_numpy(dtype=float)
+        k = self._steps
+        name = self.h5_path.name
+        grid = [f'      <Grid Name="step {k}" GridType="Uniform">\n'
+                '        <xi:include xpointer="xpointer(//Grid[@Name=&quot;mesh&quot;]/*'
+                '[self::Topology or self::Geometry])"/>\n'
+                f'        <Time Value="{float(time)!r}"/>\n']
+        if self._broken:
+            raise OSError(f"cannot write {self.h5_path}: an earlier write failed")
+        with deferred_signals(), self._naming(self.h5_path):  # a step's values, then its grid
+            for field, values in fields.items():
+                values = np.asarray(values, dtype=np.float64)
+                self._dataset(field, str(k), values)
+                shape = "Vector" if values.ndim == 2 else "Scalar"
+                center = "Node" if field == "displacement" else "Cell"
+                grid.append(f'        <Attribute Name="{field}" AttributeType="{shape}" '
+                            f'Center="{center}">\n'
+                            + _xdmf_item(values, name, f"{field}/{k}", "          ")
+                            + "        </Attribute>\n")
+            grid.append("      </Grid>\n")
+            self._h5.flush()
+        text = "".join(grid).encode("utf-8")
+        with deferred_signals(), self._naming(self.path):
+            self._write_at(self._end, text + _XDMF_TAIL)
+        self._end += len(text)
+        self._steps += 1
 
 
 class BiaxialWriter:
@@ -479,17 +631,10 @@ class BiaxialWriter:
 
     def sync(self) -> None:
         """Flush the tables appended to since their last flush to the disk (``fsync``)."""
-        for name in ("tracked.csv", "points.npy", "points.csv", "steps.csv"):  # steps last
-            if name in self._unsynced:
-                self._unsynced.discard(name)
-                try:
-                    fd = os.open(self.out_dir / name, os.O_RDONLY)
-                except FileNotFoundError:  # removed meanwhile (a rejected run's folder)
-                    continue
-                try:
-                    os.fsync(fd)
-                finally:
-                    os.close(fd)
+        names = [name for name in ("tracked.csv", "points.npy", "points.csv", "steps.csv")
+                 if name in self._unsynced]  # steps last
+        self._unsynced.difference_update(names)
+        sync_files([self.out_dir / name for name in names])
         self._synced_at = time.monotonic()
 
     def _append(self, name: str, frame: pd.DataFrame, append: bool, sync: bool) -> None:

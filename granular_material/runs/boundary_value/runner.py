@@ -21,7 +21,8 @@ The run folder gets:
   at a time before that step's ``steps.csv`` row (read it with
   :func:`~granular_material.results.writers.read_points`, also of a killed run); with
   ``points_csv``, also as text, ``points.csv``;
-- ``fields.xdmf``: the same for ParaView at every committed step (XML, no HDF5 needed);
+- ``fields.xdmf``: the same for ParaView at every committed step (its values in
+  ``fields.h5``, HDF5);
 - ``load_displacement.png``, ``mechanism.png`` and ``summary.json``.
 """
 
@@ -57,7 +58,14 @@ from granular_material.fem.forms import gauss_points_grad
 from granular_material.fem.materials.regions import RegionalMaterial
 from granular_material.multiscale.confinement import UNCONFINED_FRACTION
 from granular_material.results.bvp_plots import plot_load_displacement, plot_mechanism
-from granular_material.results.writers import FieldWriter, write_csv, write_json, write_points
+from granular_material.results.writers import (
+    SYNC_SECONDS,
+    FieldWriter,
+    sync_files,
+    write_csv,
+    write_json,
+    write_points,
+)
 from granular_material.runs.boundary_value.checks import check_disk, check_memory, generated_size
 from granular_material.runs.boundary_value.continuum import continuum_stress, settles
 from granular_material.runs.boundary_value.material import (
@@ -96,7 +104,7 @@ from granular_material.runs.spec import SpecError
 
 #: the files a run writes into its folder beside its tables (removed when a run starts, so
 #: that an earlier run's never stand beside this one's)
-_OUTPUTS = ("fields.xdmf", "load_displacement.png", "mechanism.png", "summary.json",
+_OUTPUTS = ("fields.xdmf", "fields.h5", "load_displacement.png", "mechanism.png", "summary.json",
             "strength_reduction.png")
 
 __all__ = [
@@ -629,14 +637,21 @@ def run_boundary_value(spec: BoundaryValueSpec, out: Path | None = None,
         if spec.fields:
             writer = FieldWriter(out / "fields.xdmf", problem).__enter__()
 
+    synced_at = [-math.inf]  # when the tables were last flushed to the disk (monotonic)
+
     def keep(row: dict[str, Any], points: pd.DataFrame, u: np.ndarray) -> None:
         rows.append(row)
         last.update(points=points, u=u.copy())
         if out is not None:
             first = row["step"] == 0
-            write_points(points, out, append=not first, csv=spec.points_csv)
+            # flushed (fsync) as a biaxial run's: with the first step SYNC_SECONDS after the
+            # last flush, and at the end
+            sync = not first and time.monotonic() - synced_at[0] >= SYNC_SECONDS
+            if sync:
+                synced_at[0] = time.monotonic()
+            write_points(points, out, append=not first, csv=spec.points_csv, sync=sync)
             write_csv(pd.DataFrame([row]), out / "steps.csv",  # last: the step's commit
-                      append=not first)
+                      append=not first, sync=sync)
             if writer is not None:
                 writer.write(float(row["load_factor"]), u, points)
 
@@ -710,6 +725,8 @@ def run_boundary_value(spec: BoundaryValueSpec, out: Path | None = None,
     finally:
         if writer is not None:
             writer.__exit__(None, None, None)
+        if out is not None:
+            sync_files([out / "points.npy", out / "points.csv", out / "steps.csv"])
     steps = pd.DataFrame(rows)
     summary = _summary(b, solver, steps, last.get("points", pd.DataFrame()), error,
                        initial_residual, t_initial, time.perf_counter() - t_start)
