@@ -133,13 +133,15 @@ def test_each_point_switches_to_its_own_rve():
     material.allocate(3)
     grad = np.zeros((3, 2, 2))
     grad[:, 1, 1], grad[:, 0, 0] = -1e-3, 5e-4
-    for steps in range(10):
+    committed = 0
+    for _ in range(10):
         response = material.evaluate(grad)
         if material.dem_points == 3:
             break
         material.commit()
+        committed += 1
     assert material.dem_points == 3
-    deformation = np.linalg.matrix_power(np.eye(2) + grad[0], steps)
+    deformation = np.linalg.matrix_power(np.eye(2) + grad[0], committed)
     for point in range(3):
         alone = DEMMaterial.holding(source.take([point]), parameters)
         assert alone.evaluate((deformation - np.eye(2))[None]).ok

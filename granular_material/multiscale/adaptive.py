@@ -496,9 +496,9 @@ class AdaptiveMaterial(ScikitFemInterface):
 
     def _by_strain(self, points: np.ndarray
                    ) -> tuple[DEMMaterial | None, np.ndarray, int, float, int, int]:
-        """Copies of the source driven through the points' deformation F − I in one
-        evaluation (the DEM's constant velocity gradient log F), committed; a point whose
-        RVE fails stays on the twin. The cohort, which points reached, the work
+        """The points' start RVEs (:meth:`_sources`) driven through their deformation F − I
+        in one evaluation (the DEM's constant velocity gradient log F), committed; a point
+        whose RVE fails stays on the twin. The cohort, which points reached, the work
         [disc-steps], the largest error (0: the deformation is reached exactly) and no
         target lifted or capped."""
         reached = np.ones(points.size, dtype=bool)
@@ -520,8 +520,8 @@ class AdaptiveMaterial(ScikitFemInterface):
 
     def _by_stress(self, points: np.ndarray, stress: np.ndarray
                    ) -> tuple[DEMMaterial | None, np.ndarray, int, float, int, int]:
-        """Copies of the source brought by the stress servo to the points' committed
-        stresses (lifted to the lowest prepared pressure, capped at
+        """The points' start RVEs (:meth:`_sources`) brought by the stress servo to their
+        committed stresses (lifted to the lowest prepared pressure, capped at
         :data:`TARGET_FRICTION`); an RVE that the servo breaks or does not bring to its
         target stays on the twin. The cohort, which points reached, the work
         [disc-steps], the largest error of the target's scale, the targets lifted and
