@@ -87,6 +87,23 @@ def test_a_shear_strain_alone_is_the_only_threshold_and_settings_need_adaptivity
     assert refused.value.field == "start" and "needs `adaptivity`" in str(refused.value)
 
 
+@pytest.mark.parametrize("adaptivity", [
+    AdaptivitySpec(), AdaptivitySpec(shear_strain=0.01),
+    AdaptivitySpec(mobilised_fraction=None, shear_strain=0.01, start="stress")])
+def test_an_adaptive_spec_s_command_line_makes_the_same_spec(adaptivity):
+    import shlex
+
+    from granular_material.cli import build_parser
+    from granular_material.cli.fem import command_line, spec_from_args
+
+    parser = build_parser()  # registers the commands' parsers
+    spec = RunSpec(problem=ProblemSpec(test="biaxial"), material=MaterialSpec(name="dem"),
+                   output=OutputSpec(progress=False), adaptivity=adaptivity)
+    words = shlex.split(command_line(spec))[1:]
+    assert "--adaptivity" in words
+    assert spec_from_args(parser.parse_args([*words, "--no-progress"])) == spec
+
+
 @pytest.mark.parametrize("changes, words", [
     ({"material": MaterialSpec(name="mohr-coulomb")}, "needs `material` dem"),
     ({"problem": ProblemSpec(test="single-element")}, "biaxial specimen's"),
