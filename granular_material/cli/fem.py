@@ -141,10 +141,18 @@ def command_line(spec: RunSpec) -> str:
     material = flat.pop("material")
     if material != DEFAULT_MATERIAL:
         words += ["--material", material]
-    defaults = to_flat(from_flat({"test": test, "material": material}))
+    adaptive = spec.adaptivity is not None
+    defaults = to_flat(from_flat({"test": test, "material": material,
+                                  **({"adaptivity": True} if adaptive else {})}))
+    defaults["adaptivity"] = False  # the settings' defaults are adaptivity's, the switch off
+    # beside --shear-strain, --mobilised-fraction is given even at its default: alone,
+    # --shear-strain is the only threshold
+    both = adaptive and None not in (spec.adaptivity.shear_strain,
+                                     spec.adaptivity.mobilised_fraction)
     for name, value in flat.items():
         action = dests.get(name)
-        if action is None or value == defaults.get(name) or value is None:
+        at_default = value == defaults.get(name) and not (both and name == "mobilised_fraction")
+        if action is None or at_default or value is None:
             continue
         if action.nargs == 0:  # a flag
             words += [action.option_strings[-1]] if value else []

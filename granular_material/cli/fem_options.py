@@ -36,6 +36,7 @@ from granular_material.runs.presets import PRESET_NAMES
 from granular_material.runs.spec import (
     BACKENDS,
     SCALES,
+    AdaptivitySpec,
     NewtonSpec,
     ProblemSpec,
     RegularisationSpec,
@@ -47,6 +48,7 @@ __all__ = ["DEFAULT_MATERIAL", "DEFAULT_PARTICLES", "TANGENTS", "add_fem_command
 _NEWTON = NewtonSpec()
 _OUTPUT = OutputSpec()
 _REGULARISATION = RegularisationSpec()
+_ADAPTIVITY = AdaptivitySpec()
 _PROBLEM = {f: ProblemSpec.__dataclass_fields__[f].default
             for f in ("axial_strain", "confining", "steps")}
 #: the material the FEM commands run by default, and its parameters' defaults (the class the
@@ -73,6 +75,48 @@ def regularisation_arguments(parser: argparse.ArgumentParser) -> None:
                    help="the second gradient's internal length [m]: its modulus is "
                         "D = G0 (L/10)^2 with G0 the material's initial shear modulus; the band is "
                         "a few L wide")
+
+
+def adaptivity_arguments(parser: argparse.ArgumentParser) -> None:
+    """The specimen's adaptivity: ``--adaptivity`` and its settings (the spec's adaptivity
+    section, a boundary-value scene's [adaptivity] keys; each setting defaults to None, so
+    that one given without ``--adaptivity`` is refused)."""
+    from granular_material.multiscale.adaptive import NEIGHBOURS, STARTS
+    from granular_material.runs.spec_sections import SWITCHES
+
+    a = _ADAPTIVITY
+    g = parser.add_argument_group(
+        "adaptivity (dem: DEM RVEs only where the twin is no longer trusted)", advanced=True,
+        description="every Gauss point starts on the Mohr-Coulomb twin calibrated from the "
+                    "first point's RVE and moves to its own RVE (the one an all-DEM run "
+                    "gives it) once a threshold is met; the settings need --adaptivity")
+    g.add_argument("--adaptivity", action="store_true",
+                   help="turn it on, every setting at its default")
+    g.add_argument("--mobilised-fraction", type=float, default=None, metavar="F",
+                   help="a point becomes DEM once its mobilised friction angle reaches this "
+                        "fraction, in (0, 1], of the twin's peak friction angle (default "
+                        f"{a.mobilised_fraction:g}; with --shear-strain alone: not used)")
+    g.add_argument("--shear-strain", type=float, default=None, metavar="GAMMA",
+                   help="a point becomes DEM once its accumulated shear strain reaches this "
+                        "[-] (default: not used)")
+    g.add_argument("--neighbours", choices=NEIGHBOURS, default=None,
+                   help="element: the points of a switching point's element switch with it "
+                        f"(default {a.neighbours}); point: the point alone")
+    g.add_argument("--start", choices=STARTS, default=None,
+                   help="how a switching point's RVE starts: strain, driven through the "
+                        f"point's deformation (default {a.start}); stress, brought by the "
+                        "stress servo to the point's twin stress")
+    g.add_argument("--switch", choices=SWITCHES, default=None,
+                   help="in-step: a point that meets a threshold in a load step is DEM in "
+                        f"that whole step (default {a.switch}); after-step: from the next "
+                        "step on")
+    g.add_argument("--calibration", type=Path, default=None, metavar="FILE",
+                   help="a calibration.json of `granular-material calibrate` whose "
+                        "parameters make the twin (default: the first RVE calibrated at "
+                        "--confining when the run starts)")
+    g.add_argument("--elastic-window", type=positive, default=None, metavar="STRAIN",
+                   help="the axial strain [-] the run's calibration reads the twin's E and "
+                        f"nu over (default {a.elastic_window:g})")
 
 
 def _newton_arguments(parser: argparse.ArgumentParser) -> None:
@@ -310,6 +354,7 @@ def add_fem_commands(subparsers: argparse._SubParsersAction) -> dict[str, Comman
                         "rough: no platen node moves sideways")
     _common_arguments(b)
     regularisation_arguments(b)
+    adaptivity_arguments(b)
     _newton_arguments(b)
     _dem_arguments(b)
     _rve_material_arguments(b)

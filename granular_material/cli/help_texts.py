@@ -98,6 +98,7 @@ HELP_TEXTS = {
                 'more options, shown by --help-all:\n'
                 '  finite elements (2)\n'
                 '  where the RVEs run, maps and checkpoints (5)\n'
+                '  adaptivity (dem: DEM RVEs only where the twin is no longer trusted) (8)\n'
                 '  Newton solver (15)\n'
                 '  DEM material: what is stepped, and what is post-processed (9)\n'
                 '  RVE material (12)\n'
@@ -129,7 +130,14 @@ HELP_TEXTS = {
                 '                                 [--checkpoint-every N]\n'
                 '                                 [--checkpoint-minutes M]\n'
                 '                                 [--regularisation {none,second-gradient}]\n'
-                '                                 [--internal-length L] [--rtol RTOL]\n'
+                '                                 [--internal-length L] [--adaptivity]\n'
+                '                                 [--mobilised-fraction F]\n'
+                '                                 [--shear-strain GAMMA]\n'
+                '                                 [--neighbours {point,element}]\n'
+                '                                 [--start {strain,stress}]\n'
+                '                                 [--switch {in-step,after-step}]\n'
+                '                                 [--calibration FILE]\n'
+                '                                 [--elastic-window STRAIN] [--rtol RTOL]\n'
                 '                                 [--stress-tol STRESS_TOL]\n'
                 '                                 [--stall-rtol STALL_RTOL]\n'
                 '                                 [--stall-window STALL_WINDOW]\n'
@@ -289,6 +297,39 @@ HELP_TEXTS = {
                 "  --internal-length L   the second gradient's internal length [m]: its modulus\n"
                 "                        is D = G0 (L/10)^2 with G0 the material's initial\n"
                 '                        shear modulus; the band is a few L wide\n'
+                '\n'
+                'adaptivity (dem: DEM RVEs only where the twin is no longer trusted):\n'
+                '  every Gauss point starts on the Mohr-Coulomb twin calibrated from the\n'
+                "  first point's RVE and moves to its own RVE (the one an all-DEM run gives\n"
+                '  it) once a threshold is met; the settings need --adaptivity\n'
+                '\n'
+                '  --adaptivity          turn it on, every setting at its default\n'
+                '  --mobilised-fraction F\n'
+                '                        a point becomes DEM once its mobilised friction angle\n'
+                "                        reaches this fraction, in (0, 1], of the twin's peak\n"
+                '                        friction angle (default 0.7; with --shear-strain\n'
+                '                        alone: not used)\n'
+                '  --shear-strain GAMMA  a point becomes DEM once its accumulated shear strain\n'
+                '                        reaches this [-] (default: not used)\n'
+                '  --neighbours {point,element}\n'
+                "                        element: the points of a switching point's element\n"
+                '                        switch with it (default element); point: the point\n'
+                '                        alone\n'
+                '  --start {strain,stress}\n'
+                "                        how a switching point's RVE starts: strain, driven\n"
+                "                        through the point's deformation (default strain);\n"
+                "                        stress, brought by the stress servo to the point's\n"
+                '                        twin stress\n'
+                '  --switch {in-step,after-step}\n'
+                '                        in-step: a point that meets a threshold in a load step\n'
+                '                        is DEM in that whole step (default in-step); after-\n'
+                '                        step: from the next step on\n'
+                '  --calibration FILE    a calibration.json of `granular-material calibrate`\n'
+                '                        whose parameters make the twin (default: the first RVE\n'
+                '                        calibrated at --confining when the run starts)\n'
+                '  --elastic-window STRAIN\n'
+                "                        the axial strain [-] the run's calibration reads the\n"
+                "                        twin's E and nu over (default 0.0002)\n"
                 '\n'
                 'Newton solver:\n'
                 '  --rtol RTOL           relative tolerance of the --convergence test:\n'

@@ -17,8 +17,10 @@ pressure), and move one by one to a DEM RVE of their own:
   is made on the committed state after each step, and the point is DEM from the next step
   on. With ``neighbours = "element"`` every point of an element that holds a switching
   point switches with it. A point that has switched stays DEM.
-- **How** (``start``). Each switching point's RVE is a copy of the scene's source RVE (the
-  packing every point would hold in an all-DEM run, in its start state). ``"strain"``
+- **How** (``start``). Each switching point's RVE comes from the *source*: a copy of its
+  one RVE (a scene's packing, which every point of an all-DEM run of a uniform start holds),
+  or, with one RVE a point (a specimen's, each prepared from its own seed), the point's own
+  RVE, the one it would hold in an all-DEM run, in its start state. ``"strain"``
   drives the copies through their points' whole deformation F so far in one DEM drive (the
   constant velocity gradient log F) and commits them: each RVE has its point's strain, its
   stress is the DEM's own. ``"stress"`` brings them by the anisotropic stress servo
@@ -246,8 +248,9 @@ class AdaptiveMaterial(ScikitFemInterface):
         peak_friction: the twin's peak friction angle [deg] (the criterion's reference).
         dem: the DEM material's parameters, which every cohort is made with (``device``,
             ``shards``, ``tangent``, ``drive``, …).
-        source: the RVE (one, its first used) every switching point's RVE is a copy of, in
-            the state the scene's RVEs start from.
+        source: the RVEs the switching points' RVEs come from, in the state an all-DEM run's
+            start from: one RVE, copied to every point, or one RVE a point (the point's
+            own; :meth:`allocate` then checks the count).
         criterion: when a point switches.
         nqp: Gauss points an element (points ``e·nqp … e·nqp + nqp − 1`` are element e's).
         start: how a switching point's RVE starts (:data:`STARTS`).
@@ -276,7 +279,9 @@ class AdaptiveMaterial(ScikitFemInterface):
         self.twin = twin
         self.peak_friction = float(peak_friction)
         self.dem = dem
-        self.source = source.take([0])
+        if not isinstance(source, RVEData) or source.n_rve < 1:
+            raise ParameterError("source", "must be an RVEData of one RVE, or of one a point")
+        self.source = source
         self.criterion = criterion or SwitchCriterion()
         self.nqp = nqp
         self.start = start
@@ -297,8 +302,28 @@ class AdaptiveMaterial(ScikitFemInterface):
         #: how the twin was made (a calibration's parameters and pressure), where known
         self.calibration: dict[str, Any] | None = None
 
+    def _check_source(self, n_points: int) -> None:
+        """ParameterError naming ``source`` unless it holds one RVE or ``n_points``."""
+        if self.source.n_rve not in (1, n_points):
+            raise ParameterError("source", f"holds {self.source.n_rve} RVEs: give one (copied "
+                                           f"to every point) or one a point ({n_points})")
+
+    def _sources(self, points: np.ndarray) -> RVEData:
+        """The start RVEs of ``points`` (indices): copies of the one source RVE, or each
+        point's own."""
+        if self.source.n_rve == 1:
+            return self.source.replicate(points.size)
+        return self.source.take(points)
+
+    def _source_pressure(self, points: np.ndarray) -> np.ndarray:
+        """The mean pressure [Pa] of the start RVE of each of ``points``, compression
+        positive (its measured stress)."""
+        stress = self._source_response().stress
+        index = np.zeros(points.size, dtype=np.int64) if self.source.n_rve == 1 else points
+        return -0.5 * np.trace(stress[index], axis1=1, axis2=2)
+
     def _source_response(self) -> MaterialResponse:
-        """The source RVE's response as it is (measured once: no step)."""
+        """The source RVEs' responses as they are (measured once: no step)."""
         if self._measured is None:
             from granular_material.multiscale.responses import measured_response
 
@@ -333,7 +358,9 @@ class AdaptiveMaterial(ScikitFemInterface):
 
     # -- protocol --------------------------------------------------------------------------
     def allocate(self, n_points: int) -> None:
-        """Allocate the twin at ``n_points`` points, every one on the twin."""
+        """Allocate the twin at ``n_points`` points, every one on the twin. ParameterError
+        naming ``source`` where it holds neither one RVE nor one a point."""
+        self._check_source(int(n_points))
         self.twin.allocate(n_points)
         n = int(self.twin.n_points)
         self._cohorts = []
@@ -469,19 +496,18 @@ class AdaptiveMaterial(ScikitFemInterface):
 
     def _by_strain(self, points: np.ndarray
                    ) -> tuple[DEMMaterial | None, np.ndarray, int, float, int, int]:
-        """Copies of the source driven through the points' deformation F − I in one
-        evaluation (the DEM's constant velocity gradient log F), committed; a point whose
-        RVE fails stays on the twin. The cohort, which points reached, the work
+        """The points' start RVEs (:meth:`_sources`) driven through their deformation F − I
+        in one evaluation (the DEM's constant velocity gradient log F), committed; a point
+        whose RVE fails stays on the twin. The cohort, which points reached, the work
         [disc-steps], the largest error (0: the deformation is reached exactly) and no
         target lifted or capped."""
         reached = np.ones(points.size, dtype=bool)
         work = 0
-        source = self._source_response().stress[0]
-        pressure = np.full(points.size, -0.5 * float(np.trace(source)))
+        pressure = self._source_pressure(points)
         grad = self._deformation[points] - np.eye(2)
         while reached.any():
             kept = np.flatnonzero(reached)
-            material = DEMMaterial.holding(self.source.replicate(kept.size), self.dem,
+            material = DEMMaterial.holding(self._sources(points[kept]), self.dem,
                                            pressure[kept])
             response = material.evaluate(grad[kept])
             work += int(response.costs.get("particle_steps", 0))
@@ -494,8 +520,8 @@ class AdaptiveMaterial(ScikitFemInterface):
 
     def _by_stress(self, points: np.ndarray, stress: np.ndarray
                    ) -> tuple[DEMMaterial | None, np.ndarray, int, float, int, int]:
-        """Copies of the source brought by the stress servo to the points' committed
-        stresses (lifted to the lowest prepared pressure, capped at
+        """The points' start RVEs (:meth:`_sources`) brought by the stress servo to their
+        committed stresses (lifted to the lowest prepared pressure, capped at
         :data:`TARGET_FRICTION`); an RVE that the servo breaks or does not bring to its
         target stays on the twin. The cohort, which points reached, the work
         [disc-steps], the largest error of the target's scale, the targets lifted and
@@ -517,7 +543,7 @@ class AdaptiveMaterial(ScikitFemInterface):
         work = 0
         while trying.size:  # an RVE that the servo breaks is left out, the others redone
             try:
-                data, servo = bring_to_stress(self.source.replicate(trying.size),
+                data, servo = bring_to_stress(self._sources(points[trying]),
                                               target[trying], device=self.dem.device,
                                               shards=self.dem.shards, strict=False,
                                               progress=self.progress,

@@ -171,6 +171,10 @@ def check(spec: RunSpec | DemSpec) -> RunPlan | DemPlan:
     discs = hook(spec.material.parameters, context) if hook is not None else 0
     _check_size(spec, setup, discs)
     tracking = _tracking(spec, setup.n_points)
+    calibration = None if spec.adaptivity is None else spec.adaptivity.calibration
+    if calibration is not None and not calibration.is_file():
+        raise SpecError("calibration", f"{calibration} is no file (a calibration.json written "
+                                       "by granular-material calibrate)")
     if hasattr(cls, "for_run"):  # the material's own checks of what it is built from
         _built(spec, context)
     return RunPlan(spec=spec, device=device, setup=setup, context=context, discs=discs,
@@ -183,6 +187,17 @@ def _built(spec: RunSpec, context: RunContext) -> Material:
     if hasattr(cls, "for_run"):
         return cls.for_run(spec.material.parameters, context)
     return cls(**spec.material.values())
+
+
+def _adaptive(plan: RunPlan, dem: Material) -> Material:
+    """The adaptive material of the run from its DEM material ``dem``
+    (:func:`~granular_material.runs.specimen_adaptivity.adaptive_specimen`; a resumed run
+    prepares and calibrates again, then takes every point's state from its checkpoint)."""
+    from granular_material.runs.specimen_adaptivity import adaptive_specimen
+
+    spec, setup = plan.spec, plan.setup
+    return adaptive_specimen(dem, spec.adaptivity, setup.n_points, setup.points_per_element,
+                             spec.problem.confining, progress=spec.output.progress)
 
 
 def _scale_name(plan: RunPlan) -> str:
@@ -267,6 +282,9 @@ def run(spec: RunSpec | DemSpec, observer: RunObserver | None = None, *,
                                              "fresh=True) starts afresh over it)") from None
         plan = check(spec)
         material = _built(spec, plan.context)
+        if spec.adaptivity is not None:  # the RVEs prepared and the twin calibrated first
+            with times.phase("preparation"):
+                material = _adaptive(plan, material)
         # the material allocated, or restored (an older checkpoint refused), before the
         # folder is touched
         if saved:
@@ -333,6 +351,10 @@ def _execute(plan: RunPlan, material: Material, observer: RunObserver | None,
     if result.regularisation is not None:
         summary["regularisation"] = result.regularisation
     summary["preset"] = spec.preset
+    if spec.adaptivity is not None:
+        from granular_material.runs.specimen_adaptivity import adaptivity_summary
+
+        summary["adaptivity"] = adaptivity_summary(material, spec.adaptivity)
     summary.update(element=plan.setup.element,
                    points_per_element=plan.setup.points_per_element,
                    convergence=spec.newton.convergence_test(noisy))

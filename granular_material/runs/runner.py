@@ -88,6 +88,11 @@ def _rows(solver: NewtonSolver, problem: BiaxialProblem, record: StepRecord | No
         "converged_by": "+".join(record.converged_by) if record else "",
         "correction_history": json.dumps(record.correction_history if record else []),
     }
+    dem_points = getattr(solver.material, "dem_points", None)
+    if dem_points is not None:  # an adaptive material: its DEM points after the step, and
+        row["dem_points"] = int(dem_points)  # the work of the switches (beside the steps')
+        row["switch_particle_steps"] = (record.costs.get("switch_particle_steps", 0)
+                                        if record else 0)
     xy = to_points(np.asarray(problem.basis.global_coordinates()))
     n = stress.shape[0]
     nqp = problem.basis.X.shape[-1]

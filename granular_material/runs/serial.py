@@ -5,12 +5,15 @@ older checkpoints use.
 Nested form::
 
     {"problem": {...}, "material": {"name": "dem", "parameters": {...}},
-     "newton": {...}, "output": {...}, "device": ..., "shards": ..., "backend": ...,
+     "newton": {...}, "output": {...}, "regularisation": {...},
+     "adaptivity": {...} or None, "device": ..., "shards": ..., "backend": ...,
      "preset": ...}
 
 Flat form: every field by its bare name (``steps``, ``rtol``, ``particles``, ``out``), the
 material's name as ``material`` and the problem's ``test``; a field left out takes its
-default.
+default. Adaptivity, an optional section, is ``adaptivity`` (true: on) and its fields by
+their bare names (``mobilised_fraction``, ``start``, …), which need it on; as in a scene's
+``[adaptivity]`` table, ``shear_strain`` given alone is the only threshold.
 """
 
 from __future__ import annotations
@@ -24,6 +27,7 @@ from pathlib import Path
 from typing import Any
 
 from granular_material.runs.spec import (
+    AdaptivitySpec,
     MaterialSpec,
     NewtonSpec,
     OutputSpec,
@@ -47,6 +51,8 @@ SECTIONS: dict[str, type] = {"problem": ProblemSpec, "newton": NewtonSpec,
                              "output": OutputSpec, "regularisation": RegularisationSpec}
 #: the spec's own fields (beside its sections)
 _RUN_FIELDS = ("device", "shards", "backend", "preset")
+#: the optional section (None: off) and its fields' bare names
+_ADAPTIVITY = "adaptivity"
 
 
 def _plain(value: Any) -> Any:
@@ -67,6 +73,7 @@ def to_dict(spec: RunSpec) -> dict[str, Any]:
     data: dict[str, Any] = {name: _fields(getattr(spec, name)) for name in SECTIONS}
     data["material"] = {"name": spec.material.name,
                         "parameters": {k: _plain(v) for k, v in spec.material.values().items()}}
+    data[_ADAPTIVITY] = None if spec.adaptivity is None else _fields(spec.adaptivity)
     data.update({name: getattr(spec, name) for name in _RUN_FIELDS})
     return data
 
@@ -98,13 +105,27 @@ def _known(kind: type, values: Any, where: str) -> dict[str, Any]:
     return dict(values)
 
 
+def _adaptivity(values: Any) -> AdaptivitySpec | None:
+    """The adaptivity section of a nested form: None (off) or a table of its fields (empty:
+    every default; ``shear_strain`` named alone is the only threshold)."""
+    if values is None:
+        return None
+    table = _known(AdaptivitySpec, values, _ADAPTIVITY)
+    if "shear_strain" in table and "mobilised_fraction" not in table:
+        table["mobilised_fraction"] = None
+    try:
+        return AdaptivitySpec(**table)
+    except SpecError as exc:  # a field by its bare name, as every field of a run spec
+        raise SpecError(exc.field.removeprefix(f"{_ADAPTIVITY}."), exc.message) from None
+
+
 def from_dict(data: Mapping[str, Any]) -> RunSpec:
     """The spec of a nested form (:func:`to_dict`); SpecError naming an unknown, missing or
     ill-typed field."""
     if not isinstance(data, Mapping):
         raise SpecError("spec", "must be a table of sections (problem, material, newton, "
                                 f"output), got {data!r} ({type(data).__name__})")
-    unknown = sorted(set(map(str, data)) - {*SECTIONS, "material", *_RUN_FIELDS})
+    unknown = sorted(set(map(str, data)) - {*SECTIONS, "material", _ADAPTIVITY, *_RUN_FIELDS})
     if unknown:
         raise SpecError(unknown[0], "is no section of a run spec")
     material = dict(_section("material", data.get("material")))
@@ -120,7 +141,8 @@ def from_dict(data: Mapping[str, Any]) -> RunSpec:
     problem = ProblemSpec(**_known(ProblemSpec, data.get("problem"), "problem"))
     return RunSpec(problem=problem,
                    material=MaterialSpec(name=material["name"], parameters=dict(parameters)),
-                   **sections, **{k: data[k] for k in _RUN_FIELDS if k in data})
+                   **sections, adaptivity=_adaptivity(data.get(_ADAPTIVITY)),
+                   **{k: data[k] for k in _RUN_FIELDS if k in data})
 
 
 def _names(kind: type) -> set[str]:
@@ -145,11 +167,17 @@ def from_flat(values: Mapping[str, Any], *, strict: bool = True) -> RunSpec:
         raise SpecError("material", f"must name the material (a string), got {name!r}")
     data: dict[str, Any] = {key: {} for key in SECTIONS}
     parameters: dict[str, Any] = {}
+    adaptive = values.pop(_ADAPTIVITY, False)
+    if not isinstance(adaptive, bool):
+        raise SpecError(_ADAPTIVITY, f"must be true or false, got {adaptive!r}")
+    adaptivity: dict[str, Any] = {}
     material_names = _material_names(name)
     for key, value in renamed(values, name).items():  # old names: warned, read as new
         section = next((s for s, kind in SECTIONS.items() if key in _names(kind)), None)
         if section is not None:
             data[section][key] = value
+        elif key in _names(AdaptivitySpec):
+            adaptivity[key] = value
         elif key in _RUN_FIELDS:
             data[key] = value
         elif material_names is None or key in material_names:
@@ -157,6 +185,12 @@ def from_flat(values: Mapping[str, Any], *, strict: bool = True) -> RunSpec:
         elif strict:
             raise SpecError(key, f"is no field of a run of the material {name}")
     data["material"] = {"name": name, "parameters": parameters}
+    if not adaptive:
+        given = [k for k, v in adaptivity.items() if v is not None]
+        if given:
+            raise SpecError(given[0], "is a setting of adaptivity: it needs `adaptivity`")
+    else:
+        data[_ADAPTIVITY] = adaptivity
     return from_dict(data)
 
 
@@ -167,6 +201,8 @@ def to_flat(spec: RunSpec) -> dict[str, Any]:
     for name in SECTIONS:
         flat.update(data[name])
     flat.update(data["material"]["parameters"])
+    flat[_ADAPTIVITY] = spec.adaptivity is not None
+    flat.update(data[_ADAPTIVITY] or {})
     flat.update({k: data[k] for k in _RUN_FIELDS})
     return flat
 
@@ -209,6 +245,10 @@ def to_toml(spec: RunSpec) -> str:
     lines = [f"{k} = {_toml_value(data[k])}" for k in _RUN_FIELDS if data[k] is not None]
     for name, kind in SECTIONS.items():
         lines += ["", *_table(name, data[name], _defaults(kind))]
+    if spec.adaptivity is not None:  # a threshold that is None is left out (the other alone)
+        values = {k: v for k, v in data[_ADAPTIVITY].items()
+                  if v is not None or k != "mobilised_fraction"}
+        lines += ["", *_table(_ADAPTIVITY, values, _defaults(AdaptivitySpec))]
     kind = getattr(spec.material.cls, "Parameters", None)
     lines += ["", "[material]", f"name = {_toml_value(spec.material.name)}", "",
               *_table("material.parameters", data["material"]["parameters"],

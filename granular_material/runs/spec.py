@@ -35,6 +35,7 @@ from granular_material.runs.spec_sections import (
     REDUCED_SCALE,
     SCALES,
     TESTS,
+    AdaptivitySpec,
     MaterialSpec,
     NewtonSpec,
     OutputSpec,
@@ -46,9 +47,9 @@ from granular_material.runs.spec_sections import (
 )
 
 __all__ = ["BACKENDS", "FULL_SCALE", "MAX_CUTBACKS", "MAX_ITERATIONS", "MAX_MAP_STRAINS",
-           "MAX_TRACKED_ROWS", "REDUCED_SCALE",
-           "SCALES", "TESTS", "MaterialSpec", "NewtonSpec", "OutputSpec", "ProblemSpec",
-           "RegularisationSpec", "RunSpec", "SpecError"]
+           "MAX_TRACKED_ROWS", "REDUCED_SCALE", "SCALES", "TESTS", "AdaptivitySpec",
+           "MaterialSpec", "NewtonSpec", "OutputSpec", "ProblemSpec", "RegularisationSpec",
+           "RunSpec", "SpecError"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -61,6 +62,10 @@ class RunSpec:
         newton: the Newton solver.
         output: what is written.
         regularisation: the FEM's regularisation (none: the classical medium).
+        adaptivity: a biaxial specimen of the DEM material modelled only where it requires
+            it (:class:`AdaptivitySpec`): every point starts on the Mohr–Coulomb twin
+            calibrated from the first point's RVE, and moves to its own RVE (the one an
+            all-DEM run gives it) once a threshold is met; None: every point DEM (default).
         device: the DEM device, "cpu", "cuda" or "cuda:N"; None: CUDA where present.
         shards: CPU threads (shards) of a DEM batch; None: one per core.
         backend: "inprocess" or "mpi" (a material's points in shards on an MPI job's ranks).
@@ -73,6 +78,7 @@ class RunSpec:
     newton: NewtonSpec = field(default_factory=NewtonSpec)
     output: OutputSpec = field(default_factory=OutputSpec)
     regularisation: RegularisationSpec = field(default_factory=RegularisationSpec)
+    adaptivity: AdaptivitySpec | None = None
     device: str | None = None
     shards: int | None = None
     backend: str = "inprocess"
@@ -99,6 +105,29 @@ class RunSpec:
         if self.backend != "inprocess" and not hasattr(self.material.cls, "launch"):
             raise SpecError("backend", f"{self.backend} needs a material that runs on it "
                                        f"(dem), not {self.material.name}")
+        self._check_adaptivity()
+
+    def _check_adaptivity(self) -> None:
+        """SpecError naming ``adaptivity`` where it cannot act: another material than dem,
+        a single element, the MPI backend, tracked points (their RVEs are not all held)."""
+        a = self.adaptivity
+        if a is None:
+            return
+        if not isinstance(a, AdaptivitySpec):
+            raise SpecError("adaptivity", f"must be an AdaptivitySpec, got {type(a).__name__}")
+        if self.material.name != "dem":
+            raise SpecError("adaptivity", f"puts DEM RVEs where the twin of the dem material "
+                                          f"is no longer trusted; it needs `material` dem, "
+                                          f"not {self.material.name}")
+        if self.problem.test != "biaxial":
+            raise SpecError("adaptivity", f"is the biaxial specimen's, not the "
+                                          f"{self.problem.test} test's")
+        if self.backend != "inprocess":
+            raise SpecError("adaptivity", f"holds its RVEs in this process, not on "
+                                          f"`backend` {self.backend}")
+        if self.output.track is not None:
+            raise SpecError("adaptivity", "holds no RVE at a point still on its twin: "
+                                          "`track` needs every point DEM (leave one out)")
 
     def replace(self, **sections: Any) -> RunSpec:
         """A copy with whole sections or run fields replaced (dataclasses.replace)."""

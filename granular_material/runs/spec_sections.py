@@ -1,7 +1,9 @@
 """The sections of a run specification (:mod:`granular_material.runs.spec` says what one is):
 the problem (:class:`ProblemSpec`), the Newton solver (:class:`NewtonSpec`), the material
-(:class:`MaterialSpec`) and the outputs (:class:`OutputSpec`), each field with its default
-and its check, once."""
+(:class:`MaterialSpec`), the outputs (:class:`OutputSpec`), the regularisation
+(:class:`RegularisationSpec`) and adaptivity (:class:`AdaptivitySpec`, which a boundary-value
+scene's ``[adaptivity]`` table and the specimen's run share), each field with its default and
+its check, once."""
 
 from __future__ import annotations
 
@@ -18,6 +20,7 @@ from granular_material.fem.solver.defaults import COMMAND_DEFAULTS
 from granular_material.fem.solver.newton import NewtonSettings
 from granular_material.procedures.element_tests import DEFAULT_AXIAL_STRAIN
 from granular_material.procedures.packing import DEFAULT_DISCS, DEFAULT_PRESSURE
+from granular_material.reference_values import TWIN_ELASTIC_WINDOW
 from granular_material.runs.spec_checks import (
     SpecError,
     check_map_strains,
@@ -29,8 +32,9 @@ from granular_material.runs.spec_checks import (
 )
 from granular_material.vocabulary import renamed
 
-__all__ = ["BACKENDS", "FULL_SCALE", "REDUCED_SCALE", "SCALES", "TESTS", "MaterialSpec",
-           "NewtonSpec", "OutputSpec", "ProblemSpec", "RegularisationSpec"]
+__all__ = ["BACKENDS", "DEFAULT_MOBILISED_FRACTION", "FULL_SCALE", "REDUCED_SCALE", "SCALES",
+           "SWITCHES", "TESTS", "AdaptivitySpec", "MaterialSpec", "NewtonSpec", "OutputSpec",
+           "ProblemSpec", "RegularisationSpec"]
 
 #: the tests a run specification describes: one element, or the biaxial specimen
 TESTS = ("single-element", "biaxial")
@@ -408,3 +412,82 @@ class OutputSpec:
         from granular_material.fem.tracking import available_postprocessors
 
         return self.postprocess or tuple(available_postprocessors())
+
+
+#: when a point that meets a threshold becomes DEM: in the step it meets it, or after it
+SWITCHES = ("in-step", "after-step")
+#: the mobilised fraction of the twin's peak friction angle at which a point switches to its
+#: DEM RVE when an [adaptivity] table names no threshold
+DEFAULT_MOBILISED_FRACTION = 0.7
+
+
+@dataclass(frozen=True, kw_only=True)
+class AdaptivitySpec:
+    """A DEM material modelled only where the run requires it
+    (:class:`~granular_material.multiscale.adaptive.AdaptiveMaterial`): every point starts on
+    the Mohr–Coulomb twin calibrated from the run's (first) RVE and moves to a DEM RVE of its
+    own once a threshold is met: a boundary-value scene's ``[adaptivity]`` table, or a
+    specimen's :attr:`RunSpec.adaptivity <granular_material.runs.spec.RunSpec.adaptivity>`.
+
+    Attributes:
+        mobilised_fraction: switch once the mobilised friction angle reaches this fraction
+            (0, 1] of the twin's peak friction angle; None: not used.
+        shear_strain: switch once the accumulated shear strain γ [-] reaches this; None:
+            not used (at least one of the two is given).
+        neighbours: "element" (every point of a switching point's element switches with it)
+            or "point".
+        start: how a switching point's RVE starts: "strain" (driven through the point's
+            deformation) or "stress" (the stress servo brings it to the point's twin
+            stress).
+        switch: "in-step" (a point that meets a threshold during a load step is DEM in that
+            whole step) or "after-step" (from the next step on).
+        calibration: a ``calibration.json`` of ``granular-material calibrate`` whose
+            parameters make the twin; None: the scene's RVE (a specimen's first) is
+            calibrated at the scene's reference pressure (the specimen's confining pressure)
+            when the run starts.
+        elastic_window: the axial strain [-] that calibration reads the twin's E and ν over
+            (:data:`~granular_material.reference_values.TWIN_ELASTIC_WINDOW`, 2e-4: the
+            far field's strains).
+    """
+
+    mobilised_fraction: float | None = DEFAULT_MOBILISED_FRACTION
+    shear_strain: float | None = None
+    neighbours: str = "element"
+    start: str = "strain"
+    switch: str = "in-step"
+    calibration: Path | None = None
+    elastic_window: float = TWIN_ELASTIC_WINDOW
+
+    def __post_init__(self) -> None:
+        from granular_material.errors import ParameterError
+
+        if self.calibration is not None:
+            object.__setattr__(self, "calibration", Path(self.calibration))
+        try:
+            self.criterion()
+        except ParameterError as exc:
+            raise SpecError(exc.field, exc.message) from None
+        from granular_material.multiscale.adaptive import STARTS
+
+        if self.start not in STARTS:
+            raise SpecError("adaptivity.start", f"must be one of {', '.join(STARTS)}, got "
+                                                f"{self.start!r}")
+        if not (isinstance(self.elastic_window, int | float)
+                and 0 < self.elastic_window < 0.05):
+            raise SpecError("adaptivity.elastic_window", f"must be an axial strain in (0, 0.05) "
+                                                         f"[-], got {self.elastic_window!r}")
+        if self.calibration is not None and self.elastic_window != TWIN_ELASTIC_WINDOW:
+            raise SpecError("adaptivity.elastic_window", "reads the calibration the run makes; "
+                                                         "with a calibration file it would do "
+                                                         "nothing (give the window to the "
+                                                         "calibration that writes the file)")
+        if self.switch not in SWITCHES:
+            raise SpecError("adaptivity.switch", f"must be one of {', '.join(SWITCHES)}, got "
+                                                 f"{self.switch!r}")
+
+    def criterion(self) -> Any:
+        """The :class:`~granular_material.multiscale.adaptive.SwitchCriterion` it names."""
+        from granular_material.multiscale.adaptive import SwitchCriterion
+
+        return SwitchCriterion(self.mobilised_fraction, self.shear_strain, self.neighbours,
+                               in_step=self.switch == "in-step")

@@ -101,6 +101,7 @@ from granular_material.runs.boundary_value.resume import (
 from granular_material.runs.boundary_value.spec import BoundaryValueSpec, ConditionSpec
 from granular_material.runs.run_folder import interrupted_error, starting
 from granular_material.runs.spec import SpecError
+from granular_material.runs.specimen_adaptivity import adaptivity_summary
 
 #: the files a run writes into its folder beside its tables (removed when a run starts, so
 #: that an earlier run's never stand beside this one's)
@@ -877,23 +878,8 @@ def _summary(b: Built, solver: NewtonSolver, steps: pd.DataFrame, points: pd.Dat
         "unconfined_where": _where(points, "unconfined") if len(points) else "",
         "bodies": bodies, "timing_s": {k: round(v, 3) for k, v in timings.items()},
         "wall_s": round(wall, 3),
-        **({} if spec.adaptivity is None else {"adaptivity": _adaptivity_summary(b)}),
-    }
-
-
-def _adaptivity_summary(b: Built) -> dict[str, Any]:
-    """What an adaptive run's material did: its criterion, its twin, its switches."""
-    m = b.material
-    a = b.spec.adaptivity
-    return {
-        "mobilised_fraction": a.mobilised_fraction, "shear_strain": a.shear_strain,
-        "neighbours": a.neighbours, "twin": m.calibration,
-        "dem_points_final": int(m.dem_points), "gauss_points": int(m.n_points),
-        "missed_points": m.missed.tolist(),
-        "switches": [{"after_commit": s.commit, "points": int(s.points.size),
-                      "missed": int(s.missed.size), "lifted": s.lifted, "capped": s.capped,
-                      "particle_steps": s.particle_steps, "seconds": round(s.seconds, 3),
-                      "largest_error": s.error} for s in m.switches],
+        **({} if spec.adaptivity is None
+           else {"adaptivity": adaptivity_summary(b.material, spec.adaptivity)}),
     }
 
 

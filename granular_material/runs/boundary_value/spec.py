@@ -109,8 +109,13 @@ from pathlib import Path
 from typing import Any
 
 from granular_material.multiscale.parameters import MAX_SHARDS
-from granular_material.reference_values import TWIN_ELASTIC_WINDOW
-from granular_material.runs.spec import MaterialSpec, NewtonSpec, RegularisationSpec, SpecError
+from granular_material.runs.spec import (
+    AdaptivitySpec,
+    MaterialSpec,
+    NewtonSpec,
+    RegularisationSpec,
+    SpecError,
+)
 from granular_material.typed_fields import conform, conform_fields
 from granular_material.vocabulary import RenamedWarning, key_of, user_stacklevel
 
@@ -517,83 +522,6 @@ class StrengthReductionSpec:
         if self.steps < 1:
             raise SpecError("strength_reduction.steps", f"must be an integer >= 1, got "
                                                         f"{self.steps!r}")
-
-
-#: when a point that meets a threshold becomes DEM: in the step it meets it, or after it
-SWITCHES = ("in-step", "after-step")
-#: the mobilised fraction of the twin's peak friction angle at which a point switches to its
-#: DEM RVE when an [adaptivity] table names no threshold
-DEFAULT_MOBILISED_FRACTION = 0.7
-
-
-@dataclass(frozen=True, kw_only=True)
-class AdaptivitySpec:
-    """A DEM material modelled only where the scene requires it
-    (:class:`~granular_material.multiscale.adaptive.AdaptiveMaterial`): every point starts on
-    the Mohr–Coulomb twin calibrated from the scene's RVE and moves to a DEM RVE of its own,
-    brought to its stress, once a threshold is met.
-
-    Attributes:
-        mobilised_fraction: switch once the mobilised friction angle reaches this fraction
-            (0, 1] of the twin's peak friction angle; None: not used.
-        shear_strain: switch once the accumulated shear strain γ [-] reaches this; None:
-            not used (at least one of the two is given).
-        neighbours: "element" (every point of a switching point's element switches with it)
-            or "point".
-        start: how a switching point's RVE starts: "strain" (driven through the point's
-            deformation) or "stress" (the stress servo brings it to the point's twin
-            stress).
-        switch: "in-step" (a point that meets a threshold during a load step is DEM in that
-            whole step) or "after-step" (from the next step on).
-        calibration: a ``calibration.json`` of ``granular-material calibrate`` whose
-            parameters make the twin; None: the scene's RVE is calibrated at the scene's
-            reference pressure when the run starts.
-        elastic_window: the axial strain [-] that calibration reads the twin's E and ν over
-            (:data:`~granular_material.reference_values.TWIN_ELASTIC_WINDOW`, 2e-4: the
-            far field's strains).
-    """
-
-    mobilised_fraction: float | None = DEFAULT_MOBILISED_FRACTION
-    shear_strain: float | None = None
-    neighbours: str = "element"
-    start: str = "strain"
-    switch: str = "in-step"
-    calibration: Path | None = None
-    elastic_window: float = TWIN_ELASTIC_WINDOW
-
-    def __post_init__(self) -> None:
-        from granular_material.errors import ParameterError
-
-        if self.calibration is not None:
-            object.__setattr__(self, "calibration", Path(self.calibration))
-        try:
-            self.criterion()
-        except ParameterError as exc:
-            raise SpecError(exc.field, exc.message) from None
-        from granular_material.multiscale.adaptive import STARTS
-
-        if self.start not in STARTS:
-            raise SpecError("adaptivity.start", f"must be one of {', '.join(STARTS)}, got "
-                                                f"{self.start!r}")
-        if not (isinstance(self.elastic_window, int | float)
-                and 0 < self.elastic_window < 0.05):
-            raise SpecError("adaptivity.elastic_window", f"must be an axial strain in (0, 0.05) "
-                                                         f"[-], got {self.elastic_window!r}")
-        if self.calibration is not None and self.elastic_window != TWIN_ELASTIC_WINDOW:
-            raise SpecError("adaptivity.elastic_window", "reads the calibration the run makes; "
-                                                         "with a calibration file it would do "
-                                                         "nothing (give the window to the "
-                                                         "calibration that writes the file)")
-        if self.switch not in SWITCHES:
-            raise SpecError("adaptivity.switch", f"must be one of {', '.join(SWITCHES)}, got "
-                                                 f"{self.switch!r}")
-
-    def criterion(self) -> Any:
-        """The :class:`~granular_material.multiscale.adaptive.SwitchCriterion` it names."""
-        from granular_material.multiscale.adaptive import SwitchCriterion
-
-        return SwitchCriterion(self.mobilised_fraction, self.shear_strain, self.neighbours,
-                               in_step=self.switch == "in-step")
 
 
 @dataclass(frozen=True, kw_only=True)
