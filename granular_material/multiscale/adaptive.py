@@ -356,6 +356,25 @@ class AdaptiveMaterial(ScikitFemInterface):
         """The progress bar's count of DEM points (of all)."""
         return {"DEM": f"{self.dem_points}/{self.n_points}"}
 
+    def summary(self) -> dict[str, Any]:
+        """What the run did (a run summary's ``adaptivity``): its criterion and start, its
+        twin's calibration (``calibration``, where the run set it), its DEM points and every
+        switch."""
+        c = self.criterion
+        return {
+            "mobilised_fraction": c.mobilised_fraction, "shear_strain": c.shear_strain,
+            "neighbours": c.neighbours, "start": self.start,
+            "switch": "in-step" if c.in_step else "after-step",
+            "twin": getattr(self, "calibration", None),
+            "dem_points_final": self.dem_points, "gauss_points": self.n_points,
+            "missed_points": self.missed.tolist(),
+            "switches": [{"after_commit": s.commit, "points": int(s.points.size),
+                          "missed": int(s.missed.size), "lifted": s.lifted,
+                          "capped": s.capped, "particle_steps": s.particle_steps,
+                          "seconds": round(s.seconds, 3), "largest_error": s.error}
+                         for s in self.switches],
+        }
+
     # -- protocol --------------------------------------------------------------------------
     def allocate(self, n_points: int) -> None:
         """Allocate the twin at ``n_points`` points, every one on the twin. ParameterError

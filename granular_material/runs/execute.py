@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pandas as pd
 
 from granular_material.checks import (
@@ -190,14 +191,40 @@ def _built(spec: RunSpec, context: RunContext) -> Material:
 
 
 def _adaptive(plan: RunPlan, dem: Material) -> Material:
-    """The adaptive material of the run from its DEM material ``dem``
-    (:func:`~granular_material.runs.specimen_adaptivity.adaptive_specimen`; a resumed run
-    prepares and calibrates again, then takes every point's state from its checkpoint)."""
-    from granular_material.runs.specimen_adaptivity import adaptive_specimen
+    """The adaptive material of the specimen from its DEM material ``dem`` (not allocated):
+    the RVEs the all-DEM run would give its points (seed, seed + 1, … or the file's) become
+    the points' sources, the Mohr–Coulomb twin is calibrated from the first at the
+    confining pressure (or read from ``adaptivity.calibration``), and every point starts on
+    it at −confining·I
+    (:class:`~granular_material.multiscale.adaptive.AdaptiveMaterial`). A resumed run
+    prepares and calibrates again, then takes every point's state from its checkpoint. Not
+    allocated; its ``calibration`` says how the twin was made, with the seconds it took."""
+    from granular_material.multiscale.adaptive import (
+        AdaptiveMaterial,
+        twin_from_calibration,
+        twin_from_rve,
+    )
 
     spec, setup = plan.spec, plan.setup
-    return adaptive_specimen(dem, spec.adaptivity, setup.n_points, setup.points_per_element,
-                             spec.problem.confining, progress=spec.output.progress)
+    adaptivity, confining = spec.adaptivity, float(spec.problem.confining)
+    dem.allocate(setup.n_points)
+    source = dem.committed_rves()
+    sigma0 = np.repeat(-confining * np.eye(2)[None], setup.n_points, axis=0)
+    began = time.perf_counter()
+    if adaptivity.calibration is not None:
+        twin, calibration = twin_from_calibration(adaptivity.calibration, sigma0)
+    else:
+        twin, calibration = twin_from_rve(source, confining, sigma0,
+                                          device=dem.parameters.device,
+                                          progress=spec.output.progress,
+                                          elastic_window=adaptivity.elastic_window)
+    calibration = {**calibration, "seconds": round(time.perf_counter() - began, 3)}
+    material = AdaptiveMaterial(twin, calibration["parameters"]["friction_angle"],
+                                dem.parameters, source, adaptivity.criterion(),
+                                nqp=setup.points_per_element, start=adaptivity.start,
+                                progress=spec.output.progress)
+    material.calibration = calibration
+    return material
 
 
 def _scale_name(plan: RunPlan) -> str:
@@ -352,9 +379,7 @@ def _execute(plan: RunPlan, material: Material, observer: RunObserver | None,
         summary["regularisation"] = result.regularisation
     summary["preset"] = spec.preset
     if spec.adaptivity is not None:
-        from granular_material.runs.specimen_adaptivity import adaptivity_summary
-
-        summary["adaptivity"] = adaptivity_summary(material, spec.adaptivity)
+        summary["adaptivity"] = material.summary()
     summary.update(element=plan.setup.element,
                    points_per_element=plan.setup.points_per_element,
                    convergence=spec.newton.convergence_test(noisy))

@@ -101,7 +101,6 @@ from granular_material.runs.boundary_value.resume import (
 from granular_material.runs.boundary_value.spec import BoundaryValueSpec, ConditionSpec
 from granular_material.runs.run_folder import interrupted_error, starting
 from granular_material.runs.spec import SpecError
-from granular_material.runs.specimen_adaptivity import adaptivity_summary
 
 #: the files a run writes into its folder beside its tables (removed when a run starts, so
 #: that an earlier run's never stand beside this one's)
@@ -879,7 +878,7 @@ def _summary(b: Built, solver: NewtonSolver, steps: pd.DataFrame, points: pd.Dat
         "bodies": bodies, "timing_s": {k: round(v, 3) for k, v in timings.items()},
         "wall_s": round(wall, 3),
         **({} if spec.adaptivity is None
-           else {"adaptivity": adaptivity_summary(b.material, spec.adaptivity)}),
+           else {"adaptivity": b.material.summary()}),
     }
 
 
