@@ -500,3 +500,22 @@ def test_a_regularised_softening_specimen_has_an_active_band_the_profile_misses(
     assert bands[0]["inclination_deg"] == pytest.approx(-bands[1]["inclination_deg"], abs=1.0)
     assert bands[0]["width"] == pytest.approx(bands[1]["width"], rel=0.02)
     assert 0.020 < summary["active_band_width"] < 0.040
+
+
+@settings(max_examples=60, deadline=None)
+@given(rows=st.integers(1, 6), length=st.integers(1, 120), scale=st.floats(-8, 8),
+       sigma=st.sampled_from([0.5, 1.0, 2.5, 4.0]), seed=st.integers(0, 2**31 - 1))
+def test_the_hough_smoothing_is_scipys_gaussian_filter_to_the_last_bit(rows, length, scale,
+                                                                       sigma, seed):
+    """The accumulator's Gaussian smoothing, without scipy.ndimage: the same numbers as its
+    ``gaussian_filter1d`` (constant mode), rows shorter than the kernel included."""
+    from scipy.ndimage import gaussian_filter1d
+
+    from granular_material.results.bands import _smoothed
+
+    rng = np.random.default_rng(seed)
+    values = rng.random((rows, length)) * 10.0 ** scale
+    values[rng.random(values.shape) < 0.4] = 0.0
+    np.testing.assert_array_equal(
+        _smoothed(values, sigma),
+        gaussian_filter1d(values, sigma=sigma, axis=1, mode="constant"))

@@ -1,7 +1,8 @@
 """Only what the run needs (issue 62): a run of a continuum material (Mohr–Coulomb,
 linear-elastic) through the library's one entry point or the command line loads neither
-warp, the DEM's batch and kernels, the DEM material nor scipy.spatial; the DEM's and the
-procedures' packages load their modules when a name of theirs is first used."""
+warp, the DEM's batch and kernels, the DEM material, scipy.spatial, scipy.ndimage nor
+scipy.special; the DEM's and the procedures' packages load their modules when a name of
+theirs is first used."""
 
 from __future__ import annotations
 
@@ -12,7 +13,8 @@ import sys
 import pytest
 
 #: modules a continuum run must not load
-_NOT_NEEDED = ["warp", "scipy.spatial", "granular_material.dem.batch",
+_NOT_NEEDED = ["warp", "scipy.spatial", "scipy.ndimage", "scipy.special",
+               "granular_material.dem.batch",
                "granular_material.dem.model", "granular_material.dem.kernels.sets",
                "granular_material.dem.kernels.step",
                "granular_material.multiscale", "granular_material.procedures.servo",

@@ -53,7 +53,6 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 import pandas as pd
-from scipy.ndimage import gaussian_filter1d
 
 __all__ = ["MAX_BANDS", "MIN_ASPECT", "MIN_CONTRAST", "MIN_STRENGTH", "Band", "band_width",
            "find_bands", "step_points"]
@@ -88,6 +87,10 @@ _FEWEST = 3
 _SHARE = 0.3
 #: the largest factor by which the refined peak may exceed the largest bin's mean excess
 _PEAK_CAP = 1.2
+#: the Hough accumulator's smoothing along the offset: its standard deviation, in bins, and
+#: how far the kernel reaches, in standard deviations
+_SMOOTH_BINS = 4.0
+_SMOOTH_REACH = 4.0
 
 
 @dataclass(frozen=True)
@@ -209,6 +212,26 @@ def _parabola_vertex(y0: float, y1: float, y2: float) -> tuple[float, float]:
     return shift, y1 - 0.25 * (y0 - y2) * shift
 
 
+def _smoothed(rows: np.ndarray, sigma: float = _SMOOTH_BINS) -> np.ndarray:
+    """Each row of ``rows`` convolved with a normalised Gaussian kernel of standard
+    deviation ``sigma`` [bins] cut at :data:`_SMOOTH_REACH` of them, zero beyond the row's
+    ends. The kernel's terms are added in pairs from its tails inwards, which gives
+    ``scipy.ndimage.gaussian_filter1d(rows, sigma, axis=1, mode="constant")`` to the last bit
+    without importing ``scipy.ndimage`` (about 0.3 s of every run's start)."""
+    radius = int(_SMOOTH_REACH * sigma + 0.5)
+    offsets = np.arange(-radius, radius + 1)
+    kernel = np.exp(-0.5 / (sigma * sigma) * offsets ** 2)
+    kernel = kernel / kernel.sum()
+    n = rows.shape[1]
+    padded = np.zeros((rows.shape[0], n + 2 * radius))
+    padded[:, radius:radius + n] = rows
+    out = padded[:, radius:radius + n] * kernel[radius]
+    for k in range(radius, 0, -1):
+        out = out + (padded[:, radius + k:radius + k + n]
+                     + padded[:, radius - k:radius - k + n]) * kernel[radius + k]
+    return out
+
+
 def _strongest_line(xy: np.ndarray, weight: np.ndarray, spacing: float,
                     reach: float) -> _Line:
     """The line of the largest integral of ``weight`` (each point standing for spacing²),
@@ -225,7 +248,7 @@ def _strongest_line(xy: np.ndarray, weight: np.ndarray, spacing: float,
         accumulator[start:start + chunk.size] = np.bincount(
             index.ravel(), weights=np.repeat(weight[:, None] * spacing ** 2, chunk.size, axis=1)
             .ravel(), minlength=bins * chunk.size).reshape(chunk.size, bins)
-    accumulator = gaussian_filter1d(accumulator / bin_size, sigma=4.0, axis=1, mode="constant")
+    accumulator = _smoothed(accumulator / bin_size)
     k, j = np.unravel_index(int(np.argmax(accumulator)), accumulator.shape)
     ridge = accumulator.max(axis=1)
     shift, _ = _parabola_vertex(ridge[k - 1], ridge[k], ridge[(k + 1) % angles.size])
