@@ -209,6 +209,15 @@ def measure_steps(steps: pd.DataFrame, summary: dict[str, Any], name: str, scene
         row["dem_points_at_peak"] = int(row["dem_points"][min(peak, len(load) - 1)])
         total_ref = int(reference["particle_steps"][:n].sum())
         row["cost_ratio"] = (row["particle_steps"] + switching) / max(total_ref, 1)
+        row["switch_ratio"] = switching / max(total_ref, 1)
+        row["reference_load_steps_s"] = float(reference["wall_time"][:n].sum())
+        # a step's DEM work per Newton iteration over the reference's: what the DEM points
+        # cost beside all of them, whatever the iterations each run needed
+        ours = steps["particle_steps"].to_numpy(float)[:n] / steps["iterations"].to_numpy(
+            float)[:n].clip(1)
+        theirs = (reference["particle_steps"].to_numpy(float)[:n]
+                  / reference["iterations"].to_numpy(float)[:n].clip(1))
+        row["work_per_iteration_ratio"] = [None, *(ours[1:] / theirs[1:].clip(1)).tolist()]
     return row
 
 
@@ -269,7 +278,8 @@ def report(out: Path, results: dict[str, dict[str, Any]], commit: str) -> None:
                   "(switches) | load steps [s] |",
                   "|---|---|---|---|---|---|---|"]
         for variant, row in rows.items():
-            switch = row["switch_particle_steps"] / max(ref["particle_steps"], 1)
+            switch = row.get("switch_ratio",
+                             row["switch_particle_steps"] / max(ref["particle_steps"], 1))
             stopped = f" ({row['error'][:40]})" if row["error"] else ""
             at = 1e3 * ref["displacement"][row.get("largest_error_step", 0)]
             lines.append(
@@ -289,13 +299,19 @@ def report(out: Path, results: dict[str, dict[str, Any]], commit: str) -> None:
                 lines.append(f"- {variant}: the largest error from {low:g} to {high:g} mm "
                              f"({row['window_steps']} steps): "
                              f"{_pct(row.get('largest_error_in_window'))}.")
-            if not row.get("reached_peak", True):
-                lines.append(f"- {variant} has {row['steps']} of the reference's steps "
-                             f"(to {1e3 * row['displacement'][-1]:.2f} mm), not its peak: "
-                             "its errors 'to the peak' are to its last step, and its "
-                             "particle-steps are over the reference's to that step.")
+            if row["steps"] < ref["steps"]:
+                before = ("" if row.get("reached_peak", True) else
+                          ", before the reference's peak: its errors 'to the peak' are to "
+                          "its last step")
+                lines.append(f"- {variant} has {row['steps']} of the reference's "
+                             f"{ref['steps']} steps (to "
+                             f"{1e3 * row['displacement'][-1]:.2f} mm){before}; its "
+                             "particle-steps are over the reference's to that step, whose "
+                             f"load steps took {row['reference_load_steps_s']:.0f} s.")
         if lines[-1] != "":
             lines.append("")
+        if scene in ON_REQUEST:
+            lines += _work_table(rows)
     (out / "report.md").write_text("\n".join(lines) + "\n", encoding="utf-8")
 
 
@@ -304,6 +320,23 @@ def _gauss_points(folders: dict[str, Path]) -> int:
     summary = json.loads((next(iter(folders.values())) / "summary.json").read_text(
         encoding="utf-8"))
     return int(summary["gauss_points"])
+
+
+def _work_table(rows: dict[str, dict[str, Any]]) -> list[str]:
+    """Where the DEM work is: at each whole millimetre, each adaptive run's DEM points (of
+    all) and its DEM work per Newton iteration over the reference's."""
+    lines = ["| run | displacement [mm] | DEM points | DEM work per iteration / all-DEM's |",
+             "|---|---|---|---|"]
+    for variant, row in rows.items():
+        if variant == "all-DEM" or "work_per_iteration_ratio" not in row:
+            continue
+        d = 1e3 * np.asarray(row["displacement"])
+        for mm in range(1, int(d.max() + 1e-9) + 1):
+            k = int(np.argmin(np.abs(d - mm)))
+            lines.append(f"| {variant} | {d[k]:.2f} | "
+                         f"{100 * row['dem_points'][k] / row['gauss_points']:.0f} % | "
+                         f"{row['work_per_iteration_ratio'][k]:.2f} |")
+    return [*lines, ""]
 
 
 def main(argv: list[str] | None = None) -> dict[str, Any]:
