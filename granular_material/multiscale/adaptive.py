@@ -365,7 +365,7 @@ class AdaptiveMaterial(ScikitFemInterface):
             "mobilised_fraction": c.mobilised_fraction, "shear_strain": c.shear_strain,
             "neighbours": c.neighbours, "start": self.start,
             "switch": "in-step" if c.in_step else "after-step",
-            "twin": getattr(self, "calibration", None),
+            "twin": self.calibration,
             "dem_points_final": self.dem_points, "gauss_points": self.n_points,
             "missed_points": self.missed.tolist(),
             "switches": [{"after_commit": s.commit, "points": int(s.points.size),
