@@ -56,6 +56,24 @@ class StopAtStep:
             raise KeyboardInterrupt
 
 
+class StopAfterRecord:
+    """A run observer (``runs.run``'s second argument): Ctrl-C once load step ``step`` is
+    recorded."""
+
+    def __init__(self, step: int) -> None:
+        self.step = step
+
+    def start(self, problem) -> None:
+        pass
+
+    def record(self, row, points, u, tracked=None) -> None:
+        if row["step"] == self.step:
+            raise KeyboardInterrupt
+
+    def finish(self, result) -> None:
+        pass
+
+
 class CommittedStrain:
     """The state of a test material whose response depends on its committed total strain
     alone (n, 2, 2): allocate, commit, revert, checkpoint and restore. A subclass's

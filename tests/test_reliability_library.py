@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from run_helpers import StopAfterRecord
 
 from granular_material.cli import main
 from granular_material.errors import ParameterError
@@ -38,23 +39,6 @@ def _elastic(out: Path | None, steps: int = 6) -> RunSpec:
                    output=OutputSpec(out=out, checkpoint_every=1), device="cpu")
 
 
-class _StopAfter:
-    """A run observer that presses Ctrl-C once load step ``step`` is recorded."""
-
-    def __init__(self, step: int) -> None:
-        self.step = step
-
-    def start(self, problem) -> None:
-        pass
-
-    def record(self, row, points, u, tracked=None) -> None:
-        if row["step"] == self.step:
-            raise KeyboardInterrupt
-
-    def finish(self, result) -> None:
-        pass
-
-
 def _files(folder: Path) -> dict[Path, bytes]:
     return {p: p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
 
@@ -62,7 +46,7 @@ def _files(folder: Path) -> dict[Path, bytes]:
 # -- a stopped run's work is never lost unasked ----------------------------------------------
 def test_a_run_into_a_stopped_runs_folder_is_refused_unless_resumed_or_fresh(tmp_path):
     spec = _elastic(tmp_path / "run")
-    stopped = run(spec, _StopAfter(3))
+    stopped = run(spec, StopAfterRecord(3))
     assert stopped.interrupt is not None and len(stopped.result.steps) == 4
     before = _files(tmp_path / "run")
     with pytest.raises(ParameterError, match=r"stopped after load step [23] of 6.*resume=True"):
@@ -72,7 +56,7 @@ def test_a_run_into_a_stopped_runs_folder_is_refused_unless_resumed_or_fresh(tmp
         run(spec, resume=True, fresh=True)
     resumed = run(spec, resume=True)
     assert resumed.summary["resumed_from_step"] in (2, 3) and len(resumed.result.steps) == 7
-    run(spec, _StopAfter(2))
+    run(spec, StopAfterRecord(2))
     again = run(spec, fresh=True)  # asked for explicitly: starts from step 0
     assert again.summary["resumed_from_step"] is None and len(again.result.steps) == 7
     assert run(spec).interrupt is None  # a finished run's folder may be run again

@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+from run_helpers import StopAfterRecord
 
 from granular_material.cli import main
 from granular_material.errors import ParameterError
@@ -206,30 +207,13 @@ def test_without_adaptivity_the_steps_table_is_as_before(tmp_path):
     assert "dem_points" not in columns and "switch_particle_steps" not in columns
 
 
-class _StopAfter:
-    """An observer that stops the run (Ctrl-C) once step ``step`` is recorded."""
-
-    def __init__(self, step: int) -> None:
-        self.step = step
-
-    def start(self, problem) -> None:
-        pass
-
-    def record(self, row, points, u, tracked=None) -> None:
-        if row["step"] == self.step:
-            raise KeyboardInterrupt
-
-    def finish(self, result) -> None:
-        pass
-
-
 def test_a_stopped_adaptive_specimen_resumes_to_the_run_that_never_stopped(tmp_path):
     adaptivity = AdaptivitySpec(mobilised_fraction=0.5, calibration=_calibration(tmp_path))
     whole = run(_spec(tmp_path / "whole", adaptivity))
     assert whole.result.error is None
     assert whole.summary["adaptivity"]["dem_points_final"] > 0
     spec = _spec(tmp_path / "part", adaptivity)
-    stopped = run(spec, _StopAfter(3))
+    stopped = run(spec, StopAfterRecord(3))
     assert stopped.interrupt is not None
     resumed = run(spec, resume=True)
     assert resumed.result.error is None and resumed.result.resumed_from is not None
