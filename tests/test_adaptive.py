@@ -15,13 +15,9 @@ from granular_material.errors import ParameterError
 from granular_material.fem import MohrCoulomb
 from granular_material.fem.boundary_value.continuum_start import cap_friction
 from granular_material.multiscale import DEMMaterial
-from granular_material.multiscale.adaptive import (
-    AdaptiveMaterial,
-    SwitchCriterion,
-    mobilised_friction,
-    twin_from_calibration,
-)
+from granular_material.multiscale.adaptive import AdaptiveMaterial, twin_from_calibration
 from granular_material.multiscale.parameters import DEMMaterialParameters
+from granular_material.multiscale.switching import SwitchCriterion, mobilised_friction
 from granular_material.runs.boundary_value.spec import SCENE_KEYS, bvp_from_dict
 from granular_material.runs.spec import SpecError
 

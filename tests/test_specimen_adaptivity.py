@@ -17,7 +17,8 @@ from granular_material.cli import main
 from granular_material.errors import ParameterError
 from granular_material.fem import MohrCoulomb, create_material
 from granular_material.multiscale import DEMMaterial
-from granular_material.multiscale.adaptive import AdaptiveMaterial, SwitchCriterion
+from granular_material.multiscale.adaptive import AdaptiveMaterial
+from granular_material.multiscale.switching import SwitchCriterion
 from granular_material.runs import from_dict, from_flat, run, to_dict, to_flat
 from granular_material.runs.serial import to_toml
 from granular_material.runs.spec import (

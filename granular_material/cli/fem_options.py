@@ -81,7 +81,7 @@ def adaptivity_arguments(parser: argparse.ArgumentParser) -> None:
     """The specimen's adaptivity: ``--adaptivity`` and its settings (the spec's adaptivity
     section, a boundary-value scene's [adaptivity] keys; each setting defaults to None, so
     that one given without ``--adaptivity`` is refused)."""
-    from granular_material.multiscale.adaptive import NEIGHBOURS, STARTS
+    from granular_material.multiscale.switching import NEIGHBOURS, STARTS
     from granular_material.runs.spec_sections import SWITCHES
 
     a = _ADAPTIVITY

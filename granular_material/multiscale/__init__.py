@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING
 from granular_material.lazy_names import lazy_names
 
 if TYPE_CHECKING:
-    from granular_material.multiscale.adaptive import AdaptiveMaterial, SwitchCriterion
+    from granular_material.multiscale.adaptive import AdaptiveMaterial
     from granular_material.multiscale.backend import InProcessBackend
     from granular_material.multiscale.confinement import (
         UNCONFINED_FRACTION,
@@ -39,12 +39,13 @@ if TYPE_CHECKING:
         DEMRVEs,
     )
     from granular_material.multiscale.run_hooks import DEMParameters
+    from granular_material.multiscale.switching import SwitchCriterion
 
 #: the module each public name comes from: imported on first use (PEP 562), so that the DEM
 #: material's parameters (the command line's defaults) load neither warp nor the DEM
 _HOME = {
     "AdaptiveMaterial": "granular_material.multiscale.adaptive",
-    "SwitchCriterion": "granular_material.multiscale.adaptive",
+    "SwitchCriterion": "granular_material.multiscale.switching",
     "InProcessBackend": "granular_material.multiscale.backend",
     "UNCONFINED_FRACTION": "granular_material.multiscale.confinement",
     "UnconfinedWarning": "granular_material.multiscale.confinement",

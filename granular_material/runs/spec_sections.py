@@ -467,7 +467,7 @@ class AdaptivitySpec:
             self.criterion()
         except ParameterError as exc:
             raise SpecError(exc.field, exc.message) from None
-        from granular_material.multiscale.adaptive import STARTS
+        from granular_material.multiscale.switching import STARTS
 
         if self.start not in STARTS:
             raise SpecError("adaptivity.start", f"must be one of {', '.join(STARTS)}, got "
@@ -487,7 +487,7 @@ class AdaptivitySpec:
 
     def criterion(self) -> Any:
         """The :class:`~granular_material.multiscale.adaptive.SwitchCriterion` it names."""
-        from granular_material.multiscale.adaptive import SwitchCriterion
+        from granular_material.multiscale.switching import SwitchCriterion
 
         return SwitchCriterion(self.mobilised_fraction, self.shear_strain, self.neighbours,
                                in_step=self.switch == "in-step")
