@@ -486,7 +486,7 @@ class AdaptivitySpec:
                                                  f"{self.switch!r}")
 
     def criterion(self) -> Any:
-        """The :class:`~granular_material.multiscale.adaptive.SwitchCriterion` it names."""
+        """The :class:`~granular_material.multiscale.switching.SwitchCriterion` it names."""
         from granular_material.multiscale.switching import SwitchCriterion
 
         return SwitchCriterion(self.mobilised_fraction, self.shear_strain, self.neighbours,
