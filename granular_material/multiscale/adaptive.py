@@ -77,13 +77,13 @@ from granular_material.multiscale.material import DEMMaterial
 from granular_material.multiscale.parameters import DEMMaterialParameters
 from granular_material.multiscale.preparation import SERVO_TOLERANCES
 from granular_material.multiscale.switching import (
-    STARTS,
     SwitchCriterion,
+    check_start,
 )
 from granular_material.reference_values import TWIN_ELASTIC_WINDOW
 
-__all__ = ["TARGET_FRICTION", "AdaptiveMaterial", "SwitchRecord", "twin_from_calibration",
-           "twin_from_rve"]
+__all__ = ["TARGET_FRICTION", "AdaptiveMaterial", "SwitchRecord", "calibrated_adaptive",
+           "twin_from_calibration", "twin_from_rve"]
 
 #: the largest mobilised friction a switching RVE is brought to, as a fraction of the twin's
 #: peak friction angle: a twin point at (or near) its peak asks the servo for the RVE's own
@@ -186,7 +186,8 @@ class AdaptiveMaterial(ScikitFemInterface):
             own; :meth:`allocate` then checks the count).
         criterion: when a point switches.
         nqp: Gauss points an element (points ``e·nqp … e·nqp + nqp − 1`` are element e's).
-        start: how a switching point's RVE starts (:data:`STARTS`).
+        start: how a switching point's RVE starts
+            (:data:`~granular_material.multiscale.switching.STARTS`).
         progress: show the servo's progress at a switch.
     """
 
@@ -203,9 +204,7 @@ class AdaptiveMaterial(ScikitFemInterface):
                                                   f"{peak_friction!r}")
         if isinstance(nqp, bool) or not isinstance(nqp, int) or nqp < 1:
             raise ParameterError("nqp", f"must be an integer >= 1, got {nqp!r}")
-        if start not in STARTS:
-            raise ParameterError("adaptivity.start", f"must be one of {', '.join(STARTS)}, "
-                                                     f"got {start!r}")
+        check_start(start)
         if dem.backend != "inprocess":
             raise ParameterError("backend", "an adaptive material holds its RVEs in this "
                                             f"process, not {dem.backend!r}")
@@ -593,3 +592,24 @@ class AdaptiveMaterial(ScikitFemInterface):
         self._increment = None
         self._commits, self._pending_steps = commits, pending
         self._last = None
+
+
+def calibrated_adaptive(source: RVEData, dem: DEMMaterialParameters, pressure: float,
+                        initial_stress: np.ndarray, criterion: SwitchCriterion, *, nqp: int,
+                        start: str = "strain", calibration: str | Path | None = None,
+                        elastic_window: float = TWIN_ELASTIC_WINDOW, progress: bool = False
+                        ) -> AdaptiveMaterial:
+    """The adaptive material of the RVEs ``source`` (one, or one a point) and the DEM
+    parameters ``dem``: its twin read from the ``calibration`` file
+    (:func:`twin_from_calibration`) or, without one, the first RVE calibrated at ``pressure``
+    [Pa] (:func:`twin_from_rve`), every point starting on it at ``initial_stress`` [Pa]
+    (n, 2, 2); its ``calibration`` says how the twin was made. Not allocated."""
+    if calibration is not None:
+        twin, made = twin_from_calibration(calibration, initial_stress)
+    else:
+        twin, made = twin_from_rve(source, pressure, initial_stress, device=dem.device,
+                                   progress=progress, elastic_window=elastic_window)
+    material = AdaptiveMaterial(twin, made["parameters"]["friction_angle"], dem, source,
+                                criterion, nqp=nqp, start=start, progress=progress)
+    material.calibration = made
+    return material

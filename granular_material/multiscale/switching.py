@@ -14,7 +14,7 @@ import numpy as np
 from granular_material.errors import ParameterError
 from granular_material.fem.boundary_value.continuum_start import mobilised_friction as friction_of
 
-__all__ = ["NEIGHBOURS", "STARTS", "SwitchCriterion", "mobilised_friction"]
+__all__ = ["NEIGHBOURS", "STARTS", "SwitchCriterion", "check_start", "mobilised_friction"]
 
 #: which points switch with a point that meets the criterion: itself, or its element's
 NEIGHBOURS = ("point", "element")
@@ -22,6 +22,15 @@ NEIGHBOURS = ("point", "element")
 #: accumulated deformation ("strain"), or brought by the stress servo to the point's twin
 #: stress ("stress")
 STARTS = ("strain", "stress")
+
+
+
+def check_start(start: str) -> None:
+    """ParameterError naming ``adaptivity.start`` unless ``start`` is one of
+    :data:`STARTS`."""
+    if start not in STARTS:
+        raise ParameterError("adaptivity.start", f"must be one of {', '.join(STARTS)}, got "
+                                                 f"{start!r}")
 
 
 @dataclass(frozen=True)

@@ -199,31 +199,21 @@ def _adaptive(plan: RunPlan, dem: Material) -> Material:
     (:class:`~granular_material.multiscale.adaptive.AdaptiveMaterial`). A resumed run
     prepares and calibrates again, then takes every point's state from its checkpoint. Not
     allocated; its ``calibration`` says how the twin was made, with the seconds it took."""
-    from granular_material.multiscale.adaptive import (
-        AdaptiveMaterial,
-        twin_from_calibration,
-        twin_from_rve,
-    )
+    from granular_material.multiscale.adaptive import calibrated_adaptive
 
     spec, setup = plan.spec, plan.setup
     adaptivity, confining = spec.adaptivity, float(spec.problem.confining)
     dem.allocate(setup.n_points)
-    source = dem.committed_rves()
     sigma0 = np.repeat(-confining * np.eye(2)[None], setup.n_points, axis=0)
     began = time.perf_counter()
-    if adaptivity.calibration is not None:
-        twin, calibration = twin_from_calibration(adaptivity.calibration, sigma0)
-    else:
-        twin, calibration = twin_from_rve(source, confining, sigma0,
-                                          device=dem.parameters.device,
-                                          progress=spec.output.progress,
-                                          elastic_window=adaptivity.elastic_window)
-    calibration = {**calibration, "seconds": round(time.perf_counter() - began, 3)}
-    material = AdaptiveMaterial(twin, calibration["parameters"]["friction_angle"],
-                                dem.parameters, source, adaptivity.criterion(),
-                                nqp=setup.points_per_element, start=adaptivity.start,
-                                progress=spec.output.progress)
-    material.calibration = calibration
+    material = calibrated_adaptive(dem.committed_rves(), dem.parameters, confining, sigma0,
+                                   adaptivity.criterion(), nqp=setup.points_per_element,
+                                   start=adaptivity.start,
+                                   calibration=adaptivity.calibration,
+                                   elastic_window=adaptivity.elastic_window,
+                                   progress=spec.output.progress)
+    material.calibration = {**material.calibration,
+                            "seconds": round(time.perf_counter() - began, 3)}
     return material
 
 

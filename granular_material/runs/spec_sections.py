@@ -463,15 +463,13 @@ class AdaptivitySpec:
 
         if self.calibration is not None:
             object.__setattr__(self, "calibration", Path(self.calibration))
+        from granular_material.multiscale.switching import check_start
+
         try:
             self.criterion()
+            check_start(self.start)
         except ParameterError as exc:
             raise SpecError(exc.field, exc.message) from None
-        from granular_material.multiscale.switching import STARTS
-
-        if self.start not in STARTS:
-            raise SpecError("adaptivity.start", f"must be one of {', '.join(STARTS)}, got "
-                                                f"{self.start!r}")
         if not (isinstance(self.elastic_window, int | float)
                 and 0 < self.elastic_window < 0.05):
             raise SpecError("adaptivity.elastic_window", f"must be an axial strain in (0, 0.05) "

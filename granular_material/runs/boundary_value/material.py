@@ -143,27 +143,15 @@ def adaptive_material(spec: BoundaryValueSpec, n_points: int, initial_stress: np
     start holds), the twin the Mohr–Coulomb material of ``[adaptivity] calibration`` or,
     without it, of the source RVE calibrated at the scene's reference pressure; every point
     starts on the twin at its ``initial_stress`` [Pa] (n, 2, 2)."""
-    from granular_material.multiscale.adaptive import (
-        AdaptiveMaterial,
-        twin_from_calibration,
-        twin_from_rve,
-    )
+    from granular_material.multiscale.adaptive import calibrated_adaptive
 
     a = spec.adaptivity
     sigma0 = np.asarray(initial_stress, float)
     first = _one_material(spec, spec.material, "material", 1, sigma0[:1], True)
-    source = first.committed_rves()
-    if a.calibration is not None:
-        twin, calibration = twin_from_calibration(a.calibration, sigma0)
-    else:
-        twin, calibration = twin_from_rve(source, spec.reference_pressure, sigma0,
-                                          device=first.parameters.device,
-                                          progress=spec.progress,
-                                          elastic_window=a.elastic_window)
-    material = AdaptiveMaterial(twin, calibration["parameters"]["friction_angle"],
-                                first.parameters, source, a.criterion(), nqp=nqp,
-                                start=a.start, progress=spec.progress)
-    material.calibration = calibration
+    material = calibrated_adaptive(first.committed_rves(), first.parameters,
+                                   spec.reference_pressure, sigma0, a.criterion(), nqp=nqp,
+                                   start=a.start, calibration=a.calibration,
+                                   elastic_window=a.elastic_window, progress=spec.progress)
     if allocate:
         material.allocate(n_points)
     return material
