@@ -101,6 +101,35 @@ def test_logarithmic_strain_of_a_stretch_and_a_rotation() -> None:
     assert np.trace(eps[2]) == pytest.approx(np.log(1.3 * 0.8))
 
 
+def _rotation(theta: float) -> np.ndarray:
+    return np.array([[np.cos(theta), -np.sin(theta)], [np.sin(theta), np.cos(theta)]])
+
+
+@settings(max_examples=200, deadline=None)
+@given(log_stretch=st.lists(st.floats(-3.0, 3.0), min_size=2, max_size=2),
+       scale=st.sampled_from([1e-9, 1e-5, 1e-2, 1.0]),
+       theta=st.floats(0.0, 2 * np.pi), phi=st.floats(0.0, 2 * np.pi),
+       flip=st.booleans())
+def test_logarithmic_strain_closed_form(log_stretch: list[float], scale: float, theta: float,
+                                        phi: float, flip: bool) -> None:
+    """The closed form against F = R diag(λ) Q, whose Hencky strain is R diag(ln λ) Rᵀ, from
+    strains of 10⁻⁹ to stretches of e³ (an inverted F, a reflection Q, included: b = F Fᵀ
+    stays positive definite), and against the eigendecomposition of F Fᵀ."""
+    log_lam = scale * np.asarray(log_stretch)
+    rot = _rotation(theta)
+    q = _rotation(phi) @ (np.diag([1.0, -1.0]) if flip else EYE)
+    f = rot @ np.diag(np.exp(log_lam)) @ q
+    exact = rot @ np.diag(log_lam) @ rot.T
+    eps = logarithmic_strain((f - EYE)[None])[0]
+    size = max(1.0, float(np.abs(log_lam).max()))
+    np.testing.assert_allclose(eps, exact, rtol=0, atol=4e-15 * size * np.exp(abs(log_lam).max()))
+    b = f @ f.T
+    values, vectors = np.linalg.eigh(b)
+    by_eigh = 0.5 * vectors @ np.diag(np.log(values)) @ vectors.T
+    np.testing.assert_allclose(eps, by_eigh, rtol=0, atol=1e-8 * size)
+    assert eps[0, 1] == eps[1, 0]
+
+
 def test_follower_pressure_acts_on_the_current_sides() -> None:
     """A unit square deformed by F: the pressure's nodal forces on the right side add up to
     −p·cof(F)·N·L, the force of p on the current side (its length and its normal)."""
