@@ -186,7 +186,7 @@ CHANGED = {
     "gravity": {"unit_weight": 18e3, "factor": [1.0, 2.0]},
     "material": {"name": "mohr-coulomb", "parameters": {"young": 70e6, "poisson": 0.3}},
     "output": {"out": "elsewhere", "device": "cpu", "shards": 2, "progress": True,
-               "fields": False, "points_csv": True},
+               "fields": False, "points_csv": True, "figures": False},
     "regularisation": {"model": "second-gradient", "internal_length": 0.01},
     "strength_reduction": {"factor_end": 2.5, "steps": 5},
 }

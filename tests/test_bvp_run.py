@@ -104,6 +104,18 @@ def test_output_points_csv_writes_the_table_as_text_too(tmp_path, capsys):
     pd.testing.assert_frame_equal(read_points(out), points, check_exact=True)
 
 
+def test_output_figures_false_draws_none(tmp_path, capsys):
+    """[output] figures = false: the tables and summary, no figure."""
+    text = FOOTING.format(steps=2, elements="[4, 3]", settlement=-0.001, material=ELASTIC)
+    out = tmp_path / "run"
+    assert main(["run", str(_scene(tmp_path, text + "[output]\nfigures = false\n")),
+                 "--out", str(out)]) == 0
+    assert not list(out.glob("*.png"))
+    assert set(read_points(out)["step"]) == {0, 1, 2} and (out / "summary.json").is_file()
+    assert main(["run", str(_scene(tmp_path, text, "plain.toml")), "--out", str(out)]) == 0
+    assert {p.name for p in out.glob("*.png")} == {"load_displacement.png", "mechanism.png"}
+
+
 def test_mohr_coulomb_footing_levels_off_near_prandtl(tmp_path):
     material = ('[material]\nname = "mohr-coulomb"\n[material.parameters]\nyoung = 60e6\n'
                 'poisson = 0.3\nfriction_angle = 30.0\ndilation_angle = 30.0\n[newton]\n'

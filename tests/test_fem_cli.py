@@ -4,6 +4,9 @@ from __future__ import annotations
 
 import importlib.util
 import json
+import shutil
+import subprocess
+import sys
 from pathlib import Path
 
 import meshio
@@ -78,6 +81,29 @@ def test_points_csv_is_written_on_request_as_pandas_writes_the_table(tmp_path, c
     assert main(options) == 0
     assert not (tmp_path / "points.csv").exists()
     pd.testing.assert_frame_equal(read_points(tmp_path), points, check_exact=True)
+
+
+def test_no_figures_writes_the_same_tables_without_figures(tmp_path, capsys):
+    """--no-figures: the same tables and summary numbers, no figure (an earlier run's in the
+    folder removed), and matplotlib never imported (a fresh process)."""
+    options = ["single-element", "--material", "mohr-coulomb", "--steps", "3",
+               "--axial-strain", "0.01", "--no-progress", "--map-strain", "0.005", "0.01"]
+    assert main([*options, "--out", str(tmp_path / "drawn")]) == 0
+    drawn = sorted(p.name for p in (tmp_path / "drawn").glob("*.png"))
+    assert drawn == ["maps_0.5pct.png", "maps_1.0pct.png", "stress_strain.png"]
+    folder = tmp_path / "plain"
+    shutil.copytree(tmp_path / "drawn", folder)  # a run's figures there before
+    code = ("import sys\nfrom granular_material.cli import main\n"
+            f"code = main({[*options, '--out', str(folder), '--no-figures']!r})\n"
+            "assert code == 0, code\nassert 'matplotlib' not in sys.modules\n")
+    subprocess.run([sys.executable, "-c", code], check=True, capture_output=True)
+    assert not list(folder.glob("*.png"))
+    for name in ("steps.csv", "fields.xdmf"):
+        assert (folder / name).is_file()
+    pd.testing.assert_frame_equal(read_points(folder), read_points(tmp_path / "drawn"))
+    steps = [pd.read_csv(f / "steps.csv").drop(columns="wall_time")
+             for f in (folder, tmp_path / "drawn")]
+    pd.testing.assert_frame_equal(*steps)
 
 
 def test_bad_input_is_a_value_error(capsys):

@@ -4,6 +4,7 @@ library's run() against the command line, resume against the saved spec, and sce
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import shutil
 import sys
@@ -263,9 +264,15 @@ def test_a_spec_s_command_line_makes_the_same_spec():
     spec = from_flat({"test": "biaxial", "material": "dem", "elements": (3, 6), "steps": 7,
                       "element": "quad8", "rtol": 0.02, "tangent": "condensed",
                       "track": ("all",), "map_strain": (0.01, 0.03), "kn": 2e6,
-                      "device": "cpu", "progress": False, "out": Path("somewhere")})
+                      "device": "cpu", "progress": False, "out": Path("somewhere"),
+                      "points_csv": True, "figures": False})
     words = shlex.split(command_line(spec))[1:]
+    assert "--no-figures" in words and "--points-csv" in words
     assert spec_from_args(build_parser().parse_args([*words, "--no-progress"])) == spec
+    shown = dataclasses.replace(spec, output=dataclasses.replace(spec.output, progress=True))
+    words = shlex.split(command_line(shown))[1:]
+    assert "--progress" in words and "--no-progress" not in words
+    assert spec_from_args(build_parser().parse_args(words)) == shown
     element = _elastic(steps=2)
     words = shlex.split(command_line(element))[1:]
     assert spec_from_args(build_parser().parse_args([*words, "--no-progress"])) == element

@@ -134,6 +134,10 @@ def command_line(spec: RunSpec) -> str:
     """The command line of ``spec``: its command and an option for every field not at the
     command's default (the spec's own defaults where the command has no option)."""
     test = spec.problem.test
+    if test not in _PARSERS:  # made with the command line's parser
+        from granular_material.cli.commands import build_parser
+
+        build_parser()
     parser = _PARSERS[test]
     dests = {a.dest: a for a in parser.arguments if a.option_strings}
     words = ["granular-material", test]
@@ -154,8 +158,11 @@ def command_line(spec: RunSpec) -> str:
         at_default = value == defaults.get(name) and not (both and name == "mobilised_fraction")
         if action is None or at_default or value is None:
             continue
-        if action.nargs == 0:  # a flag
-            words += [action.option_strings[-1]] if value else []
+        if isinstance(action, argparse.BooleanOptionalAction):  # --name or --no-name
+            words += [action.option_strings[0 if value else 1]]
+            continue
+        if action.nargs == 0:  # a flag: given where the value is the one it stores
+            words += [action.option_strings[-1]] if value == action.const else []
             continue
         flag = next(o for o in action.option_strings if o.startswith("--"))
         values = value if isinstance(value, list) else [value]

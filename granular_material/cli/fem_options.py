@@ -257,6 +257,11 @@ def _common_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--points-csv", action="store_true", default=_OUTPUT.points_csv,
                         help="with --out, the Gauss-point table also as text, points.csv "
                              "(points.npy, read by numpy.load, is written regardless)")
+    parser.add_argument("--figures", action=argparse.BooleanOptionalAction,
+                        default=_OUTPUT.figures,
+                        help="with --out, draw the figures (stress_strain.png, maps) at the "
+                             "end (default); --no-figures: tables, fields and summary only, "
+                             "without matplotlib's second or so")
     add_json(parser, "a summary")
     add_device(parser, "DEM device")
     parser.add_argument("--preset", choices=PRESET_NAMES, default=None,

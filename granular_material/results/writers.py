@@ -726,9 +726,13 @@ class BiaxialWriter:
 def write_outputs(result: BiaxialResult, out_dir: str | Path,
                   map_strain: float | Sequence[float] | None = None,
                   reference: pd.DataFrame | None = None, *,
-                  tables: bool = True, points_csv: bool = False) -> dict[str, Path]:
+                  tables: bool = True, points_csv: bool = False,
+                  figures: bool = True) -> dict[str, Path]:
     """Tables, the stress–strain figure and the maps figures under ``out_dir``
     (``points_csv``: the Gauss-point table as ``points.csv`` too, :func:`write_tables`).
+
+    ``figures`` False: no figures (matplotlib is not imported), and those an earlier run
+    drew in ``out_dir`` (``stress_strain.png``, ``maps.png``, ``maps_*pct.png``) are removed.
 
     ``tables`` False: the tables are not written again, being already whole there (a
     :class:`BiaxialWriter`'s, after its :meth:`~BiaxialWriter.finish`); their paths are
@@ -749,16 +753,21 @@ def write_outputs(result: BiaxialResult, out_dir: str | Path,
             paths["points_csv"] = out / "points.csv"
         if len(result.tracked):
             paths["tracked"] = out / "tracked.csv"
-    paths["stress_strain"] = plot_stress_strain(result.steps, out / "stress_strain.png",
-                                                reference)
-    if map_strain is None:
-        map_strain = float(result.steps["axial_strain"].iloc[-1])
-    strains = [float(map_strain)] if np.isscalar(map_strain) else [float(e) for e in map_strain]
-    if len(strains) == 1:
-        paths["maps"] = plot_maps(result, strains[0], out / "maps.png")
-    else:
-        for strain in strains:
-            paths[f"maps_{strain:g}"] = plot_maps(result, strain,
-                                                  out / f"maps_{100 * strain:.1f}pct.png")
+    if figures:
+        paths["stress_strain"] = plot_stress_strain(result.steps, out / "stress_strain.png",
+                                                    reference)
+        if map_strain is None:
+            map_strain = float(result.steps["axial_strain"].iloc[-1])
+        strains = ([float(map_strain)] if np.isscalar(map_strain)
+                   else [float(e) for e in map_strain])
+        if len(strains) == 1:
+            paths["maps"] = plot_maps(result, strains[0], out / "maps.png")
+        else:
+            for strain in strains:
+                paths[f"maps_{strain:g}"] = plot_maps(result, strain,
+                                                      out / f"maps_{100 * strain:.1f}pct.png")
+    else:  # an earlier run's, which this one does not draw
+        for stale in [out / "stress_strain.png", out / "maps.png", *out.glob("maps_*pct.png")]:
+            stale.unlink(missing_ok=True)
     paths["fields"] = out / "fields.xdmf"
     return paths

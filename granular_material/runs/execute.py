@@ -428,7 +428,8 @@ def _finish(plan: RunPlan, outcome: RunOutcome, times: PhaseTimes, started: floa
     if out is not None:
         with times.phase("outputs"):
             write_outputs(result, out, map_strain=list(spec.output.map_strain),
-                          reference=outcome.reference, tables=False)  # the writer's, whole
+                          reference=outcome.reference, tables=False,  # the writer's, whole
+                          figures=spec.output.figures)
             if outcome.reference is not None:
                 write_csv(outcome.reference, Path(out) / "pure_dem.csv")
     times.add_all(result.timings)

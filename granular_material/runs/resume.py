@@ -35,10 +35,10 @@ class FailedRunError(StoppedRunError):
     changed."""
 
 #: fields that may differ between a run and its resume: where it writes, how it reports and
-#: how often it saves, whether it writes points.csv, the CPU threads and the backend (none
-#: changes a result)
+#: how often it saves, whether it writes points.csv or figures, the CPU threads and the
+#: backend (none changes a result)
 RESUME_FREE = frozenset({"out", "progress", "checkpoint_every", "checkpoint_minutes",
-                         "points_csv", "shards", "backend"})
+                         "points_csv", "figures", "shards", "backend"})
 #: options added after checkpoints were first written, with the value older runs had
 _ADDED_OPTIONS = {"element": "quad4", "quadrature": None, "convergence": "force",
                   "formulation": "small-strain", "accept_correction": 0.0,

@@ -368,6 +368,9 @@ class OutputSpec:
             two saves of the committed state.
         points_csv: with ``out``, the Gauss-point table also as text, ``points.csv``
             (``points.npy`` is written regardless).
+        figures: with ``out``, draw the run's figures at its end (``stress_strain.png``,
+            the maps); False: tables, fields and summary only (matplotlib is then not
+            imported: about a second of a short run, issue 62).
         progress: show progress bars.
     """
 
@@ -379,6 +382,7 @@ class OutputSpec:
     checkpoint_every: int | None = None
     checkpoint_minutes: float = 10.0
     points_csv: bool = False
+    figures: bool = True
     progress: bool = False
 
     def __post_init__(self) -> None:

@@ -38,9 +38,11 @@ from granular_material.runs.spec import SpecError
 __all__ = ["RESUME_FREE", "check_not_stopped", "open_bvp_checkpoint", "remember", "run_files",
            "scene_record", "start_bvp_checkpoint"]
 
-#: the scene's fields a resume may change: where it writes, how it reports, the device and
-#: the CPU shards (none changes a result beyond the DEM's float rounding)
-RESUME_FREE = frozenset({"out", "progress", "device", "shards", "fields", "points_csv"})
+#: the scene's fields a resume may change: where it writes, how it reports (tables, fields,
+#: figures), the device and the CPU shards (none changes a result beyond the DEM's float
+#: rounding)
+RESUME_FREE = frozenset({"out", "progress", "device", "shards", "fields", "points_csv",
+                         "figures"})
 #: minutes between saves of the committed state at the latest
 SAVE_MINUTES = 10.0
 

@@ -744,8 +744,9 @@ def run_boundary_value(spec: BoundaryValueSpec, out: Path | None = None,
     if checkpoint is not None and error is None:
         checkpoint.remove()  # finished: nothing to resume
     if out is not None:
-        _figures(b, steps, last, out)
-        if reduction is not None:
+        if spec.figures:
+            _figures(b, steps, last, out)
+        if reduction is not None and spec.figures:
             reduction_figure(steps[steps["step"] > spec.steps + ahead],
                              summary["strength_reduction"],
                              out)

@@ -97,7 +97,8 @@ into a :class:`BoundaryValueSpec` by :func:`bvp_from_dict` (every key checked, a
     [newton]                        # NewtonSpec's fields
     [regularisation]                # past a peak: model = "second-gradient" (quad8, quad9,
     internal_length = 0.005         # tri6), ℓ [m]; default model = "none"
-    [output]                        # out, device, shards, progress, fields, points_csv
+    [output]                        # out, device, shards, progress, fields, points_csv,
+                                    # figures
 """
 
 from __future__ import annotations
@@ -556,6 +557,8 @@ class BoundaryValueSpec:
         fields: write the ParaView fields (fields.xdmf) at every committed step.
         points_csv: write the Gauss-point table also as text, points.csv (points.npy is
             written regardless).
+        figures: draw the run's figures at its end (load_displacement.png, mechanism.png,
+            strength_reduction.png); False: tables, fields and summary only.
         name: the problem's name (tables and figures).
         phases: the loading in stages (:class:`PhaseSpec`), each from the state the one
             before committed; empty: one phase, ``conditions``, ``gravity_factor`` and
@@ -587,6 +590,7 @@ class BoundaryValueSpec:
     progress: bool = False
     fields: bool = True
     points_csv: bool = False
+    figures: bool = True
     name: str = "problem"
     phases: tuple[PhaseSpec, ...] = ()
     strength_reduction: StrengthReductionSpec | None = None
@@ -912,7 +916,8 @@ SCENE_KEYS: dict[str, frozenset[str]] = {
     "strength_reduction": frozenset({"factor_end", "steps"}),
     "adaptivity": frozenset({"mobilised_fraction", "shear_strain", "neighbours", "start",
                              "switch", "calibration", "elastic_window"}),
-    "output": frozenset({"out", "device", "shards", "progress", "fields", "points_csv"}),
+    "output": frozenset({"out", "device", "shards", "progress", "fields", "points_csv",
+                         "figures"}),
     "phases": frozenset({"name", "steps", "conditions", "gravity", "reset_displacements"}),
     "phases.gravity": frozenset({"factor"}),
 }
@@ -1022,7 +1027,7 @@ def bvp_from_dict(data: Mapping[str, Any], folder: Path | str = ".") -> Boundary
                                    lambda: RegularisationSpec(**regularisation)),
             device=output.get("device"), shards=output.get("shards"),
             progress=output.get("progress", False), fields=output.get("fields", True),
-            points_csv=output.get("points_csv", False),
+            points_csv=output.get("points_csv", False), figures=output.get("figures", True),
             name=data.get("name", "problem"), phases=phases, strength_reduction=reduction,
             adaptivity=adaptivity)
     except SpecError as exc:
