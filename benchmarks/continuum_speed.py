@@ -7,7 +7,9 @@ Usage::
         [--steps 50] [--repeats 3] [--growth-steps 200] [--out out/continuum-speed]
 
 Each REV is a git revision of this repository (checked out into a temporary worktree) or
-``.``, this working tree; the first is the one the others are compared with. Every case runs
+``.``, this working tree; the first is the one the others are compared with. ``REV+OPTION``
+runs that revision with the command's ``--OPTION`` added (``.+no-figures``: this tree
+without its figures). Every case runs
 the command of the issue (``granular-material biaxial --material mohr-coulomb --phi 35
 --phi-cs 28 --softening-strain 0.02 --psi 5 --platens rough``, to 5 % axial strain in
 ``--steps`` steps, with its output folder) in a fresh process per revision, the revisions
@@ -80,7 +82,8 @@ def worker(nx: int, ny: int, steps: int, axial_strain: float, growth: bool) -> d
 
     with tempfile.TemporaryDirectory() as scratch:
         out = Path(scratch) / "run"
-        code = main([*COMMAND, "--axial-strain", str(axial_strain), "--steps", str(steps),
+        code = main([*COMMAND, *json.loads(os.environ.get(_OPTIONS, "[]")),
+                     "--axial-strain", str(axial_strain), "--steps", str(steps),
                      "--elements", str(nx), str(ny), "--out", str(out)])
         summary = json.loads((out / "summary.json").read_text())
     # the runner enters ``tables`` twice a step (its rows, then their writing and saving)
@@ -166,12 +169,23 @@ def plain(nx: int, ny: int, steps: int, axial_strain: float, max_iterations: int
             "evaluations": evaluations, "unconverged_steps": unconverged}
 
 
-def _run(source: Path, *arguments: str) -> tuple[dict, float]:
-    """A worker in a fresh process importing the package found at ``source``; what it
-    returns and the process's wall time [s]."""
+#: the environment variable that hands a worker the command's added options (JSON)
+_OPTIONS = "CONTINUUM_SPEED_OPTIONS"
+
+
+def _options(rev: str) -> list[str]:
+    """The command options a revision ``REV+OPTION`` adds (none without a ``+``)."""
+    return [f"--{o}" for o in rev.split("+")[1:]]
+
+
+def _run(source: Path, *arguments: str, options: list[str] | None = None,
+         ) -> tuple[dict, float]:
+    """A worker in a fresh process importing the package found at ``source`` (the command
+    with ``options`` added); what it returns and the process's wall time [s]."""
     command = [sys.executable, str(Path(__file__).resolve()), "--worker", *arguments]
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(
-        filter(None, [str(source), os.environ.get("PYTHONPATH")]))}
+        filter(None, [str(source), os.environ.get("PYTHONPATH")])),
+        _OPTIONS: json.dumps(options or [])}
     started = time.perf_counter()
     done = subprocess.run(command, capture_output=True, text=True, env=env, check=False,
                           cwd=tempfile.gettempdir())
@@ -182,10 +196,13 @@ def _run(source: Path, *arguments: str) -> tuple[dict, float]:
 
 
 def _label(rev: str) -> str:
-    """A revision's short commit (``.``: HEAD's, with ``+dirty`` where the tree differs)."""
+    """A revision's short commit (``.``: HEAD's, with ``+dirty`` where the tree differs),
+    and the options it adds."""
     from granular_material.provenance import code_commit
 
-    return code_commit() if rev == "." else code_commit(rev).removesuffix("+dirty")
+    base = rev.split("+")[0]
+    commit = code_commit() if base == "." else code_commit(base).removesuffix("+dirty")
+    return " ".join([commit, *_options(rev)])
 
 
 def _growth_ratio(per_step: list[float], early: int = 5) -> tuple[float, float, float]:
@@ -287,20 +304,22 @@ def main(argv: list[str] | None = None) -> dict[str, pd.DataFrame] | None:
     with tempfile.TemporaryDirectory() as scratch:
         sources = []
         for index, rev in enumerate(args.revs):
-            if rev == ".":
+            base = rev.split("+")[0]
+            if base == ".":
                 sources.append(REPO)
                 continue
             path = Path(scratch) / f"rev{index}"
-            subprocess.run(["git", "worktree", "add", "--detach", "-q", str(path), rev],
+            subprocess.run(["git", "worktree", "add", "--detach", "-q", str(path), base],
                            cwd=REPO, check=True)
             sources.append(path)
+        options = [_options(rev) for rev in args.revs]
         try:
             for nx, ny in meshes:
                 runs: list[list[dict]] = [[] for _ in sources]
                 for _ in range(args.repeats):  # the revisions take turns
                     for index, source in enumerate(sources):
                         runs[index].append(_run(source, str(nx), str(ny), str(args.steps),
-                                                "0.05", "0")[0])
+                                                "0.05", "0", options=options[index])[0])
                 rows += [_row(rev, label, nx, ny, args.steps, result, runs[0])
                          for rev, label, result in zip(args.revs, labels, runs, strict=True)]
                 if not args.no_plain:  # this tree's material in a plain scikit-fem loop
@@ -311,7 +330,8 @@ def main(argv: list[str] | None = None) -> dict[str, pd.DataFrame] | None:
             walls: list[list[float]] = [[] for _ in sources]
             for _ in range(args.repeats):
                 for index, source in enumerate(sources):
-                    walls[index].append(_run(source, "1", "2", "1", "0.001", "0")[1])
+                    walls[index].append(_run(source, "1", "2", "1", "0.001", "0",
+                                             options=options[index])[1])
             growth = []
             if args.growth_steps:
                 nx, ny = meshes[0]
@@ -320,7 +340,7 @@ def main(argv: list[str] | None = None) -> dict[str, pd.DataFrame] | None:
                     for index, source in enumerate(sources):
                         growth[index].append(_growth_ratio(_run(
                             source, str(nx), str(ny), str(args.growth_steps), "0.05",
-                            "1")[0]["tables_per_step"]))
+                            "1", options=options[index])[0]["tables_per_step"]))
             for index, (rev, label) in enumerate(zip(args.revs, labels, strict=True)):
                 extra = {"rev": rev, "commit": label,
                          "wall_1x2_one_step_s": float(np.median(walls[index])),
@@ -336,7 +356,7 @@ def main(argv: list[str] | None = None) -> dict[str, pd.DataFrame] | None:
                 extras.append(extra)
         finally:
             for rev, source in zip(args.revs, sources, strict=True):
-                if rev != ".":
+                if rev.split("+")[0] != ".":
                     subprocess.run(["git", "worktree", "remove", "--force", str(source)],
                                    cwd=REPO, check=False)
     table, extra_table = pd.DataFrame(rows), pd.DataFrame(extras)

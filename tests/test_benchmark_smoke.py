@@ -99,19 +99,22 @@ def test_mpi_scaling_benchmark_smoke(tmp_path):
 
 
 def test_continuum_speed_benchmark_smoke(tmp_path):
-    """The continuum benchmark at smoke size: this tree against itself, every phase's
-    column, the start-up and growth cases, ratios near 1."""
+    """The continuum benchmark at smoke size: this tree against itself without its figures,
+    every phase's column, the start-up and growth cases, ratios near 1."""
     path = BENCH.with_name("continuum_speed.py")
     spec = importlib.util.spec_from_file_location("continuum_speed", path)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
-    tables = module.main([".", ".", "--meshes", "1x2", "--steps", "2", "--repeats", "1",
-                          "--growth-steps", "12", "--out", str(tmp_path)])
+    tables = module.main([".", ".+no-figures", "--meshes", "1x2", "--steps", "2",
+                          "--repeats", "1", "--growth-steps", "12", "--out", str(tmp_path)])
     meshes, extras = tables["meshes"], tables["extras"]
     assert meshes["elements"].tolist() == ["1x2"] * 3 and (meshes["points"] == 8).all()
-    assert meshes["rev"].tolist() == [".", ".", "plain scikit-fem"]
+    assert meshes["rev"].tolist() == [".", ".+no-figures", "plain scikit-fem"]
+    assert meshes["commit"].iloc[1] == meshes["commit"].iloc[0] + " --no-figures"
     assert (meshes["total_s"] > 0).all() and (meshes["assembly_s"] > 0).all()
     assert meshes["ratio"].iloc[0] == 1.0 and 0 < meshes["ratio"].iloc[1] < 10
+    # the variant drew no figures: its outputs took next to nothing
+    assert meshes["outputs_s"].iloc[1] < 0.1 < meshes["outputs_s"].iloc[0]
     assert (0 < meshes["overhead_pct"][:2]).all() and (meshes["overhead_pct"] < 100).all()
     # the plain loop: no tables, files or checkpoints, every step converged
     assert meshes["commit"].iloc[2].endswith(", 0 unconverged")
