@@ -14,8 +14,12 @@ from granular_material.dem import load_rve
 from granular_material.errors import ParameterError
 from granular_material.fem import MohrCoulomb
 from granular_material.fem.boundary_value.continuum_start import cap_friction
-from granular_material.multiscale import DEMMaterial
-from granular_material.multiscale.adaptive import AdaptiveMaterial, twin_from_calibration
+from granular_material.multiscale import DEMMaterial, adaptive
+from granular_material.multiscale.adaptive import (
+    AdaptiveMaterial,
+    adaptive_for_resume,
+    twin_from_calibration,
+)
 from granular_material.multiscale.parameters import DEMMaterialParameters
 from granular_material.multiscale.switching import SwitchCriterion, mobilised_friction
 from granular_material.runs.boundary_value.spec import SCENE_KEYS, bvp_from_dict
@@ -196,6 +200,39 @@ def test_a_restored_material_answers_as_the_one_it_was_written_from(tmp_path):
     assert restored.is_dem.tolist() == material.is_dem.tolist()
 
 
+def test_a_resume_makes_the_material_from_its_checkpoint(tmp_path):
+    """adaptive_for_resume: the twin from the calibration the checkpoint holds, the source
+    RVE from it too; restored, it answers as the material it was written from. A checkpoint
+    without a calibration (one made before it held one) gives None."""
+    parameters = {"young": 60e6, "poisson": 0.3, "friction_angle": PEAK,
+                  "dilation_angle": 0.0, "cohesion": 0.0, "critical_friction_angle": PEAK,
+                  "softening_strain": 0.0}
+    material = _material("stress")
+    material.calibration = {"parameters": parameters, "pressure": 100e3, "seconds": 1.5}
+    material.allocate(3)
+    scale = np.array([0.5, 1.0, 1.5])
+    _load_until_a_switch(material, scale)
+    material.commit()
+    material.checkpoint(tmp_path / "state.npz")
+    sigma0 = np.repeat(-100e3 * np.eye(2)[None], 3, axis=0)
+    dem = DEMMaterialParameters(device="cpu", shards=1, confining=100e3)
+    made = adaptive_for_resume(tmp_path / "state.npz", dem, sigma0,
+                               SwitchCriterion(0.7, neighbours="point"), nqp=1, start="stress")
+    assert made is not None and made.calibration == material.calibration
+    assert made.twin.parameters == material.twin.parameters
+    made.restore(tmp_path / "state.npz")
+    for _ in range(3):
+        a, b = material.evaluate(_biaxial(scale)), made.evaluate(_biaxial(scale))
+        np.testing.assert_array_equal(a.stress, b.stress)
+        material.commit()
+        made.commit()
+    assert made.is_dem.tolist() == material.is_dem.tolist()
+    material.calibration = None
+    material.checkpoint(tmp_path / "older.npz")
+    assert adaptive_for_resume(tmp_path / "older.npz", dem, sigma0, SwitchCriterion(0.7),
+                               nqp=1) is None
+
+
 def test_the_twin_of_a_calibration_file(tmp_path):
     parameters = {"young": 20e6, "poisson": 0.25, "friction_angle": 31.0,
                   "dilation_angle": 10.0, "cohesion": 0.0, "critical_friction_angle": 25.0,
@@ -330,7 +367,13 @@ def test_a_stopped_adaptive_run_resumes_to_the_run_that_never_stopped(tmp_path, 
         _stop_at(m, 3)
         stopped = run_boundary_value(_footing(tmp_path), out=tmp_path / "run")
     assert "interrupted after load step 2" in stopped.error
-    resumed = run_boundary_value(_footing(tmp_path), out=tmp_path / "run", resume=True)
+
+    def made_again(*args, **kwargs):
+        raise AssertionError("a resume made its twin and source RVE again")
+
+    with monkeypatch.context() as m:  # the resume makes its material from the checkpoint
+        m.setattr(adaptive, "calibrated_adaptive", made_again)
+        resumed = run_boundary_value(_footing(tmp_path), out=tmp_path / "run", resume=True)
     assert resumed.error is None and 0 <= resumed.summary["resumed_from_step"] <= 2
     for a, b in zip(_tables(tmp_path / "whole"), _tables(tmp_path / "run"), strict=True):
         pd.testing.assert_frame_equal(a, b, check_exact=True)

@@ -16,7 +16,7 @@ from run_helpers import StopAfterRecord
 from granular_material.cli import main
 from granular_material.errors import ParameterError
 from granular_material.fem import MohrCoulomb, create_material
-from granular_material.multiscale import DEMMaterial
+from granular_material.multiscale import DEMMaterial, adaptive
 from granular_material.multiscale.adaptive import AdaptiveMaterial
 from granular_material.multiscale.switching import SwitchCriterion
 from granular_material.runs import from_dict, from_flat, run, to_dict, to_flat
@@ -208,7 +208,8 @@ def test_without_adaptivity_the_steps_table_is_as_before(tmp_path):
     assert "dem_points" not in columns and "switch_particle_steps" not in columns
 
 
-def test_a_stopped_adaptive_specimen_resumes_to_the_run_that_never_stopped(tmp_path):
+def test_a_stopped_adaptive_specimen_resumes_to_the_run_that_never_stopped(tmp_path,
+                                                                          monkeypatch):
     adaptivity = AdaptivitySpec(mobilised_fraction=0.5, calibration=_calibration(tmp_path))
     whole = run(_spec(tmp_path / "whole", adaptivity))
     assert whole.result.error is None
@@ -216,7 +217,17 @@ def test_a_stopped_adaptive_specimen_resumes_to_the_run_that_never_stopped(tmp_p
     spec = _spec(tmp_path / "part", adaptivity)
     stopped = run(spec, StopAfterRecord(3))
     assert stopped.interrupt is not None
-    resumed = run(spec, resume=True)
+
+    def made_again(*args, **kwargs):
+        raise AssertionError("a resume prepared its RVEs and made its twin again")
+
+    with monkeypatch.context() as m:  # made from the checkpoint: nothing prepared again
+        m.setattr(adaptive, "calibrated_adaptive", made_again)
+        m.setattr(DEMMaterial, "allocate", made_again)
+        resumed = run(spec, resume=True)
+    twins = [{k: v for k, v in o.summary["adaptivity"]["twin"].items() if k != "seconds"}
+             for o in (whole, resumed)]
+    assert twins[0] == twins[1]
     assert resumed.result.error is None and resumed.result.resumed_from is not None
     steps = whole.result.steps  # the checkpoint it resumed from held DEM points
     assert steps["dem_points"].iloc[resumed.result.resumed_from] > 0

@@ -50,6 +50,7 @@ in one file, so a resumed run is the run that was stopped.
 
 from __future__ import annotations
 
+import json
 import tempfile
 import warnings
 from dataclasses import dataclass
@@ -82,8 +83,8 @@ from granular_material.multiscale.switching import (
 )
 from granular_material.reference_values import TWIN_ELASTIC_WINDOW
 
-__all__ = ["TARGET_FRICTION", "AdaptiveMaterial", "SwitchRecord", "calibrated_adaptive",
-           "twin_from_calibration", "twin_from_rve"]
+__all__ = ["TARGET_FRICTION", "AdaptiveMaterial", "SwitchRecord", "adaptive_for_resume",
+           "calibrated_adaptive", "twin_from_calibration", "twin_from_rve"]
 
 #: the largest mobilised friction a switching RVE is brought to, as a fraction of the twin's
 #: peak friction angle: a twin point at (or near) its peak asks the servo for the RVE's own
@@ -124,12 +125,7 @@ def twin_from_calibration(path: str | Path, initial_stress: np.ndarray
     calibrate`` (its ``parameters`` and ``pressure``), at every point's ``initial_stress``
     [Pa] (n, 2, 2); the material (not allocated) and the file's content. ParameterError
     naming ``calibration`` for a file without them."""
-    import json
-
-    import pandas as pd
-
-    from granular_material.fem.materials.mohr_coulomb import MohrCoulomb
-    from granular_material.procedures.calibration import PARAMETER_UNITS, Calibration
+    from granular_material.procedures.calibration import PARAMETER_UNITS
 
     content = json.loads(Path(path).read_text())
     parameters = content.get("parameters") if isinstance(content, dict) else None
@@ -139,12 +135,27 @@ def twin_from_calibration(path: str | Path, initial_stress: np.ndarray
         raise ParameterError("calibration", f"{path} is no calibration.json of granular-"
                                             f"material calibrate (it lacks "
                                             f"{', '.join(missing) or 'pressure'})")
+    twin = _twin(parameters, content["pressure"], initial_stress, str(path))
+    return twin, {k: content[k] for k in ("parameters", "pressure")}
+
+
+def _twin(parameters: dict[str, Any], pressure: float, initial_stress: np.ndarray,
+          source: str) -> Material:
+    """The Mohr–Coulomb twin of a calibration's ``parameters`` (those of
+    :data:`~granular_material.procedures.calibration.PARAMETER_UNITS`) made at ``pressure``
+    [Pa], at every point's ``initial_stress`` [Pa] (n, 2, 2); ``source``: where they come
+    from."""
+    import pandas as pd
+
+    from granular_material.fem.materials.mohr_coulomb import MohrCoulomb
+    from granular_material.procedures.calibration import PARAMETER_UNITS, Calibration
+
     calibration = Calibration(parameters={k: float(parameters[k]) for k in PARAMETER_UNITS},
-                              readings={}, curve=pd.DataFrame(),
-                              pressure=float(content["pressure"]), source=str(path))
+                              readings={}, curve=pd.DataFrame(), pressure=float(pressure),
+                              source=source)
     keywords = calibration.material_keywords()
     keywords["initial_stress"] = np.asarray(initial_stress, dtype=np.float64)
-    return MohrCoulomb(**keywords), {k: content[k] for k in ("parameters", "pressure")}
+    return MohrCoulomb(**keywords)
 
 
 @dataclass
@@ -521,13 +532,17 @@ class AdaptiveMaterial(ScikitFemInterface):
     def checkpoint(self, path: str | Path) -> None:
         """Write the committed state to ``path``: one ``.npz`` holding the twin's and every
         cohort's own checkpoints (bytes), the cohorts' points, each point's model, the
-        source RVE, the committed total ∇u and deformation; whole or not at all."""
+        source RVE, the committed total ∇u and deformation, and how the twin was made
+        (:attr:`calibration`, JSON: a resume makes the twin from it,
+        :func:`adaptive_for_resume`); whole or not at all."""
         arrays: dict[str, np.ndarray] = {
             CHECKPOINT_NAME_KEY: np.array(_NAME), "is_dem": self._is_dem,
             "missed": self._missed, "grad_u": self.committed_grad_u,
             "deformation": self._deformation, "stress": self._committed_stress,
             "commits": np.array(self._commits), "pending": np.array(self._pending_steps),
             "cohorts": np.array(len(self._cohorts))}
+        if self.calibration is not None:
+            arrays["calibration"] = np.array(json.dumps(self.calibration))
         with tempfile.TemporaryDirectory(prefix="adaptive-") as folder:
             own = Path(folder) / "twin.npz"
             self.twin.checkpoint(own)
@@ -611,5 +626,32 @@ def calibrated_adaptive(source: RVEData, dem: DEMMaterialParameters, pressure: f
                                    progress=progress, elastic_window=elastic_window)
     material = AdaptiveMaterial(twin, made["parameters"]["friction_angle"], dem, source,
                                 criterion, nqp=nqp, start=start, progress=progress)
+    material.calibration = made
+    return material
+
+
+def adaptive_for_resume(path: str | Path, dem: DEMMaterialParameters,
+                        initial_stress: np.ndarray, criterion: SwitchCriterion, *, nqp: int,
+                        start: str = "strain", progress: bool = False,
+                        ) -> AdaptiveMaterial | None:
+    """The adaptive material a resume restores the checkpoint ``path`` into, made from what
+    the checkpoint holds: the twin from the calibration it was made with, at every point's
+    ``initial_stress`` [Pa] (n, 2, 2), and the source RVEs, so that a resume neither
+    prepares RVEs nor calibrates again. The material :func:`calibrated_adaptive` made for
+    the run, not allocated and not yet restored (:meth:`AdaptiveMaterial.restore`); None
+    for a checkpoint written before it held its calibration."""
+    with checkpoint_archive(path, _NAME, ("source",)) as data:
+        if "calibration" not in data.files:
+            return None
+        made = json.loads(str(data["calibration"]))
+        blob = np.array(data["source"]).tobytes()
+    with tempfile.TemporaryDirectory(prefix="adaptive-") as folder:
+        own = Path(folder) / "source.npz"
+        write_whole(own, lambda tmp: tmp.write_bytes(blob))
+        source = load_rve(own)
+    parameters = made["parameters"]
+    twin = _twin(parameters, made["pressure"], initial_stress, f"{path} (its calibration)")
+    material = AdaptiveMaterial(twin, parameters["friction_angle"], dem, source, criterion,
+                                nqp=nqp, start=start, progress=progress)
     material.calibration = made
     return material

@@ -190,21 +190,30 @@ def _built(spec: RunSpec, context: RunContext) -> Material:
     return cls(**spec.material.values())
 
 
-def _adaptive(plan: RunPlan, dem: Material) -> Material:
+def _adaptive(plan: RunPlan, dem: Material, saved: Path | None = None) -> Material:
     """The adaptive material of the specimen from its DEM material ``dem`` (not allocated):
     the RVEs the all-DEM run would give its points (seed, seed + 1, … or the file's) become
     the points' sources, the Mohr–Coulomb twin is calibrated from the first at the
     confining pressure (or read from ``adaptivity.calibration``), and every point starts on
     it at −confining·I
     (:class:`~granular_material.multiscale.adaptive.AdaptiveMaterial`). A resumed run
-    prepares and calibrates again, then takes every point's state from its checkpoint. Not
-    allocated; its ``calibration`` says how the twin was made, with the seconds it took."""
-    from granular_material.multiscale.adaptive import calibrated_adaptive
+    (``saved``: its material's checkpoint) makes the same material from the calibration and
+    sources its checkpoint holds, preparing and calibrating nothing (a checkpoint from
+    before it held them: prepared and calibrated again), then takes every point's state
+    from it. Not allocated; its ``calibration`` says how the twin was made, with the
+    seconds it took."""
+    from granular_material.multiscale.adaptive import adaptive_for_resume, calibrated_adaptive
 
     spec, setup = plan.spec, plan.setup
     adaptivity, confining = spec.adaptivity, float(spec.problem.confining)
-    dem.allocate(setup.n_points)
     sigma0 = np.repeat(-confining * np.eye(2)[None], setup.n_points, axis=0)
+    if saved is not None:
+        material = adaptive_for_resume(saved, dem.parameters, sigma0, adaptivity.criterion(),
+                                       nqp=setup.points_per_element, start=adaptivity.start,
+                                       progress=spec.output.progress)
+        if material is not None:
+            return material
+    dem.allocate(setup.n_points)
     began = time.perf_counter()
     material = calibrated_adaptive(dem.committed_rves(), dem.parameters, confining, sigma0,
                                    adaptivity.criterion(), nqp=setup.points_per_element,
@@ -299,13 +308,14 @@ def run(spec: RunSpec | DemSpec, observer: RunObserver | None = None, *,
                                              "fresh=True) starts afresh over it)") from None
         plan = check(spec)
         material = _built(spec, plan.context)
+        material_file = checkpoint.load(tidy=False).material_path if saved else None
         if spec.adaptivity is not None:  # the RVEs prepared and the twin calibrated first
-            with times.phase("preparation"):
-                material = _adaptive(plan, material)
+            with times.phase("preparation"):  # (a resume: made from its checkpoint)
+                material = _adaptive(plan, material, material_file)
         # the material allocated, or restored (an older checkpoint refused), before the
         # folder is touched
-        if saved:
-            material.restore(checkpoint.load(tidy=False).material_path)
+        if material_file is not None:
+            material.restore(material_file)
         else:
             with times.phase("preparation"):
                 material.allocate(plan.setup.n_points)

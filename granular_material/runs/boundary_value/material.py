@@ -18,6 +18,7 @@ file's cells (:func:`region_elements`).
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -106,17 +107,18 @@ def _point_regions(spec: BoundaryValueSpec, mesh: MeshData, n_points: int) -> np
 
 def material_for_problem(spec: BoundaryValueSpec, n_points: int,
                          initial_stress: np.ndarray, allocate: bool = True,
-                         mesh: MeshData | None = None) -> Any:
+                         mesh: MeshData | None = None, saved: Path | None = None) -> Any:
     """The material of ``spec`` at ``n_points`` Gauss points starting from
     ``initial_stress`` [Pa] (n, 2, 2), allocated (its RVEs prepared) unless ``allocate`` is
     False; with ``[[materials]]``, a
     :class:`~granular_material.fem.materials.regions.RegionalMaterial` of every region's
-    material on the regions of ``mesh``."""
+    material on the regions of ``mesh``. ``saved``: the material's checkpoint a resume
+    restores (an adaptive material is then made from it, :func:`adaptive_material`)."""
     if spec.adaptivity is not None:
         if mesh is None:
             raise ValueError("adaptivity needs the mesh (its Gauss points an element)")
         return adaptive_material(spec, n_points, initial_stress, n_points // mesh.n_elements,
-                                 allocate)
+                                 allocate, saved)
     if spec.materials is None:
         return _one_material(spec, spec.material, "material", n_points, initial_stress,
                              allocate)
@@ -136,17 +138,28 @@ def material_for_problem(spec: BoundaryValueSpec, n_points: int,
 
 
 def adaptive_material(spec: BoundaryValueSpec, n_points: int, initial_stress: np.ndarray,
-                      nqp: int, allocate: bool = True) -> Any:
+                      nqp: int, allocate: bool = True, saved: Path | None = None) -> Any:
     """The :class:`~granular_material.multiscale.adaptive.AdaptiveMaterial` of ``spec``'s
     DEM material: the source RVE is the one the DEM material prepares for the first Gauss
     point (at its initial stress: the packing every point of an all-DEM run of a uniform
     start holds), the twin the Mohr–Coulomb material of ``[adaptivity] calibration`` or,
     without it, of the source RVE calibrated at the scene's reference pressure; every point
-    starts on the twin at its ``initial_stress`` [Pa] (n, 2, 2)."""
-    from granular_material.multiscale.adaptive import calibrated_adaptive
+    starts on the twin at its ``initial_stress`` [Pa] (n, 2, 2). A resume (``saved``: the
+    material's checkpoint) makes the same material from the calibration and source the
+    checkpoint holds, preparing and calibrating nothing (an older checkpoint without
+    them: as a fresh run)."""
+    from granular_material.multiscale.adaptive import adaptive_for_resume, calibrated_adaptive
 
     a = spec.adaptivity
     sigma0 = np.asarray(initial_stress, float)
+    if saved is not None:
+        first = _one_material(spec, spec.material, "material", 1, sigma0[:1], False)
+        material = adaptive_for_resume(saved, first.parameters, sigma0, a.criterion(),
+                                       nqp=nqp, start=a.start, progress=spec.progress)
+        if material is not None:
+            if allocate:
+                material.allocate(n_points)
+            return material
     first = _one_material(spec, spec.material, "material", 1, sigma0[:1], True)
     material = calibrated_adaptive(first.committed_rves(), first.parameters,
                                    spec.reference_pressure, sigma0, a.criterion(), nqp=nqp,

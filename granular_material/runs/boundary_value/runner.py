@@ -326,9 +326,11 @@ class Built:
         return u if self.offset is None else u - self.offset
 
 
-def build(spec: BoundaryValueSpec, allocate: bool = True) -> Built:
+def build(spec: BoundaryValueSpec, allocate: bool = True, saved: Path | None = None
+          ) -> Built:
     """Mesh, problem, initial stress and material of ``spec`` (no step taken; the material
-    not allocated, its RVEs not prepared, unless ``allocate``). A phased ``spec``: those of
+    not allocated, its RVEs not prepared, unless ``allocate``; ``saved``: the material's
+    checkpoint a resume restores, :func:`material_for_problem`). A phased ``spec``: those of
     its first phase, and every phase's problem (:attr:`Built.plans`), each checked."""
     phased = spec
     spec = phase_view(phased, 0) if phased.phases else phased
@@ -342,7 +344,7 @@ def build(spec: BoundaryValueSpec, allocate: bool = True) -> Built:
     sigma0, initial = _initial_stress(spec, problem, f0)  # with step 0's weight
     t0 = time.perf_counter()
     try:
-        material = material_for_problem(phased, xy.shape[0], sigma0, allocate, mesh)
+        material = material_for_problem(phased, xy.shape[0], sigma0, allocate, mesh, saved)
     except ParameterError as exc:  # a continuum that refuses its point's stress
         if spec.initial.state == "continuum" and exc.field == "initial_stress":
             raise SpecError("initial.state", f"a continuum start: the material's initial "
@@ -612,7 +614,8 @@ def run_boundary_value(spec: BoundaryValueSpec, out: Path | None = None,
         check_disk(spec, next(p for p in (out, *out.absolute().parents) if p.exists()),
                    _mesh)
     checkpoint, saved = open_bvp_checkpoint(spec, out, resume)  # read, nothing changed
-    b = build(spec, allocate=saved is None)
+    b = build(spec, allocate=saved is None,
+              saved=None if saved is None else saved.material_path)
     if saved is not None:
         b.material.restore(saved.material_path)  # refused (an older one) before any write
     problem = b.problem
