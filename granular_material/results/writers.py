@@ -55,7 +55,7 @@ if TYPE_CHECKING:
     from granular_material.fem.boundary_value.biaxial import BiaxialProblem
     from granular_material.results.biaxial import BiaxialResult
 
-__all__ = ["BiaxialWriter", "FieldWriter", "append_csv", "cell_means", "format_rows",
+__all__ = ["BiaxialWriter", "FieldWriter", "SyncClock", "append_csv", "cell_means", "format_rows",
            "read_points", "read_run_tables", "read_table", "strict_json", "sync_files",
            "write_csv", "write_json", "write_outputs", "write_points", "write_tables"]
 
@@ -68,6 +68,26 @@ _CELL_FIELDS = ("sxx", "syy", "sxy", "exx", "eyy", "exy", "volumetric_strain",
 #: a :class:`BiaxialWriter` flushes its growing tables to the disk once this many seconds
 #: have passed since it last did, and at the run's end [s]
 SYNC_SECONDS = 1.0
+
+
+class SyncClock:
+    """When a run's growing tables are next flushed to the disk: with the first step (not
+    the first of the tables, written whole) :data:`SYNC_SECONDS` after the last flush."""
+
+    def __init__(self) -> None:
+        self.last = -math.inf  # when the tables were last flushed (time.monotonic)
+
+    def due(self, first: bool = False) -> bool:
+        """Whether a step (``first``: the tables' first) flushes them; counted as the flush."""
+        now = time.monotonic()
+        if first or now - self.last < SYNC_SECONDS:
+            return False
+        self.last = now
+        return True
+
+    def flushed(self) -> None:
+        """The tables were flushed now (at the run's end, or out of turn)."""
+        self.last = time.monotonic()
 
 
 def sync_files(paths: Sequence[Path]) -> None:
@@ -612,7 +632,7 @@ class BiaxialWriter:
         self._rows = {"steps": 0, "points": 0, "tracked": 0}  # rows recorded by table
         #: each table's columns and their types as first recorded; False once they changed
         self._kinds: dict[str, Any] = {}
-        self._synced_at = -math.inf  # when the tables were last flushed (time.monotonic)
+        self._clock = SyncClock()
         self._unsynced: set[str] = set()  # files of the tables appended to since
 
     def __enter__(self) -> BiaxialWriter:
@@ -635,7 +655,7 @@ class BiaxialWriter:
                  if name in self._unsynced]  # steps last
         self._unsynced.difference_update(names)
         sync_files([self.out_dir / name for name in names])
-        self._synced_at = time.monotonic()
+        self._clock.flushed()
 
     def _append(self, name: str, frame: pd.DataFrame, append: bool, sync: bool) -> None:
         """Add ``frame`` to table ``name`` (``append`` False: write it whole), flushed to the
@@ -660,7 +680,7 @@ class BiaxialWriter:
         self._tracked_any = False
         self._rows = {"steps": 0, "points": 0, "tracked": 0}
         self._kinds = {}
-        self._synced_at, self._unsynced = -math.inf, set()
+        self._clock, self._unsynced = SyncClock(), set()
         if not self.points_csv:  # an earlier run's, which this one does not write
             (self.out_dir / "points.csv").unlink(missing_ok=True)
 
@@ -681,10 +701,8 @@ class BiaxialWriter:
         self._fields.write(row["axial_strain"], u, points)
         # all of a step's tables flushed, or none: tracked and points before steps
         more = self._steps > 0
-        now = time.monotonic()
-        sync = more and now - self._synced_at >= SYNC_SECONDS
+        sync = self._clock.due(first=not more)
         if sync:
-            self._synced_at = now
             if "tracked.csv" in self._unsynced and (tracked is None or not len(tracked)):
                 self.sync()  # earlier steps' tracked rows, before this step's points
         # each table's rows count once written: a stop signal delivered between two writes

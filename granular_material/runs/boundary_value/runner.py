@@ -59,8 +59,8 @@ from granular_material.fem.materials.regions import RegionalMaterial
 from granular_material.multiscale.confinement import UNCONFINED_FRACTION
 from granular_material.results.bvp_plots import plot_load_displacement, plot_mechanism
 from granular_material.results.writers import (
-    SYNC_SECONDS,
     FieldWriter,
+    SyncClock,
     sync_files,
     write_csv,
     write_json,
@@ -640,18 +640,14 @@ def run_boundary_value(spec: BoundaryValueSpec, out: Path | None = None,
         if spec.fields:
             writer = FieldWriter(out / "fields.xdmf", problem).__enter__()
 
-    synced_at = [-math.inf]  # when the tables were last flushed to the disk (monotonic)
+    clock = SyncClock()  # the tables flushed to the disk as a biaxial run's
 
     def keep(row: dict[str, Any], points: pd.DataFrame, u: np.ndarray) -> None:
         rows.append(row)
         last.update(points=points, u=u.copy())
         if out is not None:
             first = row["step"] == 0
-            # flushed (fsync) as a biaxial run's: with the first step SYNC_SECONDS after the
-            # last flush, and at the end
-            sync = not first and time.monotonic() - synced_at[0] >= SYNC_SECONDS
-            if sync:
-                synced_at[0] = time.monotonic()
+            sync = clock.due(first)  # and at the end
             write_points(points, out, append=not first, csv=spec.points_csv, sync=sync)
             write_csv(pd.DataFrame([row]), out / "steps.csv",  # last: the step's commit
                       append=not first, sync=sync)
