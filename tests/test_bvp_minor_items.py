@@ -214,7 +214,7 @@ def test_the_tables_are_flushed_a_second_apart_and_at_the_end(tmp_path, monkeypa
     first step a second after the last flush, and when it ends; not at every step."""
     import os
 
-    from granular_material.runs.boundary_value import runner
+    from granular_material.results import writers
 
     flushed: list[str] = []
     real = os.fsync
@@ -226,7 +226,7 @@ def test_the_tables_are_flushed_a_second_apart_and_at_the_end(tmp_path, monkeypa
     if not os.path.isdir("/proc/self/fd"):
         pytest.skip("needs /proc to name the flushed files")
     monkeypatch.setattr(os, "fsync", fsync)
-    monkeypatch.setattr(runner, "SYNC_SECONDS", 1e9)  # the clock never lets one more in
+    monkeypatch.setattr(writers, "SYNC_SECONDS", 1e9)  # the clock never lets one more in
     out = tmp_path / "run"
     assert main(["run", str(_scene(tmp_path)), "--out", str(out)]) == 0
     steps = [name for name in flushed if name in ("points.npy", "steps.csv")]
