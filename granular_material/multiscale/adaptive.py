@@ -581,10 +581,7 @@ class AdaptiveMaterial(ScikitFemInterface):
                 blobs[f"cohort_{k}_points"] = np.array(data[f"cohort_{k}_points"])
         with tempfile.TemporaryDirectory(prefix="adaptive-") as folder:
             def unpack(name: str) -> Path:
-                own = Path(folder) / f"{name}.npz"
-                data = blobs[name].tobytes()
-                write_whole(own, lambda tmp: tmp.write_bytes(data))
-                return own
+                return _unpacked(blobs[name], Path(folder) / f"{name}.npz")
 
             self.twin.restore(unpack("twin"))
             self.source = load_rve(unpack("source"))
@@ -607,6 +604,14 @@ class AdaptiveMaterial(ScikitFemInterface):
         self._increment = None
         self._commits, self._pending_steps = commits, pending
         self._last = None
+
+
+def _unpacked(blob: np.ndarray, path: Path) -> Path:
+    """``path``, written whole with the bytes ``blob`` (a file a checkpoint holds as bytes:
+    the twin's, a cohort's or the source RVEs' own)."""
+    data = blob.tobytes()
+    write_whole(path, lambda tmp: tmp.write_bytes(data))
+    return path
 
 
 def calibrated_adaptive(source: RVEData, dem: DEMMaterialParameters, pressure: float,
@@ -644,11 +649,9 @@ def adaptive_for_resume(path: str | Path, dem: DEMMaterialParameters,
         if "calibration" not in data.files:
             return None
         made = json.loads(str(data["calibration"]))
-        blob = np.array(data["source"]).tobytes()
+        blob = np.array(data["source"])
     with tempfile.TemporaryDirectory(prefix="adaptive-") as folder:
-        own = Path(folder) / "source.npz"
-        write_whole(own, lambda tmp: tmp.write_bytes(blob))
-        source = load_rve(own)
+        source = load_rve(_unpacked(blob, Path(folder) / "source.npz"))
     parameters = made["parameters"]
     twin = _twin(parameters, made["pressure"], initial_stress, f"{path} (its calibration)")
     material = AdaptiveMaterial(twin, parameters["friction_angle"], dem, source, criterion,

@@ -24,7 +24,6 @@ NEIGHBOURS = ("point", "element")
 STARTS = ("strain", "stress")
 
 
-
 def check_start(start: str) -> None:
     """ParameterError naming ``adaptivity.start`` unless ``start`` is one of
     :data:`STARTS`."""
