@@ -745,10 +745,9 @@ def run_boundary_value(spec: BoundaryValueSpec, out: Path | None = None,
     if out is not None:
         if spec.figures:
             _figures(b, steps, last, out)
-        if reduction is not None and spec.figures:
-            reduction_figure(steps[steps["step"] > spec.steps + ahead],
-                             summary["strength_reduction"],
-                             out)
+            if reduction is not None:
+                reduction_figure(steps[steps["step"] > spec.steps + ahead],
+                                 summary["strength_reduction"], out)
         summary["out"] = str(out)
         write_json(summary, out / "summary.json")
     return BVPOutcome(steps, summary, error, last.get("points", pd.DataFrame()),
